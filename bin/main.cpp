@@ -1,0 +1,30 @@
+// clothfit: the command line. Thin: parse, validate, call one library function, turn
+// errors into a non-zero exit status with a message naming the file or flag.
+#include <cstdio>
+#include <exception>
+
+#include "bin/commands.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"clothfit: fit real-time cloth materials to ray-traced references"};
+  app.set_version_flag("--version", "clothfit 0.1.0");
+  app.require_subcommand(1);
+  clothfit::cli::Globals globals;
+  app.add_flag("-q,--quiet", globals.quiet, "no progress output on stderr");
+
+  int exit_code = 0;
+  clothfit::cli::AddLutCommand(app, globals, exit_code);
+  clothfit::cli::AddStressCommand(app, globals, exit_code);
+  clothfit::cli::AddBenchCommand(app, globals, exit_code);
+  clothfit::cli::AddModelsCommand(app, globals, exit_code);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);  // usage errors: message + exit 1 (help: 0)
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "clothfit: error: %s\n", e.what());
+    return 1;
+  }
+  return exit_code;
+}

@@ -1,0 +1,44 @@
+// bin/progress.h: a one-line progress bar on stderr (only when stderr is a terminal or
+// CLOTHFIT_PROGRESS=1), with rate and ETA. Silent under --quiet.
+#pragma once
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+namespace clothfit::cli {
+
+class ProgressBar {
+ public:
+  ProgressBar(std::string label, bool quiet)
+      : label_(std::move(label)),
+        enabled_(!quiet && (isatty(2) || std::getenv("CLOTHFIT_PROGRESS") != nullptr)),
+        start_(std::chrono::steady_clock::now()) {}
+
+  void Update(long long done, long long total) {
+    if (!enabled_ || total <= 0) return;
+    const auto now = std::chrono::steady_clock::now();
+    if (done < total && now - last_ < std::chrono::milliseconds(100)) return;
+    last_ = now;
+    const double secs = std::chrono::duration<double>(now - start_).count();
+    const double frac = double(done) / double(total);
+    const double rate = secs > 0 ? double(done) / secs : 0.0;
+    const double eta = rate > 0 ? double(total - done) / rate : 0.0;
+    const int width = 30;
+    const int filled = int(frac * width);
+    std::fprintf(stderr, "\r%s [%.*s%*s] %5.1f%%  %.3g/s  ETA %.0fs ", label_.c_str(), filled,
+                 "##############################", width - filled, "", 100.0 * frac, rate, eta);
+    if (done >= total) std::fprintf(stderr, "\n");
+    std::fflush(stderr);
+  }
+
+ private:
+  std::string label_;
+  bool enabled_;
+  std::chrono::steady_clock::time_point start_, last_{};
+};
+
+}  // namespace clothfit::cli

@@ -1,0 +1,224 @@
+#include "brdf/stress.h"
+
+#include <ceres/jet.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <mutex>
+#include <random>
+#include <sstream>
+
+namespace clothfit::stress {
+namespace {
+
+constexpr int kMaxParams = 10;
+using Jet = ceres::Jet<double, kMaxParams>;
+
+constexpr std::array<double, 8> kAdversarialCos{0.0,         1e-8, 1e-4, 1.0 - 1e-7,
+                                                1.0,         1.0 + 1e-7, -1e-8, -0.3};
+
+// SplitMix64: a counter-based generator, so chunk k's stream depends only on (seed, k).
+struct SplitMix {
+  uint64_t s;
+  uint64_t Next() {
+    uint64_t z = (s += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  double Uniform() { return double(Next() >> 11) * 0x1.0p-53; }
+  int Index(int n) { return int(Next() % uint64_t(n)); }
+};
+
+struct Input {
+  std::array<double, kMaxParams> x{};
+  Cosines<double> c{};
+};
+
+// Which flat parameters are roughness-like (clamped by the engine).
+std::vector<bool> ClampedFlags(ModelId m) {
+  std::vector<bool> out;
+  auto fill = [&](std::span<const ParamInfo> table) {
+    for (const ParamInfo& p : table)
+      for (int c = 0; c < p.size; ++c)
+        out.push_back(std::string_view(p.name).find("roughness") != std::string_view::npos);
+  };
+  switch (m) {
+    case ModelId::kStandard: fill(standard::kParameterTable); break;
+    case ModelId::kPhysicalSheen: fill(physical_sheen::kParameterTable); break;
+    case ModelId::kGltfSheen: fill(gltf_sheen::kParameterTable); break;
+    default: fill(cloth::kParameterTable); break;
+  }
+  return out;
+}
+
+Input Draw(ModelId m, SplitMix& rng) {
+  Input in;
+  const int n = ParameterCount(m);
+  std::array<double, kMaxParams> lo{}, hi{};
+  FlatBounds(m, lo.data(), hi.data());
+  // Colours and metalness stay inside [0, 1] (out-of-range values are rejected as bad input
+  // before they reach a model); roughness parameters, which the engines clamp, also go
+  // beyond their clamps on both sides.
+  const std::vector<bool> clamped = ClampedFlags(m);
+  const int mode = rng.Index(4);
+  for (int k = 0; k < n; ++k) {
+    const double span = hi[k] - lo[k];
+    const bool beyond = clamped[size_t(k)];
+    if (mode == 0 || (mode == 1 && !beyond)) {  // in range
+      in.x[k] = lo[k] + span * rng.Uniform();
+    } else if (mode == 1) {  // up to 10 % beyond either bound
+      in.x[k] = lo[k] - 0.1 * span + 1.2 * span * rng.Uniform();
+    } else if (!beyond) {  // adversarial: a bound
+      in.x[k] = rng.Index(2) ? hi[k] : lo[k];
+    } else {  // adversarial: a bound, 0, 1, or beyond the clamps
+      const std::array<double, 7> picks{lo[k], hi[k], 0.0, 1.0, lo[k] * 0.5, -0.05, 1.05};
+      in.x[k] = picks[size_t(rng.Index(int(picks.size())))];
+    }
+  }
+  const int cmode = rng.Index(3);
+  if (cmode == 0) {  // consistent geometry from random directions on the sphere
+    auto dir = [&]() {
+      const double z = 2.0 * rng.Uniform() - 1.0;
+      const double phi = 2.0 * kPi * rng.Uniform();
+      const double s = std::sqrt(std::max(0.0, 1.0 - z * z));
+      return Vec3<double>(s * std::cos(phi), s * std::sin(phi), z);
+    };
+    in.c = CosinesFromDirections(dir(), dir());
+  } else if (cmode == 1) {  // independent raw cosines
+    auto u = [&]() { return -0.25 + 1.5 * rng.Uniform(); };
+    in.c = {u(), u(), u(), u()};
+  } else {  // adversarial cosines
+    auto a = [&]() { return kAdversarialCos[size_t(rng.Index(int(kAdversarialCos.size())))]; };
+    in.c = {a(), a(), a(), a()};
+  }
+  return in;
+}
+
+template <typename T>
+bool Finite(const T& v) {
+  if constexpr (std::is_arithmetic_v<T>) {
+    return std::isfinite(v);
+  } else {
+    return ceres::isfinite(v);  // value and every derivative
+  }
+}
+
+std::string Describe(ModelId m, const Input& in, const char* what) {
+  std::ostringstream os;
+  os.precision(9);
+  os << what << " at NoV=" << in.c.NoV << " NoL=" << in.c.NoL << " NoH=" << in.c.NoH
+     << " LoH=" << in.c.LoH << " params=[";
+  for (int k = 0; k < ParameterCount(m); ++k) os << (k ? "," : "") << in.x[size_t(k)];
+  os << "]";
+  return os.str();
+}
+
+struct Tally {
+  int64_t evaluations = 0, non_finite = 0, negative = 0;
+  double max_dev = 0.0;
+  std::string first_failure;
+  void Fail(std::string msg) {
+    if (first_failure.empty()) first_failure = std::move(msg);
+  }
+};
+
+void EvaluateOne(ModelId m, const Input& in, Tally& t) {
+  const int n = ParameterCount(m);
+  // double
+  Rgb<double> dd, di;
+  EvaluateFlat<double>(m, in.x.data(), in.c, dd, di);
+  // float
+  std::array<float, kMaxParams> xf{};
+  for (int k = 0; k < n; ++k) xf[size_t(k)] = float(in.x[size_t(k)]);
+  const Cosines<float> cf{float(in.c.NoV), float(in.c.NoL), float(in.c.NoH), float(in.c.LoH)};
+  Rgb<float> fd, fi;
+  EvaluateFlat<float>(m, xf.data(), cf, fd, fi);
+  // Jet: one derivative slot per parameter
+  std::array<Jet, kMaxParams> xj{};
+  for (int k = 0; k < n; ++k) xj[size_t(k)] = Jet(in.x[size_t(k)], k);
+  const Cosines<Jet> cj{Jet(in.c.NoV), Jet(in.c.NoL), Jet(in.c.NoH), Jet(in.c.LoH)};
+  Rgb<Jet> jd, ji;
+  EvaluateFlat<Jet>(m, xj.data(), cj, jd, ji);
+
+  ++t.evaluations;
+  bool bad_finite = false, bad_negative = false;
+  for (int ch = 0; ch < 3; ++ch) {
+    const double d[2] = {dd[ch], di[ch]};
+    const float f[2] = {fd[ch], fi[ch]};
+    const Jet* j[2] = {&jd[ch], &ji[ch]};
+    for (int k = 0; k < 2; ++k) {
+      if (!std::isfinite(d[k]) || !std::isfinite(f[k]) || !Finite(*j[k])) bad_finite = true;
+      if (d[k] < 0.0 || f[k] < 0.0f || j[k]->a < 0.0) bad_negative = true;
+      if (std::isfinite(d[k]) && std::isfinite(f[k])) {
+        const double dev = std::abs(double(f[k]) - d[k]) / std::max(std::abs(d[k]), 1e-3);
+        t.max_dev = std::max(t.max_dev, dev);
+      }
+    }
+  }
+  if (bad_finite) {
+    ++t.non_finite;
+    t.Fail(Describe(m, in, "non-finite"));
+  }
+  if (bad_negative) {
+    ++t.negative;
+    t.Fail(Describe(m, in, "negative"));
+  }
+}
+
+}  // namespace
+
+Report Run(int64_t evals, uint64_t seed, const std::function<void(int64_t, int64_t)>& progress) {
+  // Build the shared tables before the parallel section (and outside any timing).
+  (void)lut::DefaultDfg();
+  (void)lut::DefaultSheenAlbedo();
+
+  const int num_models = int(kAllModels.size());
+  const int64_t per_model = (evals + num_models - 1) / num_models;
+  constexpr int64_t kChunk = 4096;
+  const int64_t chunks_per_model = (per_model + kChunk - 1) / kChunk;
+  const int64_t total_chunks = chunks_per_model * num_models;
+
+  std::vector<Tally> tallies(static_cast<size_t>(total_chunks));
+  std::atomic<int64_t> done{0};
+  std::mutex progress_mutex;
+  tbb::parallel_for(int64_t(0), total_chunks, [&](int64_t chunk) {
+    const int mi = int(chunk / chunks_per_model);
+    const int64_t ci = chunk % chunks_per_model;
+    const ModelId m = kAllModels[size_t(mi)];
+    const int64_t begin = ci * kChunk;
+    const int64_t end = std::min(per_model, begin + kChunk);
+    SplitMix rng{seed * 0x100000001B3ull + uint64_t(chunk) * 0x9E3779B97F4A7C15ull};
+    Tally& t = tallies[size_t(chunk)];
+    for (int64_t e = begin; e < end; ++e) EvaluateOne(m, Draw(m, rng), t);
+    const int64_t d = done.fetch_add(end - begin) + (end - begin);
+    if (progress) {
+      std::lock_guard<std::mutex> lock(progress_mutex);
+      progress(d, per_model * num_models);
+    }
+  });
+
+  Report r;
+  for (int mi = 0; mi < num_models; ++mi) {
+    ModelReport mr;
+    mr.model = std::string(ModelName(kAllModels[size_t(mi)]));
+    for (int64_t ci = 0; ci < chunks_per_model; ++ci) {  // merge in chunk order: deterministic
+      const Tally& t = tallies[size_t(mi * chunks_per_model + ci)];
+      mr.evaluations += t.evaluations;
+      mr.non_finite += t.non_finite;
+      mr.negative += t.negative;
+      mr.max_rel_float_dev = std::max(mr.max_rel_float_dev, t.max_dev);
+      if (mr.first_failure.empty()) mr.first_failure = t.first_failure;
+    }
+    r.evaluations += mr.evaluations;
+    r.non_finite += mr.non_finite;
+    r.negative += mr.negative;
+    r.models.push_back(std::move(mr));
+  }
+  return r;
+}
+
+}  // namespace clothfit::stress
