@@ -1,6 +1,6 @@
 // clothfit bench brdf: Google Benchmark of every model, ns per evaluation of the direct
 // term plus the IBL weights, in double and with a ceres::Jet of 10 parameters.
-// Extra arguments after `--` go to Google Benchmark (e.g. -- --benchmark_format=json).
+// Extra arguments go to Google Benchmark (e.g. clothfit bench brdf --benchmark_format=json).
 #include <benchmark/benchmark.h>
 #include <ceres/jet.h>
 

@@ -21,7 +21,8 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);  // usage errors: message + exit 1 (help: 0)
+    // Usage errors print the message and exit 1 (help and --version: 0).
+    return app.exit(e) == 0 ? 0 : 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "clothfit: error: %s\n", e.what());
     return 1;

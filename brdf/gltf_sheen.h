@@ -63,7 +63,7 @@ inline constexpr std::array<ParamInfo, 5> kParameterTable{{
     {"roughness", 1, {1.0, 0.0, 0.0}, 0.0, 1.0, true, "perceptual r; alpha = r^2"},
     {"metallic", 1, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "0 = dielectric"},
     {"sheen_color", 3, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "linear sRGB (sheenColorFactor)"},
-    {"sheen_roughness", 1, {0.0, 0.0, 0.0}, 0.0, 1.0, true,
+    {"sheen_roughness", 1, {0.0, 0.0, 0.0}, kMinSheenRoughness, 1.0, true,
      "sheenRoughnessFactor r_s, floored at 1e-4; alpha = r_s^2"},
 }};
 

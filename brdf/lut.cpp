@@ -2,101 +2,135 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <vector>
 
 #include "brdf/terms.h"
 
 namespace clothfit::lut {
 namespace {
 
-// View direction in the shading frame (n = +z), in the xz plane.
-Vec3<double> ViewDir(double NoV) { return {std::sqrt(std::max(0.0, 1.0 - NoV * NoV)), 0.0, NoV}; }
-
-Vec3<double> HalfFromAngles(double cos_h, double phi) {
-  const double sin_h = std::sqrt(std::max(0.0, 1.0 - cos_h * cos_h));
-  return {sin_h * std::cos(phi), sin_h * std::sin(phi), cos_h};
-}
-
-// Sum over S x S strata of g(h) with h drawn from a half-vector density, where
-// `cos_theta_h(u)` inverts the radial CDF. Returns the mean of `term` over the strata.
-template <typename CosThetaFn, typename TermFn>
-double StratifiedMean(int S, CosThetaFn cos_theta_h, TermFn term) {
-  double sum = 0.0;
-  for (int a = 0; a < S; ++a) {
-    const double u1 = (a + 0.5) / S;
-    const double cos_h = cos_theta_h(u1);
-    for (int b = 0; b < S; ++b) {
-      const double phi = 2.0 * kPi * (b + 0.5) / S;
-      sum += term(HalfFromAngles(cos_h, phi));
+// Gauss-Legendre nodes and weights on [-1, 1] (Newton iteration on P_n).
+struct GaussLegendre {
+  std::vector<double> x, w;
+  explicit GaussLegendre(int n) : x(size_t(n)), w(size_t(n)) {
+    for (int i = 0; i < n; ++i) {
+      double z = std::cos(kPi * (i + 0.75) / (n + 0.5)), dp = 1.0;
+      for (int it = 0; it < 100; ++it) {
+        double p1 = 1.0, p2 = 0.0;
+        for (int j = 0; j < n; ++j) {
+          const double p3 = p2;
+          p2 = p1;
+          p1 = ((2.0 * j + 1.0) * z * p2 - j * p3) / (j + 1.0);
+        }
+        dp = n * (z * p1 - p2) / (z * z - 1.0);
+        const double z1 = z;
+        z = z1 - p1 / dp;
+        if (std::abs(z - z1) < 1e-15) break;
+      }
+      x[size_t(i)] = z;
+      w[size_t(i)] = 2.0 / ((1.0 - z * z) * dp * dp);
     }
   }
-  return sum / (double(S) * S);
+};
+
+// Panel breakpoints in theta_h: uniform every pi/8, plus points clustered where the
+// distribution varies on its own scale (GGX: tan(theta) = alpha s near the normal;
+// Charlie: pi/2 - sqrt(alpha) s near the tangent plane).
+std::vector<double> Breakpoints(double alpha, bool charlie) {
+  std::vector<double> b;
+  for (int k = 0; k <= 4; ++k) b.push_back(k * kPi / 8.0);
+  for (double s : {0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 64.0}) {
+    b.push_back(charlie ? 0.5 * kPi - std::sqrt(alpha) * s : std::atan(alpha * s));
+  }
+  std::vector<double> out;
+  std::sort(b.begin(), b.end());
+  for (double t : b) {
+    if (t < 0.0 || t > 0.5 * kPi) continue;
+    if (out.empty() || t - out.back() > 1e-9) out.push_back(t);
+  }
+  return out;
 }
 
-// Reflect v about h; returns l and v.h.
-inline Vec3<double> Reflect(const Vec3<double>& v, const Vec3<double>& h, double& VoH) {
-  VoH = Dot(v, h);
-  return h * (2.0 * VoH) - v;
-}
-
-double CharlieCosThetaH(double u, double alpha) {
-  // sin(theta_h) = u^(alpha / (2 alpha + 1))  (Estevez & Kulla 2017, importance sampling)
-  const double sin_h = std::pow(u, alpha / (2.0 * alpha + 1.0));
-  return std::sqrt(std::max(0.0, 1.0 - sin_h * sin_h));
-}
-
-template <typename VisFn>
-double IntegrateCharlie(double NoV, double alpha, int S, VisFn vis) {
-  const Vec3<double> v = ViewDir(NoV);
-  return StratifiedMean(
-      S, [alpha](double u) { return CharlieCosThetaH(u, alpha); },
-      [&](const Vec3<double>& h) {
-        double VoH;
-        const Vec3<double> l = Reflect(v, h, VoH);
-        const double NoL = l.z;
-        const double NoH = h.z;
-        if (NoL <= 0.0 || VoH <= 0.0 || NoH <= 0.0) return 0.0;
-        return vis(NoL) * NoL * 4.0 * VoH / NoH;
-      });
+// int over the hemisphere of directions l of f(l) where f(l) = D(h) g(h, l) and the change
+// of variables dl = 4 (v.h) dh is applied by the caller's g. Integrates in the half vector:
+//   int_0^{pi/2} int_{valid phi} D(theta_h) g sin(theta_h) dphi dtheta_h,
+// with Gauss-Legendre panels in theta_h and midpoints over the azimuth arc where
+// n.l = 2 (v.h) cos(theta_h) - NoV > 0 (solved in closed form, so the integrand has no
+// discontinuity in phi), using the mirror symmetry about the plane of n and v.
+template <typename DFn, typename GFn>
+double HalfVectorIntegral(double NoV, double alpha, bool charlie, const Settings& s, DFn D,
+                          GFn g) {
+  static thread_local GaussLegendre gl_cache(8);
+  if (int(gl_cache.x.size()) != s.gauss_legendre_order) gl_cache = GaussLegendre(s.gauss_legendre_order);
+  const GaussLegendre& gl = gl_cache;
+  const double sin_v = std::sqrt(std::max(0.0, 1.0 - NoV * NoV));
+  const Vec3<double> v(sin_v, 0.0, NoV);
+  const std::vector<double> br = Breakpoints(alpha, charlie);
+  double total = 0.0;
+  for (size_t p = 0; p + 1 < br.size(); ++p) {
+    const double t0 = br[p], t1 = br[p + 1];
+    for (size_t k = 0; k < gl.x.size(); ++k) {
+      const double th = 0.5 * (t0 + t1) + 0.5 * (t1 - t0) * gl.x[k];
+      const double wt = 0.5 * (t1 - t0) * gl.w[k];
+      const double ch = std::cos(th), sh = std::sin(th);
+      // n.l > 0  <=>  cos(phi) > (NoV / (2 cos_h) - NoV cos_h) / (sin_v sin_h)
+      const double num = NoV / (2.0 * ch) - NoV * ch;
+      const double den = sin_v * sh;
+      double phi_max;
+      if (den < 1e-12) {
+        phi_max = num < 0.0 ? kPi : 0.0;
+      } else {
+        const double c0 = num / den;
+        phi_max = c0 <= -1.0 ? kPi : (c0 >= 1.0 ? 0.0 : std::acos(c0));
+      }
+      if (phi_max <= 0.0) continue;
+      double acc = 0.0;
+      for (int b = 0; b < s.azimuth_samples; ++b) {
+        const double phi = phi_max * (b + 0.5) / s.azimuth_samples;
+        const Vec3<double> h(sh * std::cos(phi), sh * std::sin(phi), ch);
+        const double VoH = Dot(v, h);
+        const double NoL = 2.0 * VoH * ch - NoV;
+        if (NoL <= 0.0 || VoH <= 0.0) continue;
+        acc += g(NoL, VoH, ch);
+      }
+      // 2 phi_max: both halves of the symmetric arc
+      total += wt * D(ch) * sh * 2.0 * phi_max * acc / s.azimuth_samples;
+    }
+  }
+  return total;
 }
 
 }  // namespace
 
-void IntegrateGgx(double NoV, double r, int S, double& A, double& B) {
+void IntegrateGgx(double NoV, double r, const Settings& s, double& A, double& B) {
   const double alpha = std::max(r * r, kMinAlpha);
-  const double a2 = alpha * alpha;
-  const Vec3<double> v = ViewDir(NoV);
-  double sa = 0.0, sb = 0.0;
-  for (int a = 0; a < S; ++a) {
-    const double u1 = (a + 0.5) / S;
-    // GGX D cos sampling (Walter et al. 2007): cos^2 = (1 - u) / (1 + (a2 - 1) u)
-    const double cos_h = std::sqrt((1.0 - u1) / (1.0 + (a2 - 1.0) * u1));
-    for (int b = 0; b < S; ++b) {
-      const Vec3<double> h = HalfFromAngles(cos_h, 2.0 * kPi * (b + 0.5) / S);
-      double VoH;
-      const Vec3<double> l = Reflect(v, h, VoH);
-      const double NoL = l.z;
-      if (NoL <= 0.0 || VoH <= 0.0) continue;
-      const double w = V_SmithGGXCorrelated(alpha, NoV, NoL) * NoL * 4.0 * VoH / h.z;
-      const double Fc = Pow5(1.0 - VoH);
-      sa += (1.0 - Fc) * w;
-      sb += Fc * w;
-    }
-  }
-  A = sa / (double(S) * S);
-  B = sb / (double(S) * S);
+  // f cos dl = D V F NoL 4 VoH dh
+  auto D = [alpha](double ch) { return D_GGX(alpha, ch); };
+  A = HalfVectorIntegral(NoV, alpha, false, s, D, [&](double NoL, double VoH, double) {
+    return V_SmithGGXCorrelated(alpha, NoV, NoL) * NoL * 4.0 * VoH * (1.0 - Pow5(1.0 - VoH));
+  });
+  B = HalfVectorIntegral(NoV, alpha, false, s, D, [&](double NoL, double VoH, double) {
+    return V_SmithGGXCorrelated(alpha, NoV, NoL) * NoL * 4.0 * VoH * Pow5(1.0 - VoH);
+  });
 }
 
-double IntegrateClothDg(double NoV, double r, int S) {
+double IntegrateClothDg(double NoV, double r, const Settings& s) {
   const double alpha = std::max(r * r, kMinAlpha);
-  return IntegrateCharlie(NoV, alpha, S, [NoV](double NoL) { return V_Neubelt(NoV, NoL); });
+  return HalfVectorIntegral(
+      NoV, alpha, true, s, [alpha](double ch) { return D_Charlie(alpha, ch, false); },
+      [&](double NoL, double VoH, double) { return V_Neubelt(NoV, NoL) * NoL * 4.0 * VoH; });
 }
 
-double IntegrateSheenAlbedo(double NoV, double r, int S) {
+double IntegrateSheenAlbedo(double NoV, double r, const Settings& s) {
   const double alpha = std::max(r * r, kMinAlpha);
-  return IntegrateCharlie(NoV, alpha, S,
-                          [NoV, alpha](double NoL) { return V_Charlie(NoV, NoL, alpha); });
+  return HalfVectorIntegral(
+      NoV, alpha, true, s, [alpha](double ch) { return D_Charlie(alpha, ch, false); },
+      [&](double NoL, double VoH, double) {
+        return V_Charlie(NoV, NoL, alpha) * NoL * 4.0 * VoH;
+      });
 }
 
 namespace {
@@ -120,10 +154,10 @@ Table2D ComputeDfg(const Settings& s, const Progress& progress) {
     for (int i = 0; i < s.size; ++i) {
       const double NoV = Table2D::Centre(i, s.size);
       double A, B;
-      IntegrateGgx(NoV, r, s.samples_per_axis, A, B);
+      IntegrateGgx(NoV, r, s, A, B);
       t.at(i, j, 0) = float(A);
       t.at(i, j, 1) = float(B);
-      t.at(i, j, 2) = float(IntegrateClothDg(NoV, r, s.samples_per_axis));
+      t.at(i, j, 2) = float(IntegrateClothDg(NoV, r, s));
     }
   });
   return t;
@@ -137,19 +171,19 @@ Table2D ComputeSheenAlbedo(const Settings& s, const Progress& progress) {
     const double r = Table2D::Centre(j, s.size);
     for (int i = 0; i < s.size; ++i) {
       t.at(i, j, 0) =
-          float(IntegrateSheenAlbedo(Table2D::Centre(i, s.size), r, s.samples_per_axis));
+          float(IntegrateSheenAlbedo(Table2D::Centre(i, s.size), r, s));
     }
   });
   return t;
 }
 
 const Table2D& DefaultDfg() {
-  static const Table2D table = ComputeDfg(Settings{128, 64});
+  static const Table2D table = ComputeDfg(Settings{128});
   return table;
 }
 
 const Table2D& DefaultSheenAlbedo() {
-  static const Table2D table = ComputeSheenAlbedo(Settings{32, 64});
+  static const Table2D table = ComputeSheenAlbedo(Settings{32});
   return table;
 }
 

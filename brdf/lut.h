@@ -11,9 +11,14 @@
 // Sheen albedo table (clothfit lut --sheen-out), size M x M, 1 channel, u = NoV, v = r_s:
 //   E = int D_Charlie(alpha = r_s^2) V_Charlie(alpha) cos dl (glTF KHR_materials_sheen).
 //
-// Integrator: deterministic stratified importance sampling of the half vector (GGX: its
-// D cos; Charlie: sin(theta_h) = u^(alpha/(2 alpha + 1))), `samples` = S x S midpoint
-// strata per texel, l = reflect(v, h), estimator f cos / pdf(l) = V cos_l 4 (v.h) / (n.h).
+// Integrator (deterministic quadrature in the half vector h, l = reflect(v, h),
+// dl = 4 (v.h) dh): Gauss-Legendre panels in theta_h (order 8 by default; breakpoints every
+// pi/8 plus 8 clustered at the distribution's own scale: tan(theta) = alpha s for GGX,
+// pi/2 - sqrt(alpha) s for Charlie), and midpoints over the azimuth arc where n.l > 0,
+// found in closed form so the integrand has no cut-off discontinuity. About 12 panels x 8
+// nodes x 32 azimuths ~ 3000 evaluations per texel and channel. Measured against a
+// converged reference: max error 1e-4 (GGX A) on NoV in [0.02, 0.97], r in [0.05, 0.97].
+// (Stratified importance sampling with 4096 samples per texel had 5e-3 errors at low r.)
 #pragma once
 
 #include <functional>
@@ -23,8 +28,9 @@
 namespace clothfit::lut {
 
 struct Settings {
-  int size = 128;              // texels per axis
-  int samples_per_axis = 64;   // S: S x S importance samples per texel (4096 by default)
+  int size = 128;                // texels per axis
+  int gauss_legendre_order = 8;  // nodes per theta_h panel
+  int azimuth_samples = 32;      // midpoints over the valid half arc of phi_h
 };
 
 // Progress callback: called with (rows done, rows total); may be empty.
@@ -34,11 +40,11 @@ Table2D ComputeDfg(const Settings& s, const Progress& progress = {});
 Table2D ComputeSheenAlbedo(const Settings& s, const Progress& progress = {});
 
 // Single-texel integrals (the same estimators; used by tests and tools).
-void IntegrateGgx(double NoV, double r, int samples_per_axis, double& A, double& B);
-double IntegrateClothDg(double NoV, double r, int samples_per_axis);
-double IntegrateSheenAlbedo(double NoV, double r, int samples_per_axis);
+void IntegrateGgx(double NoV, double r, const Settings& s, double& A, double& B);
+double IntegrateClothDg(double NoV, double r, const Settings& s = {});
+double IntegrateSheenAlbedo(double NoV, double r, const Settings& s = {});
 
-// Process-wide default tables (DFG 128 x 128, sheen albedo 32 x 32, 64 x 64 samples),
+// Process-wide default tables (DFG 128 x 128, sheen albedo 32 x 32, default quadrature),
 // computed on first use (thread-safe) and kept.
 const Table2D& DefaultDfg();
 const Table2D& DefaultSheenAlbedo();

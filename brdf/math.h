@@ -158,7 +158,7 @@ template <typename T>
 inline Vec3<T> SphericalDirection(T cos_theta, T phi) {
   using std::cos;
   using std::sin;
-  const T sin_theta = SafeSqrt(Const<T>(1.0) - cos_theta * cos_theta, 0.0);
+  const T sin_theta = SafeSqrt(Const<T>(1.0) - cos_theta * cos_theta);
   return {sin_theta * cos(phi), sin_theta * sin(phi), cos_theta};
 }
 

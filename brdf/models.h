@@ -19,7 +19,7 @@ enum class ModelId {
   kClothFilamentSubsurface,  // cloth, Filament desktop, subsurface colour
   kClothFilamentMobile,      // cloth, Filament mobile clamps
   kClothSeed,                // cloth, seed MeshClothMaterial, sheen = sqrt(base)
-  kClothSeedSubsurface,      // cloth, seed MeshClothMaterial with SUBSURFACE
+  kClothSeedSubsurface,      // cloth, seed MeshClothMaterial with SUBSURFACE, sqrt(base)
   kStandard,                 // three.js r187 MeshStandardMaterial
   kPhysicalSheen,            // three.js r187 MeshPhysicalMaterial sheen
   kGltfSheen,                // glTF KHR_materials_sheen
@@ -55,6 +55,7 @@ inline cloth::Options ClothOptionsFor(ModelId m) {
       break;
     case ModelId::kClothSeedSubsurface:
       o.variant = cloth::Variant::kSeedThreejs;
+      o.sheen_default = cloth::SheenDefault::kSqrtBaseColor;
       o.subsurface = true;
       break;
     default: break;

@@ -23,7 +23,8 @@ inline constexpr double kMinAlpha = 1e-8;
 // D_Charlie: Estevez & Kulla 2017, "Production Friendly Microfacet Sheen BRDF".
 //   D(h) = (2 + 1/alpha) sin(theta_h)^(1/alpha) / (2 pi),  sin^2 = 1 - NoH^2.
 // `engine_clamp` applies the engines' sin2h >= 2^-7 clamp (Filament, three.js). Without it
-// sin2h is still floored at 1e-12 so that pow(0, g) (infinite d/dg) never occurs; the value
+// sin2h is still floored at 1e-12 so that pow(0, g) (infinite derivative in the base,
+// NaN in g through log 0) never occurs; the value
 // changes by at most (1e-12)^(1/(2 alpha)) <= 1e-6 relative to the peak. alpha is floored
 // at kMinAlpha = 1e-8 (three.js r187's smallest sheen alpha, (1e-4)^2).
 template <typename T>
@@ -69,7 +70,7 @@ inline T V_Neubelt(const T& NoV, const T& NoL, NeubeltClamp clamp = NeubeltClamp
 //   L(x) = a / (1 + b x^c) + d x + e
 //   Lambda(cos) = exp(L(cos)) if |cos| < 0.5, else exp(2 L(0.5) - L(1 - cos)).
 // Guard: x is floored at 1e-9 inside L, so x^c (0 < c < 1) keeps a finite derivative in c
-// (changes Lambda(1) from ~1e-8 to ~1e-6, negligible against 1 in the visibility).
+// (changes Lambda(1) by less than 1e-7, negligible against 1 in the visibility).
 template <typename T>
 inline T L_CharlieLambda(const T& x_in, const T& alpha) {
   using std::pow;
@@ -104,7 +105,8 @@ inline T V_Charlie(const T& NoV, const T& NoL, const T& alpha) {
 
 // D_GGX: Walter et al. 2007, "Microfacet Models for Refraction through Rough Surfaces"
 // (Trowbridge-Reitz). D = alpha^2 / (pi (NoH^2 (alpha^2 - 1) + 1)^2). three.js form.
-// Guard: the denominator is floored at 1e-12 (it is >= alpha^2 > 0 for NoH in [0, 1]).
+// Guard: the denominator is floored at 1e-12 (it is >= alpha^2 for NoH in [0, 1], so the
+// floor only acts when alpha < 1e-6, i.e. glTF roughness below 1e-3).
 template <typename T>
 inline T D_GGX(const T& alpha_in, const T& NoH) {
   const T alpha = Max(alpha_in, Const<T>(kMinAlpha));

@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# Command-line tests through the real executable: cli_tests.sh <clothfit> <case>
+set -uo pipefail
+BIN=$1
+CASE=$2
+TMP=$(mktemp -d)
+trap 'rm -rf "$TMP"' EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+
+case "$CASE" in
+  lut)
+    "$BIN" --quiet lut --size 128 --out "$TMP/dfg.exr" --sheen-out "$TMP/sheen.exr" || fail "lut exited $?"
+    [ -s "$TMP/dfg.exr" ] || fail "no dfg.exr"
+    [ -s "$TMP/sheen.exr" ] || fail "no sheen.exr"
+    oiiotool --info -v "$TMP/dfg.exr" | grep -q "clothfit:v_axis" || fail "axis metadata missing"
+    oiiotool "$TMP/dfg.exr" --ch B -o "$TMP/b.exr" || fail "oiiotool --ch B"
+    oiiotool --dumpdata "$TMP/b.exr" > "$TMP/b.txt" || fail "oiiotool --dumpdata"
+    # Bilinear lookup of channel B at the stored-table points of cloth-models.md (+-0.01).
+    python3 - "$TMP/b.txt" <<'PY' || fail "B channel does not match cloth-models.md"
+import re, sys
+vals = {}
+for line in open(sys.argv[1]):
+    m = re.match(r"\s*Pixel \((\d+), (\d+)\):\s*([-\d.eE+]+)", line)
+    if m:
+        vals[(int(m.group(1)), int(m.group(2)))] = float(m.group(3))
+N = 128
+assert len(vals) == N * N, len(vals)
+def tex(i, j):
+    return vals[(min(max(i, 0), N - 1), min(max(j, 0), N - 1))]
+def sample(u, v):
+    x, y = u * N - 0.5, v * N - 0.5
+    x, y = min(max(x, 0.0), N - 1.0), min(max(y, 0.0), N - 1.0)
+    i, j = int(x), int(y)
+    fx, fy = x - i, y - j
+    a = tex(i, j) * (1 - fx) + tex(i + 1, j) * fx
+    b = tex(i, j + 1) * (1 - fx) + tex(i + 1, j + 1) * fx
+    return a * (1 - fy) + b * fy
+table = {(0.3, 0.1): 0.798, (0.3, 0.5): 0.137, (0.3, 1.0): 0.001, (0.5, 0.1): 0.639,
+         (0.5, 0.5): 0.230, (0.5, 1.0): 0.031, (0.7, 0.1): 0.556, (0.7, 0.5): 0.266,
+         (0.7, 1.0): 0.082, (1.0, 0.1): 0.494, (1.0, 0.5): 0.287, (1.0, 1.0): 0.141}
+bad = 0
+for (r, nov), want in table.items():
+    got = sample(nov, r)
+    ok = abs(got - want) <= 0.01
+    bad += not ok
+    print(f"r={r} NoV={nov}: B={got:.4f} table={want:.3f} {'ok' if ok else 'MISMATCH'}")
+sys.exit(1 if bad else 0)
+PY
+    ;;
+  stress)
+    out=$("$BIN" --quiet stress --evals 40000 --seed 11) || fail "stress exited non-zero: $out"
+    echo "$out" | tail -1 | grep -q "^stress: 40000 evaluations, 0 non-finite, 0 negative$" \
+      || fail "unexpected last line: $(echo "$out" | tail -1)"
+    ;;
+  badargs)
+    "$BIN" lut --size 1 --out "$TMP/x.exr" 2>/dev/null && fail "--size 1 accepted"
+    err=$("$BIN" --quiet lut --size 8 --out /nonexistent/dir/x.exr 2>&1) && fail "bad --out accepted"
+    echo "$err" | grep -q "/nonexistent/dir" || fail "error does not name the path: $err"
+    "$BIN" no-such-command 2>/dev/null && fail "unknown subcommand accepted"
+    "$BIN" stress --evals abc 2>/dev/null && fail "non-numeric --evals accepted"
+    "$BIN" lut --out "$TMP/y.exr" --frobnicate 2>/dev/null && fail "unknown flag accepted"
+    [ ! -e "$TMP/x.exr" ] || fail "output written despite error"
+    ;;
+  bench)
+    out=$("$BIN" bench brdf --benchmark_filter='cloth/filament/' --benchmark_min_time=0.01 2>&1) \
+      || fail "bench exited non-zero: $out"
+    echo "$out" | grep -q "brdf/cloth/filament/double" || fail "no double benchmark in: $out"
+    echo "$out" | grep -q "brdf/cloth/filament/jet10" || fail "no jet benchmark in: $out"
+    ;;
+  *) fail "unknown case $CASE" ;;
+esac
+echo "PASS: $CASE"
