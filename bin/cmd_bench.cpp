@@ -60,8 +60,9 @@ void BM_Model(benchmark::State& state, ModelId m) {
 void AddBenchCommand(CLI::App& app, const Globals&, int& exit_code) {
   auto what = std::make_shared<std::string>();
   CLI::App* cmd = app.add_subcommand("bench", "benchmarks (Google Benchmark)");
-  cmd->add_option("what", *what, "what to benchmark: brdf")->required()->check(
-      CLI::IsMember({"brdf"}));
+  cmd->add_option("what", *what, "what to benchmark: brdf")
+      ->required()
+      ->check(CLI::IsMember({"brdf"}));
   cmd->allow_extras();
   cmd->callback([cmd, what, &exit_code]() {
     (void)lut::DefaultDfg();  // tables are built once, outside the timed loops

@@ -29,8 +29,9 @@ void AddLutCommand(CLI::App& app, const Globals& g, int& exit_code) {
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
-      "lut", "compute the DFG LUT (R,G = GGX scale/bias, B = cloth sheen albedo) and the glTF "
-             "sheen albedo table");
+      "lut",
+      "compute the DFG LUT (R,G = GGX scale/bias, B = cloth sheen albedo) and the glTF "
+      "sheen albedo table");
   cmd->add_option("--size", args->size, "DFG texels per axis")->check(CLI::Range(2, 4096));
   cmd->add_option("--gl-order", args->order, "Gauss-Legendre nodes per theta_h panel")
       ->check(CLI::Range(2, 64));

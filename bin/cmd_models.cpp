@@ -18,8 +18,8 @@ void PrintTable(const char* title, std::span<const ParamInfo> table) {
     else
       std::snprintf(def, sizeof def, "%g", p.def[0]);
     std::snprintf(range, sizeof range, "[%g, %g]", p.lower, p.upper);
-    std::printf("  %-17.*s %4d %-16s %-18s %-5s %.*s\n", int(p.name.size()), p.name.data(),
-                p.size, def, range, p.differentiable ? "yes" : "no", int(p.convention.size()),
+    std::printf("  %-17.*s %4d %-16s %-18s %-5s %.*s\n", int(p.name.size()), p.name.data(), p.size,
+                def, range, p.differentiable ? "yes" : "no", int(p.convention.size()),
                 p.convention.data());
   }
 }

@@ -21,16 +21,14 @@ void AddStressCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--seed", args->seed, "random seed (results are deterministic per seed)");
   cmd->callback([args, &g, &exit_code]() {
     ProgressBar bar("stress", g.quiet);
-    const stress::Report r = stress::Run(args->evals, args->seed,
-                                         [&](int64_t d, int64_t t) { bar.Update(d, t); });
+    const stress::Report r =
+        stress::Run(args->evals, args->seed, [&](int64_t d, int64_t t) { bar.Update(d, t); });
     std::printf("%-28s %12s %10s %10s %14s\n", "model", "evaluations", "non-finite", "negative",
                 "max rel f-dev");
     for (const auto& m : r.models) {
-      std::printf("%-28s %12lld %10lld %10lld %14.3g\n", m.model.c_str(),
-                  (long long)m.evaluations, (long long)m.non_finite, (long long)m.negative,
-                  m.max_rel_float_dev);
-      if (!m.first_failure.empty())
-        std::printf("  first failure: %s\n", m.first_failure.c_str());
+      std::printf("%-28s %12lld %10lld %10lld %14.3g\n", m.model.c_str(), (long long)m.evaluations,
+                  (long long)m.non_finite, (long long)m.negative, m.max_rel_float_dev);
+      if (!m.first_failure.empty()) std::printf("  first failure: %s\n", m.first_failure.c_str());
     }
     std::printf("stress: %lld evaluations, %lld non-finite, %lld negative\n",
                 (long long)r.evaluations, (long long)r.non_finite, (long long)r.negative);

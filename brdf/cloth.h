@@ -81,9 +81,9 @@ inline constexpr double kSeedMinRoughness = 0.0525;
 struct Options {
   Variant variant = Variant::kFilament;
   SheenDefault sheen_default = SheenDefault::kExplicit;  // kExplicit: use sheen_color as given
-  bool subsurface = false;                                // MATERIAL_HAS_SUBSURFACE_COLOR
-  Platform platform = Platform::kDesktop;                 // Filament only
-  double seed_subsurface_intensity = 0.5;                 // seed's subsurfaceIntensity (IBL wrap)
+  bool subsurface = false;                               // MATERIAL_HAS_SUBSURFACE_COLOR
+  Platform platform = Platform::kDesktop;                // Filament only
+  double seed_subsurface_intensity = 0.5;                // seed's subsurfaceIntensity (IBL wrap)
 };
 
 template <typename T>
@@ -96,9 +96,19 @@ struct Params {
 
 inline constexpr std::array<ParamInfo, 4> kParameterTable{{
     {"base_color", 3, {1.0, 1.0, 1.0}, 0.0, 1.0, true, "linear sRGB"},
-    {"sheen_color", 3, {1.0, 1.0, 1.0}, 0.0, 1.0, true,
+    {"sheen_color",
+     3,
+     {1.0, 1.0, 1.0},
+     0.0,
+     1.0,
+     true,
      "linear sRGB; when absent, derived per sheen_default (explicit/sqrt-base-color/white)"},
-    {"roughness", 1, {1.0, 0.0, 0.0}, kMinPerceptualRoughnessDesktop, 1.0, true,
+    {"roughness",
+     1,
+     {1.0, 0.0, 0.0},
+     kMinPerceptualRoughnessDesktop,
+     1.0,
+     true,
      "perceptual r, clamped to [0.045, 1] desktop, [0.089, 1] mobile, [0.0525, 1] seed; "
      "alpha = r^2"},
     {"subsurface_color", 3, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "linear sRGB; only with subsurface"},

@@ -16,10 +16,11 @@
 //     diffuse weight  = (1 - m) c (1 - Fib(0.04))
 //     sheen weight    = c_s E(NoV, r_s)    (on the Charlie-prefiltered radiance)
 //     base weights x (1 - max3(c_s) E(NoV, r_s))
-//   E(NoV, r_s) (read saturated, see SheenAlbedo): the sheen lobe's directional albedo int D_Charlie V_Charlie cos, a table
-//   built by our own integrator (clothfit lut --sheen-out; brdf/lut.h), not the viewer's
-//   (reported 10-50 % high). The viewer reads its Charlie LUT for the IBL term and a
-//   separate albedo-scaling LUT; both are this same integral, so one table serves both.
+//   E(NoV, r_s) (read saturated, see SheenAlbedo): the sheen lobe's directional albedo int
+//   D_Charlie V_Charlie cos, a table built by our own integrator (clothfit lut --sheen-out;
+//   brdf/lut.h), not the viewer's (reported 10-50 % high). The viewer reads its Charlie LUT for the
+//   IBL term and a separate albedo-scaling LUT; both are this same integral, so one table serves
+//   both.
 //
 // Parameters (kParameterTable):
 //   name             size default  range        diff  convention
@@ -43,7 +44,8 @@
 
 namespace clothfit::gltf_sheen {
 
-inline constexpr std::string_view kEngine = "glTF 2.0 + KHR_materials_sheen (Khronos sample viewer)";
+inline constexpr std::string_view kEngine =
+    "glTF 2.0 + KHR_materials_sheen (Khronos sample viewer)";
 inline constexpr double kMinSheenRoughness = 1e-4;
 inline constexpr double kF0 = 0.04;
 
@@ -63,7 +65,12 @@ inline constexpr std::array<ParamInfo, 5> kParameterTable{{
     {"roughness", 1, {1.0, 0.0, 0.0}, 0.0, 1.0, true, "perceptual r; alpha = r^2"},
     {"metallic", 1, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "0 = dielectric"},
     {"sheen_color", 3, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "linear sRGB (sheenColorFactor)"},
-    {"sheen_roughness", 1, {0.0, 0.0, 0.0}, kMinSheenRoughness, 1.0, true,
+    {"sheen_roughness",
+     1,
+     {0.0, 0.0, 0.0},
+     kMinSheenRoughness,
+     1.0,
+     true,
      "sheenRoughnessFactor r_s, floored at 1e-4; alpha = r_s^2"},
 }};
 

@@ -61,10 +61,10 @@ std::vector<double> Breakpoints(double alpha, bool charlie) {
 // n.l = 2 (v.h) cos(theta_h) - NoV > 0 (solved in closed form, so the integrand has no
 // discontinuity in phi), using the mirror symmetry about the plane of n and v.
 template <typename DFn, typename GFn>
-double HalfVectorIntegral(double NoV, double alpha, bool charlie, const Settings& s, DFn D,
-                          GFn g) {
+double HalfVectorIntegral(double NoV, double alpha, bool charlie, const Settings& s, DFn D, GFn g) {
   static thread_local GaussLegendre gl_cache(8);
-  if (int(gl_cache.x.size()) != s.gauss_legendre_order) gl_cache = GaussLegendre(s.gauss_legendre_order);
+  if (int(gl_cache.x.size()) != s.gauss_legendre_order)
+    gl_cache = GaussLegendre(s.gauss_legendre_order);
   const GaussLegendre& gl = gl_cache;
   const double sin_v = std::sqrt(std::max(0.0, 1.0 - NoV * NoV));
   const Vec3<double> v(sin_v, 0.0, NoV);
@@ -128,9 +128,7 @@ double IntegrateSheenAlbedo(double NoV, double r, const Settings& s) {
   const double alpha = std::max(r * r, kMinAlpha);
   return HalfVectorIntegral(
       NoV, alpha, true, s, [alpha](double ch) { return D_Charlie(alpha, ch, false); },
-      [&](double NoL, double VoH, double) {
-        return V_Charlie(NoV, NoL, alpha) * NoL * 4.0 * VoH;
-      });
+      [&](double NoL, double VoH, double) { return V_Charlie(NoV, NoL, alpha) * NoL * 4.0 * VoH; });
 }
 
 namespace {
@@ -170,8 +168,7 @@ Table2D ComputeSheenAlbedo(const Settings& s, const Progress& progress) {
   ParallelRows(s.size, progress, [&](int j) {
     const double r = Table2D::Centre(j, s.size);
     for (int i = 0; i < s.size; ++i) {
-      t.at(i, j, 0) =
-          float(IntegrateSheenAlbedo(Table2D::Centre(i, s.size), r, s));
+      t.at(i, j, 0) = float(IntegrateSheenAlbedo(Table2D::Centre(i, s.size), r, s));
     }
   });
   return t;

@@ -26,9 +26,10 @@ enum class ModelId {
 };
 
 inline constexpr std::array<ModelId, 8> kAllModels{
-    ModelId::kClothFilament,  ModelId::kClothFilamentSubsurface, ModelId::kClothFilamentMobile,
-    ModelId::kClothSeed,      ModelId::kClothSeedSubsurface,     ModelId::kStandard,
-    ModelId::kPhysicalSheen,  ModelId::kGltfSheen};
+    ModelId::kClothFilament,       ModelId::kClothFilamentSubsurface,
+    ModelId::kClothFilamentMobile, ModelId::kClothSeed,
+    ModelId::kClothSeedSubsurface, ModelId::kStandard,
+    ModelId::kPhysicalSheen,       ModelId::kGltfSheen};
 
 inline std::string_view ModelName(ModelId m) {
   switch (m) {

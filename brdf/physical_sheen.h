@@ -12,9 +12,9 @@
 //       (three.js adds iblIrradiance c_s E^ / pi, iblIrradiance = pi x env at max LOD)
 //     base weights x (1 - max3(c_s) E^(NoV))
 //   E^ (three.js IBLSheenBRDF, r182+): q = 1/(r_s + 0.1),
-//     a = -1.9362 + 1.0678 r + 0.4573 r^2 - 0.8469 q, b = -0.6014 + 0.5538 r - 0.4670 r^2 - 0.1255 q,
-//     E^ = saturate(exp(a NoV + b)).  It underestimates the true albedo at grazing angles
-//     (r = 0.3, NoV = 0.1: 0.313 vs 0.756; cloth-models.md section 4): tested, not fixed.
+//     a = -1.9362 + 1.0678 r + 0.4573 r^2 - 0.8469 q, b = -0.6014 + 0.5538 r - 0.4670 r^2 - 0.1255
+//     q, E^ = saturate(exp(a NoV + b)).  It underestimates the true albedo at grazing angles (r =
+//     0.3, NoV = 0.1: 0.313 vs 0.756; cloth-models.md section 4): tested, not fixed.
 //
 // Parameters (kParameterTable):
 //   name             size default  range        diff  convention
@@ -51,11 +51,21 @@ struct Params {
 
 inline constexpr std::array<ParamInfo, 5> kParameterTable{{
     {"base_color", 3, {1.0, 1.0, 1.0}, 0.0, 1.0, true, "linear sRGB"},
-    {"roughness", 1, {1.0, 0.0, 0.0}, standard::kMinRoughness, 1.0, true,
+    {"roughness",
+     1,
+     {1.0, 0.0, 0.0},
+     standard::kMinRoughness,
+     1.0,
+     true,
      "perceptual r, clamped to [0.045, 1]; alpha = r^2"},
     {"metalness", 1, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "0 = dielectric"},
     {"sheen_color", 3, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "linear sRGB; sheenColor x sheen"},
-    {"sheen_roughness", 1, {1.0, 0.0, 0.0}, kMinSheenRoughness, 1.0, true,
+    {"sheen_roughness",
+     1,
+     {1.0, 0.0, 0.0},
+     kMinSheenRoughness,
+     1.0,
+     true,
      "perceptual r_s, clamped to [1e-4, 1]; alpha = r_s^2"},
 }};
 
@@ -71,10 +81,10 @@ inline T SheenAlbedoFit(const T& NoV_raw, const T& r_s) {
   const T NoV = Saturate(NoV_raw);
   const T q = Const<T>(1.0) / (r_s + Const<T>(0.1));
   const T r2 = r_s * r_s;
-  const T a = Const<T>(-1.9362) + Const<T>(1.0678) * r_s + Const<T>(0.4573) * r2 -
-              Const<T>(0.8469) * q;
-  const T b = Const<T>(-0.6014) + Const<T>(0.5538) * r_s - Const<T>(0.4670) * r2 -
-              Const<T>(0.1255) * q;
+  const T a =
+      Const<T>(-1.9362) + Const<T>(1.0678) * r_s + Const<T>(0.4573) * r2 - Const<T>(0.8469) * q;
+  const T b =
+      Const<T>(-0.6014) + Const<T>(0.5538) * r_s - Const<T>(0.4670) * r2 - Const<T>(0.1255) * q;
   return Saturate(exp(a * NoV + b));
 }
 
@@ -86,8 +96,8 @@ inline Rgb<T> EvalDirect(const Params<T>& p, const Options& o, const Cosines<T>&
   const T r_s = ClampedSheenRoughness(p.sheen_roughness);
   const T DV = D_Charlie(r_s * r_s, Saturate(c.NoH)) * V_Neubelt(NoV, NoL, NeubeltClamp::kOne);
   const Rgb<T> sheen = p.sheen_color * (DV * NoL);
-  const T comp = Const<T>(1.0) -
-                 Max3(p.sheen_color) * Max(SheenAlbedoFit(NoV, r_s), SheenAlbedoFit(NoL, r_s));
+  const T comp =
+      Const<T>(1.0) - Max3(p.sheen_color) * Max(SheenAlbedoFit(NoV, r_s), SheenAlbedoFit(NoL, r_s));
   return sheen + standard::EvalDirect(p.Base(), o, c, dfg) * comp;
 }
 

@@ -57,7 +57,12 @@ struct Params {
 
 inline constexpr std::array<ParamInfo, 3> kParameterTable{{
     {"base_color", 3, {1.0, 1.0, 1.0}, 0.0, 1.0, true, "linear sRGB"},
-    {"roughness", 1, {1.0, 0.0, 0.0}, kMinRoughness, 1.0, true,
+    {"roughness",
+     1,
+     {1.0, 0.0, 0.0},
+     kMinRoughness,
+     1.0,
+     true,
      "perceptual r, clamped to [0.045, 1]; alpha = r^2"},
     {"metalness", 1, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "0 = dielectric (f0 = 0.04)"},
 }};

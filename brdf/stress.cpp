@@ -17,8 +17,8 @@ namespace {
 constexpr int kMaxParams = 10;
 using Jet = ceres::Jet<double, kMaxParams>;
 
-constexpr std::array<double, 8> kAdversarialCos{0.0,         1e-8, 1e-4, 1.0 - 1e-7,
-                                                1.0,         1.0 + 1e-7, -1e-8, -0.3};
+constexpr std::array<double, 8> kAdversarialCos{0.0, 1e-8,       1e-4,  1.0 - 1e-7,
+                                                1.0, 1.0 + 1e-7, -1e-8, -0.3};
 
 // SplitMix64: a counter-based generator, so chunk k's stream depends only on (seed, k).
 struct SplitMix {

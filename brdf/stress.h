@@ -21,8 +21,8 @@ namespace clothfit::stress {
 struct ModelReport {
   std::string model;
   int64_t evaluations = 0;
-  int64_t non_finite = 0;     // any value or Jet derivative not finite
-  int64_t negative = 0;       // any value < 0
+  int64_t non_finite = 0;  // any value or Jet derivative not finite
+  int64_t negative = 0;    // any value < 0
   double max_rel_float_dev = 0.0;
   std::string first_failure;  // description of the first failing input, if any
 };
@@ -34,6 +34,7 @@ struct Report {
 
 // Runs `evals` evaluations in total, split evenly across models; deterministic for a seed
 // whatever the thread count. `progress(done, total)` may be empty.
-Report Run(int64_t evals, uint64_t seed, const std::function<void(int64_t, int64_t)>& progress = {});
+Report Run(int64_t evals, uint64_t seed,
+           const std::function<void(int64_t, int64_t)>& progress = {});
 
 }  // namespace clothfit::stress

@@ -32,8 +32,7 @@ inline T D_Charlie(const T& alpha_in, const T& NoH, bool engine_clamp = true) {
   using std::pow;
   const T alpha = Max(alpha_in, Const<T>(kMinAlpha));
   const T inv_alpha = Const<T>(1.0) / alpha;
-  const T sin2h =
-      Max(Const<T>(1.0) - NoH * NoH, Const<T>(engine_clamp ? kCharlieMinSin2h : 1e-12));
+  const T sin2h = Max(Const<T>(1.0) - NoH * NoH, Const<T>(engine_clamp ? kCharlieMinSin2h : 1e-12));
   return (Const<T>(2.0) + inv_alpha) * pow(sin2h, inv_alpha * Const<T>(0.5)) *
          Const<T>(0.5 * kInvPi);
 }
@@ -54,12 +53,9 @@ inline T V_Neubelt(const T& NoV, const T& NoL, NeubeltClamp clamp = NeubeltClamp
   const T den = Max(Const<T>(4.0) * (NoL + NoV - NoL * NoV), Const<T>(1e-12));
   const T v = Const<T>(1.0) / den;
   switch (clamp) {
-    case NeubeltClamp::kOne:
-      return Min(v, Const<T>(1.0));
-    case NeubeltClamp::kMobile:
-      return Min(v, Const<T>(65504.0));
-    case NeubeltClamp::kNone:
-      break;
+    case NeubeltClamp::kOne: return Min(v, Const<T>(1.0));
+    case NeubeltClamp::kMobile: return Min(v, Const<T>(65504.0));
+    case NeubeltClamp::kNone: break;
   }
   return v;
 }
@@ -86,8 +82,8 @@ inline T L_CharlieLambda(const T& x_in, const T& alpha) {
 
 template <typename T>
 inline T Lambda_Charlie(const T& cos_theta, const T& alpha) {
-  using std::exp;
   using std::abs;
+  using std::exp;
   if (abs(cos_theta) < Const<T>(0.5)) return exp(L_CharlieLambda(abs(cos_theta), alpha));
   return exp(Const<T>(2.0) * L_CharlieLambda(Const<T>(0.5), alpha) -
              L_CharlieLambda(Const<T>(1.0) - abs(cos_theta), alpha));

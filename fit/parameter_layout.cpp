@@ -7,7 +7,8 @@ namespace clothfit::fit {
 std::vector<double> ParameterLayout::Defaults(std::span<const ParamInfo> table) const {
   std::vector<double> x(size_t(flat_size), 0.0);
   for (size_t i = 0; i < table.size() && i < blocks.size(); ++i)
-    for (int c = 0; c < blocks[i].size; ++c) x[size_t(blocks[i].offset + c)] = table[i].def[size_t(c)];
+    for (int c = 0; c < blocks[i].size; ++c)
+      x[size_t(blocks[i].offset + c)] = table[i].def[size_t(c)];
   return x;
 }
 
@@ -17,7 +18,8 @@ const Block& ParameterLayout::Find(const std::string& name) const {
   throw std::invalid_argument("unknown parameter '" + name + "'");
 }
 
-ParameterLayout MakeLayout(std::span<const ParamInfo> table, const std::vector<std::string>& locked) {
+ParameterLayout MakeLayout(std::span<const ParamInfo> table,
+                           const std::vector<std::string>& locked) {
   ParameterLayout layout;
   std::string valid;
   for (const ParamInfo& p : table) {
@@ -36,7 +38,8 @@ ParameterLayout MakeLayout(std::span<const ParamInfo> table, const std::vector<s
     auto it = std::find_if(layout.blocks.begin(), layout.blocks.end(),
                            [&](const Block& b) { return b.name == name; });
     if (it == layout.blocks.end()) {
-      throw std::invalid_argument("--lock: unknown parameter '" + name + "' (valid: " + valid + ")");
+      throw std::invalid_argument("--lock: unknown parameter '" + name + "' (valid: " + valid +
+                                  ")");
     }
     it->locked = true;
   }

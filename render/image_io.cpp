@@ -74,9 +74,9 @@ Image ReadImage(const std::string& path) {
       spec.height > kMaxDimension || spec.nchannels <= 0 || spec.nchannels > kMaxChannels ||
       spec.depth != 1) {
     throw IoError(path + ": unsupported image size " + std::to_string(spec.width) + "x" +
-                  std::to_string(spec.height) + "x" + std::to_string(spec.nchannels) +
-                  " (limits " + std::to_string(kMaxDimension) + " per side, " +
-                  std::to_string(kMaxChannels) + " channels)");
+                  std::to_string(spec.height) + "x" + std::to_string(spec.nchannels) + " (limits " +
+                  std::to_string(kMaxDimension) + " per side, " + std::to_string(kMaxChannels) +
+                  " channels)");
   }
   Image img;
   img.width = spec.width;

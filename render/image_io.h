@@ -24,7 +24,7 @@ class IoError : public std::runtime_error {
 struct Image {
   int width = 0, height = 0;
   std::vector<std::string> channel_names;  // e.g. {"R", "G", "B"}
-  std::vector<float> pixels;                // row-major, top row first, interleaved
+  std::vector<float> pixels;               // row-major, top row first, interleaved
   std::map<std::string, std::string> metadata;
 
   int channels() const { return int(channel_names.size()); }

@@ -134,10 +134,10 @@ struct AlbedoPoint {
   double r, NoV, expected;
 };
 // cloth-models.md section 2, [checked] DFG.z (unclamped V).
-const AlbedoPoint kClothAlbedo[] = {
-    {0.3, 0.1, 0.798}, {0.3, 0.5, 0.137}, {0.3, 1.0, 0.001}, {0.5, 0.1, 0.639},
-    {0.5, 0.5, 0.230}, {0.5, 1.0, 0.031}, {0.7, 0.1, 0.556}, {0.7, 0.5, 0.266},
-    {0.7, 1.0, 0.082}, {1.0, 0.1, 0.494}, {1.0, 0.5, 0.287}, {1.0, 1.0, 0.141}};
+const AlbedoPoint kClothAlbedo[] = {{0.3, 0.1, 0.798}, {0.3, 0.5, 0.137}, {0.3, 1.0, 0.001},
+                                    {0.5, 0.1, 0.639}, {0.5, 0.5, 0.230}, {0.5, 1.0, 0.031},
+                                    {0.7, 0.1, 0.556}, {0.7, 0.5, 0.266}, {0.7, 1.0, 0.082},
+                                    {1.0, 0.1, 0.494}, {1.0, 0.5, 0.287}, {1.0, 1.0, 0.141}};
 
 TEST(Energy, ClothSheenAlbedoMatchesStoredTable) {
   for (const auto& p : kClothAlbedo) {

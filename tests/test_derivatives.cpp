@@ -14,7 +14,8 @@ namespace {
 
 constexpr int kResiduals = 6;
 constexpr double kRtol = 1e-5;
-const std::vector<const ceres::Manifold*>* const kNoManifolds = nullptr;  // direct RGB + uniform-environment IBL RGB
+const std::vector<const ceres::Manifold*>* const kNoManifolds =
+    nullptr;  // direct RGB + uniform-environment IBL RGB
 
 template <int N>
 struct ModelFunctor {
@@ -57,8 +58,8 @@ void Check(ModelId m, std::array<double, N> x, const Cosines<double>& c, double 
       const double a = jet(row, col), b = num(row, col);
       EXPECT_LE(std::abs(a - b), precision * std::max(std::abs(a), std::abs(b)) + 1e-9)
           << ModelName(m) << " d(residual " << row << ")/d(x" << col << "): jet " << a
-          << " vs Ridders " << b << " at x" << col << " = " << x[size_t(col)]
-          << ", NoV=" << c.NoV << " NoL=" << c.NoL;
+          << " vs Ridders " << b << " at x" << col << " = " << x[size_t(col)] << ", NoV=" << c.NoV
+          << " NoL=" << c.NoL;
     }
   }
 }
@@ -76,9 +77,9 @@ const Cosines<double> kConfigs[] = {Config(0.3, 0.8, 2.4), Config(1.2, 0.5, 1.0)
 // between LUT texel centres (0.5546875 = 71/128 is halfway between two), so the bilinear
 // lookup is differentiable there; near-bound values are 1e-3 inside their clamps.
 TEST(Derivatives, ClothAllVariantsInterior) {
-  for (ModelId m : {ModelId::kClothFilament, ModelId::kClothFilamentSubsurface,
-                    ModelId::kClothFilamentMobile, ModelId::kClothSeed,
-                    ModelId::kClothSeedSubsurface}) {
+  for (ModelId m :
+       {ModelId::kClothFilament, ModelId::kClothFilamentSubsurface, ModelId::kClothFilamentMobile,
+        ModelId::kClothSeed, ModelId::kClothSeedSubsurface}) {
     for (const auto& c : kConfigs) {
       Check<10>(m, {0.6, 0.35, 0.2, 0.8, 0.7, 0.5, 0.5546875, 0.3, 0.15, 0.05}, c, kRtol);
     }
@@ -88,7 +89,8 @@ TEST(Derivatives, ClothAllVariantsInterior) {
 TEST(Derivatives, ClothNearBounds) {
   for (const auto& c : kConfigs) {
     // roughness just inside its clamp, colours near 0 and 1
-    Check<10>(ModelId::kClothFilament, {0.999, 0.02, 0.5, 0.98, 0.01, 0.3, 0.0461, 0, 0, 0}, c, kRtol);
+    Check<10>(ModelId::kClothFilament, {0.999, 0.02, 0.5, 0.98, 0.01, 0.3, 0.0461, 0, 0, 0}, c,
+              kRtol);
     Check<10>(ModelId::kClothFilamentSubsurface,
               {0.999, 0.02, 0.5, 0.98, 0.01, 0.3, 0.9987, 0.995, 0.01, 0.5}, c, kRtol);
     // sqrt(base) at a small base colour: derivative large but finite and correct
@@ -106,9 +108,12 @@ TEST(Derivatives, StandardInteriorAndNearBounds) {
 
 TEST(Derivatives, PhysicalSheenInteriorAndNearBounds) {
   for (const auto& c : kConfigs) {
-    Check<9>(ModelId::kPhysicalSheen, {0.6, 0.35, 0.2, 0.5546875, 0.0, 0.5, 0.4, 0.3, 0.62}, c, kRtol);
-    Check<9>(ModelId::kPhysicalSheen, {0.6, 0.35, 0.2, 0.0461, 0.1, 0.9, 0.4, 0.3, 0.0711}, c, kRtol);
-    Check<9>(ModelId::kPhysicalSheen, {0.6, 0.35, 0.2, 0.9987, 0.0, 0.9, 0.4, 0.3, 0.9987}, c, kRtol);
+    Check<9>(ModelId::kPhysicalSheen, {0.6, 0.35, 0.2, 0.5546875, 0.0, 0.5, 0.4, 0.3, 0.62}, c,
+             kRtol);
+    Check<9>(ModelId::kPhysicalSheen, {0.6, 0.35, 0.2, 0.0461, 0.1, 0.9, 0.4, 0.3, 0.0711}, c,
+             kRtol);
+    Check<9>(ModelId::kPhysicalSheen, {0.6, 0.35, 0.2, 0.9987, 0.0, 0.9, 0.4, 0.3, 0.9987}, c,
+             kRtol);
   }
 }
 

@@ -51,7 +51,9 @@ std::map<std::string, std::function<std::array<double, 3>()>> Computations() {
     m[key("V_Charlie r=%g")] = [a] { return S(V_Charlie(kC.NoV, kC.NoL, a)); };
     m[key("Lambda_Charlie(NoV) r=%g")] = [a] { return S(Lambda_Charlie(kC.NoV, a)); };
     m[key("Lambda_Charlie(0.3) r=%g")] = [a] { return S(Lambda_Charlie(0.3, a)); };
-    m[key("SheenAlbedoFit(NoV) r=%g")] = [r] { return S(physical_sheen::SheenAlbedoFit(kC.NoV, r)); };
+    m[key("SheenAlbedoFit(NoV) r=%g")] = [r] {
+      return S(physical_sheen::SheenAlbedoFit(kC.NoV, r));
+    };
   }
   m["D_Charlie grazing r=0.5"] = [] { return S(D_Charlie(0.25, 0.999)); };
   m["V_Neubelt"] = [] { return S(V_Neubelt(kC.NoV, kC.NoL)); };

@@ -55,8 +55,8 @@ Table2D* LutVsQuadrature::dfg_ = nullptr;
 Table2D* LutVsQuadrature::sheen_ = nullptr;
 
 TEST_F(LutVsQuadrature, ChannelsMatchIndependentQuadratureAtTexelCentres) {
-  for (int j : {5, 8, 11, 15}) {     // r = 0.34, 0.53, 0.72, 0.97
-    for (int i : {3, 8, 12, 15}) {   // NoV = 0.22, 0.53, 0.78, 0.97
+  for (int j : {5, 8, 11, 15}) {    // r = 0.34, 0.53, 0.72, 0.97
+    for (int i : {3, 8, 12, 15}) {  // NoV = 0.22, 0.53, 0.78, 0.97
       const double NoV = Table2D::Centre(i, 16), r = Table2D::Centre(j, 16);
       EXPECT_NEAR(dfg_->at(i, j, 0), QuadGgx(NoV, r, false), 1e-3) << "A at " << NoV << "," << r;
       EXPECT_NEAR(dfg_->at(i, j, 1), QuadGgx(NoV, r, true), 1e-3) << "B at " << NoV << "," << r;
@@ -92,10 +92,10 @@ TEST(Table2D, BilinearBetweenCentresAndClampToEdge) {
   t.at(1, 0, 0) = 1.f;
   t.at(0, 1, 0) = 2.f;
   t.at(1, 1, 0) = 3.f;
-  EXPECT_DOUBLE_EQ(t.Sample(0.5, 0.25, 0), 0.5);   // halfway between u centres 0.25 and 0.75
+  EXPECT_DOUBLE_EQ(t.Sample(0.5, 0.25, 0), 0.5);  // halfway between u centres 0.25 and 0.75
   EXPECT_DOUBLE_EQ(t.Sample(0.5, 0.5, 0), 1.5);
-  EXPECT_DOUBLE_EQ(t.Sample(0.0, 0.0, 0), 0.0);    // clamp to edge below the first centre
-  EXPECT_DOUBLE_EQ(t.Sample(1.0, 1.0, 0), 3.0);    // and above the last
+  EXPECT_DOUBLE_EQ(t.Sample(0.0, 0.0, 0), 0.0);  // clamp to edge below the first centre
+  EXPECT_DOUBLE_EQ(t.Sample(1.0, 1.0, 0), 3.0);  // and above the last
   EXPECT_DOUBLE_EQ(t.Sample(-5.0, 0.75, 0), 2.0);
   EXPECT_DOUBLE_EQ(t.Sample(std::nan(""), 0.25, 0), 0.0);  // NaN coordinates clamp too
 }
