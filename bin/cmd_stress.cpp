@@ -28,6 +28,7 @@ void AddStressCommand(CLI::App& app, const Globals& g, int& exit_code) {
     for (const auto& m : r.models) {
       std::printf("%-28s %12lld %10lld %10lld %14.3g\n", m.model.c_str(), (long long)m.evaluations,
                   (long long)m.non_finite, (long long)m.negative, m.max_rel_float_dev);
+      if (m.max_rel_float_dev > 1e-3) std::printf("  %s\n", m.worst_float_deviation.c_str());
       if (!m.first_failure.empty()) std::printf("  first failure: %s\n", m.first_failure.c_str());
     }
     std::printf("stress: %lld evaluations, %lld non-finite, %lld negative\n",

@@ -120,6 +120,7 @@ std::string Describe(ModelId m, const Input& in, const char* what) {
 struct Tally {
   int64_t evaluations = 0, non_finite = 0, negative = 0;
   double max_dev = 0.0;
+  Input worst;  // input of the largest float deviation
   std::string first_failure;
   void Fail(std::string msg) {
     if (first_failure.empty()) first_failure = std::move(msg);
@@ -155,7 +156,10 @@ void EvaluateOne(ModelId m, const Input& in, Tally& t) {
       if (d[k] < 0.0 || f[k] < 0.0f || j[k]->a < 0.0) bad_negative = true;
       if (std::isfinite(d[k]) && std::isfinite(f[k])) {
         const double dev = std::abs(double(f[k]) - d[k]) / std::max(std::abs(d[k]), 1e-3);
-        t.max_dev = std::max(t.max_dev, dev);
+        if (dev > t.max_dev) {
+          t.max_dev = dev;
+          t.worst = in;
+        }
       }
     }
   }
@@ -210,7 +214,11 @@ Report Run(int64_t evals, uint64_t seed, const std::function<void(int64_t, int64
       mr.evaluations += t.evaluations;
       mr.non_finite += t.non_finite;
       mr.negative += t.negative;
-      mr.max_rel_float_dev = std::max(mr.max_rel_float_dev, t.max_dev);
+      if (t.max_dev > mr.max_rel_float_dev) {
+        mr.max_rel_float_dev = t.max_dev;
+        mr.worst_float_deviation =
+            Describe(kAllModels[size_t(mi)], t.worst, "largest float deviation");
+      }
       if (mr.first_failure.empty()) mr.first_failure = t.first_failure;
     }
     r.evaluations += mr.evaluations;

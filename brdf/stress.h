@@ -24,7 +24,8 @@ struct ModelReport {
   int64_t non_finite = 0;  // any value or Jet derivative not finite
   int64_t negative = 0;    // any value < 0
   double max_rel_float_dev = 0.0;
-  std::string first_failure;  // description of the first failing input, if any
+  std::string first_failure;          // description of the first failing input, if any
+  std::string worst_float_deviation;  // the input with the largest float-vs-double deviation
 };
 
 struct Report {
