@@ -1,0 +1,48 @@
+// render/sampler.h: deterministic per-pixel random streams. The stream of pixel p, sample s
+// depends only on (seed, p, s), never on thread scheduling, so the same seed gives a
+// bit-identical image with any number of threads.
+#pragma once
+
+#include <cstdint>
+
+namespace clothfit::render {
+
+// PCG32 (O'Neill 2014, "PCG: A Family of Simple Fast Space-Efficient Statistically Good
+// Algorithms for Random Number Generation"), XSH-RR output.
+class Pcg32 {
+ public:
+  Pcg32(uint64_t seed, uint64_t stream) {
+    inc_ = (stream << 1u) | 1u;
+    state_ = 0u;
+    Next();
+    state_ += seed;
+    Next();
+  }
+  uint32_t Next() {
+    const uint64_t old = state_;
+    state_ = old * 6364136223846793005ull + inc_;
+    const uint32_t xorshifted = uint32_t(((old >> 18u) ^ old) >> 27u);
+    const uint32_t rot = uint32_t(old >> 59u);
+    return (xorshifted >> rot) | (xorshifted << ((-rot) & 31));
+  }
+  // Uniform double in [0, 1).
+  double Uniform() { return double(Next()) * 0x1.0p-32; }
+
+ private:
+  uint64_t state_ = 0, inc_ = 0;
+};
+
+// SplitMix64 finaliser, to derive stream ids.
+inline uint64_t Mix64(uint64_t z) {
+  z += 0x9E3779B97F4A7C15ull;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+// The generator for (seed, pixel index, sample index).
+inline Pcg32 PixelSampler(uint64_t seed, uint64_t pixel, uint64_t sample) {
+  return Pcg32(Mix64(seed ^ Mix64(pixel)), Mix64(pixel * 0x100000001B3ull + sample));
+}
+
+}  // namespace clothfit::render
