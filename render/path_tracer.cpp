@@ -1,0 +1,364 @@
+#include "render/path_tracer.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+
+#include "render/embree_scene.h"
+#include "render/image_io.h"
+#include "render/sampler.h"
+
+namespace clothfit::render {
+namespace {
+
+using A3 = std::array<double, 3>;
+
+Vec3d V(const A3& a) { return {a[0], a[1], a[2]}; }
+A3 A(const Vec3d& v) { return {v.x, v.y, v.z}; }
+
+// Orthonormal shading frame: x = tangent, y = bitangent, z = normal.
+struct Frame {
+  Vec3d t, b, n;
+  Vec3d ToLocal(const Vec3d& w) const { return {Dot(w, t), Dot(w, b), Dot(w, n)}; }
+  Vec3d ToWorld(const Vec3d& w) const { return t * w.x + b * w.y + n * w.z; }
+};
+
+double PowerHeuristic(double a, double b) {
+  const double a2 = a * a, b2 = b * b;
+  return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
+}
+
+double Smoothstep(double e0, double e1, double x) {
+  if (e1 <= e0) return x >= e1 ? 1.0 : 0.0;
+  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
+  return t * t * (3.0 - 2.0 * t);
+}
+
+}  // namespace
+
+struct PathTracer::Impl {
+  const Scene& scene;
+  const Bsdf& fabric;
+  const Environment* env;
+  EmbreeScene bvh;
+  std::vector<std::unique_ptr<Bsdf>> lamberts;  // per mesh (null for fabric meshes)
+  bool has_env = false;
+
+  Impl(const Scene& s, const Bsdf& f, const Environment* e)
+      : scene(s), fabric(f), env(e), bvh(s), has_env(e != nullptr) {
+    for (const Mesh& m : s.meshes) {
+      if (m.is_fabric) {
+        lamberts.emplace_back(nullptr);
+      } else {
+        lamberts.emplace_back(std::make_unique<LambertBsdf>(
+            Rgbd(m.base_color[0], m.base_color[1], m.base_color[2])));
+      }
+    }
+  }
+
+  const Bsdf& BsdfOf(int mesh) const {
+    return scene.meshes[size_t(mesh)].is_fabric ? fabric : *lamberts[size_t(mesh)];
+  }
+
+  // Direct light from the punctual lights at a shading point (delta lights: no MIS).
+  Rgbd PunctualLights(const Vec3d& p, const Vec3d& ng, const Frame& fr, const Vec3d& wo_local,
+                      const Bsdf& bsdf, const ShadingPoint& sp, double eps,
+                      uint64_t& rays) const {
+    Rgbd sum(0, 0, 0);
+    for (const Light& light : scene.lights) {
+      Vec3d wi;
+      double dist = std::numeric_limits<double>::infinity();
+      double scale = light.intensity;
+      if (light.type == Light::Type::kDirectional) {
+        wi = V(light.direction) * -1.0;
+      } else {
+        const Vec3d d = V(light.position) - p;
+        const double d2 = Dot(d, d);
+        if (d2 <= 0.0) continue;
+        dist = std::sqrt(d2);
+        wi = d * (1.0 / dist);
+        scale /= d2;
+        if (light.range > 0.0) {
+          const double x = std::clamp(1.0 - std::pow(dist / light.range, 4.0), 0.0, 1.0);
+          scale *= x * x;
+        }
+        if (light.type == Light::Type::kSpot) {
+          const double cos_axis = -Dot(wi, V(light.direction));
+          scale *= Smoothstep(std::cos(light.outer_cone), std::cos(light.inner_cone), cos_axis);
+        }
+      }
+      if (scale <= 0.0) continue;
+      const Vec3d wi_local = fr.ToLocal(wi);
+      if (wi_local.z <= 0.0 || Dot(wi, ng) <= 0.0) continue;
+      const Rgbd f = bsdf.Eval(wo_local, wi_local, sp);
+      if (f.r <= 0.0 && f.g <= 0.0 && f.b <= 0.0) continue;
+      ++rays;
+      const double tfar = std::isinf(dist) ? dist : dist * (1.0 - 1e-6) - eps;
+      if (bvh.Occluded(A(p + ng * eps), A(wi), 0.0, tfar)) continue;
+      const Rgbd c(light.color[0], light.color[1], light.color[2]);
+      sum += f * c * (scale * wi_local.z);
+    }
+    return sum;
+  }
+
+  struct SampleOut {
+    Rgbd L{0, 0, 0};
+    bool hit = false, fabric = false;
+    SurfaceAttributes first;
+    double depth = 0.0;
+  };
+
+  SampleOut TracePath(const Vec3d& org0, const Vec3d& dir0, Pcg32& rng,
+                      const RenderSettings& st, uint64_t& rays) const {
+    SampleOut out;
+    Vec3d org = org0, dir = dir0;
+    Rgbd T(1, 1, 1);
+    double prev_bsdf_pdf = 0.0;
+    bool specular_bounce = true;  // camera ray: env seen directly with weight 1
+    const double eps = 1e-5 * bvh.scale();
+    for (int depth = 0;; ++depth) {
+      ++rays;
+      const Hit h = bvh.Intersect(A(org), A(dir), depth == 0 ? 0.0 : eps);
+      if (!h.valid) {
+        if (has_env) {
+          const Rgbd Le = env->Eval(dir);
+          const double w = specular_bounce ? 1.0 : PowerHeuristic(prev_bsdf_pdf, env->Pdf(dir));
+          out.L += T * Le * w;
+        } else if (depth == 0) {
+          out.L += Rgbd(scene.card.background[0], scene.card.background[1],
+                        scene.card.background[2]);
+        }
+        break;
+      }
+      SurfaceAttributes a = bvh.Attributes(h);
+      if (depth == 0) {
+        out.hit = true;
+        out.fabric = scene.meshes[size_t(h.mesh)].is_fabric;
+        out.first = a;
+        out.depth = h.t;
+      }
+      if (depth >= st.max_depth) break;
+      // Two-sided: put the frame on the viewer's side of the geometric normal.
+      Vec3d ng = V(h.ng), n = V(a.normal);
+      const Vec3d wo = dir * -1.0;
+      if (Dot(ng, wo) < 0.0) ng = ng * -1.0;
+      if (Dot(n, ng) < 0.0) n = n * -1.0;
+      Vec3d t = V(a.tangent);
+      t = Normalize(t - n * Dot(t, n));
+      const Vec3d b = Cross(n, t) * a.tangent_sign;
+      const Frame fr{t, b, n};
+      const Vec3d wo_local = fr.ToLocal(wo);
+      if (wo_local.z <= 0.0) break;  // shading normal facing away: no contribution
+      const Bsdf& bsdf = BsdfOf(h.mesh);
+      const ShadingPoint sp{{a.uv[0], a.uv[1]}};
+      const Vec3d p = V(a.position);
+
+      // Next-event estimation: punctual lights, then the environment (MIS).
+      out.L += T * PunctualLights(p, ng, fr, wo_local, bsdf, sp, eps, rays);
+      if (has_env) {
+        double pdf_l = 0.0;
+        Rgbd Le;
+        const Vec3d wi = env->Sample(rng.Uniform(), rng.Uniform(), &pdf_l, &Le);
+        const Vec3d wi_local = fr.ToLocal(wi);
+        if (pdf_l > 0.0 && wi_local.z > 0.0 && Dot(wi, ng) > 0.0) {
+          const Rgbd f = bsdf.Eval(wo_local, wi_local, sp);
+          if (f.r > 0.0 || f.g > 0.0 || f.b > 0.0) {
+            ++rays;
+            if (!bvh.Occluded(A(p + ng * eps), A(wi), 0.0,
+                              std::numeric_limits<double>::infinity())) {
+              const double pdf_b = bsdf.Pdf(wo_local, wi_local, sp);
+              const double w = PowerHeuristic(pdf_l, pdf_b);
+              out.L += T * f * Le * (wi_local.z * w / pdf_l);
+            }
+          }
+        }
+      }
+
+      // BSDF sampling continues the path.
+      BsdfSample bs;
+      const Point2d u{rng.Uniform(), rng.Uniform()};
+      if (!bsdf.Sample(wo_local, u, rng.Uniform(), sp, &bs) || bs.pdf <= 0.0) break;
+      if (bs.wi.z <= 0.0) break;
+      const Vec3d wi = fr.ToWorld(bs.wi);
+      if (Dot(wi, ng) <= 0.0) break;
+      T = T * bs.f * (bs.wi.z / bs.pdf);
+      prev_bsdf_pdf = bs.pdf;
+      specular_bounce = false;
+      // Without an environment, an escaping bounce ray carries nothing: stop early.
+      org = p + ng * eps;
+      dir = wi;
+      if (depth + 1 >= st.rr_start_depth) {
+        const double q = std::max(0.05, 1.0 - std::max({T.r, T.g, T.b}));
+        if (rng.Uniform() < q) break;
+        T = T * (1.0 / (1.0 - q));
+      }
+    }
+    return out;
+  }
+};
+
+PathTracer::PathTracer(const Scene& scene, const Bsdf& fabric, const Environment* environment)
+    : impl_(std::make_unique<Impl>(scene, fabric, environment)) {}
+PathTracer::~PathTracer() = default;
+
+RenderResult PathTracer::Render(const RenderSettings& st,
+                                const std::function<void(int, int)>& progress) const {
+  const auto t0 = std::chrono::steady_clock::now();
+  const Scene& scene = impl_->scene;
+  const int W = scene.card.width, H = scene.card.height;
+  RenderResult r;
+  r.width = W;
+  r.height = H;
+  const size_t np = size_t(W) * size_t(H);
+  r.rgb.assign(np * 3, 0.f);
+  r.std_error.assign(np * 3, 0.f);
+  r.coverage.assign(np, 0.f);
+  r.fabric.assign(np, 0.f);
+  if (st.aovs.normal) r.normal.assign(np * 3, 0.f);
+  if (st.aovs.position) r.position.assign(np * 3, 0.f);
+  if (st.aovs.tangent) r.tangent.assign(np * 3, 0.f);
+  if (st.aovs.uv) r.uv.assign(np * 2, 0.f);
+  if (st.aovs.depth) r.depth.assign(np, 0.f);
+
+  const int tiles_x = (W + st.tile_size - 1) / st.tile_size;
+  const int tiles_y = (H + st.tile_size - 1) / st.tile_size;
+  const int tiles = tiles_x * tiles_y;
+  std::atomic<int> done{0};
+  std::atomic<uint64_t> total_rays{0};
+  std::mutex progress_mutex;
+
+  tbb::parallel_for(0, tiles, [&](int tile) {
+    const int tx = tile % tiles_x, ty = tile / tiles_x;
+    uint64_t rays = 0;
+    for (int y = ty * st.tile_size; y < std::min(H, (ty + 1) * st.tile_size); ++y) {
+      for (int x = tx * st.tile_size; x < std::min(W, (tx + 1) * st.tile_size); ++x) {
+        const size_t pix = size_t(y) * size_t(W) + size_t(x);
+        double mean[3] = {0, 0, 0}, m2[3] = {0, 0, 0};
+        int hits = 0, fabric_hits = 0;
+        double aov_n[3] = {0, 0, 0}, aov_p[3] = {0, 0, 0}, aov_t[3] = {0, 0, 0}, aov_uv[2] = {0, 0};
+        double aov_z = 0.0;
+        for (int s = 0; s < st.spp; ++s) {
+          Pcg32 rng = PixelSampler(st.seed, pix, uint64_t(s));
+          A3 org, dir;
+          scene.CameraRay(x + rng.Uniform(), y + rng.Uniform(), org, dir);
+          Impl::SampleOut so = impl_->TracePath(V(org), V(dir), rng, st, rays);
+          double v[3] = {so.L.r, so.L.g, so.L.b};
+          for (int c = 0; c < 3; ++c) {
+            if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel
+            if (st.max_sample_value > 0.0) v[c] = std::min(v[c], st.max_sample_value);
+            const double delta = v[c] - mean[c];  // Welford
+            mean[c] += delta / (s + 1);
+            m2[c] += delta * (v[c] - mean[c]);
+          }
+          if (so.hit) {
+            ++hits;
+            if (so.fabric) ++fabric_hits;
+            for (int c = 0; c < 3; ++c) {
+              aov_n[c] += so.first.normal[size_t(c)];
+              aov_p[c] += so.first.position[size_t(c)];
+              aov_t[c] += so.first.tangent[size_t(c)];
+            }
+            aov_uv[0] += so.first.uv[0];
+            aov_uv[1] += so.first.uv[1];
+            aov_z += so.depth;
+          }
+        }
+        for (int c = 0; c < 3; ++c) {
+          r.rgb[pix * 3 + size_t(c)] = float(mean[c]);
+          const double var = st.spp > 1 ? m2[c] / (st.spp - 1) : 0.0;
+          r.std_error[pix * 3 + size_t(c)] = float(std::sqrt(var / st.spp));
+        }
+        r.coverage[pix] = float(hits) / float(st.spp);
+        r.fabric[pix] = float(fabric_hits) / float(st.spp);
+        if (hits > 0) {
+          const double inv = 1.0 / hits;
+          for (int c = 0; c < 3; ++c) {
+            if (st.aovs.normal) r.normal[pix * 3 + size_t(c)] = float(aov_n[c] * inv);
+            if (st.aovs.position) r.position[pix * 3 + size_t(c)] = float(aov_p[c] * inv);
+            if (st.aovs.tangent) r.tangent[pix * 3 + size_t(c)] = float(aov_t[c] * inv);
+          }
+          if (st.aovs.uv) {
+            r.uv[pix * 2] = float(aov_uv[0] * inv);
+            r.uv[pix * 2 + 1] = float(aov_uv[1] * inv);
+          }
+          if (st.aovs.depth) r.depth[pix] = float(aov_z * inv);
+        }
+      }
+    }
+    total_rays += rays;
+    const int d = ++done;
+    if (progress) {
+      std::lock_guard<std::mutex> lock(progress_mutex);
+      progress(d, tiles);
+    }
+  });
+
+  r.rays = total_rays.load();
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  double se_sum = 0.0, v_sum = 0.0, rel_sum = 0.0;
+  size_t rel_n = 0;
+  for (size_t p = 0; p < np; ++p) {
+    double v = 0.0, se = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      v += double(r.rgb[p * 3 + size_t(c)]);
+      se += double(r.std_error[p * 3 + size_t(c)]);
+    }
+    se_sum += se;
+    v_sum += v;
+    if (r.coverage[p] > 0.0f && v > 1e-6) {
+      rel_sum += se / v;
+      ++rel_n;
+    }
+  }
+  r.mean_std_error = se_sum / double(np * 3);
+  r.mean_value = v_sum / double(np * 3);
+  r.mean_relative_std_error = rel_n ? rel_sum / double(rel_n) : 0.0;
+  return r;
+}
+
+void WriteRenderExr(const std::string& path, const RenderResult& r,
+                    const std::vector<std::pair<std::string, std::string>>& extra) {
+  io::Image img;
+  img.width = r.width;
+  img.height = r.height;
+  struct Plane {
+    std::string name;
+    const std::vector<float>* data;
+    int stride, offset;
+  };
+  std::vector<Plane> planes = {{"R", &r.rgb, 3, 0},          {"G", &r.rgb, 3, 1},
+                               {"B", &r.rgb, 3, 2},          {"A", &r.coverage, 1, 0},
+                               {"fabric", &r.fabric, 1, 0},  {"stderr.R", &r.std_error, 3, 0},
+                               {"stderr.G", &r.std_error, 3, 1}, {"stderr.B", &r.std_error, 3, 2}};
+  auto add3 = [&](const char* prefix, const std::vector<float>& v) {
+    if (v.empty()) return;
+    const char* s[3] = {"X", "Y", "Z"};
+    for (int c = 0; c < 3; ++c) planes.push_back({std::string(prefix) + "." + s[c], &v, 3, c});
+  };
+  add3("N", r.normal);
+  add3("P", r.position);
+  add3("T", r.tangent);
+  if (!r.uv.empty()) {
+    planes.push_back({"uv.U", &r.uv, 2, 0});
+    planes.push_back({"uv.V", &r.uv, 2, 1});
+  }
+  if (!r.depth.empty()) planes.push_back({"Z", &r.depth, 1, 0});
+  const size_t np = size_t(r.width) * size_t(r.height);
+  img.pixels.resize(np * planes.size());
+  for (const Plane& pl : planes) img.channel_names.push_back(pl.name);
+  for (size_t p = 0; p < np; ++p)
+    for (size_t k = 0; k < planes.size(); ++k)
+      img.pixels[p * planes.size() + k] =
+          (*planes[k].data)[p * size_t(planes[k].stride) + size_t(planes[k].offset)];
+  for (const auto& [k, v] : extra) img.metadata[k] = v;
+  img.metadata["clothfit:colour_space"] = "linear Rec.709 / sRGB primaries, scene-referred radiance";
+  img.metadata["clothfit:stderr"] = "stderr.* = standard error of the pixel mean, sqrt(var/n)";
+  img.metadata["clothfit:alpha"] = "A = fraction of camera samples that hit geometry";
+  io::WriteExr(path, img);
+}
+
+}  // namespace clothfit::render
