@@ -9,12 +9,17 @@ JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 CLOTHFIT := $(BUILD_DIR)/bin/clothfit
 GENERATOR := $(shell command -v ninja >/dev/null 2>&1 && echo "-G Ninja")
 
-.PHONY: all deps configure build test demo bench stress lut format clean
+.PHONY: all deps data configure build test demo bench stress lut format clean
 
 all: build
 
 deps:
 	@scripts/install-deps
+
+# Real HDR environments into the data cache ($$CLOTHFIT_DATA or ~/.cache/clothfit), fetched
+# only when the cache is missing or does not match its manifest.
+data:
+	@scripts/fetch-data --check --quiet || scripts/fetch-data
 
 # Re-configure when the build directory is missing; CMake re-runs itself on CMakeLists changes.
 $(BUILD_DIR)/CMakeCache.txt:
@@ -32,7 +37,7 @@ test: build
 	@echo "[make] running the test suite"
 	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS)
 
-demo: build
+demo: build data
 	@scripts/demo $(CLOTHFIT)
 
 bench: build

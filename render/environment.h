@@ -42,6 +42,9 @@ class Environment {
   Rgb<double> Eval(const Vec3<double>& d) const;
   // Draws a direction with pdf proportional to luminance x sin(theta) per texel (piecewise
   // constant in (u, v)); returns the world direction, its solid-angle pdf and radiance.
+  // The luminance is that of the bilinear map averaged over the texel ([1 6 1]/8 filter), so
+  // the pdf is positive wherever Eval is. pdf = 0 (only exactly at a pole) means "discard".
+  // An all-black map samples the uniform sphere (pdf 1/(4 pi)). docs/environments.md §6.
   Vec3<double> Sample(double u1, double u2, double* pdf, Rgb<double>* radiance) const;
   // Solid-angle pdf of Sample for direction d (unit).
   double Pdf(const Vec3<double>& d) const;
@@ -60,10 +63,16 @@ class Environment {
 
  private:
   void BuildDistribution();
+  void SetRotation(double rotation_y);                   // sets rotation_y_, cos_rot_, sin_rot_
+  Vec3<double> WorldToMap(const Vec3<double>& d) const;  // R_y(-rotation_y) d
+  Vec3<double> MapToWorld(const Vec3<double>& m) const;  // R_y(+rotation_y) m
+  Rgb<double> Texel(int i, int j) const;                 // stored RGB (no intensity)
+  double TexelDensity(int i, int j) const;               // p(u, v) inside texel (i, j)
 
   int width_ = 0, height_ = 0;
   std::vector<float> rgb_;
   double intensity_ = 1.0, rotation_y_ = 0.0;
+  double cos_rot_ = 1.0, sin_rot_ = 0.0;  // of rotation_y_
   EnvironmentStats stats_;
   std::string source_;
   // Sampling: marginal CDF over rows, conditional CDF per row (width_ + 1 entries each).
