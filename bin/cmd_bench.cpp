@@ -11,6 +11,7 @@
 
 #include "bin/commands.h"
 #include "brdf/models.h"
+#include "render/preview.h"
 
 namespace clothfit::cli {
 namespace {
@@ -55,24 +56,107 @@ void BM_Model(benchmark::State& state, ModelId m) {
   state.SetItemsProcessed(int64_t(state.iterations()));
 }
 
+struct PreviewSet {
+  std::string name;
+  std::unique_ptr<render::PreviewCache> cache;
+};
+
+std::vector<PreviewSet>& PreviewSets() {
+  static std::vector<PreviewSet> sets;
+  return sets;
+}
+
+// Builds the preview caches for the feature sets, outside any timing.
+void BuildPreviewSets(const std::string& scene_path, bool quiet) {
+  const render::Scene scene = render::LoadScene(scene_path);
+  const auto env = LoadSceneEnvironment(scene, quiet);
+  if (!env) throw std::runtime_error(scene_path + ": bench preview needs a scene with an environment");
+  if (scene.lights.empty()) throw std::runtime_error(scene_path + ": bench preview needs a light");
+  render::Scene no_lights = scene;
+  no_lights.lights.clear();
+  struct Def {
+    const char* name;
+    const render::Scene* s;
+    const render::Environment* e;
+    bool sub, shadows;
+  };
+  const Def defs[] = {{"full (direct+ibl+subsurface+shadows)", &scene, env.get(), true, true},
+                      {"direct+ibl", &scene, env.get(), false, false},
+                      {"direct only (no environment)", &scene, nullptr, false, false},
+                      {"ibl only (no lights)", &no_lights, env.get(), false, false}};
+  for (const Def& d : defs) {
+    render::PreviewOptions o;
+    o.model = render::ModelKind::kCloth;
+    o.cloth.subsurface = d.sub;
+    o.shadows = d.shadows;
+    auto cache = render::PreviewCache::Build(*d.s, d.e, o);
+    std::fprintf(stderr, "bench preview: cache '%s': %zu fabric pixels, %zu light samples, built in %.3f s\n",
+                 d.name, cache->pixels.size(), cache->light_samples.size(), cache->build_seconds);
+    PreviewSets().push_back({d.name, std::move(cache)});
+  }
+}
+
+template <typename T>
+void BM_Preview(benchmark::State& state, const render::PreviewCache* cache) {
+  const std::array<double, 10> values{0.6, 0.4, 0.3, 0.8, 0.7, 0.6, 0.55, 0.2, 0.1, 0.05};
+  std::array<T, 10> x{};
+  for (int k = 0; k < 10; ++k) {
+    if constexpr (std::is_same_v<T, double>) {
+      x[size_t(k)] = values[size_t(k)];
+    } else {
+      x[size_t(k)] = T(values[size_t(k)], k);
+    }
+  }
+  std::vector<Rgb<T>> out;
+  for (auto _ : state) {
+    render::EvaluatePreview(*cache, x.data(), out);
+    benchmark::DoNotOptimize(out.data());
+  }
+  state.counters["pixels"] = double(cache->pixels.size());
+}
+
 }  // namespace
 
-void AddBenchCommand(CLI::App& app, const Globals&, int& exit_code) {
+void AddBenchCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto what = std::make_shared<std::string>();
+  auto scene = std::make_shared<std::string>(std::string(CLOTHFIT_SOURCE_DATASETS) +
+                                             "/scenes/sphere.json");
   CLI::App* cmd = app.add_subcommand("bench", "benchmarks (Google Benchmark)");
-  cmd->add_option("what", *what, "what to benchmark: brdf")
+  cmd->add_option("what", *what, "what to benchmark: brdf | preview")
       ->required()
-      ->check(CLI::IsMember({"brdf"}));
+      ->check(CLI::IsMember({"brdf", "preview"}));
+  cmd->add_option("--scene", *scene, "scene card for `bench preview`");
   cmd->allow_extras();
-  cmd->callback([cmd, what, &exit_code]() {
+  cmd->callback([cmd, what, scene, &g, &exit_code]() {
     (void)lut::DefaultDfg();  // tables are built once, outside the timed loops
     (void)lut::DefaultSheenAlbedo();
-    for (ModelId m : kAllModels) {
-      const std::string name(ModelName(m));
-      benchmark::RegisterBenchmark(("brdf/" + name + "/double").c_str(),
-                                   [m](benchmark::State& s) { BM_Model<double>(s, m); });
-      benchmark::RegisterBenchmark(("brdf/" + name + "/jet10").c_str(),
-                                   [m](benchmark::State& s) { BM_Model<Jet10>(s, m); });
+    if (*what == "brdf") {
+      for (ModelId m : kAllModels) {
+        const std::string name(ModelName(m));
+        benchmark::RegisterBenchmark(("brdf/" + name + "/double").c_str(),
+                                     [m](benchmark::State& s) { BM_Model<double>(s, m); });
+        benchmark::RegisterBenchmark(("brdf/" + name + "/jet10").c_str(),
+                                     [m](benchmark::State& s) { BM_Model<Jet10>(s, m); });
+      }
+    } else {
+      try {
+        BuildPreviewSets(*scene, g.quiet);
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "clothfit bench preview: error: %s\n", e.what());
+        exit_code = 1;
+        return;
+      }
+      for (const PreviewSet& set : PreviewSets()) {
+        const render::PreviewCache* c = set.cache.get();
+        benchmark::RegisterBenchmark(("preview/" + set.name + "/double").c_str(),
+                                     [c](benchmark::State& s) { BM_Preview<double>(s, c); })
+            ->Unit(benchmark::kMillisecond)
+            ->UseRealTime();
+        benchmark::RegisterBenchmark(("preview/" + set.name + "/jet10").c_str(),
+                                     [c](benchmark::State& s) { BM_Preview<Jet10>(s, c); })
+            ->Unit(benchmark::kMillisecond)
+            ->UseRealTime();
+      }
     }
     std::vector<std::string> extras = cmd->remaining();
     std::vector<char*> argv{const_cast<char*>("clothfit-bench")};

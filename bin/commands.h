@@ -3,6 +3,13 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "render/environment.h"
+#include "render/scene.h"
+#include "render/tonemap.h"
 
 namespace clothfit::cli {
 
@@ -14,5 +21,14 @@ void AddLutCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddStressCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddBenchCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddModelsCommand(CLI::App& app, const Globals& g, int& exit_code);
+void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code);
+void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code);
+
+// The scene's environment: the card's map, or the procedural sky (warning on stderr unless
+// quiet) when the map is not installed; null when the card has no environment.
+std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& scene, bool quiet);
+// Linear RGB frame -> display RGB in [0, 1] (tone mapping + sRGB).
+std::vector<float> ToDisplayImage(const std::vector<float>& linear, render::ToneMapping op,
+                                  double exposure);
 
 }  // namespace clothfit::cli

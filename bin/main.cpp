@@ -17,6 +17,8 @@ int main(int argc, char** argv) {
   clothfit::cli::AddStressCommand(app, globals, exit_code);
   clothfit::cli::AddBenchCommand(app, globals, exit_code);
   clothfit::cli::AddModelsCommand(app, globals, exit_code);
+  clothfit::cli::AddRenderCommand(app, globals, exit_code);
+  clothfit::cli::AddPreviewCommand(app, globals, exit_code);
 
   try {
     app.parse(argc, argv);

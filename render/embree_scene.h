@@ -14,16 +14,16 @@ namespace clothfit::render {
 struct Hit {
   bool valid = false;
   double t = 0.0;
-  int mesh = -1;      // index into Scene::meshes
-  int triangle = -1;  // triangle index within the mesh
-  double b1 = 0.0, b2 = 0.0;  // barycentrics of vertices 1 and 2 (vertex 0: 1 - b1 - b2)
+  int mesh = -1;                      // index into Scene::meshes
+  int triangle = -1;                  // triangle index within the mesh
+  double b1 = 0.0, b2 = 0.0;          // barycentrics of vertices 1 and 2 (vertex 0: 1 - b1 - b2)
   std::array<double, 3> ng{0, 0, 0};  // geometric normal, unit, as wound (not flipped)
 };
 
 // Interpolated surface attributes at a hit (world space).
 struct SurfaceAttributes {
   std::array<double, 3> position{}, normal{}, tangent{};  // normal, tangent unit
-  double tangent_sign = 1.0;                                // bitangent = sign * n x t
+  double tangent_sign = 1.0;                              // bitangent = sign * n x t
   std::array<double, 2> uv{};
 };
 
@@ -36,8 +36,8 @@ class EmbreeScene {
 
   Hit Intersect(const std::array<double, 3>& org, const std::array<double, 3>& dir,
                 double tnear = 0.0, double tfar = std::numeric_limits<double>::infinity()) const;
-  bool Occluded(const std::array<double, 3>& org, const std::array<double, 3>& dir,
-                double tnear, double tfar) const;
+  bool Occluded(const std::array<double, 3>& org, const std::array<double, 3>& dir, double tnear,
+                double tfar) const;
   SurfaceAttributes Attributes(const Hit& hit) const;
   // Scene bounding-sphere radius (for ray offsets).
   double scale() const { return scale_; }

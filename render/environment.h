@@ -23,8 +23,8 @@
 namespace clothfit::render {
 
 struct EnvironmentStats {
-  long long negative_texels = 0;    // any channel < 0, clamped to 0
-  long long nonfinite_texels = 0;   // any channel NaN/Inf, set to 0
+  long long negative_texels = 0;   // any channel < 0, clamped to 0
+  long long nonfinite_texels = 0;  // any channel NaN/Inf, set to 0
 };
 
 class Environment {

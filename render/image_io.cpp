@@ -4,7 +4,9 @@
 #include <OpenImageIO/imageio.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -114,6 +116,33 @@ Table2D ImageToTable(const Image& img) {
   t.u_axis = get("clothfit:u_axis");
   t.v_axis = get("clothfit:v_axis");
   return t;
+}
+
+void WritePng8(const std::string& path, int width, int height, const std::vector<float>& rgb) {
+  if (width <= 0 || height <= 0 || rgb.size() != size_t(width) * size_t(height) * 3)
+    throw IoError(path + ": refusing to write a PNG with inconsistent size");
+  const fs::path parent = fs::path(path).parent_path();
+  if (!parent.empty() && !fs::is_directory(parent))
+    throw IoError(path + ": output directory " + parent.string() + " does not exist");
+  std::vector<unsigned char> bytes(rgb.size());
+  for (size_t i = 0; i < rgb.size(); ++i) {
+    const float v = std::isfinite(rgb[i]) ? std::min(std::max(rgb[i], 0.0f), 1.0f) : 0.0f;
+    bytes[i] = static_cast<unsigned char>(std::lround(v * 255.0f));
+  }
+  const std::string tmp = TempPathFor(path);
+  OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::UINT8);
+  spec.attribute("oiio:ColorSpace", "sRGB");
+  auto out = OIIO::ImageOutput::create(tmp);
+  if (!out) throw IoError(path + ": cannot create a PNG writer: " + OIIO::geterror());
+  if (!out->open(tmp, spec)) throw IoError(path + ": cannot open for writing: " + out->geterror());
+  const bool ok = out->write_image(OIIO::TypeDesc::UINT8, bytes.data());
+  const bool closed = out->close();
+  if (!ok || !closed) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw IoError(path + ": write failed: " + out->geterror());
+  }
+  RenameInto(tmp, path);
 }
 
 void WriteTextAtomic(const std::string& path, const std::string& text) {

@@ -45,6 +45,10 @@ Image ReadImage(const std::string& path);
 Image TableToImage(const Table2D& table, const std::vector<std::string>& channel_names);
 Table2D ImageToTable(const Image& image);
 
+// Writes display-referred RGB (values in [0, 1], already tone mapped and sRGB encoded) as an
+// 8-bit PNG, atomically. Values are clamped and rounded to nearest.
+void WritePng8(const std::string& path, int width, int height, const std::vector<float>& rgb);
+
 // Writes text atomically (temporary file + rename). Throws IoError naming the file.
 void WriteTextAtomic(const std::string& path, const std::string& text);
 

@@ -44,8 +44,8 @@ std::string EngineOf(ModelKind m);
 
 struct MaterialPreset {
   ModelKind model = ModelKind::kCloth;
-  cloth::Options cloth;                      // used when model == kCloth
-  std::vector<double> values;                // flat, in parameter-table order
+  cloth::Options cloth;                             // used when model == kCloth
+  std::vector<double> values;                       // flat, in parameter-table order
   nlohmann::json extra = nlohmann::json::object();  // uninterpreted top-level keys
 
   // Flat index of a named parameter (throws std::invalid_argument).

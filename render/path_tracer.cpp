@@ -10,6 +10,7 @@
 
 #include "render/embree_scene.h"
 #include "render/image_io.h"
+#include "render/lights.h"
 #include "render/sampler.h"
 
 namespace clothfit::render {
@@ -30,12 +31,6 @@ struct Frame {
 double PowerHeuristic(double a, double b) {
   const double a2 = a * a, b2 = b * b;
   return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
-}
-
-double Smoothstep(double e0, double e1, double x) {
-  if (e1 <= e0) return x >= e1 ? 1.0 : 0.0;
-  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
-  return t * t * (3.0 - 2.0 * t);
 }
 
 }  // namespace
@@ -70,27 +65,10 @@ struct PathTracer::Impl {
                       uint64_t& rays) const {
     Rgbd sum(0, 0, 0);
     for (const Light& light : scene.lights) {
-      Vec3d wi;
-      double dist = std::numeric_limits<double>::infinity();
-      double scale = light.intensity;
-      if (light.type == Light::Type::kDirectional) {
-        wi = V(light.direction) * -1.0;
-      } else {
-        const Vec3d d = V(light.position) - p;
-        const double d2 = Dot(d, d);
-        if (d2 <= 0.0) continue;
-        dist = std::sqrt(d2);
-        wi = d * (1.0 / dist);
-        scale /= d2;
-        if (light.range > 0.0) {
-          const double x = std::clamp(1.0 - std::pow(dist / light.range, 4.0), 0.0, 1.0);
-          scale *= x * x;
-        }
-        if (light.type == Light::Type::kSpot) {
-          const double cos_axis = -Dot(wi, V(light.direction));
-          scale *= Smoothstep(std::cos(light.outer_cone), std::cos(light.inner_cone), cos_axis);
-        }
-      }
+      const LightSample ls = EvaluateLight(light, p);
+      const Vec3d wi = ls.wi;
+      const double dist = ls.distance;
+      const double scale = ls.scale;
       if (scale <= 0.0) continue;
       const Vec3d wi_local = fr.ToLocal(wi);
       if (wi_local.z <= 0.0 || Dot(wi, ng) <= 0.0) continue;

@@ -27,8 +27,8 @@ struct AovSet {
 
 struct RenderSettings {
   int spp = 64;
-  int max_depth = 8;           // path vertices after the camera (1 = direct light only)
-  int rr_start_depth = 3;      // Russian roulette from this depth on
+  int max_depth = 8;       // path vertices after the camera (1 = direct light only)
+  int rr_start_depth = 3;  // Russian roulette from this depth on
   uint64_t seed = 1;
   int tile_size = 16;
   AovSet aovs;
@@ -47,8 +47,8 @@ struct RenderResult {
   std::vector<float> depth;                      // distance along the camera ray
   // Statistics
   double seconds = 0.0;
-  uint64_t rays = 0;        // all rays traced (camera, bounce, shadow)
-  double mean_relative_std_error = 0.0;  // mean over covered pixels of stderr / mean value
+  uint64_t rays = 0;                              // all rays traced (camera, bounce, shadow)
+  double mean_relative_std_error = 0.0;           // mean over covered pixels of stderr / mean value
   double mean_std_error = 0.0, mean_value = 0.0;  // over all pixels and channels
 };
 

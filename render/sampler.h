@@ -40,9 +40,14 @@ inline uint64_t Mix64(uint64_t z) {
   return z ^ (z >> 31);
 }
 
-// The generator for (seed, pixel index, sample index).
+// The generator for (seed, pixel index, sample index). Both the state and the stream are
+// hashes of all three: PCG sequences that share a state and differ only in the increment are
+// correlated, which made the samples of one pixel correlated (and its standard-error
+// estimate too small, caught by Reference.StandardErrorEstimateMatchesObservedSpread).
 inline Pcg32 PixelSampler(uint64_t seed, uint64_t pixel, uint64_t sample) {
-  return Pcg32(Mix64(seed ^ Mix64(pixel)), Mix64(pixel * 0x100000001B3ull + sample));
+  const uint64_t key = Mix64(Mix64(seed) ^ Mix64(pixel + 0x632BE59BD9B4E019ull) ^
+                             Mix64(sample * 0x9E3779B97F4A7C15ull + 0x85EBCA6Bull));
+  return Pcg32(key, Mix64(key ^ 0xD1B54A32D192ED03ull));
 }
 
 }  // namespace clothfit::render

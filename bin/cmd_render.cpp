@@ -1,0 +1,128 @@
+// clothfit render-reference: path-traced reference of a fabric on a scene.
+#include <tbb/global_control.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <sstream>
+#include <string>
+
+#include "bin/commands.h"
+#include "bin/progress.h"
+#include "render/environment.h"
+#include "render/fabric.h"
+#include "render/path_tracer.h"
+#include "render/scene.h"
+
+namespace clothfit::cli {
+
+// Resolves the scene's environment: the card's map, or the procedural sky (with a warning)
+// when the map is not installed. Returns null when the card has no environment.
+std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& scene,
+                                                          bool quiet) {
+  if (!scene.card.environment) return nullptr;
+  const render::EnvironmentSpec& e = *scene.card.environment;
+  auto warn = [quiet](const std::string& msg) {
+    if (!quiet) std::fprintf(stderr, "clothfit: warning: %s\n", msg.c_str());
+  };
+  if (e.path != "procedural-sky" && std::filesystem::exists(e.path)) {
+    return std::make_unique<render::Environment>(
+        render::Environment::Load(e.path, e.intensity, e.rotation_y, warn));
+  }
+  if (e.path != "procedural-sky") {
+    warn(scene.card.path + ": environment '" + e.path +
+         "' is not installed (run scripts/fetch-data); using the procedural sky");
+  }
+  return std::make_unique<render::Environment>(
+      render::Environment::ProceduralSky(e.intensity, e.rotation_y));
+}
+
+bool ParseAovs(const std::string& list, render::AovSet& aovs, std::string& bad) {
+  std::stringstream ss(list);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    if (item == "normal") aovs.normal = true;
+    else if (item == "position") aovs.position = true;
+    else if (item == "uv") aovs.uv = true;
+    else if (item == "tangent") aovs.tangent = true;
+    else if (item == "depth") aovs.depth = true;
+    else if (item == "all") aovs = {true, true, true, true, true};
+    else if (!item.empty()) {
+      bad = item;
+      return false;
+    }
+  }
+  return true;
+}
+
+void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
+  struct Args {
+    std::string scene, fabric, out, aov;
+    int spp = 64, threads = 0, max_depth = 8;
+    uint64_t seed = 1;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("render-reference",
+                                     "path-trace a reference image of a fabric on a scene");
+  cmd->add_option("--scene", args->scene, "scene card (JSON)")->required();
+  cmd->add_option("--fabric", args->fabric, "fabric definition (JSON)")->required();
+  cmd->add_option("--out", args->out, "output EXR")->required();
+  cmd->add_option("--spp", args->spp, "samples per pixel")->check(CLI::Range(1, 1 << 20));
+  cmd->add_option("--seed", args->seed, "random seed (same seed: bit-identical image)");
+  cmd->add_option("--threads", args->threads, "worker threads (0 = all cores)")
+      ->check(CLI::Range(0, 1024));
+  cmd->add_option("--max-depth", args->max_depth, "maximum path depth")->check(CLI::Range(1, 64));
+  cmd->add_option("--aov", args->aov,
+                  "comma-separated AOVs: normal,position,uv,tangent,depth,all");
+  cmd->callback([args, &g, &exit_code]() {
+    try {
+      render::RenderSettings st;
+      st.spp = args->spp;
+      st.seed = args->seed;
+      st.max_depth = args->max_depth;
+      std::string bad;
+      if (!ParseAovs(args->aov, st.aovs, bad)) {
+        std::fprintf(stderr, "clothfit render-reference: error: --aov: unknown AOV '%s'\n",
+                     bad.c_str());
+        exit_code = 1;
+        return;
+      }
+      std::unique_ptr<tbb::global_control> limit;
+      if (args->threads > 0) {
+        limit = std::make_unique<tbb::global_control>(
+            tbb::global_control::max_allowed_parallelism, size_t(args->threads));
+      }
+      const render::Scene scene = render::LoadScene(args->scene);
+      const render::Fabric fabric = render::LoadFabric(args->fabric);
+      const auto env = LoadSceneEnvironment(scene, g.quiet);
+      render::PathTracer tracer(scene, *fabric.bsdf, env.get());
+      ProgressBar bar("render " + fabric.name, g.quiet);
+      const render::RenderResult r =
+          tracer.Render(st, [&](int d, int t) { bar.Update(d, t); });
+      render::WriteRenderExr(
+          args->out, r,
+          {{"clothfit:scene", args->scene},
+           {"clothfit:fabric", args->fabric},
+           {"clothfit:fabric_name", fabric.name},
+           {"clothfit:spp", std::to_string(args->spp)},
+           {"clothfit:seed", std::to_string(args->seed)},
+           {"clothfit:max_depth", std::to_string(args->max_depth)},
+           {"clothfit:environment", env ? env->source() : std::string("none")},
+           {"clothfit:renderer", "clothfit reference path tracer (NEE + env MIS, power heuristic)"}});
+      const double mrays = double(r.rays) / r.seconds * 1e-6;
+      std::printf(
+          "render-reference: %s on %s: %dx%d, %d spp, %.2f s, %.2f Mrays/s, mean value %.4g, "
+          "mean std error %.4g (%.2f%% of mean; per covered pixel %.2f%%) -> %s\n",
+          fabric.name.c_str(), args->scene.c_str(), r.width, r.height, args->spp, r.seconds,
+          mrays, r.mean_value, r.mean_std_error,
+          r.mean_value > 0 ? 100.0 * r.mean_std_error / r.mean_value : 0.0,
+          100.0 * r.mean_relative_std_error, args->out.c_str());
+      exit_code = 0;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "clothfit render-reference: error: %s\n", e.what());
+      exit_code = 1;
+    }
+  });
+}
+
+}  // namespace clothfit::cli
