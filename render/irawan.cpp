@@ -288,15 +288,15 @@ bool IrawanBsdf::Tangents(const IrawanPoint& p, Vec3d* t, double* scale) const {
   }
   if (!(hi > lo)) return false;
   const double step = (hi - lo) / kTangents;
+  const double su = std::sin(p.u), cu = std::cos(p.u), sp = std::sin(psi), cp = std::cos(psi);
   for (int k = 0; k < kTangents; ++k) {
     const double s = lo + (k + 0.5) * step;
+    const double ss = std::sin(s), cs = std::cos(s);
     Vec3d ty;
     if (psi == 0.0) {
-      ty = Vec3d(0.0, std::cos(s), -std::sin(s));
+      ty = Vec3d(0.0, cs, -ss);
     } else {
-      const double su = std::sin(p.u), cu = std::cos(p.u), sv = std::sin(s), cv = std::cos(s);
-      const double sp = std::sin(psi), cp = std::cos(psi);
-      ty = Normalize(Vec3d(-cv * sp, cu * cp + su * sv * sp, -su * cp + cu * sv * sp));
+      ty = Normalize(Vec3d(-cs * sp, cu * cp + su * ss * sp, -su * cp + cu * ss * sp));
     }
     t[k] = FromYarnFrame(ty, y.type);
   }
@@ -305,23 +305,25 @@ bool IrawanBsdf::Tangents(const IrawanPoint& p, Vec3d* t, double* scale) const {
   return true;
 }
 
-double IrawanBsdf::LobePdf(const IrawanPoint& p, const Vec3d& wo, const Vec3d& wi) const {
+bool IrawanBsdf::Cones(const IrawanPoint& p, const Vec3d& wo, woven::Cone* cones) const {
   Vec3d t[kTangents];
   double scale = 0.0;
-  if (!Tangents(p, t, &scale)) return 0.0;
-  double sum = 0.0;
-  for (int k = 0; k < kTangents; ++k) sum += woven::ConePdf(wo, t[k], scale, wi);
-  return sum / kTangents;
+  if (!Tangents(p, t, &scale)) return false;
+  for (int k = 0; k < kTangents; ++k) cones[k] = woven::MakeCone(wo, t[k], scale);
+  return true;
 }
 
 double IrawanBsdf::Pdf(const Vec3d& wo, const Vec3d& wi, const ShadingPoint& sp) const {
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return 0.0;
   const IrawanPoint p = Locate(sp.uv);
-  Vec3d t[kTangents];
-  double scale = 0.0;
-  const double c = Tangents(p, t, &scale) ? CosineProbability(p) : 1.0;
+  woven::Cone cones[kTangents];
+  const double c = Cones(p, wo, cones) ? CosineProbability(p) : 1.0;
   double pdf = c * CosineHemispherePdf(wi.z);
-  if (c < 1.0) pdf += (1.0 - c) * LobePdf(p, wo, wi);
+  if (c < 1.0) {
+    double sum = 0.0;
+    for (const woven::Cone& cone : cones) sum += woven::ConePdf(cone, wi);
+    pdf += (1.0 - c) * sum / kTangents;
+  }
   return pdf;
 }
 
@@ -329,9 +331,8 @@ bool IrawanBsdf::Sample(const Vec3d& wo, const Point2d& u, double uc, const Shad
                         BsdfSample* out) const {
   if (!(wo.z > 0.0)) return false;
   const IrawanPoint p = Locate(sp.uv);
-  Vec3d t[kTangents];
-  double scale = 0.0;
-  const bool lobe = Tangents(p, t, &scale);
+  woven::Cone cones[kTangents];
+  const bool lobe = Cones(p, wo, cones);
   const double c = lobe ? CosineProbability(p) : 1.0;
   Vec3d wi;
   if (uc < c) {
@@ -339,13 +340,13 @@ bool IrawanBsdf::Sample(const Vec3d& wo, const Point2d& u, double uc, const Shad
   } else {
     const double r = std::clamp((uc - c) / (1.0 - c), 0.0, 1.0);
     const int k = std::min(int(r * kTangents), kTangents - 1);
-    if (!woven::SampleCone(wo, t[k], scale, u, &wi)) return false;
+    if (!woven::SampleCone(cones[k], u, &wi)) return false;
   }
   if (!(wi.z > 0.0)) return false;
   double pdf = c * CosineHemispherePdf(wi.z);
   if (c < 1.0) {
     double sum = 0.0;
-    for (int k = 0; k < kTangents; ++k) sum += woven::ConePdf(wo, t[k], scale, wi);
+    for (const woven::Cone& cone : cones) sum += woven::ConePdf(cone, wi);
     pdf += (1.0 - c) * sum / kTangents;
   }
   if (!(pdf > 0.0)) return false;

@@ -46,6 +46,7 @@
 
 #include "render/bsdf.h"
 #include "render/weave_pattern.h"
+#include "render/woven_sampling.h"
 
 namespace clothfit::render {
 
@@ -89,7 +90,8 @@ class IrawanBsdf final : public Bsdf {
   IrawanPoint LocateDraft(double X, double Y) const;
   // Tangents (shading frame) and lobe scale of the highlight band; false if the band is empty.
   bool Tangents(const IrawanPoint& p, Vec3d* t, double* scale) const;
-  double LobePdf(const IrawanPoint& p, const Vec3d& wo, const Vec3d& wi) const;
+  // The kTangents cones of the lobe strategy for wo; false if the band is empty.
+  bool Cones(const IrawanPoint& p, const Vec3d& wo, woven::Cone* cones) const;
 
   WeavePattern pattern_;
   double repeat_u_, repeat_v_;

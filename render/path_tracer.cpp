@@ -28,6 +28,16 @@ struct Frame {
   Vec3d ToWorld(const Vec3d& w) const { return t * w.x + b * w.y + n * w.z; }
 };
 
+// Van der Corput radical inverse in base 2.
+double RadicalInverse2(uint32_t i) {
+  i = (i << 16u) | (i >> 16u);
+  i = ((i & 0x55555555u) << 1u) | ((i & 0xAAAAAAAAu) >> 1u);
+  i = ((i & 0x33333333u) << 2u) | ((i & 0xCCCCCCCCu) >> 2u);
+  i = ((i & 0x0F0F0F0Fu) << 4u) | ((i & 0xF0F0F0F0u) >> 4u);
+  i = ((i & 0x00FF00FFu) << 8u) | ((i & 0xFF00FF00u) >> 8u);
+  return double(i) * 0x1.0p-32;
+}
+
 double PowerHeuristic(double a, double b) {
   const double a2 = a * a, b2 = b * b;
   return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
@@ -202,6 +212,11 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   if (st.aovs.uv) r.uv.assign(np * 2, 0.f);
   if (st.aovs.depth) r.depth.assign(np, 0.f);
 
+  // Batches for the standard-error estimate: K = 16 batches of M = spp / 16 stratified
+  // samples when spp is a multiple of 16 (>= 32), else K = spp batches of one i.i.d. sample.
+  const int K = (st.spp >= 32 && st.spp % 16 == 0) ? 16 : st.spp;
+  const int M = st.spp / K;
+  r.batches = K;
   const int tiles_x = (W + st.tile_size - 1) / st.tile_size;
   const int tiles_y = (H + st.tile_size - 1) / st.tile_size;
   const int tiles = tiles_x * tiles_y;
@@ -219,19 +234,50 @@ RenderResult PathTracer::Render(const RenderSettings& st,
         int hits = 0, fabric_hits = 0;
         double aov_n[3] = {0, 0, 0}, aov_p[3] = {0, 0, 0}, aov_t[3] = {0, 0, 0}, aov_uv[2] = {0, 0};
         double aov_z = 0.0;
+        // Pixel positions: K independently shifted copies (Cranley-Patterson rotations) of
+        // an M-point stratified set (Hammersley), K x M = spp. Each batch's mean is an
+        // unbiased estimate and the K batch means are i.i.d., so the standard error is
+        // estimated from their spread: stratification lowers the error (the weave's
+        // sub-pixel structure is antialiased far better than by i.i.d. jitter) and the
+        // estimate of it stays honest.
+        double batch_sum[3] = {0, 0, 0};
+        int batch_count = 0;
+        Pcg32 shift_rng = PixelSampler(st.seed ^ 0xA5A5A5A5DEADBEEFull, pix, 0);
+        double shift_u = 0.0, shift_v = 0.0;
         for (int s = 0; s < st.spp; ++s) {
+          const int m = s % M, b = s / M;  // sample m of batch b
+          if (m == 0) {
+            shift_u = shift_rng.Uniform();
+            shift_v = shift_rng.Uniform();
+          }
           Pcg32 rng = PixelSampler(st.seed, pix, uint64_t(s));
+          double ju = (m + 0.5) / M + shift_u, jv = RadicalInverse2(uint32_t(m)) + shift_v;
+          ju -= std::floor(ju);
+          jv -= std::floor(jv);
+          if (M == 1) {
+            ju = rng.Uniform();
+            jv = rng.Uniform();
+          }
           A3 org, dir;
-          scene.CameraRay(x + rng.Uniform(), y + rng.Uniform(), org, dir);
+          scene.CameraRay(x + ju, y + jv, org, dir);
           Impl::SampleOut so = impl_->TracePath(V(org), V(dir), rng, st, rays);
           double v[3] = {so.L.r, so.L.g, so.L.b};
           for (int c = 0; c < 3; ++c) {
             if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel
             if (st.max_sample_value > 0.0) v[c] = std::min(v[c], st.max_sample_value);
-            const double delta = v[c] - mean[c];  // Welford
-            mean[c] += delta / (s + 1);
-            m2[c] += delta * (v[c] - mean[c]);
+            batch_sum[c] += v[c];
           }
+          if (m == M - 1) {  // batch complete: Welford over batch means
+            ++batch_count;
+            for (int c = 0; c < 3; ++c) {
+              const double bm = batch_sum[c] / M;
+              const double delta = bm - mean[c];
+              mean[c] += delta / batch_count;
+              m2[c] += delta * (bm - mean[c]);
+              batch_sum[c] = 0.0;
+            }
+          }
+          (void)b;
           if (so.hit) {
             ++hits;
             if (so.fabric) ++fabric_hits;
@@ -247,8 +293,8 @@ RenderResult PathTracer::Render(const RenderSettings& st,
         }
         for (int c = 0; c < 3; ++c) {
           r.rgb[pix * 3 + size_t(c)] = float(mean[c]);
-          const double var = st.spp > 1 ? m2[c] / (st.spp - 1) : 0.0;
-          r.std_error[pix * 3 + size_t(c)] = float(std::sqrt(var / st.spp));
+          const double var = K > 1 ? m2[c] / (K - 1) : 0.0;  // variance of one batch mean
+          r.std_error[pix * 3 + size_t(c)] = float(std::sqrt(var / K));
         }
         r.coverage[pix] = float(hits) / float(st.spp);
         r.fabric[pix] = float(fabric_hits) / float(st.spp);

@@ -38,7 +38,9 @@ struct RenderSettings {
 struct RenderResult {
   int width = 0, height = 0;
   std::vector<float> rgb;        // mean radiance, linear, 3 per pixel, top row first
-  std::vector<float> std_error;  // standard error of the mean per channel (sqrt(var / n))
+  std::vector<float> std_error;  // standard error of the pixel mean per channel, from the
+                                 // spread of `batches` i.i.d. batch means (see Render)
+  int batches = 0;
   std::vector<float> coverage;   // fraction of camera samples hitting geometry (alpha)
   std::vector<float> fabric;     // fraction of camera samples hitting the fabric material
   // AOVs (first-hit, averaged over the pixel's samples that hit; empty unless requested)

@@ -178,8 +178,8 @@ Rgbd SadeghiBsdf::Eval(const Vec3d& wo, const Vec3d& wi, const ShadingPoint&) co
   return sum * (1.0 / (q * wi.z));
 }
 
-bool SadeghiBsdf::Selection(const Vec3d& wo, std::vector<double>* prob) const {
-  prob->assign(tangents_.size(), 0.0);
+bool SadeghiBsdf::Selection(const Vec3d& wo, Probabilities* prob) const {
+  prob->fill(0.0);
   double total = 0.0;
   for (size_t k = 0; k < tangents_.size(); ++k) {
     // Visible weight of the tangent times the fraction of its (surface-width) cone that can
@@ -195,7 +195,7 @@ bool SadeghiBsdf::Selection(const Vec3d& wo, std::vector<double>* prob) const {
 }
 
 double SadeghiBsdf::LobePdf(const Vec3d& wo, const Vec3d& wi,
-                            const std::vector<double>& prob) const {
+                            const Probabilities& prob) const {
   double pdf = 0.0;
   for (size_t k = 0; k < tangents_.size(); ++k) {
     if (prob[k] <= 0.0) continue;
@@ -209,7 +209,7 @@ double SadeghiBsdf::LobePdf(const Vec3d& wo, const Vec3d& wi,
 
 double SadeghiBsdf::Pdf(const Vec3d& wo, const Vec3d& wi, const ShadingPoint&) const {
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return 0.0;
-  std::vector<double> prob;
+  Probabilities prob;
   const bool lobe = Selection(wo, &prob);
   const double c = lobe ? kCosineProbability : 1.0;
   double pdf = c * CosineHemispherePdf(wi.z);
@@ -220,7 +220,7 @@ double SadeghiBsdf::Pdf(const Vec3d& wo, const Vec3d& wi, const ShadingPoint&) c
 bool SadeghiBsdf::Sample(const Vec3d& wo, const Point2d& u, double uc, const ShadingPoint& sp,
                          BsdfSample* out) const {
   if (!(wo.z > 0.0)) return false;
-  std::vector<double> prob;
+  Probabilities prob;
   const bool lobe = Selection(wo, &prob);
   const double c = lobe ? kCosineProbability : 1.0;
   Vec3d wi;

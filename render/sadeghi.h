@@ -34,6 +34,7 @@
 // or the volume width (2 gamma_v sqrt(3)/pi), each with probability 1/2.
 #pragma once
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -86,9 +87,11 @@ class SadeghiBsdf final : public Bsdf {
     int thread = 0;
     double weight = 0;  // a_j / N_j
   };
+  static constexpr size_t kMaxTangents = 128;  // 2 threads x 64 offsets
+  using Probabilities = std::array<double, kMaxTangents>;
   // Per-tangent selection probabilities for wo; false if no tangent is visible.
-  bool Selection(const Vec3d& wo, std::vector<double>* prob) const;
-  double LobePdf(const Vec3d& wo, const Vec3d& wi, const std::vector<double>& prob) const;
+  bool Selection(const Vec3d& wo, Probabilities* prob) const;
+  double LobePdf(const Vec3d& wo, const Vec3d& wi, const Probabilities& prob) const;
 
   SadeghiFabric fabric_;
   std::vector<Tangent> tangents_;

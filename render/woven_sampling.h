@@ -28,12 +28,20 @@
 
 namespace clothfit::render::woven {
 
-// Logistic distribution truncated to [lo, hi].
+// Logistic distribution truncated to [lo, hi]. Tail-safe: when the whole interval lies above
+// mu it works with the survival function S(z) = 1/(1 + e^z) (accurate where the CDF rounds
+// to 1), otherwise with the CDF F(z) = 1/(1 + e^-z) (accurate where it is tiny).
 struct TruncatedLogistic {
   double mu = 0.0, s = 1.0, lo = -0.5 * kPi, hi = 0.5 * kPi;
 
-  static double Cdf(double x, double mu, double s) { return 1.0 / (1.0 + std::exp(-(x - mu) / s)); }
-  double Mass() const { return Cdf(hi, mu, s) - Cdf(lo, mu, s); }
+  static double F(double z) { return 1.0 / (1.0 + std::exp(-z)); }
+  static double S(double z) { return 1.0 / (1.0 + std::exp(z)); }
+  bool UpperTail() const { return lo > mu; }
+  double Mass() const {
+    if (!(hi > lo)) return 0.0;
+    const double zl = (lo - mu) / s, zh = (hi - mu) / s;
+    return UpperTail() ? S(zl) - S(zh) : F(zh) - F(zl);
+  }
   double Pdf(double x) const {
     if (x < lo || x > hi) return 0.0;
     const double e = std::exp(-std::abs(x - mu) / s);
@@ -41,9 +49,16 @@ struct TruncatedLogistic {
     return mass > 0.0 ? e / (s * (1.0 + e) * (1.0 + e) * mass) : 0.0;
   }
   double Sample(double u) const {
-    const double c0 = Cdf(lo, mu, s), c1 = Cdf(hi, mu, s);
-    const double c = std::clamp(c0 + u * (c1 - c0), 1e-300, 1.0 - 1e-16);
-    return std::clamp(mu + s * std::log(c / (1.0 - c)), lo, hi);
+    const double zl = (lo - mu) / s, zh = (hi - mu) / s;
+    double z;
+    if (UpperTail()) {  // S decreases from S(zl) to S(zh)
+      const double c = std::clamp(S(zl) - u * (S(zl) - S(zh)), 1e-300, 1.0 - 1e-16);
+      z = std::log1p(-c) - std::log(c);
+    } else {
+      const double c = std::clamp(F(zl) + u * (F(zh) - F(zl)), 1e-300, 1.0 - 1e-16);
+      z = std::log(c) - std::log1p(-c);
+    }
+    return std::clamp(mu + s * z, lo, hi);
   }
 };
 
@@ -91,31 +106,56 @@ inline void ConeBasis(const Vec3d& t, Vec3d* b1, Vec3d* b2) {
   *b2 = Cross(t, *b1);
 }
 
-// Draws wi near the specular cone of tangent t for wo; returns false if the cone has no
-// direction above the surface at the drawn theta.
-inline bool SampleCone(const Vec3d& wo, const Vec3d& t, double scale, const Point2d& u, Vec3d* wi) {
-  const TruncatedLogistic lg = ConeTheta(wo, t, scale);
-  if (!(lg.Mass() > 0.0)) return false;
-  const double theta = lg.Sample(u.x);
+// One tangent's cone for a given wo, with the per-(wo, t) constants computed once.
+struct Cone {
+  Vec3d t;
+  TruncatedLogistic theta;
+  double mass = 0.0;  // theta.Mass()
+};
+
+inline Cone MakeCone(const Vec3d& wo, const Vec3d& t, double scale) {
+  Cone c;
+  c.t = t;
+  c.theta = ConeTheta(wo, t, scale);
+  c.mass = c.theta.Mass();
+  return c;
+}
+
+// Draws wi near the cone; returns false if no direction above the surface was produced.
+inline bool SampleCone(const Cone& c, const Point2d& u, Vec3d* wi) {
+  if (!(c.mass > 0.0)) return false;
+  const double theta = c.theta.Sample(u.x);
   const double st = std::sin(theta), ct = std::cos(theta);
-  const double phi_max = PhiMax(st, ct, t);
+  const double phi_max = PhiMax(st, ct, c.t);
   if (!(phi_max > 0.0)) return false;
   const double phi = (2.0 * u.y - 1.0) * phi_max;
   Vec3d b1, b2;
-  ConeBasis(t, &b1, &b2);
-  *wi = t * st + (b1 * std::cos(phi) + b2 * std::sin(phi)) * ct;
+  ConeBasis(c.t, &b1, &b2);
+  *wi = c.t * st + (b1 * std::cos(phi) + b2 * std::sin(phi)) * ct;
   return wi->z > 0.0;
 }
 
 // Solid-angle density of SampleCone at wi.
-inline double ConePdf(const Vec3d& wo, const Vec3d& t, double scale, const Vec3d& wi) {
-  if (!(wi.z > 0.0)) return 0.0;
-  const double st = std::clamp(Dot(wi, t), -1.0, 1.0);
+inline double ConePdf(const Cone& c, const Vec3d& wi) {
+  if (!(wi.z > 0.0) || !(c.mass > 0.0)) return 0.0;
+  const double st = std::clamp(Dot(wi, c.t), -1.0, 1.0);
   const double ct = std::sqrt(std::max(0.0, 1.0 - st * st));
   if (ct < 1e-12) return 0.0;
-  const double phi_max = PhiMax(st, ct, t);
+  const double x = std::asin(st);
+  if (x < c.theta.lo || x > c.theta.hi) return 0.0;
+  const double phi_max = PhiMax(st, ct, c.t);
   if (!(phi_max > 0.0)) return 0.0;
-  return ConeTheta(wo, t, scale).Pdf(std::asin(st)) / (2.0 * phi_max * ct);
+  const double e = std::exp(-std::abs(x - c.theta.mu) / c.theta.s);
+  const double p_theta = e / (c.theta.s * (1.0 + e) * (1.0 + e) * c.mass);
+  return p_theta / (2.0 * phi_max * ct);
+}
+
+// Convenience forms for one-off use.
+inline bool SampleCone(const Vec3d& wo, const Vec3d& t, double scale, const Point2d& u, Vec3d* wi) {
+  return SampleCone(MakeCone(wo, t, scale), u, wi);
+}
+inline double ConePdf(const Vec3d& wo, const Vec3d& t, double scale, const Vec3d& wi) {
+  return ConePdf(MakeCone(wo, t, scale), wi);
 }
 
 }  // namespace clothfit::render::woven

@@ -8,7 +8,8 @@
 //      integration grid, or a total pdf mass > 1.1.
 //   3. Expected count per cell = N * integral of pdf over the cell (solid angle), by an
 //      adaptive midpoint rule (n x n and 2n x 2n agree, else split the cell in four); the
-//      "no sample" bin expects N * (1 - mass).
+//      "no sample" bin expects N * (1 - mass). Refinement goes 9 levels deep, enough for the
+//      integrable point spikes of the cone sampler at the horizon.
 //   4. Pool every bin with expected count < 5 into one bin (sorted by expectation); chi^2 over
 //      the pooled bins, dof = bins - 1, p = Q(dof/2, chi^2/2) (regularized upper incomplete
 //      gamma). Reject when p < 1 - (1 - alpha)^(1/n_tests) (Sidak correction).
@@ -117,7 +118,7 @@ inline double Adaptive(const PdfFn& pdf, double t0, double t1, double p0, double
                        double abs_tol, double* min_pdf) {
   const double coarse = Midpoint(pdf, t0, t1, p0, p1, 3, min_pdf);
   const double fine = Midpoint(pdf, t0, t1, p0, p1, 6, min_pdf);
-  if (depth >= 4 || std::abs(fine - coarse) <= std::max(abs_tol, 1e-4 * std::abs(fine))) {
+  if (depth >= 9 || std::abs(fine - coarse) <= std::max(abs_tol, 1e-3 * std::abs(fine))) {
     return fine;
   }
   const double tm = 0.5 * (t0 + t1), pm = 0.5 * (p0 + p1);
@@ -199,7 +200,7 @@ inline Chi2Result RunChi2(const SampleFn& sample, const PdfFn& pdf, const Chi2Co
   tbb::parallel_for(size_t(0), cells, [&](size_t k) {
     const int it = int(k / size_t(np)), ip = int(k % size_t(np));
     expected[k] = detail::Adaptive(pdf, it * dtheta, (it + 1) * dtheta, ip * dphi,
-                                   (ip + 1) * dphi, 0, 0.01 / n, &min_pdf[k]);
+                                   (ip + 1) * dphi, 0, 0.05 / n, &min_pdf[k]);
   });
   double mass = 0.0, lowest = 0.0;
   for (size_t k = 0; k < cells; ++k) {
