@@ -1,11 +1,10 @@
 // render/fabric.cpp: the fabric JSON loader (schema in fabric.h and docs/woven-cloth.md).
 #include "render/fabric.h"
 
-#include <nlohmann/json.hpp>
-
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 
@@ -54,7 +53,7 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
     Fail(path, "JSON syntax error at " + LineColumn(text, e.byte) + ": " + e.what());
   }
   if (!j.is_object()) Fail(path, "top level must be a JSON object");
-  static const std::set<std::string> known = {"format", "version", "name", "model",
+  static const std::set<std::string> known = {"format", "version",    "name",      "model",
                                               "preset", "weave_file", "uv_repeats"};
   for (const auto& item : j.items()) {
     if (!known.count(item.key())) {

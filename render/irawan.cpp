@@ -167,7 +167,8 @@ IrawanPoint IrawanBsdf::LocateDraft(double X, double Y) const {
     // One value per segment: noise along the warp (Y) and along the weft (X) at the segment
     // centre; each yarn line gets its own sequence (salted by the other coordinate).
     const double gx = tx * W + cx, gy = ty * H + cy;
-    const double r1 = GradientNoise1D(gy / pattern_.period, Mix64(uint64_t(int64_t(std::floor(gx * 2.0)))));
+    const double r1 =
+        GradientNoise1D(gy / pattern_.period, Mix64(uint64_t(int64_t(std::floor(gx * 2.0)))));
     const double r2 = GradientNoise1D(gx / pattern_.period,
                                       Mix64(uint64_t(int64_t(std::floor(gy * 2.0))) ^ 0xABCDEFull));
     const double d1 = warp ? pattern_.d_warp_umax_over_d_warp : pattern_.d_weft_umax_over_d_warp;
@@ -218,8 +219,7 @@ double IrawanBsdf::SpecularIntegrand(const IrawanPoint& p, const Vec3d& wo_s,
     const double G = a * (R + a * std::cos(v)) / (len * std::abs(txh_x));
     double A = Seeliger(Dot(n, wi), Dot(n, wo));
     if (pattern_.ss > 0.0) {
-      A *= 1.0 - SmoothStep01((std::abs(u_h) - (1.0 - pattern_.ss) * umax) /
-                              (pattern_.ss * umax));
+      A *= 1.0 - SmoothStep01((std::abs(u_h) - (1.0 - pattern_.ss) * umax) / (pattern_.ss * umax));
     }
     fs = G * fc * A * kPi * l / delta;
   } else {

@@ -96,10 +96,12 @@ SadeghiBsdf::SadeghiBsdf(SadeghiFabric fabric) : fabric_(std::move(fabric)) {
   double a_sum = 0.0;
   for (int j = 0; j < 2; ++j) {
     const SadeghiThread& th = fabric_.thread[j];
-    const std::string where = "Sadeghi fabric '" + fabric_.name + "' thread " +
-                              std::to_string(j + 1) + ": ";
-    if (!(th.eta > 1.0 && th.eta < 3.0)) throw std::invalid_argument(where + "eta must be in (1, 3)");
-    if (!(th.kd >= 0.0 && th.kd <= 1.0)) throw std::invalid_argument(where + "kd must be in [0, 1]");
+    const std::string where =
+        "Sadeghi fabric '" + fabric_.name + "' thread " + std::to_string(j + 1) + ": ";
+    if (!(th.eta > 1.0 && th.eta < 3.0))
+      throw std::invalid_argument(where + "eta must be in (1, 3)");
+    if (!(th.kd >= 0.0 && th.kd <= 1.0))
+      throw std::invalid_argument(where + "kd must be in [0, 1]");
     if (!(th.gamma_s > 0.0 && th.gamma_s <= 90.0) || !(th.gamma_v > 0.0 && th.gamma_v <= 90.0)) {
       throw std::invalid_argument(where + "gamma_s and gamma_v must be in (0, 90] degrees");
     }
@@ -194,8 +196,7 @@ bool SadeghiBsdf::Selection(const Vec3d& wo, Probabilities* prob) const {
   return true;
 }
 
-double SadeghiBsdf::LobePdf(const Vec3d& wo, const Vec3d& wi,
-                            const Probabilities& prob) const {
+double SadeghiBsdf::LobePdf(const Vec3d& wo, const Vec3d& wi, const Probabilities& prob) const {
   double pdf = 0.0;
   for (size_t k = 0; k < tangents_.size(); ++k) {
     if (prob[k] <= 0.0) continue;

@@ -79,8 +79,8 @@ std::vector<std::pair<const char*, double WeavePattern::*>> ScalarFields() {
 }
 // Keys that must appear; the others default to 0 (noise and fineness off).
 bool Required(const std::string& key) {
-  return key == "alpha" || key == "beta" || key == "ss" || key == "hWidth" ||
-         key == "warpArea" || key == "weftArea";
+  return key == "alpha" || key == "beta" || key == "ss" || key == "hWidth" || key == "warpArea" ||
+         key == "weftArea";
 }
 
 void ValidateYarn(const Yarn& y, const std::string& where) {
@@ -148,7 +148,8 @@ void ValidateWeave(const WeavePattern& p, const std::string& context) {
   }
   if (p.yarns.empty()) Fail(context, "no yarns");
   if (!(p.alpha >= 0.0)) Fail(context, "alpha must be >= 0");
-  if (!std::isfinite(p.beta) || std::abs(p.beta) > 100.0) Fail(context, "beta must be in [-100, 100]");
+  if (!std::isfinite(p.beta) || std::abs(p.beta) > 100.0)
+    Fail(context, "beta must be in [-100, 100]");
   if (!(p.ss >= 0.0 && p.ss < 1.0)) Fail(context, "ss must satisfy 0 <= ss < 1");
   if (!(p.h_width > 0.0 && p.h_width <= 1.0)) Fail(context, "hWidth must be in (0, 1]");
   if (!(p.fineness >= 0.0) || !std::isfinite(p.fineness)) Fail(context, "fineness must be >= 0");
@@ -173,7 +174,7 @@ WeavePattern ParseWeave(std::string_view text, const std::string& source) {
     lines.push_back(text.substr(start, end - start));
     start = end + 1;
   }
-  std::map<std::string, int> seen;  // keyword -> line
+  std::map<std::string, int> seen;            // keyword -> line
   std::map<int, std::pair<Yarn, int>> yarns;  // id -> (yarn, line)
   std::map<int, std::pair<double, double>> given_centres;
   bool header = false;
@@ -290,8 +291,8 @@ WeavePattern ParseWeave(std::string_view text, const std::string& source) {
                                ParseDouble(tok[i + 2], where, k)};
           i += 3;
         } else {
-          Fail(where, "unknown yarn field '" + k +
-                          "' (valid: psi umax kappa width length kd ks center)");
+          Fail(where,
+               "unknown yarn field '" + k + "' (valid: psi umax kappa width length kd ks center)");
         }
       }
       for (const char* k : {"psi", "umax", "kappa", "width", "length", "kd", "ks"}) {
@@ -380,12 +381,11 @@ std::string WriteWeave(const WeavePattern& p) {
   DeriveSegmentCentres(&derived, "WriteWeave");
   for (size_t i = 0; i < p.yarns.size(); ++i) {
     const Yarn& y = derived.yarns[i];
-    o << "yarn " << (i + 1) << (y.type == YarnType::kWarp ? " warp" : " weft")
-      << " psi " << Num(y.psi) << " umax " << Num(y.umax) << " kappa " << Num(y.kappa)
-      << " width " << Num(y.width) << " length " << Num(y.length) << " kd " << Num(y.kd.r)
-      << " " << Num(y.kd.g) << " " << Num(y.kd.b) << " ks " << Num(y.ks.r) << " "
-      << Num(y.ks.g) << " " << Num(y.ks.b) << " center " << Num(y.center_u) << " "
-      << Num(y.center_v) << "\n";
+    o << "yarn " << (i + 1) << (y.type == YarnType::kWarp ? " warp" : " weft") << " psi "
+      << Num(y.psi) << " umax " << Num(y.umax) << " kappa " << Num(y.kappa) << " width "
+      << Num(y.width) << " length " << Num(y.length) << " kd " << Num(y.kd.r) << " " << Num(y.kd.g)
+      << " " << Num(y.kd.b) << " ks " << Num(y.ks.r) << " " << Num(y.ks.g) << " " << Num(y.ks.b)
+      << " center " << Num(y.center_u) << " " << Num(y.center_v) << "\n";
   }
   return o.str();
 }

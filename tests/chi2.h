@@ -68,7 +68,9 @@ inline double RegularizedGammaQ(double a, double x) {
 }
 
 // P(X > chi2) for X ~ chi-square with dof degrees of freedom.
-inline double Chi2Survival(double chi2, double dof) { return RegularizedGammaQ(0.5 * dof, 0.5 * chi2); }
+inline double Chi2Survival(double chi2, double dof) {
+  return RegularizedGammaQ(0.5 * dof, 0.5 * chi2);
+}
 
 struct Chi2Config {
   int n_theta = 40, n_phi = 80;
@@ -199,8 +201,8 @@ inline Chi2Result RunChi2(const SampleFn& sample, const PdfFn& pdf, const Chi2Co
   const double n = double(cfg.n_samples);
   tbb::parallel_for(size_t(0), cells, [&](size_t k) {
     const int it = int(k / size_t(np)), ip = int(k % size_t(np));
-    expected[k] = detail::Adaptive(pdf, it * dtheta, (it + 1) * dtheta, ip * dphi,
-                                   (ip + 1) * dphi, 0, 0.05 / n, &min_pdf[k]);
+    expected[k] = detail::Adaptive(pdf, it * dtheta, (it + 1) * dtheta, ip * dphi, (ip + 1) * dphi,
+                                   0, 0.05 / n, &min_pdf[k]);
   });
   double mass = 0.0, lowest = 0.0;
   for (size_t k = 0; k < cells; ++k) {
@@ -231,8 +233,9 @@ inline Chi2Result RunChi2(const SampleFn& sample, const PdfFn& pdf, const Chi2Co
     std::sort(worst.rbegin(), worst.rend());
     for (int i = 0; i < 8; ++i) {
       const size_t k = worst[size_t(i)].second;
-      std::fprintf(stderr, "  cell theta %zu phi %zu: expected %.1f observed %lld\n", k / size_t(np),
-                   k % size_t(np), expected[k] * n, static_cast<long long>(total.count[k]));
+      std::fprintf(stderr, "  cell theta %zu phi %zu: expected %.1f observed %lld\n",
+                   k / size_t(np), k % size_t(np), expected[k] * n,
+                   static_cast<long long>(total.count[k]));
     }
   }
   // Bins: the cells plus "no sample"; pool the small ones.
@@ -271,9 +274,8 @@ inline Chi2Result RunChi2(const SampleFn& sample, const PdfFn& pdf, const Chi2Co
   res.threshold = 1.0 - std::pow(1.0 - cfg.alpha, 1.0 / std::max(1, cfg.n_tests));
   res.passed = res.p_value >= res.threshold;
   std::ostringstream o;
-  o << "chi2 = " << chi2 << ", dof = " << res.dof << ", p = " << res.p_value
-    << " (threshold " << res.threshold << "), pdf mass = " << mass
-    << ", failed samples = " << total.failed;
+  o << "chi2 = " << chi2 << ", dof = " << res.dof << ", p = " << res.p_value << " (threshold "
+    << res.threshold << "), pdf mass = " << mass << ", failed samples = " << total.failed;
   res.message = o.str();
   return res;
 }

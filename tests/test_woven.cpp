@@ -25,8 +25,8 @@ namespace {
 const std::filesystem::path kDatasets =
     std::filesystem::path(__FILE__).parent_path().parent_path() / "datasets";
 
-const std::vector<std::string> kWeaves = {"polyester",      "silk_shantung", "cotton_denim",
-                                          "cotton_twill",   "wool_gabardine", "silk_charmeuse",
+const std::vector<std::string> kWeaves = {"polyester",    "silk_shantung",  "cotton_denim",
+                                          "cotton_twill", "wool_gabardine", "silk_charmeuse",
                                           "cotton_canvas"};
 
 const std::vector<std::string> kChi2Weaves = {"polyester", "cotton_denim", "cotton_canvas",
@@ -53,7 +53,8 @@ std::vector<Point2d> TestPoints(const IrawanBsdf& b) {
   std::vector<Point2d> pts;
   for (YarnType want : {YarnType::kWarp, YarnType::kWeft}) {
     for (int i = 0; i < 64; ++i) {
-      const Point2d uv{(i % 8 + 0.37) / (8.0 * b.repeat_u()), (i / 8 + 0.61) / (8.0 * b.repeat_v())};
+      const Point2d uv{(i % 8 + 0.37) / (8.0 * b.repeat_u()),
+                       (i / 8 + 0.61) / (8.0 * b.repeat_v())};
       if (b.pattern().yarns[size_t(b.Locate(uv).yarn)].type == want) {
         pts.push_back(uv);
         break;
@@ -185,12 +186,14 @@ TEST(WovenPattern, MalformedFilesGiveFileAndLine) {
       "bad.weave:21", "'warp' or 'weft'");
   ExpectWeaveError(replace_line(21, "yarn 1 warp psi 0 umax 22"), "bad.weave:21", "missing");
   ExpectWeaveError(
-      replace_line(21, "yarn 1 warp psi 0 umax 22 kappa 0 width 1 length 1 kd 0 0 0 ks 0 0 0 "
-                       "center 0.5 0.5"),
+      replace_line(21,
+                   "yarn 1 warp psi 0 umax 22 kappa 0 width 1 length 1 kd 0 0 0 ks 0 0 0 "
+                   "center 0.5 0.5"),
       "bad.weave:21", "disagrees with the centre derived");
   ExpectWeaveError(replace_line(24, ""), "bad.weave:18", "not in [1, 3]");  // id 4: no yarn
-  ExpectWeaveError(replace_line(22, "yarn 1 warp psi 0 umax 22 kappa 0 width 1 length 1 kd 0 0 0 ks 0 0 0"),
-                   "bad.weave:22", "duplicate yarn 1");
+  ExpectWeaveError(
+      replace_line(22, "yarn 1 warp psi 0 umax 22 kappa 0 width 1 length 1 kd 0 0 0 ks 0 0 0"),
+      "bad.weave:22", "duplicate yarn 1");
   ExpectWeaveError(
       "clothfit-weave 1\nalpha 0.01\nbeta 1\nss 0\nhWidth 0.5\nwarpArea 1\nweftArea 1\n"
       "tile 3 1\npattern\n1 2 1\n"
@@ -222,8 +225,7 @@ TEST(WovenIrawan, SpineRadiusMatchesNumericCurvature) {
   const double umax = 30.0 * kPi / 180.0;
   const double k0 = -1.0 / (1.0 + 1.0 / std::tan(umax));  // rhat = 0
   for (double u : {0.0, 0.2, 0.5}) {
-    EXPECT_NEAR(SpineRadius(u, umax, k0 + 1e-7, 1, 3), SpineRadius(u, umax, k0 - 1e-7, 1, 3),
-                1e-4);
+    EXPECT_NEAR(SpineRadius(u, umax, k0 + 1e-7, 1, 3), SpineRadius(u, umax, k0 - 1e-7, 1, 3), 1e-4);
     EXPECT_NEAR(SpineRadius(u, umax, 1e-8, 1, 3), SpineRadius(u, umax, 0.0, 1, 3), 1e-5);
   }
 }
@@ -308,7 +310,8 @@ TEST(WovenBsdf, SampleAgreesWithEvalAndPdf) {
       const Rgbd f = m.bsdf->Eval(wo, s.wi, sp);
       const double pdf = m.bsdf->Pdf(wo, s.wi, sp);
       ASSERT_NEAR(s.pdf, pdf, 1e-9 * pdf) << m.name;
-      for (int c = 0; c < 3; ++c) ASSERT_NEAR(s.f[c], f[c], 1e-9 * std::abs(f[c]) + 1e-300) << m.name;
+      for (int c = 0; c < 3; ++c)
+        ASSERT_NEAR(s.f[c], f[c], 1e-9 * std::abs(f[c]) + 1e-300) << m.name;
     }
     EXPECT_GT(checked, 3000) << m.name;
   }
@@ -408,7 +411,8 @@ Albedo DirectionalAlbedo(const Bsdf& b, const Vec3d& wo, const Point2d* uv, int 
   Albedo a;
   for (int c = 0; c < 3; ++c) {
     a.mean[c] = s[c] / n;
-    a.stderr_max = std::max(a.stderr_max, std::sqrt(std::max(0.0, s2[c] / n - a.mean[c] * a.mean[c]) / n));
+    a.stderr_max =
+        std::max(a.stderr_max, std::sqrt(std::max(0.0, s2[c] / n - a.mean[c] * a.mean[c]) / n));
   }
   return a;
 }
@@ -449,8 +453,9 @@ std::vector<Chi2Case> Chi2Cases() {
     const auto pts = TestPoints(*b);
     for (size_t k = 0; k < pts.size(); ++k) {
       for (int w = 0; w < 2; ++w) {
-        cases.push_back({"irawan:" + stem + (k == 0 ? " warp" : " weft") + " wo" + std::to_string(w),
-                         b, wos[w], pts[k]});
+        cases.push_back(
+            {"irawan:" + stem + (k == 0 ? " warp" : " weft") + " wo" + std::to_string(w), b, wos[w],
+             pts[k]});
       }
     }
   }
@@ -499,14 +504,14 @@ TEST(WovenChi2, EverySamplingRoutinePasses) {
   }
   const double secs =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::printf("[woven] chi2: %zu cases x 10^6 samples, min p = %.4f, %.1f s\n", cases.size(),
-              min_p, secs);
+  std::printf("[woven] chi2: %zu cases x 10^6 samples, min p = %.4f, %.1f s\n", cases.size(), min_p,
+              secs);
 }
 
 TEST(WovenChi2, RejectsADeliberatelyWrongPdf) {
   // (a) Cosine sampling checked against the uniform-hemisphere pdf.
-  const Chi2Case lambert{"lambert", std::make_shared<LambertBsdf>(Rgbd(0.5, 0.5, 0.5)),
-                         Dir(30, 0), {0, 0}};
+  const Chi2Case lambert{
+      "lambert", std::make_shared<LambertBsdf>(Rgbd(0.5, 0.5, 0.5)), Dir(30, 0), {0, 0}};
   const testing::PdfFn uniform = [](const Vec3d& wi) { return wi.z > 0 ? 0.5 * kInvPi : 0.0; };
   const auto ra = RunCase(lambert, 1, &uniform);
   std::printf("[woven] chi2 wrong pdf (uniform vs cosine): p = %.3g\n", ra.p_value);
@@ -561,9 +566,10 @@ void CompareVariance(const Bsdf& b, const std::string& label, const Vec3d& wo, c
   const double mm = sm / n, mc = sc / n;
   const double vm = sm2 / n - mm * mm, vc = sc2 / n - mc * mc;
   *ratio = vc / vm;
-  std::printf("[woven] variance %s: estimate MIS %.5f +- %.5f, cosine %.5f +- %.5f, "
-              "variance ratio cosine/MIS = %.2f\n",
-              label.c_str(), mm, std::sqrt(vm / n), mc, std::sqrt(vc / n), *ratio);
+  std::printf(
+      "[woven] variance %s: estimate MIS %.5f +- %.5f, cosine %.5f +- %.5f, "
+      "variance ratio cosine/MIS = %.2f\n",
+      label.c_str(), mm, std::sqrt(vm / n), mc, std::sqrt(vc / n), *ratio);
   EXPECT_NEAR(mm, mc, 5.0 * (std::sqrt(vm / n) + std::sqrt(vc / n))) << label;
 }
 

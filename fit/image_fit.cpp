@@ -1,0 +1,489 @@
+#include "fit/image_fit.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include "render/embree_scene.h"
+#include "render/image_io.h"
+
+namespace clothfit::fit {
+namespace {
+
+using Jet = ceres::Jet<double, 10>;
+
+int FindChannel(const io::Image& img, const std::string& name) {
+  for (int c = 0; c < img.channels(); ++c)
+    if (img.channel_names[size_t(c)] == name) return c;
+  return -1;
+}
+
+// The space transform, templated so Jets flow through it.
+template <typename T>
+Rgb<T> Transform(const Rgb<T>& lin, Space space, render::ToneMapping op, double exposure) {
+  switch (space) {
+    case Space::kDisplay: return render::ToDisplay(lin, op, exposure);
+    case Space::kLinear: return lin;
+    case Space::kLog: {
+      using std::log;
+      Rgb<T> out;
+      for (int c = 0; c < 3; ++c) out[c] = log(Max(lin[c], Const<T>(0.0)) + Const<T>(1e-3));
+      return out;
+    }
+  }
+  return lin;
+}
+
+struct SceneData {
+  std::string scene_path, reference_path;
+  std::unique_ptr<render::PreviewCache> cache;  // only the pixels the blocks use
+  std::vector<int> block_begin;                 // CSR over cache pixels
+  std::vector<Rgb<double>> ref_t;               // transformed reference block means
+  std::vector<Rgb<double>> weight;              // per block and channel
+  render::ToneMapping op = render::ToneMapping::kLinear;
+  double exposure = 1.0;
+  Space space = Space::kDisplay;
+  int blocks() const { return int(block_begin.size()) - 1; }
+};
+
+// A copy of `full` restricted to the cache pixels `keep` (in that order).
+std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
+                                             const std::vector<int>& keep) {
+  auto c = std::make_unique<render::PreviewCache>();
+  c->width = full.width;
+  c->height = full.height;
+  c->options = full.options;
+  c->features = full.features;
+  c->dfg = full.dfg;
+  c->sheen_albedo = full.sheen_albedo;
+  const size_t K3 = size_t(full.options.roughness_nodes) * 3;
+  c->light_begin.push_back(0);
+  for (int i : keep) {
+    const size_t ui = size_t(i);
+    c->pixels.push_back(full.pixels[ui]);
+    c->NoV.push_back(full.NoV[ui]);
+    for (int s = full.light_begin[ui]; s < full.light_begin[ui + 1]; ++s)
+      c->light_samples.push_back(full.light_samples[size_t(s)]);
+    c->light_begin.push_back(int(c->light_samples.size()));
+    for (size_t k = 0; k < 3; ++k)
+      if (!full.irradiance.empty()) c->irradiance.push_back(full.irradiance[ui * 3 + k]);
+    if (!full.radiance.empty())
+      c->radiance.insert(c->radiance.end(), full.radiance.begin() + long(ui * K3),
+                         full.radiance.begin() + long((ui + 1) * K3));
+    if (!full.sheen_radiance.empty())
+      c->sheen_radiance.insert(c->sheen_radiance.end(), full.sheen_radiance.begin() + long(ui * K3),
+                               full.sheen_radiance.begin() + long((ui + 1) * K3));
+  }
+  return c;
+}
+
+// Residuals (and the Jacobian) of one scene, with all of a model's parameter blocks.
+class PreviewCost final : public ceres::CostFunction {
+ public:
+  PreviewCost(const SceneData& d, std::vector<int> block_sizes) : d_(d), sizes_(std::move(block_sizes)) {
+    set_num_residuals(3 * d.blocks());
+    for (int s : sizes_) mutable_parameter_block_sizes()->push_back(s);
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    std::vector<double> x;
+    for (size_t b = 0; b < sizes_.size(); ++b)
+      for (int k = 0; k < sizes_[b]; ++k) x.push_back(parameters[b][k]);
+    if (!jacobians) return Residuals<double>(x.data(), residuals, nullptr);
+    std::vector<Jet> xj(x.size());
+    for (size_t k = 0; k < x.size(); ++k) xj[k] = Jet(x[k], int(k));
+    std::vector<Jet> r(static_cast<size_t>(num_residuals()));
+    if (!Residuals<Jet>(xj.data(), residuals, r.data())) return false;
+    int offset = 0;
+    for (size_t b = 0; b < sizes_.size(); ++b) {
+      if (jacobians[b]) {
+        for (int row = 0; row < num_residuals(); ++row)
+          for (int k = 0; k < sizes_[b]; ++k)
+            jacobians[b][row * sizes_[b] + k] = r[size_t(row)].v[offset + k];
+      }
+      offset += sizes_[b];
+    }
+    return true;
+  }
+
+  template <typename T>
+  bool Residuals(const T* x, double* residuals, T* out) const {
+    std::vector<Rgb<T>> px;
+    render::EvaluatePreview(*d_.cache, x, px);
+    const int nb = d_.blocks();
+    bool finite = true;
+    for (int b = 0; b < nb; ++b) {
+      Rgb<T> sum(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
+      const int begin = d_.block_begin[size_t(b)], end = d_.block_begin[size_t(b) + 1];
+      for (int i = begin; i < end; ++i) sum += px[size_t(i)];
+      const Rgb<T> mean = sum * Const<T>(1.0 / double(end - begin));
+      const Rgb<T> t = Transform(mean, d_.space, d_.op, d_.exposure);
+      for (int c = 0; c < 3; ++c) {
+        const T r = (t[c] - Const<T>(d_.ref_t[size_t(b)][c])) * Const<T>(d_.weight[size_t(b)][c]);
+        const size_t k = size_t(b) * 3 + size_t(c);
+        if constexpr (std::is_same_v<T, double>) {
+          residuals[k] = r;
+          finite = finite && std::isfinite(r);
+        } else {
+          residuals[k] = r.a;
+          out[k] = r;
+          finite = finite && ceres::isfinite(r);
+        }
+      }
+    }
+    return finite;
+  }
+
+ private:
+  const SceneData& d_;
+  std::vector<int> sizes_;
+};
+
+double Mean3(const std::vector<float>& rgb, const std::vector<float>& mask) {
+  double s = 0;
+  size_t n = 0;
+  for (size_t p = 0; p < mask.size(); ++p)
+    if (mask[p] > 0.5f) {
+      s += double(rgb[p * 3]) + double(rgb[p * 3 + 1]) + double(rgb[p * 3 + 2]);
+      n += 3;
+    }
+  return n ? s / double(n) : 0.0;
+}
+
+}  // namespace
+
+std::string ToString(Space s) {
+  switch (s) {
+    case Space::kDisplay: return "display";
+    case Space::kLinear: return "linear";
+    case Space::kLog: return "log";
+  }
+  return "?";
+}
+
+Space ParseSpace(const std::string& s) {
+  if (s == "display") return Space::kDisplay;
+  if (s == "linear") return Space::kLinear;
+  if (s == "log") return Space::kLog;
+  throw std::invalid_argument("unknown space '" + s + "' (valid: display, linear, log)");
+}
+
+Reference ReadReference(const std::string& path) {
+  const io::Image img = io::ReadImage(path);
+  Reference r;
+  r.path = path;
+  r.width = img.width;
+  r.height = img.height;
+  const int R = FindChannel(img, "R"), G = FindChannel(img, "G"), B = FindChannel(img, "B");
+  if (R < 0 || G < 0 || B < 0) throw FitError(path + ": reference needs channels R, G, B");
+  const int SR = FindChannel(img, "stderr.R"), SG = FindChannel(img, "stderr.G"),
+            SB = FindChannel(img, "stderr.B");
+  int F = FindChannel(img, "fabric");
+  if (F < 0) F = FindChannel(img, "A");
+  const size_t np = size_t(img.width) * size_t(img.height);
+  const size_t nc = size_t(img.channels());
+  r.rgb.resize(np * 3);
+  r.std_error.assign(np * 3, 0.f);
+  r.fabric.assign(np, 1.f);
+  size_t bad = 0, first = 0;
+  for (size_t p = 0; p < np; ++p) {
+    const float* px = &img.pixels[p * nc];
+    const int ch[3] = {R, G, B}, se[3] = {SR, SG, SB};
+    for (size_t c = 0; c < 3; ++c) {
+      const float v = px[ch[c]];
+      if (!std::isfinite(v)) {
+        if (bad++ == 0) first = p;
+      }
+      r.rgb[p * 3 + c] = v;
+      if (se[c] >= 0) r.std_error[p * 3 + c] = std::isfinite(px[se[c]]) ? px[se[c]] : 0.f;
+    }
+    if (F >= 0) r.fabric[p] = px[F];
+  }
+  if (bad > 0) {
+    throw FitError(path + ": " + std::to_string(bad) + " non-finite R/G/B values (first at pixel x=" +
+                   std::to_string(first % size_t(img.width)) + ", y=" +
+                   std::to_string(first / size_t(img.width)) + "); refusing to fit to them");
+  }
+  return r;
+}
+
+int AutoLevel(const render::Scene& scene, double weave_period_uv, int max_level) {
+  render::EmbreeScene bvh(scene);
+  std::vector<double> footprints;
+  const int W = scene.card.width, H = scene.card.height;
+  for (int y = 0; y + 1 < H; y += 4) {
+    for (int x = 0; x + 1 < W; x += 4) {
+      std::array<double, 2> uv[3];
+      bool ok = true;
+      const double d[3][2] = {{0.5, 0.5}, {1.5, 0.5}, {0.5, 1.5}};
+      for (int k = 0; k < 3 && ok; ++k) {
+        std::array<double, 3> org, dir;
+        scene.CameraRay(x + d[k][0], y + d[k][1], org, dir);
+        const render::Hit h = bvh.Intersect(org, dir);
+        ok = h.valid && scene.meshes[size_t(h.mesh)].is_fabric;
+        if (ok) uv[k] = bvh.Attributes(h).uv;
+      }
+      if (!ok) continue;
+      const double fx = std::hypot(uv[1][0] - uv[0][0], uv[1][1] - uv[0][1]);
+      const double fy = std::hypot(uv[2][0] - uv[0][0], uv[2][1] - uv[0][1]);
+      footprints.push_back(std::max(fx, fy));
+    }
+  }
+  if (footprints.empty() || weave_period_uv <= 0.0) return 1;
+  std::nth_element(footprints.begin(), footprints.begin() + long(footprints.size() / 2),
+                   footprints.end());
+  const double footprint = footprints[footprints.size() / 2];  // uv per pixel
+  const double pixels_per_period = weave_period_uv / std::max(footprint, 1e-12);
+  int level = 1;
+  while (level < max_level && double(1 << level) < 2.0 * pixels_per_period) ++level;
+  return level;
+}
+
+std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
+                                      const render::MaterialPreset& preset) {
+  render::PreviewOptions o;
+  o.model = preset.model;
+  o.cloth = preset.cloth;
+  auto cache = render::PreviewCache::Build(scene, env, o);
+  std::vector<Rgb<double>> px;
+  render::EvaluatePreview(*cache, preset.values.data(), px);
+  return render::ComposeFrame(*cache, px);
+}
+
+FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (inputs.empty()) throw FitError("fit: no (scene, reference) pairs");
+  const render::ModelKind model = opt.start.model;
+  const auto table = render::ParameterTable(model);
+  if (render::DefaultPreset(model).values.size() > 10)
+    throw FitError("fit: model has more than 10 parameters");
+  std::vector<int> sizes;
+  for (const ParamInfo& p : table) sizes.push_back(p.size);
+  for (const std::string& name : opt.locked) {
+    bool found = false;
+    for (const ParamInfo& p : table) found = found || p.name == name;
+    if (!found) throw FitError("--lock: model " + render::ToString(model) + " has no parameter '" + name + "'");
+  }
+
+  // Per scene: cache, blocks, transformed reference, weights.
+  const int B = 1 << std::max(0, opt.level);
+  std::vector<std::unique_ptr<SceneData>> data;
+  for (const SceneInput& in : inputs) {
+    const render::Scene& scene = *in.scene;
+    const Reference& ref = *in.reference;
+    if (ref.width != scene.card.width || ref.height != scene.card.height) {
+      throw FitError(ref.path + ": reference is " + std::to_string(ref.width) + "x" +
+                     std::to_string(ref.height) + " but " + in.scene_path + " renders " +
+                     std::to_string(scene.card.width) + "x" + std::to_string(scene.card.height));
+    }
+    auto d = std::make_unique<SceneData>();
+    d->scene_path = in.scene_path;
+    d->reference_path = ref.path;
+    d->space = opt.space;
+    d->op = render::ParseToneMapping(scene.card.tone_mapping);
+    d->exposure = scene.card.exposure;
+    render::PreviewOptions po;
+    po.model = model;
+    po.cloth = opt.start.cloth;
+    const auto full = render::PreviewCache::Build(scene, in.environment, po);
+    std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
+    for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
+    const double ref_mean = Mean3(ref.rgb, ref.fabric);
+    const double floor_lin = 0.01 * std::max(ref_mean, 1e-6);
+    std::vector<int> keep;
+    d->block_begin.push_back(0);
+    const int W = scene.card.width, H = scene.card.height;
+    for (int by = 0; by + B <= H; by += B) {
+      for (int bx = 0; bx + B <= W; bx += B) {
+        bool full_block = true;
+        Rgb<double> sum(0, 0, 0), var(0, 0, 0);
+        for (int y = by; y < by + B && full_block; ++y)
+          for (int x = bx; x < bx + B; ++x) {
+            const size_t p = size_t(y) * size_t(W) + size_t(x);
+            if (cache_index[p] < 0 || ref.fabric[p] < 0.999f) {
+              full_block = false;
+              break;
+            }
+            for (int c = 0; c < 3; ++c) {
+              sum[c] += double(ref.rgb[p * 3 + size_t(c)]);
+              var[c] += std::pow(double(ref.std_error[p * 3 + size_t(c)]), 2);
+            }
+          }
+        if (!full_block) continue;
+        const double n = double(B) * double(B);
+        const Rgb<double> mean = sum * (1.0 / n);
+        Rgb<double> se;
+        for (int c = 0; c < 3; ++c) se[c] = std::sqrt(var[c]) / n;
+        // Weights: sigma propagated through the transform by a one-sided difference.
+        const Rgb<double> t = Transform(mean, opt.space, d->op, d->exposure);
+        const Rgb<double> tp = Transform(mean + se, opt.space, d->op, d->exposure);
+        Rgb<double> w;
+        for (int c = 0; c < 3; ++c) {
+          const double sigma = std::abs(tp[c] - t[c]);
+          const double fl = opt.space == Space::kLinear ? floor_lin : 0.01;
+          w[c] = 1.0 / std::sqrt(sigma * sigma + fl * fl);
+        }
+        d->ref_t.push_back(t);
+        d->weight.push_back(w);
+        for (int y = by; y < by + B; y += opt.pixel_stride)
+          for (int x = bx; x < bx + B; x += opt.pixel_stride)
+            keep.push_back(cache_index[size_t(y) * size_t(W) + size_t(x)]);
+        d->block_begin.push_back(int(keep.size()));
+      }
+    }
+    if (d->blocks() == 0) {
+      throw FitError(in.scene_path + " / " + ref.path + ": no " + std::to_string(B) + "x" +
+                     std::to_string(B) + " block is fabric in both the reference and the preview "
+                     "(wrong scene for this reference, or --level too large)");
+    }
+    d->cache = Subset(*full, keep);
+    data.push_back(std::move(d));
+  }
+
+  FitResult best;
+  best.usable = false;
+  best.message = "no start converged to a usable solution";
+  const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+  // Mean reference colour (linear) of the first scene, to start the base colour.
+  Rgb<double> ref_colour(0.5, 0.5, 0.5);
+  {
+    const Reference& r = *inputs[0].reference;
+    double s[3] = {0, 0, 0};
+    double n = 0;
+    for (size_t p = 0; p < r.fabric.size(); ++p)
+      if (r.fabric[p] > 0.999f) {
+        for (int c = 0; c < 3; ++c) s[c] += double(r.rgb[p * 3 + size_t(c)]);
+        n += 1;
+      }
+    if (n > 0) {
+      const double mx = std::max({s[0], s[1], s[2]}) / n;
+      for (int c = 0; c < 3; ++c) ref_colour[c] = std::clamp(s[c] / n / std::max(mx, 1e-6) * 0.6, 0.02, 0.95);
+    }
+  }
+
+  for (double r0 : opt.start_roughness) {
+    // Parameter blocks, initialised from the start preset; unlocked colours from the reference.
+    std::vector<std::vector<double>> blocks;
+    int off = 0;
+    for (const ParamInfo& p : table) {
+      std::vector<double> v(size_t(p.size));
+      for (int c = 0; c < p.size; ++c) v[size_t(c)] = opt.start.values[size_t(off + c)];
+      const bool locked = std::find(opt.locked.begin(), opt.locked.end(), std::string(p.name)) !=
+                          opt.locked.end();
+      if (!locked) {
+        if (p.name == "roughness" || p.name == "sheen_roughness") v[0] = r0;
+        if (p.name == "base_color")
+          for (int c = 0; c < 3; ++c) v[size_t(c)] = ref_colour[c];
+        if (p.name == "sheen_color")
+          for (int c = 0; c < 3; ++c) v[size_t(c)] = 0.5;
+        if (p.name == "subsurface_color")
+          for (int c = 0; c < 3; ++c) v[size_t(c)] = 0.2;
+      }
+      blocks.push_back(v);
+      off += p.size;
+    }
+    ceres::Problem problem;
+    std::vector<double*> ptrs;
+    for (auto& b : blocks) ptrs.push_back(b.data());
+    for (const auto& d : data) {
+      ceres::LossFunction* loss = nullptr;
+      if (opt.loss == Loss::kHuber) loss = new ceres::HuberLoss(opt.loss_scale);
+      if (opt.loss == Loss::kCauchy) loss = new ceres::CauchyLoss(opt.loss_scale);
+      problem.AddResidualBlock(new PreviewCost(*d, sizes), loss, ptrs);
+    }
+    size_t bi = 0;
+    for (const ParamInfo& p : table) {
+      double lower = p.lower;
+      if (model == render::ModelKind::kCloth && p.name == "roughness")
+        lower = cloth::MinRoughness(opt.start.cloth);
+      const bool locked = std::find(opt.locked.begin(), opt.locked.end(), std::string(p.name)) !=
+                          opt.locked.end();
+      const bool ignored = model == render::ModelKind::kCloth &&
+                           ((p.name == "sheen_color" &&
+                             opt.start.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
+                            (p.name == "subsurface_color" && !opt.start.cloth.subsurface));
+      if (locked || ignored) {
+        problem.SetParameterBlockConstant(ptrs[bi]);
+      } else {
+        for (int c = 0; c < p.size; ++c) {
+          if (blocks[bi][size_t(c)] < lower || blocks[bi][size_t(c)] > p.upper) {
+            throw FitError("fit: start value of " + std::string(p.name) + " (" +
+                           std::to_string(blocks[bi][size_t(c)]) + ") is outside [" +
+                           std::to_string(lower) + ", " + std::to_string(p.upper) + "]");
+          }
+          problem.SetParameterLowerBound(ptrs[bi], c, lower);
+          problem.SetParameterUpperBound(ptrs[bi], c, p.upper);
+        }
+      }
+      ++bi;
+    }
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = opt.max_iterations;
+    so.function_tolerance = opt.function_tolerance;
+    so.minimizer_progress_to_stdout = opt.verbose;
+    so.num_threads = 1;  // the residual evaluation is parallel inside (TBB)
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    ++best.starts;
+    best.iterations += int(summary.iterations.size());
+    bool finite = true;
+    for (auto& b : blocks)
+      for (double v : b) finite = finite && std::isfinite(v);
+    if (!summary.IsSolutionUsable() || !finite) continue;
+    if (!best.usable || summary.final_cost < best.final_cost) {
+      const int starts = best.starts, iterations = best.iterations;
+      best = FitResult{};
+      best.starts = starts;
+      best.iterations = iterations;
+      best.usable = true;
+      best.final_cost = summary.final_cost;
+      best.initial_cost = summary.initial_cost;
+      best.termination = ceres::TerminationTypeToString(summary.termination_type);
+      best.solver_report = summary.BriefReport();
+      best.preset = opt.start;
+      best.preset.values.clear();
+      for (auto& b : blocks) best.preset.values.insert(best.preset.values.end(), b.begin(), b.end());
+    }
+  }
+  best.setup_seconds = setup;
+  if (!best.usable) {
+    best.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return best;
+  }
+  // Unweighted per-scene errors in the fit space at the fitted parameters.
+  double total_se = 0.0;
+  int total_n = 0;
+  for (const auto& d : data) {
+    std::vector<Rgb<double>> px;
+    render::EvaluatePreview(*d->cache, best.preset.values.data(), px);
+    double se = 0.0;
+    for (int b = 0; b < d->blocks(); ++b) {
+      Rgb<double> sum(0, 0, 0);
+      for (int i = d->block_begin[size_t(b)]; i < d->block_begin[size_t(b) + 1]; ++i) sum += px[size_t(i)];
+      const Rgb<double> t = Transform(
+          sum * (1.0 / double(d->block_begin[size_t(b) + 1] - d->block_begin[size_t(b)])), d->space,
+          d->op, d->exposure);
+      for (int c = 0; c < 3; ++c) se += std::pow(t[c] - d->ref_t[size_t(b)][c], 2);
+    }
+    SceneError e;
+    e.scene = d->scene_path;
+    e.reference = d->reference_path;
+    e.blocks = d->blocks();
+    e.rmse = std::sqrt(se / (3.0 * d->blocks()));
+    best.scenes.push_back(e);
+    total_se += se;
+    total_n += 3 * d->blocks();
+    best.residuals += 3 * d->blocks();
+  }
+  best.rmse = std::sqrt(total_se / std::max(total_n, 1));
+  best.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return best;
+}
+
+}  // namespace clothfit::fit

@@ -1,0 +1,115 @@
+// fit/image_fit.h: fit a material's parameters so the preview matches path-traced references.
+//
+// Problem. For each (scene, reference) pair the preview cache of the scene (render/preview.h)
+// is built once. Residuals are taken per block of B x B pixels, B = 2^level (the
+// mesostructure footprint: a woven reference shows yarn-scale structure a uniform material
+// cannot reproduce, so both images are averaged over blocks larger than the weave period
+// before they are compared). Only blocks whose pixels are all fabric in the reference (its
+// "fabric" coverage channel = 1) and in the preview are used: background and silhouette
+// pixels are masked out. Averaging happens in linear radiance (what a pixel footprint does);
+// the residual space is applied to the block means:
+//   display (default): the scene card's tone mapping + exposure, then the sRGB transfer
+//   linear           : radiance as is
+//   log              : log(radiance + 1e-3)
+// residual = (T(preview block) - T(reference block)) / sqrt(sigma^2 + floor^2), with sigma the
+// reference block's standard error propagated through T (first order) and floor = 0.01 in
+// display units (0.01 x mean reference radiance in linear, 0.01 in log), so a converged
+// reference does not give a few blocks unbounded weight. A robust loss (Huber by default,
+// scale 1 in these units: residuals beyond one floor-unit grow linearly) tempers outliers.
+//
+// Solver. Ceres trust region (Levenberg-Marquardt) with the parameter table's bounds; the
+// Jacobian comes from one ceres::Jet<double, 10> evaluation of the preview per scene (all
+// parameters at once). Multi-start over roughness (the colours are started from the
+// reference's mean colour); the best usable start wins. A fit whose Summary is not usable, or
+// whose parameters are not finite, is reported as failed and never written as a preset.
+#pragma once
+
+#include <ceres/ceres.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "render/environment.h"
+#include "render/material.h"
+#include "render/preview.h"
+#include "render/scene.h"
+#include "render/tonemap.h"
+
+namespace clothfit::fit {
+
+enum class Space { kDisplay, kLinear, kLog };
+std::string ToString(Space s);
+Space ParseSpace(const std::string& s);  // throws std::invalid_argument
+
+enum class Loss { kHuber, kCauchy, kNone };
+
+// One reference image for one scene (linear RGB + per-channel standard error + coverage).
+struct Reference {
+  std::string path;
+  int width = 0, height = 0;
+  std::vector<float> rgb, std_error, fabric;  // 3, 3, 1 per pixel
+};
+
+// Reads a reference EXR (channels R, G, B; optional stderr.R/G/B, fabric or A). Throws
+// io::IoError naming the file on missing/corrupt files, and FitError on NaN/Inf pixels.
+Reference ReadReference(const std::string& path);
+
+class FitError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct FitOptions {
+  render::MaterialPreset start;   // model, cloth options, and values of locked parameters
+  std::vector<std::string> locked;  // parameter names held fixed at `start`'s values
+  Space space = Space::kDisplay;
+  Loss loss = Loss::kHuber;
+  double loss_scale = 1.0;
+  int level = 2;                  // block size 2^level (see AutoLevel)
+  int pixel_stride = 1;           // evaluate every stride-th pixel per block axis (speed)
+  std::vector<double> start_roughness = {0.45, 0.85};  // multi-start values
+  int max_iterations = 50;
+  double function_tolerance = 1e-7;
+  bool verbose = false;
+};
+
+struct SceneInput {
+  const render::Scene* scene = nullptr;
+  const render::Environment* environment = nullptr;  // may be null
+  const Reference* reference = nullptr;
+  std::string scene_path;
+};
+
+struct SceneError {
+  std::string scene, reference;
+  int blocks = 0;
+  double rmse = 0.0;         // unweighted RMSE in the fit space over the blocks
+};
+
+struct FitResult {
+  bool usable = false;
+  std::string message;        // why it failed, if it did
+  render::MaterialPreset preset;
+  double final_cost = 0.0, initial_cost = 0.0;
+  int iterations = 0, starts = 0, residuals = 0;
+  double seconds = 0.0, setup_seconds = 0.0;
+  std::string termination;
+  std::vector<SceneError> scenes;
+  double rmse = 0.0;          // over all blocks of all scenes, fit space, unweighted
+  std::string solver_report;  // Ceres BriefReport of the winning start
+};
+
+// Block size from the weave scale: the smallest level whose block spans at least two weave
+// periods in pixels at the median fabric pixel (uv footprint measured from the G-buffer).
+int AutoLevel(const render::Scene& scene, double weave_period_uv, int max_level = 5);
+
+// The fit. Throws FitError on bad input (mismatched sizes, no usable blocks, infeasible
+// start); returns usable = false when the solver fails.
+FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& options);
+
+// The preview (linear, full frame) of a preset on a scene: for residual images and reports.
+std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
+                                      const render::MaterialPreset& preset);
+
+}  // namespace clothfit::fit
