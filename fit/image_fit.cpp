@@ -43,6 +43,7 @@ struct SceneData {
   std::vector<int> block_begin;                 // CSR over cache pixels
   std::vector<Rgb<double>> ref_t;               // transformed reference block means
   std::vector<Rgb<double>> weight;              // per block and channel
+  std::vector<Rgb<double>> second_t;            // transformed second-reference block means
   render::ToneMapping op = render::ToneMapping::kLinear;
   double exposure = 1.0;
   Space space = Space::kDisplay;
@@ -275,6 +276,8 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
   for (const SceneInput& in : inputs) {
     const render::Scene& scene = *in.scene;
     const Reference& ref = *in.reference;
+    if (in.second && (in.second->width != ref.width || in.second->height != ref.height))
+      throw FitError(in.second->path + ": size differs from " + ref.path);
     if (ref.width != scene.card.width || ref.height != scene.card.height) {
       throw FitError(ref.path + ": reference is " + std::to_string(ref.width) + "x" +
                      std::to_string(ref.height) + " but " + in.scene_path + " renders " +
@@ -329,6 +332,14 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         }
         d->ref_t.push_back(t);
         d->weight.push_back(w);
+        if (in.second) {
+          Rgb<double> s2(0, 0, 0);
+          for (int y = by; y < by + B; ++y)
+            for (int x = bx; x < bx + B; ++x)
+              for (int c = 0; c < 3; ++c)
+                s2[c] += double(in.second->rgb[(size_t(y) * size_t(W) + size_t(x)) * 3 + size_t(c)]);
+          d->second_t.push_back(Transform(s2 * (1.0 / n), opt.space, d->op, d->exposure));
+        }
         for (int y = by; y < by + B; y += opt.pixel_stride)
           for (int x = bx; x < bx + B; x += opt.pixel_stride)
             keep.push_back(cache_index[size_t(y) * size_t(W) + size_t(x)]);
@@ -375,7 +386,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
       for (int c = 0; c < p.size; ++c) v[size_t(c)] = opt.start.values[size_t(off + c)];
       const bool locked = std::find(opt.locked.begin(), opt.locked.end(), std::string(p.name)) !=
                           opt.locked.end();
-      if (!locked) {
+ if (!locked && opt.init_from_reference) {
         if (p.name == "roughness" || p.name == "sheen_roughness") v[0] = r0;
         if (p.name == "base_color")
           for (int c = 0; c < 3; ++c) v[size_t(c)] = ref_colour[c];
@@ -476,6 +487,12 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
     e.reference = d->reference_path;
     e.blocks = d->blocks();
     e.rmse = std::sqrt(se / (3.0 * d->blocks()));
+    if (!d->second_t.empty()) {
+      double s2 = 0.0;
+      for (size_t b = 0; b < d->second_t.size(); ++b)
+        for (int c = 0; c < 3; ++c) s2 += std::pow(d->second_t[b][c] - d->ref_t[b][c], 2);
+      e.noise_floor = std::sqrt(s2 / (3.0 * double(d->second_t.size()))) / std::sqrt(2.0);
+    }
     best.scenes.push_back(e);
     total_se += se;
     total_n += 3 * d->blocks();

@@ -72,12 +72,14 @@ struct FitOptions {
   int max_iterations = 50;
   double function_tolerance = 1e-7;
   bool verbose = false;
+  bool init_from_reference = true;  // start colours from the reference's mean colour
 };
 
 struct SceneInput {
   const render::Scene* scene = nullptr;
   const render::Environment* environment = nullptr;  // may be null
   const Reference* reference = nullptr;
+  const Reference* second = nullptr;  // same scene, another seed: the noise floor (optional)
   std::string scene_path;
 };
 
@@ -85,6 +87,9 @@ struct SceneError {
   std::string scene, reference;
   int blocks = 0;
   double rmse = 0.0;         // unweighted RMSE in the fit space over the blocks
+  double noise_floor = -1.0; // RMSE(reference, second) / sqrt(2) over the same blocks and
+                             // space: one reference's own noise, which no fit can beat
+                             // (-1: no second reference given)
 };
 
 struct FitResult {

@@ -196,18 +196,27 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
 
 namespace {
 
-// Linear interpolation of the K-node radiance table at roughness r (Jet-differentiable).
+// Interpolation of the K-node radiance table at roughness r: a uniform Catmull-Rom cubic
+// (C1, so the solver's Jacobian has no jumps at the nodes; end segments use clamped
+// neighbours). Jet-differentiable through the weights.
 template <typename T>
 Rgb<T> TableRadiance(const float* table, int K, const T& r) {
   const T s = Clamp(r, Const<T>(0.0), Const<T>(1.0)) * Const<T>(double(K - 1));
-  int i0 = int(std::floor(ScalarPart(s)));
-  i0 = std::clamp(i0, 0, K - 2);
-  const T f = s - Const<T>(double(i0));
-  const T one = Const<T>(1.0);
+  int i1 = int(std::floor(ScalarPart(s)));
+  i1 = std::clamp(i1, 0, K - 2);
+  const int i0 = std::max(i1 - 1, 0), i2 = i1 + 1, i3 = std::min(i1 + 2, K - 1);
+  const T t = s - Const<T>(double(i1));
+  const T t2 = t * t, t3 = t2 * t;
+  // Catmull-Rom basis (tension 0.5)
+  const T w0 = Const<T>(-0.5) * t3 + t2 - Const<T>(0.5) * t;
+  const T w1 = Const<T>(1.5) * t3 - Const<T>(2.5) * t2 + Const<T>(1.0);
+  const T w2 = Const<T>(-1.5) * t3 + Const<T>(2.0) * t2 + Const<T>(0.5) * t;
+  const T w3 = Const<T>(0.5) * t3 - Const<T>(0.5) * t2;
   Rgb<T> out;
   for (int ch = 0; ch < 3; ++ch) {
-    out[ch] = Const<T>(double(table[i0 * 3 + ch])) * (one - f) +
-              Const<T>(double(table[(i0 + 1) * 3 + ch])) * f;
+    out[ch] = Const<T>(double(table[i0 * 3 + ch])) * w0 + Const<T>(double(table[i1 * 3 + ch])) * w1 +
+              Const<T>(double(table[i2 * 3 + ch])) * w2 + Const<T>(double(table[i3 * 3 + ch])) * w3;
+    out[ch] = Max(out[ch], Const<T>(0.0));  // cubic overshoot must not create negative light
   }
   return out;
 }

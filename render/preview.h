@@ -8,7 +8,7 @@
 // its ray-traced visibility; the SH irradiance E_d(n); and the prefiltered environment
 // radiance each pixel needs, tabulated over roughness (K nodes, dominant direction and LOD
 // recomputed per node as the engine does) so that evaluating a frame for new parameters
-// interpolates that table (continuous, differentiable in roughness) instead of touching the
+// interpolates that table (Catmull-Rom cubic in r: C1, differentiable in roughness) instead of touching the
 // environment. Non-fabric meshes are shaded once (MeshStandardMaterial, their glTF base
 // colour, roughness 1) into a constant layer.
 //

@@ -172,18 +172,20 @@ TEST(Preview, ContinuousAcrossRoughnessTableAndLutBoundaries) {
     derivative(d);
     for (size_t p = 0; p < cur.size(); ++p)
       for (int ch = 0; ch < 3; ++ch) {
-        // The function is piecewise smooth (linear interpolation between radiance nodes and
-        // LUT texels): over one step its change is bounded by the larger one-sided slope.
+        // The function is piecewise smooth (cubic between radiance nodes, bilinear between
+        // LUT texels): over one step its change stays within a small multiple of the larger
+        // end-point slope x step (a cubic's interior slope can exceed its end slopes a
+        // little); a jump does not shrink with the step and shows as a large ratio.
         const double change = std::abs(cur[p][ch] - prev[p][ch]);
         const double predicted =
             std::max(std::abs(d[p][ch].v[6]), std::abs(dprev[p][ch].v[6])) * step;
         // a step much larger than the derivative predicts is a discontinuity
-        if (change > 1e-6) worst_ratio = std::max(worst_ratio, change / (predicted + 1e-6));
+        if (change > 1e-5) worst_ratio = std::max(worst_ratio, change / (predicted + 1e-6));
       }
     prev = cur;
     dprev = d;
   }
-  EXPECT_LT(worst_ratio, 1.5);
+  EXPECT_LT(worst_ratio, 3.0);
 }
 
 TEST(Preview, NoLightsMeansNoDirectPath) {

@@ -1,0 +1,274 @@
+// clothfit fit: fit a material preset so the preview matches path-traced references.
+#include <tbb/global_control.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "bin/commands.h"
+#include "bin/progress.h"
+#include "fit/image_fit.h"
+#include "render/fabric.h"
+#include "render/image_io.h"
+#include "render/path_tracer.h"
+
+namespace clothfit::cli {
+namespace fs = std::filesystem;
+
+namespace {
+
+std::vector<std::string> SplitList(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+std::string ReadFileOrEmpty(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
+// FNV-1a 64 over a byte string.
+uint64_t Fnv1a(const std::string& s, uint64_t h = 0xcbf29ce484222325ull) {
+  for (unsigned char c : s) {
+    h ^= c;
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+std::string CacheDir() {
+  if (const char* d = std::getenv("CLOTHFIT_CACHE")) return d;
+  if (const char* home = std::getenv("HOME")) return std::string(home) + "/.cache/clothfit/references";
+  return "/tmp/clothfit-references";
+}
+
+}  // namespace
+
+// Renders (or reuses) the reference of `fabric_path` on `scene_path`. The cache key hashes
+// the contents of every input (scene card, glTF, fabric, weave file) and the settings, so a
+// changed input re-renders and an unchanged one never does.
+std::string CachedReference(const std::string& scene_path, const std::string& fabric_path,
+                            int spp, uint64_t seed, bool quiet) {
+  const render::Scene scene = render::LoadScene(scene_path);
+  std::string key_text = "clothfit-reference-v1|" + std::to_string(spp) + "|" +
+                         std::to_string(seed) + "|" + ReadFileOrEmpty(scene_path) + "|" +
+                         ReadFileOrEmpty(scene.card.gltf) + "|" + ReadFileOrEmpty(fabric_path);
+  // The fabric's weave file (the default location next to the fabric file).
+  const render::Fabric fabric = render::LoadFabric(fabric_path);
+  const fs::path weave = fs::path(fabric_path).parent_path() / ".." / "weaves" / (fabric.preset + ".weave");
+  key_text += "|" + ReadFileOrEmpty(weave.string());
+  if (scene.card.environment) key_text += "|" + scene.card.environment->path;
+  char name[64];
+  std::snprintf(name, sizeof name, "%016llx.exr", (unsigned long long)Fnv1a(key_text));
+  const std::string dir = CacheDir();
+  fs::create_directories(dir);
+  const std::string path = (fs::path(dir) / name).string();
+  if (fs::exists(path)) return path;
+  const auto env = LoadSceneEnvironment(scene, quiet);
+  render::PathTracer tracer(scene, *fabric.bsdf, env.get());
+  render::RenderSettings st;
+  st.spp = spp;
+  st.seed = seed;
+  ProgressBar bar("reference " + fabric.name + " / " + fs::path(scene_path).stem().string(), quiet);
+  const render::RenderResult r = tracer.Render(st, [&](int d, int t) { bar.Update(d, t); });
+  render::WriteRenderExr(path, r,
+                         {{"clothfit:scene", scene_path},
+                          {"clothfit:fabric", fabric_path},
+                          {"clothfit:spp", std::to_string(spp)},
+                          {"clothfit:seed", std::to_string(seed)}});
+  if (!quiet)
+    std::fprintf(stderr, "clothfit: rendered %s (%.1f s, mean std error %.2f%% of mean)\n",
+                 path.c_str(), r.seconds,
+                 r.mean_value > 0 ? 100.0 * r.mean_std_error / r.mean_value : 0.0);
+  return path;
+}
+
+std::vector<std::string> CanonicalScenes() {
+  const char* env = std::getenv("CLOTHFIT_DATASETS");
+  const std::string root = env ? env : CLOTHFIT_SOURCE_DATASETS;
+  return {root + "/scenes/sphere.json", root + "/scenes/drape.json", root + "/scenes/swatch.json"};
+}
+
+void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
+  struct Args {
+    std::string fabric, references, scenes, model = "cloth", space = "display", lock, out;
+    std::string level = "auto", loss = "huber", variant = "filament", sheen_default = "explicit";
+    std::string images;
+    double loss_scale = 1.0;
+    bool subsurface = false, no_floor = false;
+    int spp = 256, stride = 1, threads = 0;
+  };
+  auto a = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(
+      "fit", "fit a material preset so the real-time preview matches the references");
+  cmd->add_option("--fabric", a->fabric,
+                  "fabric definition: render (or reuse cached) references on the canonical scenes");
+  cmd->add_option("--references", a->references, "comma-separated reference EXRs");
+  cmd->add_option("--scenes", a->scenes, "comma-separated scene cards, one per reference");
+  cmd->add_option("--model", a->model, "cloth | standard | physical-sheen | gltf-sheen");
+  cmd->add_option("--space", a->space, "residual space: display (default) | linear | log");
+  cmd->add_option("--lock", a->lock, "comma-separated parameters to hold at their defaults");
+  cmd->add_option("--level", a->level,
+                  "block level: residuals on 2^level blocks (auto: from the weave scale)");
+  cmd->add_option("--loss", a->loss, "huber (default) | cauchy | none");
+  cmd->add_option("--loss-scale", a->loss_scale, "robust loss scale, in noise-floor units");
+  cmd->add_option("--variant", a->variant, "cloth variant: filament | seed-threejs");
+  cmd->add_option("--sheen-default", a->sheen_default,
+                  "cloth sheen convention: explicit (fit it) | sqrt-base-color | white");
+  cmd->add_flag("--subsurface", a->subsurface, "cloth: fit a subsurface colour too");
+  cmd->add_option("--spp", a->spp, "reference samples per pixel (--fabric)")->check(CLI::Range(16, 65536));
+  cmd->add_option("--stride", a->stride, "evaluate every n-th pixel per block axis")
+      ->check(CLI::Range(1, 16));
+  cmd->add_flag("--no-noise-floor", a->no_floor, "(--fabric) skip the second-seed references");
+  cmd->add_option("--images", a->images, "directory for fitted previews and residual images");
+  cmd->add_option("--threads", a->threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
+  cmd->add_option("--out", a->out, "output preset JSON")->required();
+  cmd->callback([a, &g, &exit_code]() {
+    try {
+      std::unique_ptr<tbb::global_control> limit;
+      if (a->threads > 0)
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      size_t(a->threads));
+      std::vector<std::string> refs, refs2, scenes;
+      const double weave_period = a->fabric.empty() ? 0.0 : render::LoadFabric(a->fabric).weave_period_uv;
+      if (!a->fabric.empty()) {
+        if (!a->references.empty() || !a->scenes.empty())
+          throw std::invalid_argument("--fabric and --references/--scenes are exclusive");
+        scenes = CanonicalScenes();
+        for (const std::string& s : scenes) {
+          refs.push_back(CachedReference(s, a->fabric, a->spp, 1, g.quiet));
+          if (!a->no_floor) refs2.push_back(CachedReference(s, a->fabric, a->spp, 2, g.quiet));
+        }
+      } else {
+        refs = SplitList(a->references);
+        scenes = SplitList(a->scenes);
+        if (refs.empty() || refs.size() != scenes.size())
+          throw std::invalid_argument("--references and --scenes need the same number (>= 1) of files");
+      }
+      render::MaterialPreset start = render::DefaultPreset(render::ParseModelKind(a->model));
+      if (start.model == render::ModelKind::kCloth) {
+        render::MaterialPreset probe = render::ParsePreset(
+            {{"schema", "clothfit.preset"}, {"version", 1}, {"model", "cloth"},
+             {"cloth", {{"variant", a->variant}, {"sheen_default", a->sheen_default},
+                        {"subsurface", a->subsurface}}},
+             {"parameters", nlohmann::json::object()}},
+            "command line");
+        start.cloth = probe.cloth;
+      }
+      fit::FitOptions o;
+      o.start = start;
+      o.locked = SplitList(a->lock);
+      if (start.model == render::ModelKind::kStandard || start.model == render::ModelKind::kPhysicalSheen)
+        o.locked.push_back("metalness");
+      if (start.model == render::ModelKind::kGltfSheen) o.locked.push_back("metallic");
+      o.space = fit::ParseSpace(a->space);
+      o.loss = a->loss == "huber" ? fit::Loss::kHuber
+               : a->loss == "cauchy" ? fit::Loss::kCauchy
+               : a->loss == "none" ? fit::Loss::kNone
+               : throw std::invalid_argument("--loss: unknown '" + a->loss + "' (huber, cauchy, none)");
+      o.loss_scale = a->loss_scale;
+      o.pixel_stride = a->stride;
+      // Load everything.
+      std::vector<render::Scene> sc;
+      std::vector<std::unique_ptr<render::Environment>> envs;
+      std::vector<fit::Reference> rr, rr2;
+      for (size_t i = 0; i < scenes.size(); ++i) {
+        sc.push_back(render::LoadScene(scenes[i]));
+        envs.push_back(LoadSceneEnvironment(sc.back(), true));
+        rr.push_back(fit::ReadReference(refs[i]));
+        if (!refs2.empty()) rr2.push_back(fit::ReadReference(refs2[i]));
+      }
+      if (a->level == "auto") {
+        o.level = weave_period > 0 ? fit::AutoLevel(sc[0], weave_period) : 2;
+        for (size_t i = 1; i < sc.size() && weave_period > 0; ++i)
+          o.level = std::max(o.level, fit::AutoLevel(sc[i], weave_period));
+      } else {
+        o.level = std::stoi(a->level);
+        if (o.level < 0 || o.level > 6) throw std::invalid_argument("--level must be in [0, 6] or auto");
+      }
+      std::vector<fit::SceneInput> inputs;
+      for (size_t i = 0; i < sc.size(); ++i)
+        inputs.push_back({&sc[i], envs[i].get(), &rr[i], rr2.empty() ? nullptr : &rr2[i], scenes[i]});
+      const fit::FitResult res = fit::FitImages(inputs, o);
+      if (!res.usable) {
+        std::fprintf(stderr, "clothfit fit: error: the fit failed (%s); no preset written\n",
+                     res.message.c_str());
+        exit_code = 2;
+        return;
+      }
+      render::MaterialPreset preset = res.preset;
+      nlohmann::json fitj;
+      fitj["space"] = fit::ToString(o.space);
+      fitj["loss"] = a->loss;
+      fitj["loss_scale"] = o.loss_scale;
+      fitj["level"] = o.level;
+      fitj["block_pixels"] = 1 << o.level;
+      fitj["pixel_stride"] = o.pixel_stride;
+      fitj["locked"] = o.locked;
+      fitj["final_cost"] = res.final_cost;
+      fitj["initial_cost"] = res.initial_cost;
+      fitj["iterations"] = res.iterations;
+      fitj["starts"] = res.starts;
+      fitj["seconds"] = res.seconds;
+      fitj["termination"] = res.termination;
+      fitj["solver"] = res.solver_report;
+      fitj["rmse"] = res.rmse;
+      nlohmann::json sj = nlohmann::json::array();
+      for (const auto& e : res.scenes) {
+        nlohmann::json x = {{"scene", e.scene}, {"reference", e.reference}, {"blocks", e.blocks},
+                            {"rmse", e.rmse}};
+        if (e.noise_floor >= 0) x["noise_floor"] = e.noise_floor;
+        sj.push_back(x);
+      }
+      fitj["scenes"] = sj;
+      preset.extra["fit"] = fitj;
+      preset.extra["provenance"] = {{"tool", "clothfit 0.1.0"},
+                                    {"fabric", a->fabric.empty() ? nlohmann::json(nullptr)
+                                                                 : nlohmann::json(a->fabric)}};
+      render::WritePreset(a->out, preset);
+      if (!a->images.empty()) {
+        fs::create_directories(a->images);
+        for (size_t i = 0; i < sc.size(); ++i) {
+          const std::vector<float> frame = fit::RenderPreviewFrame(sc[i], envs[i].get(), preset);
+          const std::string stem = fs::path(scenes[i]).stem().string();
+          const auto op = render::ParseToneMapping(sc[i].card.tone_mapping);
+          io::WritePng8((fs::path(a->images) / (stem + "_preview.png")).string(), sc[i].card.width,
+                        sc[i].card.height, ToDisplayImage(frame, op, sc[i].card.exposure));
+          io::Image res_img;
+          res_img.width = sc[i].card.width;
+          res_img.height = sc[i].card.height;
+          res_img.channel_names = {"R", "G", "B"};
+          res_img.pixels.resize(frame.size());
+          for (size_t k = 0; k < frame.size(); ++k) res_img.pixels[k] = frame[k] - rr[i].rgb[k];
+          res_img.metadata["clothfit:residual"] = "preview - reference, linear radiance";
+          io::WriteExr((fs::path(a->images) / (stem + "_residual.exr")).string(), res_img);
+        }
+      }
+      double floor = 0.0;
+      int nf = 0;
+      for (const auto& e : res.scenes)
+        if (e.noise_floor >= 0) {
+          floor += e.noise_floor;
+          ++nf;
+        }
+      std::printf("fit: %s %s: rmse %.4f (%s)%s, cost %.4g, %d iterations over %d starts, %.2f s -> %s\n",
+                  a->fabric.empty() ? a->references.c_str() : a->fabric.c_str(),
+                  render::ToString(preset.model).c_str(), res.rmse, fit::ToString(o.space).c_str(),
+                  nf ? (", noise floor " + std::to_string(floor / nf).substr(0, 6)).c_str() : "",
+                  res.final_cost, res.iterations, res.starts, res.seconds, a->out.c_str());
+      exit_code = 0;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "clothfit fit: error: %s\n", e.what());
+      exit_code = 1;
+    }
+  });
+}
+
+}  // namespace clothfit::cli
