@@ -2,14 +2,13 @@
 //
 // To wire in (bin/commands.h, bin/main.cpp, bin/CMakeLists.txt):
 //   void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code);
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -39,8 +38,7 @@ std::array<float, 3> ErrorColour(double t) {
   const int i = std::min(3, int(x));
   const float f = float(x - double(i));
   std::array<float, 3> c{};
-  for (size_t k = 0; k < 3; ++k)
-    c[k] = kStops[i][k] + f * (kStops[i + 1][k] - kStops[i][k]);
+  for (size_t k = 0; k < 3; ++k) c[k] = kStops[i][k] + f * (kStops[i + 1][k] - kStops[i][k]);
   return c;
 }
 
@@ -49,7 +47,7 @@ struct PngScale {
   double lo, hi;
 };
 PngScale ScaleFor(const std::string& name, const metrics::CompareResult& r) {
-  if (name == "ssim") return {1.0, 0.0};                 // dissimilarity 1 - SSIM
+  if (name == "ssim") return {1.0, 0.0};  // dissimilarity 1 - SSIM
   if (name == "flip" || name == "hdr_flip") return {0.0, 1.0};
   if (name.rfind("ciede2000", 0) == 0) return {0.0, 10.0};  // Delta E 10 = top of the map
   if (name == "rmse_display") return {0.0, 0.25};
@@ -86,8 +84,9 @@ std::string Table(const metrics::CompareResult& r, const metrics::CompareOptions
   row("psnr_linear [dB]", Num(r.psnr_linear), "peak " + Num(o.linear_peak));
   row("rmse_display", Num(r.rmse_display), "");
   row("psnr_display [dB]", Num(r.psnr_display), "peak 1");
-  row("ssim", Num(r.ssim), r.ssim_used_border_pixels ? "image < 11 px: border windows pooled"
-                                                      : "11x11 Gaussian, sigma 1.5, L = 1");
+  row("ssim", Num(r.ssim),
+      r.ssim_used_border_pixels ? "image < 11 px: border windows pooled"
+                                : "11x11 Gaussian, sigma 1.5, L = 1");
   row("flip", Num(r.flip), "LDR-FLIP of display, ppd " + Num(o.ppd));
   row("hdr_flip", Num(r.hdr_flip),
       std::string(r.hdr_range_automatic ? "automatic" : "explicit") + " range [" +
@@ -139,16 +138,18 @@ nlohmann::json Json(const metrics::CompareResult& r, const metrics::CompareOptio
 metrics::ExposureRange ParseRange(const std::string& text) {
   const size_t comma = text.find(',');
   auto fail = [&]() -> metrics::ExposureRange {
-    throw std::invalid_argument("--hdr-range: expected \"cstart,cstop\" (two finite numbers, "
-                                "cstart <= cstop), got \"" + text + "\"");
+    throw std::invalid_argument(
+        "--hdr-range: expected \"cstart,cstop\" (two finite numbers, "
+        "cstart <= cstop), got \"" +
+        text + "\"");
   };
   if (comma == std::string::npos) return fail();
   try {
     size_t n1 = 0, n2 = 0;
     const std::string s1 = text.substr(0, comma), s2 = text.substr(comma + 1);
     metrics::ExposureRange r{std::stod(s1, &n1), std::stod(s2, &n2)};
-    if (n1 != s1.size() || n2 != s2.size() || !std::isfinite(r.start) ||
-        !std::isfinite(r.stop) || r.start > r.stop)
+    if (n1 != s1.size() || n2 != s2.size() || !std::isfinite(r.start) || !std::isfinite(r.stop) ||
+        r.start > r.stop)
       return fail();
     return r;
   } catch (const std::logic_error&) {  // stod: invalid_argument / out_of_range
@@ -247,8 +248,7 @@ void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code) {
                        args->maps_dir.c_str());
       }
       if (args->json) {
-        std::printf("%s\n",
-                    Json(r, o, args->reference, args->test, args->mask).dump(2).c_str());
+        std::printf("%s\n", Json(r, o, args->reference, args->test, args->mask).dump(2).c_str());
       } else {
         std::printf("%s", Table(r, o).c_str());
       }

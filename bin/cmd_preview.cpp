@@ -1,4 +1,5 @@
 // clothfit render-preview: what the real-time engine draws for a scene and a material preset.
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -20,6 +21,55 @@ std::vector<float> ToDisplayImage(const std::vector<float>& linear, render::Tone
     for (int k = 0; k < 3; ++k) out[i + size_t(k)] = float(d[k]);
   }
   return out;
+}
+
+void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
+  struct Args {
+    std::string in, out, scene, tone_mapping;
+    double exposure = -1.0;
+  };
+  auto a = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(
+      "tonemap", "linear EXR -> display PNG with a scene card's (or the given) tone mapping");
+  cmd->add_option("input", a->in, "linear EXR (channels R, G, B)")->required();
+  cmd->add_option("output", a->out, "output PNG")->required();
+  cmd->add_option("--scene", a->scene, "take tone mapping and exposure from this scene card");
+  cmd->add_option("--tone-mapping", a->tone_mapping,
+                  "Linear|Reinhard|Cineon|ACESFilmic|AgX|Neutral (default ACESFilmic)");
+  cmd->add_option("--exposure", a->exposure, "exposure (default 1)");
+  cmd->callback([a, &exit_code]() {
+    try {
+      std::string tm = "ACESFilmic";
+      double exposure = 1.0;
+      if (!a->scene.empty()) {
+        const render::SceneCard card = render::LoadSceneCard(a->scene);
+        tm = card.tone_mapping;
+        exposure = card.exposure;
+      }
+      if (!a->tone_mapping.empty()) tm = a->tone_mapping;
+      if (a->exposure > 0.0) exposure = a->exposure;
+      const io::Image img = io::ReadImage(a->in);
+      int ch[3] = {-1, -1, -1};
+      const char* names[3] = {"R", "G", "B"};
+      for (int c = 0; c < img.channels(); ++c)
+        for (int k = 0; k < 3; ++k)
+          if (img.channel_names[size_t(c)] == names[k]) ch[k] = c;
+      if (ch[0] < 0 || ch[1] < 0 || ch[2] < 0)
+        throw io::IoError(a->in + ": needs channels R, G, B");
+      std::vector<float> lin(size_t(img.width) * size_t(img.height) * 3);
+      for (size_t p = 0; p < size_t(img.width) * size_t(img.height); ++p)
+        for (size_t k = 0; k < 3; ++k) {
+          const float v = img.pixels[p * size_t(img.channels()) + size_t(ch[k])];
+          lin[p * 3 + k] = std::isfinite(v) ? v : 0.0f;
+        }
+      io::WritePng8(a->out, img.width, img.height,
+                    ToDisplayImage(lin, render::ParseToneMapping(tm), exposure));
+      exit_code = 0;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "clothfit tonemap: error: %s\n", e.what());
+      exit_code = 1;
+    }
+  });
 }
 
 void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {

@@ -24,6 +24,8 @@ void AddModelsCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code);
+void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code);
+void AddTonemapCommand(CLI::App& app, const Globals& g, int& exit_code);
 
 // The scene's environment: the card's map, or the procedural sky (warning on stderr unless
 // quiet) when the map is not installed; null when the card has no environment.

@@ -20,6 +20,8 @@ int main(int argc, char** argv) {
   clothfit::cli::AddRenderCommand(app, globals, exit_code);
   clothfit::cli::AddPreviewCommand(app, globals, exit_code);
   clothfit::cli::AddFitCommand(app, globals, exit_code);
+  clothfit::cli::AddCompareCommand(app, globals, exit_code);
+  clothfit::cli::AddTonemapCommand(app, globals, exit_code);
 
   try {
     app.parse(argc, argv);

@@ -115,8 +115,9 @@ Coverage Cover(const RgbImage& ref, const RgbImage& test, const Map* mask,
   }
   if (c.counts.counted == 0)
     throw std::invalid_argument(
-        metric + ": no pixel to pool (the mask selects none, or every selected pixel has a "
-                 "non-finite value in the reference or the test image)");
+        metric +
+        ": no pixel to pool (the mask selects none, or every selected pixel has a "
+        "non-finite value in the reference or the test image)");
   return c;
 }
 
@@ -273,8 +274,8 @@ FlipKernels MakeFlipKernels(double ppd) {
 
 // One image through the colour pipeline (steps 1-4) and the feature detector (step 6).
 struct FlipPrepared {
-  std::vector<Lab> lab;    // Hunt-adjusted CIELAB of the filtered image
-  Plane edge, point;       // feature magnitudes
+  std::vector<Lab> lab;  // Hunt-adjusted CIELAB of the filtered image
+  Plane edge, point;     // feature magnitudes
 };
 
 FlipPrepared PrepareFlip(const RgbImage& lin, const FlipKernels& k) {
@@ -352,8 +353,7 @@ constexpr double kTmTarget = 0.85;
 RgbImage ToRgb(const io::Image& image, const std::string& what) {
   const int nc = image.channels();
   const size_t n = size_t(image.width) * size_t(image.height);
-  if (image.width <= 0 || image.height <= 0)
-    throw std::invalid_argument(what + ": empty image");
+  if (image.width <= 0 || image.height <= 0) throw std::invalid_argument(what + ": empty image");
   if (image.pixels.size() != n * size_t(nc))
     throw std::invalid_argument(what + ": pixel buffer does not match the image size");
   std::array<int, 3> idx = {-1, -1, -1};
@@ -456,8 +456,7 @@ MetricResult Psnr(const RgbImage& ref, const RgbImage& test, double peak, const 
 
 // ---- public: SSIM -----------------------------------------------------------------------------
 
-SsimResult Ssim(const RgbImage& ref, const RgbImage& test, const SsimOptions& o,
-                const Map* mask) {
+SsimResult Ssim(const RgbImage& ref, const RgbImage& test, const SsimOptions& o, const Map* mask) {
   if (!(o.data_range > 0.0) || !std::isfinite(o.data_range))
     throw std::invalid_argument("SSIM: data_range must be finite and > 0");
   if (o.taps < 1 || o.taps % 2 == 0 || !(o.sigma > 0.0))
@@ -487,7 +486,8 @@ SsimResult Ssim(const RgbImage& ref, const RgbImage& test, const SsimOptions& o,
       yy[i] = y[i] * y[i];
       xy[i] = x[i] * y[i];
     }
-    const Plane mx = Filter2(x, w, h, g, g, Border::kZero), my = Filter2(y, w, h, g, g, Border::kZero);
+    const Plane mx = Filter2(x, w, h, g, g, Border::kZero),
+                my = Filter2(y, w, h, g, g, Border::kZero);
     const Plane mxx = Filter2(xx, w, h, g, g, Border::kZero),
                 myy = Filter2(yy, w, h, g, g, Border::kZero),
                 mxy = Filter2(xy, w, h, g, g, Border::kZero);
@@ -496,8 +496,8 @@ SsimResult Ssim(const RgbImage& ref, const RgbImage& test, const SsimOptions& o,
       const double ux = mx[i] / sw[i], uy = my[i] / sw[i];
       const double vx = mxx[i] / sw[i] - ux * ux, vy = myy[i] / sw[i] - uy * uy;
       const double cxy = mxy[i] / sw[i] - ux * uy;
-      acc[i] += ((2.0 * ux * uy + c1) * (2.0 * cxy + c2)) /
-                ((ux * ux + uy * uy + c1) * (vx + vy + c2));
+      acc[i] +=
+          ((2.0 * ux * uy + c1) * (2.0 * cxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2));
     }
   }
   for (size_t i = 0; i < n; ++i) res.map.values[i] = cov.finite[i] ? float(acc[i] / 3.0) : 0.0f;
@@ -562,7 +562,7 @@ FeatureKernels MakeFeatureKernels(double ppd) {
   for (int i = -r; i <= r; ++i) {
     const double x = double(i);
     const double gi = std::exp(-x * x / (2.0 * sigma * sigma));
-    const double e = -x * gi;                                // d/dx, up to a constant
+    const double e = -x * gi;                               // d/dx, up to a constant
     const double p = (x * x / (sigma * sigma) - 1.0) * gi;  // d2/dx2, up to a constant
     k.edge[size_t(i + r)] = e;
     k.point[size_t(i + r)] = p;
@@ -651,9 +651,10 @@ HdrFlipResult HdrFlip(const RgbImage& ref_linear, const RgbImage& test_linear,
     res.range = *o.range;
     if (!std::isfinite(res.range.start) || !std::isfinite(res.range.stop) ||
         res.range.start > res.range.stop)
-      throw std::invalid_argument("HDR-FLIP: exposure range must be finite with start <= stop, "
-                                  "got [" + std::to_string(res.range.start) + ", " +
-                                  std::to_string(res.range.stop) + "]");
+      throw std::invalid_argument(
+          "HDR-FLIP: exposure range must be finite with start <= stop, "
+          "got [" +
+          std::to_string(res.range.start) + ", " + std::to_string(res.range.stop) + "]");
   } else {
     res.range = AutomaticExposureRange(ref_linear, mask);
     res.automatic_range = true;
@@ -694,7 +695,8 @@ HdrFlipResult HdrFlip(const RgbImage& ref_linear, const RgbImage& test_linear,
 
 Lab LinearSrgbToLab(double r, double g, double b) {
   double xyz[3];
-  for (int i = 0; i < 3; ++i) xyz[i] = kRgbToXyz[i][0] * r + kRgbToXyz[i][1] * g + kRgbToXyz[i][2] * b;
+  for (int i = 0; i < 3; ++i)
+    xyz[i] = kRgbToXyz[i][0] * r + kRgbToXyz[i][1] * g + kRgbToXyz[i][2] * b;
   return XyzToLab(xyz[0], xyz[1], xyz[2]);
 }
 
@@ -721,17 +723,22 @@ double Ciede2000(const Lab& p, const Lab& q) {
   double dh = 0.0;
   if (cp1 * cp2 != 0.0) {
     dh = h2 - h1;
-    if (dh > 180.0) dh -= 360.0;
-    else if (dh < -180.0) dh += 360.0;
+    if (dh > 180.0)
+      dh -= 360.0;
+    else if (dh < -180.0)
+      dh += 360.0;
   }
   const double dH = 2.0 * std::sqrt(cp1 * cp2) * std::sin(0.5 * dh * kDeg);
   // (12)-(14): means.
   const double lbar = 0.5 * (p.L + q.L), cpbar = 0.5 * (cp1 + cp2);
   double hbar = h1 + h2;
   if (cp1 * cp2 != 0.0) {
-    if (std::abs(h1 - h2) <= 180.0) hbar = 0.5 * (h1 + h2);
-    else if (h1 + h2 < 360.0) hbar = 0.5 * (h1 + h2 + 360.0);
-    else hbar = 0.5 * (h1 + h2 - 360.0);
+    if (std::abs(h1 - h2) <= 180.0)
+      hbar = 0.5 * (h1 + h2);
+    else if (h1 + h2 < 360.0)
+      hbar = 0.5 * (h1 + h2 + 360.0);
+    else
+      hbar = 0.5 * (h1 + h2 - 360.0);
   }
   // (15)-(22): weighting functions.
   const double t = 1.0 - 0.17 * std::cos((hbar - 30.0) * kDeg) +
@@ -761,7 +768,8 @@ Ciede2000Result Ciede2000(const RgbImage& ref, const RgbImage& test, const Map* 
     if (!cov.finite[i]) continue;
     const float* a = &ref.rgb[3 * i];
     const float* b = &test.rgb[3 * i];
-    const double de = Ciede2000(LinearSrgbToLab(a[0], a[1], a[2]), LinearSrgbToLab(b[0], b[1], b[2]));
+    const double de =
+        Ciede2000(LinearSrgbToLab(a[0], a[1], a[2]), LinearSrgbToLab(b[0], b[1], b[2]));
     res.map.values[i] = float(de);
     if (cov.counted[i]) pooled.push_back(de);
   }
@@ -840,8 +848,8 @@ CompareResult CompareFiles(const std::string& reference_path, const std::string&
     mask = ToMask(io::ReadImage(mask_path), mask_path);
     if (mask->width != ref.width || mask->height != ref.height)
       throw std::invalid_argument("size mismatch: mask " + mask_path + " is " +
-                                  SizeText(mask->width, mask->height) + " but " +
-                                  reference_path + " is " + SizeText(ref.width, ref.height));
+                                  SizeText(mask->width, mask->height) + " but " + reference_path +
+                                  " is " + SizeText(ref.width, ref.height));
   }
   return Compare(ref, test, options, mask ? &*mask : nullptr);
 }

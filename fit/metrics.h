@@ -28,7 +28,7 @@
 //   reaches any result. If no pixel counts, the functions throw std::invalid_argument (there is
 //   no meaningful mean of nothing, and NaN is never returned).
 // * Colour space chain for Lab (CIEDE2000, FLIP): linear sRGB -> XYZ with the IEC 61966-2-1
-//   matrix (4-digit values) -> CIELAB with the white point XYZ(1, 1, 1) = (0.9505, 1, 1.089)
+//   matrix (4-digit values) -> CIELAB with the white point M (1, 1, 1) = (0.9505, 1, 1.089)
 //   (D65 as that matrix encodes it, so linear white is exactly L* = 100, a* = b* = 0).
 #pragma once
 
@@ -60,8 +60,7 @@ struct Map {
   std::vector<float> values;  // size width * height
 
   Map() = default;
-  Map(int w, int h, float fill = 0.0f)
-      : width(w), height(h), values(size_t(w) * size_t(h), fill) {}
+  Map(int w, int h, float fill = 0.0f) : width(w), height(h), values(size_t(w) * size_t(h), fill) {}
 };
 
 // RGB from an io::Image: channels named R, G, B (any order, extra channels such as A are
@@ -71,16 +70,17 @@ RgbImage ToRgb(const io::Image& image, const std::string& what);
 // A mask from an io::Image: the channel named "Y", else "R", else the first channel.
 Map ToMask(const io::Image& image, const std::string& what);
 // Display values: render::ToDisplay per pixel (tone mapping, clamp to [0, 1], sRGB encoding).
+// A pixel with a non-finite channel becomes NaN in all three, so the metrics still exclude it.
 RgbImage ToDisplay(const RgbImage& linear, render::ToneMapping op, double exposure);
 // A single-channel map as an io::Image (channel "Y") for io::WriteExr.
 io::Image MapToImage(const Map& map);
 
 // How many pixels entered the pooled numbers, and why others did not.
 struct PixelCounts {
-  long long counted = 0;        // inside the mask and finite in both images
-  long long masked_out = 0;     // mask <= 0.5
-  long long nonfinite_ref = 0;  // pixels with a NaN/Inf channel in the reference (anywhere)
-  long long nonfinite_test = 0; // ... in the test image
+  long long counted = 0;         // inside the mask and finite in both images
+  long long masked_out = 0;      // mask <= 0.5
+  long long nonfinite_ref = 0;   // pixels with a NaN/Inf channel in the reference (anywhere)
+  long long nonfinite_test = 0;  // ... in the test image
 };
 
 // A pooled number and its per-pixel map.
@@ -187,10 +187,10 @@ struct HdrFlipOptions {
   std::optional<ExposureRange> range;
 };
 struct HdrFlipResult : MetricResult {
-  ExposureRange range;          // the range used
-  bool automatic_range = false; // true when it came from AutomaticExposureRange
-  int exposures = 0;            // N
-  Map exposure_map;             // per pixel, the exposure (stops) that gave the maximum
+  ExposureRange range;           // the range used
+  bool automatic_range = false;  // true when it came from AutomaticExposureRange
+  int exposures = 0;             // N
+  Map exposure_map;              // per pixel, the exposure (stops) that gave the maximum
 };
 HdrFlipResult HdrFlip(const RgbImage& ref_linear, const RgbImage& test_linear,
                       const HdrFlipOptions& options = {}, const Map* mask = nullptr);
@@ -236,12 +236,12 @@ struct CompareResult {
   double rmse_display = 0, psnr_display = 0;  // display values, PSNR peak = 1
   double ssim = 0;                            // display values, L = 1
   bool ssim_used_border_pixels = false;
-  double flip = 0;                            // LDR-FLIP of the display images
-  double hdr_flip = 0;                        // HDR-FLIP of the linear images
+  double flip = 0;      // LDR-FLIP of the display images
+  double hdr_flip = 0;  // HDR-FLIP of the linear images
   ExposureRange hdr_range;
   bool hdr_range_automatic = false;
   int hdr_exposures = 0;
-  double ciede2000_mean = 0, ciede2000_p95 = 0;           // Lab of the linear values
+  double ciede2000_mean = 0, ciede2000_p95 = 0;                  // Lab of the linear values
   double ciede2000_display_mean = 0, ciede2000_display_p95 = 0;  // Lab of the displayed colour
   struct NamedMap {
     std::string name;  // rmse_linear, rmse_display, ssim, flip, hdr_flip, ciede2000, ...

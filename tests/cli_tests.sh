@@ -67,6 +67,29 @@ PY
     echo "$out" | grep -q "brdf/cloth/filament/double" || fail "no double benchmark in: $out"
     echo "$out" | grep -q "brdf/cloth/filament/jet10" || fail "no jet benchmark in: $out"
     ;;
+  compare)
+    "$BIN" --quiet lut --size 16 --out "$TMP/a.exr" >/dev/null || fail "lut a"
+    "$BIN" --quiet lut --size 16 --out "$TMP/b.exr" >/dev/null || fail "lut b"
+    "$BIN" --quiet lut --size 8 --out "$TMP/c.exr" >/dev/null || fail "lut c"
+    out=$("$BIN" compare "$TMP/a.exr" "$TMP/b.exr" --json --hdr-range -4,2) || fail "compare exited $?"
+    echo "$out" | grep -q '"inf"' || fail "identical images: PSNR not reported as inf: $out"
+    err=$("$BIN" compare "$TMP/a.exr" "$TMP/c.exr" 2>&1) && fail "size mismatch accepted"
+    echo "$err" | grep -q "c.exr" || fail "size mismatch error does not name the file: $err"
+    "$BIN" compare "$TMP/a.exr" "$TMP/missing.exr" 2>/dev/null && fail "missing file accepted"
+    ;;
+  fitbad)
+    printf '{"schema":"clothfit.preset","version":1,"model":"cloth","parameters":{"roughness":2}}' > "$TMP/m.json"
+    err=$("$BIN" render-preview --scene "$(dirname "$0")/../datasets/scenes/sphere.json" --material "$TMP/m.json" --out "$TMP/p.png" 2>&1) \
+      && fail "out-of-range roughness accepted"
+    echo "$err" | grep -q "parameters.roughness" || fail "error does not name the field: $err"
+    printf '{"schema":"clothfit.preset","version":1,"model":"cloth","parameters":{}}' > "$TMP/ok.json"
+    err=$("$BIN" render-preview --scene "$(dirname "$0")/../datasets/scenes/sphere.json" --material "$TMP/ok.json" --model standard --out "$TMP/p.png" 2>&1) \
+      && fail "model mismatch accepted"
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$(dirname "$0")/../datasets/scenes/sphere.json" --out "$TMP/f.json" 2>&1) \
+      && fail "missing reference accepted"
+    echo "$err" | grep -q "none.exr" || fail "fit error does not name the file: $err"
+    [ ! -e "$TMP/f.json" ] || fail "preset written despite error"
+    ;;
   *) fail "unknown case $CASE" ;;
 esac
 echo "PASS: $CASE"

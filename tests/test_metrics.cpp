@@ -1,8 +1,6 @@
 // Image metrics (fit/metrics.h): identities, published CIEDE2000 data, hand-derived FLIP/SSIM/
 // PSNR values, FLIP properties, the HDR-FLIP exposure-range rule, masks, non-finite input and
 // bad input.
-#include "fit/metrics.h"
-
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -15,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "fit/metrics.h"
 #include "render/image_io.h"
 
 namespace clothfit::metrics {
@@ -151,8 +150,8 @@ TEST(MetricsCiede2000, ImageMeanAndP95OverCountedPixels) {
   EXPECT_NEAR(r.value, mean, 1e-9);
   EXPECT_NEAR(r.p95, de[18] + 0.05 * (de[19] - de[18]), 1e-9);
   EXPECT_EQ(r.counts.counted, 20);
-  EXPECT_NEAR(r.map.values[7], Ciede2000(LinearSrgbToLab(0.2, 0.2, 0.2),
-                                         LinearSrgbToLab(0.27f, 0.27f, 0.27f)),
+  EXPECT_NEAR(r.map.values[7],
+              Ciede2000(LinearSrgbToLab(0.2, 0.2, 0.2), LinearSrgbToLab(0.27f, 0.27f, 0.27f)),
               1e-5);
 }
 
@@ -320,8 +319,8 @@ TEST(MetricsFlip, MonotoneInAGrowingUniformOffset) {
 }
 
 TEST(MetricsFlip, SymmetricColourErrorAndUnitRange) {
-  const float colours[][3] = {{0.9f, 0.1f, 0.1f}, {0.1f, 0.8f, 0.3f}, {0.2f, 0.2f, 0.9f},
-                              {0.5f, 0.5f, 0.5f}, {1, 1, 0}};
+  const float colours[][3] = {
+      {0.9f, 0.1f, 0.1f}, {0.1f, 0.8f, 0.3f}, {0.2f, 0.2f, 0.9f}, {0.5f, 0.5f, 0.5f}, {1, 1, 0}};
   for (const auto& a : colours)
     for (const auto& b : colours) {
       const RgbImage ia = Uniform(5, 5, a[0], a[1], a[2]), ib = Uniform(5, 5, b[0], b[1], b[2]);
@@ -550,8 +549,8 @@ TEST(MetricsCompare, ChannelLayoutsAndDisplayTransform) {
     EXPECT_NE(std::string(e.what()).find("uv.exr"), std::string::npos);
   }
   // Display values are render::ToDisplay: ACES at exposure 1 of linear 0.18 grey.
-  const RgbImage d = ToDisplay(Uniform(1, 1, 0.18f, 0.18f, 0.18f),
-                               render::ToneMapping::kAcesFilmic, 1.0);
+  const RgbImage d =
+      ToDisplay(Uniform(1, 1, 0.18f, 0.18f, 0.18f), render::ToneMapping::kAcesFilmic, 1.0);
   const Rgb<double> expect =
       render::ToDisplay(Rgb<double>(0.18f, 0.18f, 0.18f), render::ToneMapping::kAcesFilmic, 1.0);
   EXPECT_NEAR(d.rgb[0], expect.r, 1e-6);
