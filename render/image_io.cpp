@@ -36,6 +36,21 @@ void RenameInto(const std::string& tmp, const std::string& path) {
   }
 }
 
+// Writes `pixels` to the temporary file `tmp` with OpenImageIO; removes it on failure.
+void WriteWithOiio(const std::string& path, const std::string& tmp, const OIIO::ImageSpec& spec,
+                   OIIO::TypeDesc type, const void* pixels) {
+  auto out = OIIO::ImageOutput::create(tmp);
+  if (!out) throw IoError(path + ": cannot create an image writer: " + OIIO::geterror());
+  if (!out->open(tmp, spec)) throw IoError(path + ": cannot open for writing: " + out->geterror());
+  const bool ok = out->write_image(type, pixels);
+  const bool closed = out->close();
+  if (!ok || !closed) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw IoError(path + ": write failed: " + out->geterror());
+  }
+}
+
 }  // namespace
 
 void WriteExr(const std::string& path, const Image& image) {
@@ -52,18 +67,7 @@ void WriteExr(const std::string& path, const Image& image) {
   spec.channelnames = image.channel_names;
   spec.attribute("compression", "zip");
   for (const auto& [k, v] : image.metadata) spec.attribute(k, v);
-  auto out = OIIO::ImageOutput::create(tmp);
-  if (!out) throw IoError(path + ": cannot create an EXR writer: " + OIIO::geterror());
-  if (!out->open(tmp, spec)) {
-    throw IoError(path + ": cannot open for writing: " + out->geterror());
-  }
-  const bool ok = out->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data());
-  const bool closed = out->close();
-  if (!ok || !closed) {
-    std::error_code ec;
-    fs::remove(tmp, ec);
-    throw IoError(path + ": write failed: " + out->geterror());
-  }
+  WriteWithOiio(path, tmp, spec, OIIO::TypeDesc::FLOAT, image.pixels.data());
   RenameInto(tmp, path);
 }
 
@@ -132,16 +136,7 @@ void WritePng8(const std::string& path, int width, int height, const std::vector
   const std::string tmp = TempPathFor(path);
   OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::UINT8);
   spec.attribute("oiio:ColorSpace", "sRGB");
-  auto out = OIIO::ImageOutput::create(tmp);
-  if (!out) throw IoError(path + ": cannot create a PNG writer: " + OIIO::geterror());
-  if (!out->open(tmp, spec)) throw IoError(path + ": cannot open for writing: " + out->geterror());
-  const bool ok = out->write_image(OIIO::TypeDesc::UINT8, bytes.data());
-  const bool closed = out->close();
-  if (!ok || !closed) {
-    std::error_code ec;
-    fs::remove(tmp, ec);
-    throw IoError(path + ": write failed: " + out->geterror());
-  }
+  WriteWithOiio(path, tmp, spec, OIIO::TypeDesc::UINT8, bytes.data());
   RenameInto(tmp, path);
 }
 

@@ -304,6 +304,33 @@ struct GltfContext {
   const tinygltf::Model& model;
 };
 
+// Validates an accessor's bufferView and buffer bounds for elements of `elem` bytes and
+// returns the address of its first element and its stride (the caller handles
+// acc.bufferView < 0, which glTF defines as all zeros).
+const unsigned char* AccessorData(const GltfContext& g, const tinygltf::Model& model,
+                                  const tinygltf::Accessor& acc, size_t elem,
+                                  const std::string& where, const std::string& what,
+                                  size_t* stride_out) {
+  if (acc.bufferView >= static_cast<int>(model.bufferViews.size())) {
+    Fail(g.file, where, what + ": bufferView index out of range");
+  }
+  const tinygltf::BufferView& view = model.bufferViews[static_cast<size_t>(acc.bufferView)];
+  if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size())) {
+    Fail(g.file, where, what + ": buffer index out of range");
+  }
+  const std::vector<unsigned char>& data = model.buffers[static_cast<size_t>(view.buffer)].data;
+  const size_t stride = view.byteStride != 0 ? view.byteStride : elem;
+  if (acc.count > 0) {
+    const size_t need = acc.byteOffset + stride * (acc.count - 1) + elem;
+    if (stride < elem || need > view.byteLength ||
+        view.byteOffset + view.byteLength > data.size()) {
+      Fail(g.file, where, what + ": data runs past the end of its bufferView or buffer");
+    }
+  }
+  *stride_out = stride;
+  return data.data() + view.byteOffset + acc.byteOffset;
+}
+
 std::string MeshWhere(const tinygltf::Model& model, int mesh, int prim) {
   const std::string& name = model.meshes[mesh].name;
   return "mesh " + Quote(name.empty() ? "mesh" + std::to_string(mesh) : name) + " (meshes[" +
@@ -341,23 +368,8 @@ std::vector<float> ReadFloats(const GltfContext& g, const std::string& where, co
   const size_t elem = csize * static_cast<size_t>(comps);
   std::vector<float> out(acc.count * static_cast<size_t>(comps), 0.0f);
   if (acc.bufferView < 0) return out;  // glTF: no bufferView means all zeros
-  if (acc.bufferView >= static_cast<int>(model.bufferViews.size())) {
-    Fail(g.file, where, what + ": bufferView index out of range");
-  }
-  const tinygltf::BufferView& view = model.bufferViews[acc.bufferView];
-  if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size())) {
-    Fail(g.file, where, what + ": buffer index out of range");
-  }
-  const std::vector<unsigned char>& data = model.buffers[view.buffer].data;
-  const size_t stride = view.byteStride != 0 ? view.byteStride : elem;
-  if (acc.count > 0) {
-    const size_t need = acc.byteOffset + stride * (acc.count - 1) + elem;
-    if (stride < elem || need > view.byteLength ||
-        view.byteOffset + view.byteLength > data.size()) {
-      Fail(g.file, where, what + ": data runs past the end of its bufferView or buffer");
-    }
-  }
-  const unsigned char* base = data.data() + view.byteOffset + acc.byteOffset;
+  size_t stride = 0;
+  const unsigned char* base = AccessorData(g, model, acc, elem, where, what, &stride);
   for (size_t i = 0; i < acc.count; ++i) {
     const unsigned char* src = base + i * stride;
     for (int c = 0; c < comps; ++c) {
@@ -409,23 +421,8 @@ std::vector<uint32_t> ReadIndices(const GltfContext& g, const std::string& where
   if (csize == 0) Fail(g.file, where, what + ": component type must be an unsigned integer");
   std::vector<uint32_t> out(acc.count, 0);
   if (acc.bufferView < 0) return out;
-  if (acc.bufferView >= static_cast<int>(model.bufferViews.size())) {
-    Fail(g.file, where, what + ": bufferView index out of range");
-  }
-  const tinygltf::BufferView& view = model.bufferViews[acc.bufferView];
-  if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size())) {
-    Fail(g.file, where, what + ": buffer index out of range");
-  }
-  const std::vector<unsigned char>& data = model.buffers[view.buffer].data;
-  const size_t stride = view.byteStride != 0 ? view.byteStride : csize;
-  if (acc.count > 0) {
-    const size_t need = acc.byteOffset + stride * (acc.count - 1) + csize;
-    if (stride < csize || need > view.byteLength ||
-        view.byteOffset + view.byteLength > data.size()) {
-      Fail(g.file, where, what + ": data runs past the end of its bufferView or buffer");
-    }
-  }
-  const unsigned char* base = data.data() + view.byteOffset + acc.byteOffset;
+  size_t stride = 0;
+  const unsigned char* base = AccessorData(g, model, acc, csize, where, what, &stride);
   for (size_t i = 0; i < acc.count; ++i) {
     const unsigned char* p = base + i * stride;
     if (csize == 1) {
