@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 
@@ -177,11 +178,23 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
       o.pixel_stride = a->stride;
       // Load everything.
       std::vector<render::Scene> sc;
-      std::vector<std::unique_ptr<render::Environment>> envs;
+      std::vector<std::shared_ptr<render::Environment>> envs;
+      std::map<std::string, std::shared_ptr<render::Environment>> env_by_key;  // load once
       std::vector<fit::Reference> rr, rr2;
       for (size_t i = 0; i < scenes.size(); ++i) {
         sc.push_back(render::LoadScene(scenes[i]));
-        envs.push_back(LoadSceneEnvironment(sc.back(), true));
+        const auto& spec = sc.back().card.environment;
+        const std::string key = spec ? spec->path + "|" + std::to_string(spec->intensity) + "|" +
+                                           std::to_string(spec->rotation_y)
+                                     : std::string();
+        if (key.empty()) {
+          envs.push_back(nullptr);
+        } else {
+          auto it = env_by_key.find(key);
+          if (it == env_by_key.end())
+            it = env_by_key.emplace(key, LoadSceneEnvironment(sc.back(), true)).first;
+          envs.push_back(it->second);
+        }
         rr.push_back(fit::ReadReference(refs[i]));
         if (!refs2.empty()) rr2.push_back(fit::ReadReference(refs2[i]));
       }
@@ -217,6 +230,7 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
       fitj["iterations"] = res.iterations;
       fitj["starts"] = res.starts;
       fitj["seconds"] = res.seconds;
+      fitj["setup_seconds"] = res.setup_seconds;
       fitj["termination"] = res.termination;
       fitj["solver"] = res.solver_report;
       fitj["rmse"] = res.rmse;

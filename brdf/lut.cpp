@@ -3,6 +3,8 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
+#include <type_traits>
 #include <atomic>
 #include <cmath>
 #include <vector>
@@ -60,8 +62,10 @@ std::vector<double> Breakpoints(double alpha, bool charlie) {
 // with Gauss-Legendre panels in theta_h and midpoints over the azimuth arc where
 // n.l = 2 (v.h) cos(theta_h) - NoV > 0 (solved in closed form, so the integrand has no
 // discontinuity in phi), using the mirror symmetry about the plane of n and v.
-template <typename DFn, typename GFn>
-double HalfVectorIntegral(double NoV, double alpha, bool charlie, const Settings& s, DFn D, GFn g) {
+// `g` returns an std::array of integrands (several channels share one quadrature).
+template <typename DFn, typename GFn,
+          typename Acc = std::invoke_result_t<GFn, double, double, double>>
+Acc HalfVectorIntegral(double NoV, double alpha, bool charlie, const Settings& s, DFn D, GFn g) {
   static thread_local GaussLegendre gl_cache(8);
   if (int(gl_cache.x.size()) != s.gauss_legendre_order)
     gl_cache = GaussLegendre(s.gauss_legendre_order);
@@ -69,7 +73,7 @@ double HalfVectorIntegral(double NoV, double alpha, bool charlie, const Settings
   const double sin_v = std::sqrt(std::max(0.0, 1.0 - NoV * NoV));
   const Vec3<double> v(sin_v, 0.0, NoV);
   const std::vector<double> br = Breakpoints(alpha, charlie);
-  double total = 0.0;
+  Acc total{};
   for (size_t p = 0; p + 1 < br.size(); ++p) {
     const double t0 = br[p], t1 = br[p + 1];
     for (size_t k = 0; k < gl.x.size(); ++k) {
@@ -87,17 +91,25 @@ double HalfVectorIntegral(double NoV, double alpha, bool charlie, const Settings
         phi_max = c0 <= -1.0 ? kPi : (c0 >= 1.0 ? 0.0 : std::acos(c0));
       }
       if (phi_max <= 0.0) continue;
-      double acc = 0.0;
+      Acc acc{};
+      // Midpoints phi_b = (b + 0.5) dphi by rotation recurrence (no sincos per sample).
+      const double dphi = phi_max / s.azimuth_samples;
+      const double cd = std::cos(dphi), sd = std::sin(dphi);
+      double cphi = std::cos(0.5 * dphi), sphi = std::sin(0.5 * dphi);
       for (int b = 0; b < s.azimuth_samples; ++b) {
-        const double phi = phi_max * (b + 0.5) / s.azimuth_samples;
-        const Vec3<double> h(sh * std::cos(phi), sh * std::sin(phi), ch);
+        const Vec3<double> h(sh * cphi, sh * sphi, ch);
+        const double c_next = cphi * cd - sphi * sd;
+        sphi = sphi * cd + cphi * sd;
+        cphi = c_next;
         const double VoH = Dot(v, h);
         const double NoL = 2.0 * VoH * ch - NoV;
         if (NoL <= 0.0 || VoH <= 0.0) continue;
-        acc += g(NoL, VoH, ch);
+        const Acc x = g(NoL, VoH, ch);
+        for (size_t m = 0; m < x.size(); ++m) acc[m] += x[m];
       }
       // 2 phi_max: both halves of the symmetric arc
-      total += wt * D(ch) * sh * 2.0 * phi_max * acc / s.azimuth_samples;
+      const double scale = wt * D(ch) * sh * 2.0 * phi_max / s.azimuth_samples;
+      for (size_t m = 0; m < acc.size(); ++m) total[m] += scale * acc[m];
     }
   }
   return total;
@@ -107,28 +119,34 @@ double HalfVectorIntegral(double NoV, double alpha, bool charlie, const Settings
 
 void IntegrateGgx(double NoV, double r, const Settings& s, double& A, double& B) {
   const double alpha = std::max(r * r, kMinAlpha);
-  // f cos dl = D V F NoL 4 VoH dh
+  // f cos dl = D V F NoL 4 VoH dh; A and B share one quadrature.
   auto D = [alpha](double ch) { return D_GGX(alpha, ch); };
-  A = HalfVectorIntegral(NoV, alpha, false, s, D, [&](double NoL, double VoH, double) {
-    return V_SmithGGXCorrelated(alpha, NoV, NoL) * NoL * 4.0 * VoH * (1.0 - Pow5(1.0 - VoH));
-  });
-  B = HalfVectorIntegral(NoV, alpha, false, s, D, [&](double NoL, double VoH, double) {
-    return V_SmithGGXCorrelated(alpha, NoV, NoL) * NoL * 4.0 * VoH * Pow5(1.0 - VoH);
-  });
+  const std::array<double, 2> ab =
+      HalfVectorIntegral(NoV, alpha, false, s, D, [&](double NoL, double VoH, double) {
+        const double w = V_SmithGGXCorrelated(alpha, NoV, NoL) * NoL * 4.0 * VoH;
+        const double Fc = Pow5(1.0 - VoH);
+        return std::array<double, 2>{w * (1.0 - Fc), w * Fc};
+      });
+  A = ab[0];
+  B = ab[1];
 }
 
 double IntegrateClothDg(double NoV, double r, const Settings& s) {
   const double alpha = std::max(r * r, kMinAlpha);
   return HalfVectorIntegral(
       NoV, alpha, true, s, [alpha](double ch) { return D_Charlie(alpha, ch, false); },
-      [&](double NoL, double VoH, double) { return V_Neubelt(NoV, NoL) * NoL * 4.0 * VoH; });
+      [&](double NoL, double VoH, double) {
+        return std::array<double, 1>{V_Neubelt(NoV, NoL) * NoL * 4.0 * VoH};
+      })[0];
 }
 
 double IntegrateSheenAlbedo(double NoV, double r, const Settings& s) {
   const double alpha = std::max(r * r, kMinAlpha);
   return HalfVectorIntegral(
       NoV, alpha, true, s, [alpha](double ch) { return D_Charlie(alpha, ch, false); },
-      [&](double NoL, double VoH, double) { return V_Charlie(NoV, NoL, alpha) * NoL * 4.0 * VoH; });
+      [&](double NoL, double VoH, double) {
+        return std::array<double, 1>{V_Charlie(NoV, NoL, alpha) * NoL * 4.0 * VoH};
+      })[0];
 }
 
 namespace {

@@ -1,7 +1,9 @@
 #include "render/environment.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <sstream>
 #include <stdexcept>
 
@@ -71,6 +73,61 @@ struct SkyModel {
     return c;
   }
 };
+
+// Map-space direction m -> (u, v) (Environment::DirectionToUv) plus the cosine of its
+// elevation, cos(elevation) = sin(pi v) = sqrt(x^2 + z^2) / |m|. A path that escapes calls Eval
+// and then Pdf for the same direction, so the last result is kept in a one-entry thread-local
+// memo keyed by the bits of m (a pure function of m: identical to recomputing it).
+struct MapUv {
+  double u = 0.0, v = 0.0, cos_elevation = 0.0;
+};
+
+MapUv DirectionToMapUv(const Vec3<double>& m) {
+  struct Memo {
+    uint64_t key[3] = {~0ull, ~0ull, ~0ull};  // a NaN pattern: never a valid key
+    MapUv uv;
+  };
+  thread_local Memo memo;
+  const uint64_t kx = std::bit_cast<uint64_t>(m.x), ky = std::bit_cast<uint64_t>(m.y),
+                 kz = std::bit_cast<uint64_t>(m.z);
+  if (memo.key[0] != kx || memo.key[1] != ky || memo.key[2] != kz) {
+    MapUv r;
+    Environment::DirectionToUv(m, &r.u, &r.v);
+    const double rxz = std::sqrt(m.x * m.x + m.z * m.z);
+    const double len = std::sqrt(rxz * rxz + m.y * m.y);
+    r.cos_elevation = len > 0.0 ? rxz / len : 0.0;
+    memo.key[0] = kx;
+    memo.key[1] = ky;
+    memo.key[2] = kz;
+    memo.uv = r;
+  }
+  return memo.uv;
+}
+
+// The bilinear lookup of Environment::Eval at map coordinates (u, v).
+Rgb<double> BilinearAt(const std::vector<float>& rgb, int width, int height, double intensity,
+                       double u, double v) {
+  // Continuous texel coordinates with texel centres at integers (+0.5 rule).
+  const double x = u * width - 0.5;
+  const double y = (1.0 - v) * height - 0.5;
+  const double x0 = std::floor(x), y0 = std::floor(y);
+  const double fx = x - x0, fy = y - y0;
+  // Wrap in u (the seam at u = 0 / 1 is continuous), clamp in v (the poles).
+  const int w = width;
+  const int i0 = ((int(x0) % w) + w) % w;
+  const int i1 = i0 + 1 == w ? 0 : i0 + 1;
+  const int j0 = std::clamp(int(y0), 0, height - 1);
+  const int j1 = std::clamp(int(y0) + 1, 0, height - 1);
+  const auto texel = [&](int i, int j) {
+    const size_t p = (size_t(j) * size_t(w) + size_t(i)) * 3;
+    return Rgb<double>(double(rgb[p]), double(rgb[p + 1]), double(rgb[p + 2]));
+  };
+  // a + t (b - a) form: exact for a constant map.
+  const Rgb<double> a = texel(i0, j0), b = texel(i1, j0), c = texel(i0, j1), e = texel(i1, j1);
+  const Rgb<double> top = a + (b - a) * fx;
+  const Rgb<double> bottom = c + (e - c) * fx;
+  return (top + (bottom - top) * fy) * intensity;
+}
 
 }  // namespace
 
@@ -235,25 +292,9 @@ Rgb<double> Environment::Texel(int i, int j) const {
 
 Rgb<double> Environment::Eval(const Vec3<double>& d) const {
   if (width_ <= 0) return {};
-  double u = 0.0, v = 0.0;
-  DirectionToUv(WorldToMap(d), &u, &v);
-  if (!std::isfinite(u) || !std::isfinite(v)) return {};
-  // Continuous texel coordinates with texel centres at integers (+0.5 rule).
-  const double x = u * width_ - 0.5;
-  const double y = (1.0 - v) * height_ - 0.5;
-  const double x0 = std::floor(x), y0 = std::floor(y);
-  const double fx = x - x0, fy = y - y0;
-  // Wrap in u (the seam at u = 0 / 1 is continuous), clamp in v (the poles).
-  const int w = width_;
-  const int i0 = ((int(x0) % w) + w) % w;
-  const int i1 = (i0 + 1) % w;
-  const int j0 = std::clamp(int(y0), 0, height_ - 1);
-  const int j1 = std::clamp(int(y0) + 1, 0, height_ - 1);
-  // a + t (b - a) form: exact for a constant map.
-  const Rgb<double> a = Texel(i0, j0), b = Texel(i1, j0), c = Texel(i0, j1), e = Texel(i1, j1);
-  const Rgb<double> top = a + (b - a) * fx;
-  const Rgb<double> bottom = c + (e - c) * fx;
-  return (top + (bottom - top) * fy) * intensity_;
+  const MapUv m = DirectionToMapUv(WorldToMap(d));
+  if (!std::isfinite(m.u) || !std::isfinite(m.v)) return {};
+  return BilinearAt(rgb_, width_, height_, intensity_, m.u, m.v);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -369,25 +410,30 @@ Vec3<double> Environment::Sample(double u1, double u2, double* pdf, Rgb<double>*
   const double du = std::clamp((u1 - cdf[i]) / (cdf[i + 1] - cdf[i]), 0.0, kOneMinusEpsilon);
   const double u = (i + du) / width_;
   const double v = 1.0 - (j + dv) / height_;
-  const Vec3<double> d = MapToWorld(UvToDirection(u, v));
+  // UvToDirection(u, v), keeping cos(elevation) = sin(theta) = sin(pi v) for the pdf.
+  const double phi = (u - 0.5) * 2.0 * kPi;
+  const double elevation = (v - 0.5) * kPi;
+  const double c = std::cos(elevation);
+  const Vec3<double> d = MapToWorld({c * std::cos(phi), std::sin(elevation), c * std::sin(phi)});
   if (pdf) {
     // sin(theta) = 0 only exactly at a pole (a measure-zero set): report pdf 0 there, which
     // callers treat as "discard this sample", instead of dividing by zero.
-    const double sin_theta = std::sin(kPi * v);
+    const double sin_theta = v > 0.0 && v < 1.0 ? c : 0.0;
     *pdf = sin_theta > 0.0 ? TexelDensity(i, j) / (2.0 * kPi * kPi * sin_theta) : 0.0;
   }
-  if (radiance) *radiance = Eval(d);
+  // Radiance at the sampled (u, v) itself (what Eval(d) reads, without the round trip).
+  if (radiance) *radiance = BilinearAt(rgb_, width_, height_, intensity_, u, v);
   return d;
 }
 
 double Environment::Pdf(const Vec3<double>& d) const {
   if (width_ <= 0) return 0.0;
   if (!(total_weight_ > 0.0)) return 1.0 / (4.0 * kPi);
-  double u = 0.0, v = 0.0;
-  DirectionToUv(WorldToMap(d), &u, &v);
+  const MapUv m = DirectionToMapUv(WorldToMap(d));
+  const double u = m.u, v = m.v;
   if (!std::isfinite(u) || !std::isfinite(v)) return 0.0;
-  const double sin_theta = std::sin(kPi * v);
-  if (!(sin_theta > 0.0)) return 0.0;  // exactly at a pole; see Sample
+  const double sin_theta = m.cos_elevation;  // = sin(pi v)
+  if (!(sin_theta > 0.0)) return 0.0;        // exactly at a pole; see Sample
   const int i = std::clamp(int(u * width_), 0, width_ - 1);
   const int j = std::clamp(int((1.0 - v) * height_), 0, height_ - 1);
   return TexelDensity(i, j) / (2.0 * kPi * kPi * sin_theta);

@@ -2,6 +2,8 @@
 #include "render/irawan.h"
 
 #include <algorithm>
+#include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
@@ -46,11 +48,9 @@ double GradientNoise1D(double x, uint64_t salt) {
   return 2.0 * (g0 * f * (1.0 - fade) + g1 * (f - 1.0) * fade);
 }
 
-double WrapAngle(double a) {
-  while (a > kPi) a -= 2.0 * kPi;
-  while (a <= -kPi) a += 2.0 * kPi;
-  return a;
-}
+std::atomic<uint64_t> g_next_instance_id{1};
+
+uint64_t Bits(double x) { return std::bit_cast<uint64_t>(x); }
 
 }  // namespace
 
@@ -89,7 +89,7 @@ Vec3d FromYarnFrame(const Vec3d& d, YarnType type) {
 double SpineRadius(double u_abs, double umax, double kappa, double width, double length) {
   const double a = 0.5 * width;
   const double hx = 0.5 * length - a * std::sin(umax);
-  const double rhat = 1.0 + kappa * (1.0 + 1.0 / std::tan(umax));
+  const double rhat = kappa == 0.0 ? 1.0 : 1.0 + kappa * (1.0 + 1.0 / std::tan(umax));
   const double u = std::min(u_abs, umax);
   if (std::abs(rhat - 1.0) < 1e-12) return hx / std::sin(umax);
   if (rhat > 1e-9) {
@@ -122,6 +122,17 @@ IrawanBsdf::IrawanBsdf(WeavePattern pattern, double repeat_u, double repeat_v)
   DeriveSegmentCentres(&pattern_, "IrawanBsdf(" + pattern_.name + ")");
   ValidateWeave(pattern_, "IrawanBsdf(" + pattern_.name + ")");
   von_mises_norm_ = 1.0 / (2.0 * kPi * BesselI0(std::abs(pattern_.beta)));
+  instance_id_ = g_next_instance_id.fetch_add(1, std::memory_order_relaxed);
+  for (const Yarn& y : pattern_.yarns) {
+    YarnConst yc;
+    yc.psi = y.psi * kDegToRad;
+    yc.sin_psi = std::sin(yc.psi);
+    yc.cos_psi = std::cos(yc.psi);
+    yc.tan_psi = std::tan(yc.psi);
+    yc.area_factor = (pattern_.warp_area + pattern_.weft_area) /
+                     (y.type == YarnType::kWarp ? pattern_.warp_area : pattern_.weft_area);
+    yarn_const_.push_back(yc);
+  }
 
   // Specular normalisation: 10 000 deterministic draws over 16 x 16 tiles (so the umax
   // noise is averaged too) with cosine-distributed wi and wo; intensity variation excluded
@@ -182,6 +193,9 @@ IrawanPoint IrawanBsdf::LocateDraft(double X, double Y) const {
   p.umax = umax;
   p.u = std::clamp(p.along / (0.5 * y.length) * umax, -umax, umax);
   p.v = std::clamp(p.across * kPi / y.width, -0.5 * kPi, 0.5 * kPi);
+  p.sin_u = std::sin(p.u);
+  p.cos_u = std::cos(p.u);
+  if (y.psi != 0.0) p.spine_radius = SpineRadius(std::abs(p.u), umax, y.kappa, y.width, y.length);
   if (pattern_.fineness > 0.0) {
     const double xi = Hash01(Key(int64_t(std::floor(X * pattern_.fineness)),
                                  int64_t(std::floor(Y * pattern_.fineness)), 0xF1BEull));
@@ -194,61 +208,120 @@ double IrawanBsdf::SpecularIntegrand(const IrawanPoint& p, const Vec3d& wo_s,
                                      const Vec3d& wi_s) const {
   if (!(wo_s.z > 0.0) || !(wi_s.z > 0.0)) return 0.0;
   const Yarn& y = pattern_.yarns[size_t(p.yarn)];
+  const YarnConst& yc = yarn_const_[size_t(p.yarn)];
   const Vec3d wi = ToYarnFrame(wi_s, y.type), wo = ToYarnFrame(wo_s, y.type);
   const Vec3d sum = wi + wo;
   const double len = Length(sum);
   if (!(len > 1e-12)) return 0.0;
   const Vec3d h = sum * (1.0 / len);
   const double umax = p.umax, w = y.width, l = y.length, a = 0.5 * w;
-  const double psi = y.psi * kDegToRad;
   // Phase function: uniform + von Mises about the forward direction.
   const double fc = pattern_.alpha + std::exp(pattern_.beta * -Dot(wi, wo)) * von_mises_norm_;
   double fs = 0.0;
-  if (psi == 0.0) {
-    const double u_h = std::atan(h.y / h.z);
+  if (yc.psi == 0.0) {
+    // u_h = atan(h_y / h_z) with h_z > 0 (wi, wo above the surface): cos u_h = 1/sqrt(1 + q^2),
+    // sin u_h = q cos u_h, q = h_y / h_z.
+    const double q = h.y / h.z;
+    const double u_h = std::atan(q);
     if (!(std::abs(u_h) < umax)) return 0.0;
     const double delta = l * pattern_.h_width;
     // Band centre clamped so the band stays inside the segment.
     const double y_h = std::clamp(u_h / umax * 0.5 * l, -0.5 * (l - delta), 0.5 * (l - delta));
     if (!(std::abs(p.along - y_h) < 0.5 * delta)) return 0.0;
-    const double v = p.v;
-    const Vec3d n(std::sin(v), std::sin(u_h) * std::cos(v), std::cos(u_h) * std::cos(v));
-    const Vec3d t(0.0, std::cos(u_h), -std::sin(u_h));
+    const double cos_uh = 1.0 / std::sqrt(1.0 + q * q), sin_uh = q * cos_uh;
+    const double v = p.v, sv = std::sin(v), cv = std::cos(v);
+    const Vec3d n(sv, sin_uh * cv, cos_uh * cv);
+    const Vec3d t(0.0, cos_uh, -sin_uh);
     const double R = SpineRadius(std::abs(u_h), umax, y.kappa, w, l);
     const double txh_x = t.y * h.z - t.z * h.y;
-    const double G = a * (R + a * std::cos(v)) / (len * std::abs(txh_x));
+    const double G = a * (R + a * cv) / (len * std::abs(txh_x));
     double A = Seeliger(Dot(n, wi), Dot(n, wo));
     if (pattern_.ss > 0.0) {
       A *= 1.0 - SmoothStep01((std::abs(u_h) - (1.0 - pattern_.ss) * umax) / (pattern_.ss * umax));
     }
     fs = G * fc * A * kPi * l / delta;
   } else {
-    const double u = p.u;
-    const double su = std::sin(u), cu = std::cos(u);
+    const double su = p.sin_u, cu = p.cos_u;
     const double bterm = h.y * su + h.z * cu;
-    const double D = (h.y * cu - h.z * su) / (std::sqrt(h.x * h.x + bterm * bterm) * std::tan(psi));
-    if (!(std::abs(D) < 1.0)) return 0.0;
-    const double v_h = WrapAngle(std::atan2(-bterm, h.x) + std::acos(D));
+    const double r = std::sqrt(h.x * h.x + bterm * bterm);
+    const double D = (h.y * cu - h.z * su) / (r * yc.tan_psi);
+    if (!(std::abs(D) < 1.0)) return 0.0;  // also rejects r = 0 (D infinite or NaN)
+    // v_h = atan2(-bterm, h_x) + acos(D), wrapped to (-pi, pi]: its sine and cosine by the
+    // angle-sum formulas (cos of the atan2 = h_x / r, sin = -bterm / r; sin acos D =
+    // sqrt(1 - D^2)), the angle itself by one atan2.
+    const double ca = h.x / r, sa = -bterm / r, sb = std::sqrt(1.0 - D * D);
+    const double cos_vh = ca * D - sa * sb, sin_vh = sa * D + ca * sb;
+    const double v_h = std::atan2(sin_vh, cos_vh);
     if (!(std::abs(v_h) < 0.5 * kPi)) return 0.0;
     const double delta = w * pattern_.h_width;
     const double x_h = std::clamp(v_h * w / kPi, -0.5 * (w - delta), 0.5 * (w - delta));
     if (!(std::abs(p.across - x_h) < 0.5 * delta)) return 0.0;
-    const Vec3d n(std::sin(v_h), su * std::cos(v_h), cu * std::cos(v_h));
+    const Vec3d n(sin_vh, su * cos_vh, cu * cos_vh);
     const double NoH = Dot(n, h);
     if (!(NoH > 0.0)) return 0.0;
-    const double R = SpineRadius(std::abs(u), umax, y.kappa, w, l);
-    const double G = a * (R + a * std::cos(v_h)) / (len * NoH * std::abs(std::sin(psi)));
+    const double R = p.spine_radius;
+    const double G = a * (R + a * cos_vh) / (len * NoH * std::abs(yc.sin_psi));
     const double A = Seeliger(Dot(n, wi), Dot(n, wo));
     fs = G * fc * A * 2.0 * w * umax / delta;
   }
-  const double area = pattern_.warp_area + pattern_.weft_area;
-  fs *= area / (y.type == YarnType::kWarp ? pattern_.warp_area : pattern_.weft_area);
-  return fs;
+  return fs * yc.area_factor;
+}
+
+struct IrawanBsdf::Memo {
+  uint64_t id = 0;  // instance_id_ of the owner; 0: empty
+  uint64_t uv[2] = {0, 0};
+  bool has_local = false;
+  uint64_t wo[3] = {0, 0, 0};
+  Local local;
+};
+
+IrawanBsdf::Memo& IrawanBsdf::ThreadMemo() {
+  thread_local Memo memo;
+  return memo;
+}
+
+const IrawanPoint& IrawanBsdf::PointAt(const ShadingPoint& sp) const {
+  Memo& m = ThreadMemo();
+  const uint64_t ux = Bits(sp.uv.x), uy = Bits(sp.uv.y);
+  if (m.id != instance_id_ || m.uv[0] != ux || m.uv[1] != uy) {
+    m.id = instance_id_;
+    m.uv[0] = ux;
+    m.uv[1] = uy;
+    m.has_local = false;
+    m.local.p = Locate(sp.uv);
+  }
+  return m.local.p;
+}
+
+const IrawanBsdf::Local& IrawanBsdf::LocalAt(const Vec3d& wo, const ShadingPoint& sp) const {
+  PointAt(sp);
+  Memo& m = ThreadMemo();
+  const uint64_t wx = Bits(wo.x), wy = Bits(wo.y), wz = Bits(wo.z);
+  if (!m.has_local || m.wo[0] != wx || m.wo[1] != wy || m.wo[2] != wz) {
+    Local& l = m.local;
+    l.lobe = Cones(l.p, wo, l.cones);
+    l.c = l.lobe ? CosineProbability(l.p) : 1.0;
+    m.wo[0] = wx;
+    m.wo[1] = wy;
+    m.wo[2] = wz;
+    m.has_local = true;
+  }
+  return m.local;
+}
+
+double IrawanBsdf::MixturePdf(const Local& l, const Vec3d& wi) const {
+  double pdf = l.c * CosineHemispherePdf(wi.z);
+  if (l.c < 1.0) {
+    double sum = 0.0;
+    for (const woven::Cone& cone : l.cones) sum += woven::ConePdf(cone, wi);
+    pdf += (1.0 - l.c) * sum / kTangents;
+  }
+  return pdf;
 }
 
 Rgbd IrawanBsdf::Eval(const Vec3d& wo, const Vec3d& wi, const ShadingPoint& sp) const {
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return Rgbd(0, 0, 0);
-  const IrawanPoint p = Locate(sp.uv);
+  const IrawanPoint& p = PointAt(sp);
   const Yarn& y = pattern_.yarns[size_t(p.yarn)];
   const double spec = SpecularIntegrand(p, wo, wi) * p.intensity * spec_norm_;
   return y.ks * spec + y.kd * kInvPi;
@@ -288,17 +361,24 @@ bool IrawanBsdf::Tangents(const IrawanPoint& p, Vec3d* t, double* scale) const {
   }
   if (!(hi > lo)) return false;
   const double step = (hi - lo) / kTangents;
-  const double su = std::sin(p.u), cu = std::cos(p.u), sp = std::sin(psi), cp = std::cos(psi);
+  const YarnConst& yc = yarn_const_[size_t(p.yarn)];
+  const double su = p.sin_u, cu = p.cos_u, sp = yc.sin_psi, cp = yc.cos_psi;
+  // s_k = lo + (k + 1/2) step: sin and cos by rotating (sin s_0, cos s_0) by step each time.
+  const double s0 = lo + 0.5 * step;
+  double ss = std::sin(s0), cs = std::cos(s0);
+  const double sd = std::sin(step), cd = std::cos(step);
   for (int k = 0; k < kTangents; ++k) {
-    const double s = lo + (k + 0.5) * step;
-    const double ss = std::sin(s), cs = std::cos(s);
     Vec3d ty;
     if (psi == 0.0) {
       ty = Vec3d(0.0, cs, -ss);
     } else {
-      ty = Normalize(Vec3d(-cs * sp, cu * cp + su * ss * sp, -su * cp + cu * ss * sp));
+      // Unit by construction: |ty|^2 = sin^2 psi (cs^2 + ss^2) + cos^2 psi = 1.
+      ty = Vec3d(-cs * sp, cu * cp + su * ss * sp, -su * cp + cu * ss * sp);
     }
     t[k] = FromYarnFrame(ty, y.type);
+    const double ss_next = ss * cd + cs * sd;
+    cs = cs * cd - ss * sd;
+    ss = ss_next;
   }
   // Logistic scale: half the angular spacing of neighbouring cones, at least 0.03 rad.
   *scale = std::max(0.5 * step * gain, 0.03);
@@ -315,45 +395,29 @@ bool IrawanBsdf::Cones(const IrawanPoint& p, const Vec3d& wo, woven::Cone* cones
 
 double IrawanBsdf::Pdf(const Vec3d& wo, const Vec3d& wi, const ShadingPoint& sp) const {
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return 0.0;
-  const IrawanPoint p = Locate(sp.uv);
-  woven::Cone cones[kTangents];
-  const double c = Cones(p, wo, cones) ? CosineProbability(p) : 1.0;
-  double pdf = c * CosineHemispherePdf(wi.z);
-  if (c < 1.0) {
-    double sum = 0.0;
-    for (const woven::Cone& cone : cones) sum += woven::ConePdf(cone, wi);
-    pdf += (1.0 - c) * sum / kTangents;
-  }
-  return pdf;
+  return MixturePdf(LocalAt(wo, sp), wi);
 }
 
 bool IrawanBsdf::Sample(const Vec3d& wo, const Point2d& u, double uc, const ShadingPoint& sp,
                         BsdfSample* out) const {
   if (!(wo.z > 0.0)) return false;
-  const IrawanPoint p = Locate(sp.uv);
-  woven::Cone cones[kTangents];
-  const bool lobe = Cones(p, wo, cones);
-  const double c = lobe ? CosineProbability(p) : 1.0;
+  const Local& l = LocalAt(wo, sp);
+  const double c = l.c;
   Vec3d wi;
   if (uc < c) {
     wi = SampleCosineHemisphere(u);
   } else {
     const double r = std::clamp((uc - c) / (1.0 - c), 0.0, 1.0);
     const int k = std::min(int(r * kTangents), kTangents - 1);
-    if (!woven::SampleCone(cones[k], u, &wi)) return false;
+    if (!woven::SampleCone(l.cones[k], u, &wi)) return false;
   }
   if (!(wi.z > 0.0)) return false;
-  double pdf = c * CosineHemispherePdf(wi.z);
-  if (c < 1.0) {
-    double sum = 0.0;
-    for (const woven::Cone& cone : cones) sum += woven::ConePdf(cone, wi);
-    pdf += (1.0 - c) * sum / kTangents;
-  }
+  const double pdf = MixturePdf(l, wi);
   if (!(pdf > 0.0)) return false;
-  const Yarn& y = pattern_.yarns[size_t(p.yarn)];
+  const Yarn& y = pattern_.yarns[size_t(l.p.yarn)];
   out->wi = wi;
   out->pdf = pdf;
-  out->f = y.ks * (SpecularIntegrand(p, wo, wi) * p.intensity * spec_norm_) + y.kd * kInvPi;
+  out->f = y.ks * (SpecularIntegrand(l.p, wo, wi) * l.p.intensity * spec_norm_) + y.kd * kInvPi;
   return true;
 }
 

@@ -41,6 +41,7 @@
 // staple yarns, midpoints), then wi near its specular cone. Pdf() is that exact mixture.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -58,6 +59,8 @@ struct IrawanPoint {
   double u = 0.0, v = 0.0;  // along-yarn inclination angle, across-yarn angle (radians)
   double umax = 0.0;        // radians, after the umax noise
   double intensity = 1.0;   // fineness intensity variation
+  double sin_u = 0.0, cos_u = 1.0;  // sin(u), cos(u)
+  double spine_radius = 0.0;        // SpineRadius(|u|, umax, ...) (staple yarns only)
 };
 
 class IrawanBsdf final : public Bsdf {
@@ -88,6 +91,29 @@ class IrawanBsdf final : public Bsdf {
 
  private:
   IrawanPoint LocateDraft(double X, double Y) const;
+  // Per-(uv, wo) state shared by Eval, Pdf and Sample at one shading point: the weave location
+  // and the lobe strategy's cones. Kept in a one-entry thread-local memo keyed by this BSDF's
+  // instance id, uv and wo (a path vertex calls Eval for each light, Eval/Pdf for the
+  // environment and Sample with the same wo and uv): a pure function of its key, so the
+  // results are exactly those of recomputing it.
+  struct Local {
+    IrawanPoint p;
+    bool lobe = false;  // cones valid (band not empty)
+    double c = 1.0;     // probability of cosine sampling
+    woven::Cone cones[kTangents];
+  };
+  struct Memo;
+  static Memo& ThreadMemo();
+  const IrawanPoint& PointAt(const ShadingPoint& sp) const;
+  const Local& LocalAt(const Vec3d& wo, const ShadingPoint& sp) const;
+  double MixturePdf(const Local& l, const Vec3d& wi) const;
+  // Per-yarn constants (parallel to pattern_.yarns).
+  struct YarnConst {
+    double psi = 0.0, sin_psi = 0.0, cos_psi = 1.0, tan_psi = 0.0;
+    double area_factor = 1.0;  // (warpArea + weftArea) / (warpArea or weftArea)
+  };
+  std::vector<YarnConst> yarn_const_;
+  uint64_t instance_id_ = 0;
   // Tangents (shading frame) and lobe scale of the highlight band; false if the band is empty.
   bool Tangents(const IrawanPoint& p, Vec3d* t, double* scale) const;
   // The kTangents cones of the lobe strategy for wo; false if the band is empty.

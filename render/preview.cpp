@@ -4,6 +4,8 @@
 #include <tbb/parallel_for.h>
 
 #include <chrono>
+#include <map>
+#include <mutex>
 #include <cmath>
 
 #include "brdf/cloth.h"
@@ -36,6 +38,35 @@ double LodFor(ModelKind m, const PrefilteredEnvironment& pre, double r, int leve
   return pre.LodForRoughness(r);
 }
 
+// Prefiltered chains are the expensive part of a cache build and depend only on the
+// environment (file, intensity, rotation) and the chain settings: build each once per process.
+std::shared_ptr<const PrefilteredEnvironment> SharedPrefilter(const Environment& env,
+                                                              PrefilteredEnvironment::Kernel k,
+                                                              const PreviewOptions& o) {
+  static std::mutex mutex;
+  static std::map<std::string, std::shared_ptr<const PrefilteredEnvironment>> cache;
+  // Only named sources are shareable (procedural and constant maps are cheap to rebuild and
+  // may differ in content under the same name).
+  const bool shareable = !env.source().empty() && env.source().find('/') != std::string::npos;
+  const std::string key = env.source() + "|" + std::to_string(env.intensity()) + "|" +
+                          std::to_string(env.rotation_y()) + "|" + std::to_string(int(k)) + "|" +
+                          std::to_string(o.prefilter_levels) + "|" +
+                          std::to_string(o.prefilter_base_width) + "|" +
+                          std::to_string(o.prefilter_samples);
+  if (shareable) {
+    std::lock_guard<std::mutex> lock(mutex);
+    auto it = cache.find(key);
+    if (it != cache.end()) return it->second;
+  }
+  auto built = std::make_shared<const PrefilteredEnvironment>(PrefilteredEnvironment::Build(
+      env, k, o.prefilter_levels, o.prefilter_base_width, o.prefilter_samples, {}));
+  if (shareable) {
+    std::lock_guard<std::mutex> lock(mutex);
+    cache.emplace(key, built);
+  }
+  return built;
+}
+
 }  // namespace
 
 PreviewCache::~PreviewCache() = default;
@@ -64,18 +95,13 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
 
   // Environment-derived data (only when the scene has an environment).
   Sh9 sh{};
-  std::unique_ptr<PrefilteredEnvironment> ggx, charlie;
+  std::shared_ptr<const PrefilteredEnvironment> ggx, charlie;
   if (env) {
     if (log) log("preview: projecting the environment on SH and prefiltering");
     sh = ProjectEnvironment(*env);
-    ggx = std::make_unique<PrefilteredEnvironment>(PrefilteredEnvironment::Build(
-        *env, PrefilteredEnvironment::Kernel::kGgx, opt.prefilter_levels,
-        opt.prefilter_base_width, opt.prefilter_samples, {}));
-    if (opt.model == ModelKind::kGltfSheen) {
-      charlie = std::make_unique<PrefilteredEnvironment>(PrefilteredEnvironment::Build(
-          *env, PrefilteredEnvironment::Kernel::kCharlie, opt.prefilter_levels,
-          opt.prefilter_base_width, opt.prefilter_samples, {}));
-    }
+    ggx = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kGgx, opt);
+    if (opt.model == ModelKind::kGltfSheen)
+      charlie = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kCharlie, opt);
   }
 
   // Primary visibility at pixel centres. Per-pixel work is independent; gather per row.
