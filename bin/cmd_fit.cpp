@@ -104,7 +104,7 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
     std::string images;
     double loss_scale = 1.0;
     bool subsurface = false, no_floor = false;
-    int spp = 256, stride = 1, threads = 0;
+    int spp = 256, stride = 0, threads = 0;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
@@ -125,8 +125,9 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "cloth sheen convention: explicit (fit it) | sqrt-base-color | white");
   cmd->add_flag("--subsurface", a->subsurface, "cloth: fit a subsurface colour too");
   cmd->add_option("--spp", a->spp, "reference samples per pixel (--fabric)")->check(CLI::Range(16, 65536));
-  cmd->add_option("--stride", a->stride, "evaluate every n-th pixel per block axis")
-      ->check(CLI::Range(1, 16));
+  cmd->add_option("--stride", a->stride,
+                  "evaluate every n-th pixel per block axis (0 = auto: at most 4 x 4 per block)")
+      ->check(CLI::Range(0, 16));
   cmd->add_flag("--no-noise-floor", a->no_floor, "(--fabric) skip the second-seed references");
   cmd->add_option("--images", a->images, "directory for fitted previews and residual images");
   cmd->add_option("--threads", a->threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
@@ -223,7 +224,7 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
       fitj["loss_scale"] = o.loss_scale;
       fitj["level"] = o.level;
       fitj["block_pixels"] = 1 << o.level;
-      fitj["pixel_stride"] = o.pixel_stride;
+      fitj["pixel_stride"] = o.pixel_stride > 0 ? o.pixel_stride : std::max(1, (1 << o.level) / 4);
       fitj["locked"] = o.locked;
       fitj["final_cost"] = res.final_cost;
       fitj["initial_cost"] = res.initial_cost;

@@ -272,6 +272,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
 
   // Per scene: cache, blocks, transformed reference, weights.
   const int B = 1 << std::max(0, opt.level);
+  const int stride = opt.pixel_stride > 0 ? opt.pixel_stride : std::max(1, B / 4);
   std::vector<std::unique_ptr<SceneData>> data;
   for (const SceneInput& in : inputs) {
     const render::Scene& scene = *in.scene;
@@ -340,8 +341,8 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
                 s2[c] += double(in.second->rgb[(size_t(y) * size_t(W) + size_t(x)) * 3 + size_t(c)]);
           d->second_t.push_back(Transform(s2 * (1.0 / n), opt.space, d->op, d->exposure));
         }
-        for (int y = by; y < by + B; y += opt.pixel_stride)
-          for (int x = bx; x < bx + B; x += opt.pixel_stride)
+        for (int y = by; y < by + B; y += stride)
+          for (int x = bx; x < bx + B; x += stride)
             keep.push_back(cache_index[size_t(y) * size_t(W) + size_t(x)]);
         d->block_begin.push_back(int(keep.size()));
       }

@@ -294,6 +294,13 @@ Rgb<double> Environment::Eval(const Vec3<double>& d) const {
   if (width_ <= 0) return {};
   const MapUv m = DirectionToMapUv(WorldToMap(d));
   if (!std::isfinite(m.u) || !std::isfinite(m.v)) return {};
+  if (total_weight_ > 0.0) {
+    // The path tracer asks Pdf(d) right after Eval(d) for an escaping path: start loading the
+    // CDF entries Pdf reads (TexelDensity) so that miss overlaps the texel loads below.
+    const int i = std::clamp(int(m.u * width_), 0, width_ - 1);
+    const int j = std::clamp(int((1.0 - m.v) * height_), 0, height_ - 1);
+    __builtin_prefetch(&conditional_cdf_[size_t(j) * size_t(width_ + 1) + size_t(i)]);
+  }
   return BilinearAt(rgb_, width_, height_, intensity_, m.u, m.v);
 }
 
