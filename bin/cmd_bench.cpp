@@ -5,12 +5,17 @@
 #include <ceres/jet.h>
 
 #include <array>
+#include <cstdlib>
+#include <filesystem>
+#include <sstream>
 #include <cstdio>
 #include <string>
 #include <vector>
 
 #include "bin/commands.h"
 #include "brdf/models.h"
+#include "fit/bench_fit.h"
+#include "render/fabric.h"
 #include "render/preview.h"
 
 namespace clothfit::cli {
@@ -115,6 +120,52 @@ void BM_Preview(benchmark::State& state, const render::PreviewCache* cache) {
   state.counters["pixels"] = double(cache->pixels.size());
 }
 
+void RunBenchFit(const std::string& fabric_list, int spp, const std::string& csv,
+                 const std::string& png, bool quiet) {
+  const char* env_root = std::getenv("CLOTHFIT_DATASETS");
+  const std::string root = env_root ? env_root : CLOTHFIT_SOURCE_DATASETS;
+  std::vector<fit::BenchSetting> settings;
+  for (int level : {2, 3, 4, 5})
+    for (int stride : {0, 1})
+      for (int starts : {1, 2}) settings.push_back({level, stride, starts});
+  std::vector<fit::BenchRow> all;
+  std::stringstream ss(fabric_list);
+  std::string name;
+  std::printf("%-8s %5s %6s %6s %8s %9s\n", "fabric", "level", "stride", "starts", "seconds", "error");
+  while (std::getline(ss, name, ',')) {
+    const std::string fabric_path = root + "/fabrics/" + name + ".json";
+    std::vector<render::Scene> scenes;
+    std::vector<std::unique_ptr<render::Environment>> envs;
+    std::vector<fit::Reference> refs;
+    const std::vector<std::string> paths = CanonicalScenes();
+    for (const std::string& sp : paths) {
+      refs.push_back(fit::ReadReference(CachedReference(sp, fabric_path, spp, 1, quiet)));
+      scenes.push_back(render::LoadScene(sp));
+      envs.push_back(LoadSceneEnvironment(scenes.back(), true));
+    }
+    std::vector<fit::SceneInput> inputs;
+    for (size_t i = 0; i < scenes.size(); ++i)
+      inputs.push_back({&scenes[i], envs[i].get(), &refs[i], nullptr, paths[i]});
+    fit::FitOptions base;
+    base.start = render::DefaultPreset(render::ModelKind::kCloth);
+    const auto rows = fit::RunFitBench(name, inputs, base, settings, [](const fit::BenchRow& r) {
+      std::printf("%-8s %5d %6s %6d %8.2f %9.5f%s\n", r.fabric.c_str(), r.setting.level,
+                  r.setting.stride == 0 ? "auto" : std::to_string(r.setting.stride).c_str(),
+                  r.setting.starts, r.seconds, r.error, r.usable ? "" : "  (unusable)");
+      std::fflush(stdout);
+    });
+    all.insert(all.end(), rows.begin(), rows.end());
+  }
+  std::filesystem::create_directories(std::filesystem::path(csv).parent_path().empty()
+                                          ? std::filesystem::path(".")
+                                          : std::filesystem::path(csv).parent_path());
+  std::filesystem::create_directories(std::filesystem::path(png).parent_path().empty()
+                                          ? std::filesystem::path(".")
+                                          : std::filesystem::path(png).parent_path());
+  fit::WriteFitBench(all, csv, png);
+  std::printf("bench fit: %zu fits -> %s, %s\n", all.size(), csv.c_str(), png.c_str());
+}
+
 }  // namespace
 
 void AddBenchCommand(CLI::App& app, const Globals& g, int& exit_code) {
@@ -122,14 +173,32 @@ void AddBenchCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto scene = std::make_shared<std::string>(std::string(CLOTHFIT_SOURCE_DATASETS) +
                                              "/scenes/sphere.json");
   CLI::App* cmd = app.add_subcommand("bench", "benchmarks (Google Benchmark)");
-  cmd->add_option("what", *what, "what to benchmark: brdf | preview")
+  auto fabrics = std::make_shared<std::string>("canvas,twill");
+  auto spp = std::make_shared<int>(64);
+  auto csv = std::make_shared<std::string>("out/bench-fit.csv");
+  auto png = std::make_shared<std::string>("out/bench-fit.png");
+  cmd->add_option("what", *what, "what to benchmark: brdf | preview | fit")
       ->required()
-      ->check(CLI::IsMember({"brdf", "preview"}));
+      ->check(CLI::IsMember({"brdf", "preview", "fit"}));
+  cmd->add_option("--fabrics", *fabrics, "`bench fit`: comma-separated fabric names");
+  cmd->add_option("--spp", *spp, "`bench fit`: reference samples per pixel (cached)");
+  cmd->add_option("--csv", *csv, "`bench fit`: output CSV");
+  cmd->add_option("--png", *png, "`bench fit`: output plot (error vs time)");
   cmd->add_option("--scene", *scene, "scene card for `bench preview`");
   cmd->allow_extras();
-  cmd->callback([cmd, what, scene, &g, &exit_code]() {
+  cmd->callback([cmd, what, scene, fabrics, spp, csv, png, &g, &exit_code]() {
     (void)lut::DefaultDfg();  // tables are built once, outside the timed loops
     (void)lut::DefaultSheenAlbedo();
+    if (*what == "fit") {
+      try {
+        RunBenchFit(*fabrics, *spp, *csv, *png, g.quiet);
+        exit_code = 0;
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "clothfit bench fit: error: %s\n", e.what());
+        exit_code = 1;
+      }
+      return;
+    }
     if (*what == "brdf") {
       for (ModelId m : kAllModels) {
         const std::string name(ModelName(m));

@@ -30,6 +30,11 @@ void AddTonemapCommand(CLI::App& app, const Globals& g, int& exit_code);
 // The scene's environment: the card's map, or the procedural sky (warning on stderr unless
 // quiet) when the map is not installed; null when the card has no environment.
 std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& scene, bool quiet);
+// Renders (or reuses from the content-keyed cache) a reference; returns its path.
+std::string CachedReference(const std::string& scene_path, const std::string& fabric_path,
+                            int spp, uint64_t seed, bool quiet);
+// The canonical scene cards (datasets/scenes/{sphere,drape,swatch}.json).
+std::vector<std::string> CanonicalScenes();
 // Linear RGB frame -> display RGB in [0, 1] (tone mapping + sRGB).
 std::vector<float> ToDisplayImage(const std::vector<float>& linear, render::ToneMapping op,
                                   double exposure);

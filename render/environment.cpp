@@ -428,8 +428,7 @@ Vec3<double> Environment::Sample(double u1, double u2, double* pdf, Rgb<double>*
     const double sin_theta = v > 0.0 && v < 1.0 ? c : 0.0;
     *pdf = sin_theta > 0.0 ? TexelDensity(i, j) / (2.0 * kPi * kPi * sin_theta) : 0.0;
   }
-  // Radiance at the sampled (u, v) itself (what Eval(d) reads, without the round trip).
-  if (radiance) *radiance = BilinearAt(rgb_, width_, height_, intensity_, u, v);
+  if (radiance) *radiance = Eval(d);  // exactly Eval's value (not a lookup at (u, v))
   return d;
 }
 

@@ -56,9 +56,9 @@ struct IrawanPoint {
   int yarn = 0;         // index into pattern.yarns
   double across = 0.0;  // yarn-frame position relative to the segment centre, cells
   double along = 0.0;
-  double u = 0.0, v = 0.0;  // along-yarn inclination angle, across-yarn angle (radians)
-  double umax = 0.0;        // radians, after the umax noise
-  double intensity = 1.0;   // fineness intensity variation
+  double u = 0.0, v = 0.0;          // along-yarn inclination angle, across-yarn angle (radians)
+  double umax = 0.0;                // radians, after the umax noise
+  double intensity = 1.0;           // fineness intensity variation
   double sin_u = 0.0, cos_u = 1.0;  // sin(u), cos(u)
   double spine_radius = 0.0;        // SpineRadius(|u|, umax, ...) (staple yarns only)
 };

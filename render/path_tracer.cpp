@@ -38,6 +38,18 @@ double RadicalInverse2(uint32_t i) {
   return double(i) * 0x1.0p-32;
 }
 
+// atan2 to about 1e-5 rad, for cache prefetch hints only (never for a result).
+double RoughAtan2(double y, double x) {
+  const double ax = std::abs(x), ay = std::abs(y);
+  const double mx = std::max(ax, ay), mn = std::min(ax, ay);
+  if (!(mx > 0.0)) return 0.0;
+  const double a = mn / mx, s = a * a;
+  double r = ((-0.0464964749 * s + 0.15931422) * s - 0.327622764) * s * a + a;
+  if (ay > ax) r = 0.5 * kPi - r;
+  if (x < 0.0) r = kPi - r;
+  return y < 0.0 ? -r : r;
+}
+
 double PowerHeuristic(double a, double b) {
   const double a2 = a * a, b2 = b * b;
   return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
@@ -52,9 +64,14 @@ struct PathTracer::Impl {
   EmbreeScene bvh;
   std::vector<std::unique_ptr<Bsdf>> lamberts;  // per mesh (null for fabric meshes)
   bool has_env = false;
+  double env_cos_rot = 1.0, env_sin_rot = 0.0;  // of env->rotation_y()
 
   Impl(const Scene& s, const Bsdf& f, const Environment* e)
       : scene(s), fabric(f), env(e), bvh(s), has_env(e != nullptr) {
+    if (env) {
+      env_cos_rot = std::cos(env->rotation_y());
+      env_sin_rot = std::sin(env->rotation_y());
+    }
     for (const Mesh& m : s.meshes) {
       if (m.is_fabric) {
         lamberts.emplace_back(nullptr);
@@ -62,6 +79,29 @@ struct PathTracer::Impl {
         lamberts.emplace_back(std::make_unique<LambertBsdf>(
             Rgbd(m.base_color[0], m.base_color[1], m.base_color[2])));
       }
+    }
+  }
+
+  // A bounce ray that escapes reads the environment map at its direction (Eval, bilinear) after
+  // the intersection test; start loading those texels now so the cache misses overlap the
+  // traversal. A hint only: (u, v) per environment.h's convention, approximately.
+  void PrefetchEnvironment(const Vec3d& d) const {
+    const int w = env->width(), h = env->height();
+    if (w <= 0 || h <= 0) return;
+    const double mx = env_cos_rot * d.x - env_sin_rot * d.z;
+    const double mz = env_sin_rot * d.x + env_cos_rot * d.z;
+    const double u = RoughAtan2(mz, mx) * (0.5 * kInvPi) + 0.5;
+    const double v = RoughAtan2(d.y, std::sqrt(mx * mx + mz * mz)) * kInvPi + 0.5;
+    const double x = u * w - 0.5, y = (1.0 - v) * h - 0.5;
+    if (!std::isfinite(x) || !std::isfinite(y)) return;
+    const int i0 = std::clamp(int(std::floor(x)), 0, w - 1);
+    const int i1 = std::min(i0 + 1, w - 1);
+    const int j0 = std::clamp(int(std::floor(y)), 0, h - 1);
+    const int j1 = std::min(j0 + 1, h - 1);
+    const float* px = env->pixels().data();
+    for (const int j : {j0, j1}) {
+      __builtin_prefetch(px + (size_t(j) * size_t(w) + size_t(i0)) * 3);
+      __builtin_prefetch(px + (size_t(j) * size_t(w) + size_t(i1)) * 3 + 2);
     }
   }
 
@@ -149,8 +189,8 @@ struct PathTracer::Impl {
       out.L += T * PunctualLights(p, ng, fr, wo_local, bsdf, sp, eps, rays);
       if (has_env) {
         double pdf_l = 0.0;
-        Rgbd Le;
-        const Vec3d wi = env->Sample(rng.Uniform(), rng.Uniform(), &pdf_l, &Le);
+        // Radiance looked up only for a sample that contributes (below).
+        const Vec3d wi = env->Sample(rng.Uniform(), rng.Uniform(), &pdf_l, nullptr);
         const Vec3d wi_local = fr.ToLocal(wi);
         if (pdf_l > 0.0 && wi_local.z > 0.0 && Dot(wi, ng) > 0.0) {
           const Rgbd f = bsdf.Eval(wo_local, wi_local, sp);
@@ -158,6 +198,7 @@ struct PathTracer::Impl {
             ++rays;
             if (!bvh.Occluded(A(p + ng * eps), A(wi), 0.0,
                               std::numeric_limits<double>::infinity())) {
+              const Rgbd Le = env->Eval(wi);
               const double pdf_b = bsdf.Pdf(wo_local, wi_local, sp);
               const double w = PowerHeuristic(pdf_l, pdf_b);
               out.L += T * f * Le * (wi_local.z * w / pdf_l);
@@ -179,6 +220,7 @@ struct PathTracer::Impl {
       // Without an environment, an escaping bounce ray carries nothing: stop early.
       org = p + ng * eps;
       dir = wi;
+      if (has_env) PrefetchEnvironment(dir);
       if (depth + 1 >= st.rr_start_depth) {
         const double q = std::max(0.05, 1.0 - std::max({T.r, T.g, T.b}));
         if (rng.Uniform() < q) break;

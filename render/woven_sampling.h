@@ -85,8 +85,8 @@ inline double ConeMass(const Vec3d& wo, const Vec3d& t, double scale) {
 }
 
 // Half-range of the azimuth about t for which wi.z > 0, at longitudinal angle theta.
-inline double PhiMax(double sin_theta, double cos_theta, const Vec3d& t) {
-  const double ct = std::sqrt(std::max(0.0, 1.0 - t.z * t.z));
+// ct = sqrt(1 - t.z^2) (precomputed by the caller).
+inline double PhiMax(double sin_theta, double cos_theta, const Vec3d& t, double ct) {
   const double a = cos_theta * ct;
   const double b = sin_theta * t.z;  // wi.z = b + a cos(phi)
   if (a <= 1e-12) return b > 0.0 ? kPi : 0.0;
@@ -94,6 +94,9 @@ inline double PhiMax(double sin_theta, double cos_theta, const Vec3d& t) {
   if (kappa >= 1.0) return 0.0;
   if (kappa <= -1.0) return kPi;
   return std::acos(kappa);
+}
+inline double PhiMax(double sin_theta, double cos_theta, const Vec3d& t) {
+  return PhiMax(sin_theta, cos_theta, t, std::sqrt(std::max(0.0, 1.0 - t.z * t.z)));
 }
 
 // Orthonormal b1, b2 about t with b1 the normal's direction projected off t (b2.z = 0).
@@ -111,6 +114,8 @@ struct Cone {
   Vec3d t;
   TruncatedLogistic theta;
   double mass = 0.0;  // theta.Mass()
+  // Constants of ConePdf: 1 / s, 1 / (s mass), sqrt(1 - t.z^2).
+  double inv_s = 0.0, inv_s_mass = 0.0, t_perp = 0.0;
 };
 
 inline Cone MakeCone(const Vec3d& wo, const Vec3d& t, double scale) {
@@ -118,6 +123,9 @@ inline Cone MakeCone(const Vec3d& wo, const Vec3d& t, double scale) {
   c.t = t;
   c.theta = ConeTheta(wo, t, scale);
   c.mass = c.theta.Mass();
+  c.inv_s = 1.0 / scale;
+  c.inv_s_mass = c.mass > 0.0 ? 1.0 / (scale * c.mass) : 0.0;
+  c.t_perp = std::sqrt(std::max(0.0, 1.0 - t.z * t.z));
   return c;
 }
 
@@ -143,11 +151,12 @@ inline double ConePdf(const Cone& c, const Vec3d& wi) {
   if (ct < 1e-12) return 0.0;
   const double x = std::asin(st);
   if (x < c.theta.lo || x > c.theta.hi) return 0.0;
-  const double phi_max = PhiMax(st, ct, c.t);
+  const double phi_max = PhiMax(st, ct, c.t, c.t_perp);
   if (!(phi_max > 0.0)) return 0.0;
-  const double e = std::exp(-std::abs(x - c.theta.mu) / c.theta.s);
-  const double p_theta = e / (c.theta.s * (1.0 + e) * (1.0 + e) * c.mass);
-  return p_theta / (2.0 * phi_max * ct);
+  // p_theta = e / (s (1 + e)^2 mass) (TruncatedLogistic::Pdf), over 2 phi_max cos(theta).
+  const double e = std::exp(-std::abs(x - c.theta.mu) * c.inv_s);
+  const double e1 = 1.0 + e;
+  return e * c.inv_s_mass / (e1 * e1 * (2.0 * phi_max * ct));
 }
 
 // Convenience forms for one-off use.
