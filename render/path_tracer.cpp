@@ -28,16 +28,6 @@ struct Frame {
   Vec3d ToWorld(const Vec3d& w) const { return t * w.x + b * w.y + n * w.z; }
 };
 
-// Van der Corput radical inverse in base 2.
-double RadicalInverse2(uint32_t i) {
-  i = (i << 16u) | (i >> 16u);
-  i = ((i & 0x55555555u) << 1u) | ((i & 0xAAAAAAAAu) >> 1u);
-  i = ((i & 0x33333333u) << 2u) | ((i & 0xCCCCCCCCu) >> 2u);
-  i = ((i & 0x0F0F0F0Fu) << 4u) | ((i & 0xF0F0F0F0u) >> 4u);
-  i = ((i & 0x00FF00FFu) << 8u) | ((i & 0xFF00FF00u) >> 8u);
-  return double(i) * 0x1.0p-32;
-}
-
 // atan2 to about 1e-5 rad, for cache prefetch hints only (never for a result).
 double RoughAtan2(double y, double x) {
   const double ax = std::abs(x), ay = std::abs(y);

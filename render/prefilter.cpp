@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "render/sampler.h"
+
 namespace clothfit::render {
 namespace {
 
@@ -141,16 +143,6 @@ Rgb<double> Trilinear(const std::vector<Level>& pyramid, const Vec3<double>& map
   if (f == 0.0 || k1 == k0) return a;
   const Rgb<double> b = pyramid[static_cast<size_t>(k1)].Bilinear(map_dir);
   return a + (b - a) * f;
-}
-
-// Van der Corput radical inverse in base 2 (the second Hammersley coordinate).
-double RadicalInverse2(unsigned bits) {
-  bits = (bits << 16u) | (bits >> 16u);
-  bits = ((bits & 0x55555555u) << 1u) | ((bits & 0xAAAAAAAAu) >> 1u);
-  bits = ((bits & 0x33333333u) << 2u) | ((bits & 0xCCCCCCCCu) >> 2u);
-  bits = ((bits & 0x0F0F0F0Fu) << 4u) | ((bits & 0xF0F0F0F0u) >> 4u);
-  bits = ((bits & 0x00FF00FFu) << 8u) | ((bits & 0xFF00FF00u) >> 8u);
-  return double(bits) * 0x1p-32;
 }
 
 // One importance sample of the prefilter, in the frame where n = v = R = +z.

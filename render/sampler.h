@@ -32,6 +32,16 @@ class Pcg32 {
   uint64_t state_ = 0, inc_ = 0;
 };
 
+// Van der Corput radical inverse in base 2 (the second coordinate of a Hammersley set).
+inline double RadicalInverse2(uint32_t i) {
+  i = (i << 16u) | (i >> 16u);
+  i = ((i & 0x55555555u) << 1u) | ((i & 0xAAAAAAAAu) >> 1u);
+  i = ((i & 0x33333333u) << 2u) | ((i & 0xCCCCCCCCu) >> 2u);
+  i = ((i & 0x0F0F0F0Fu) << 4u) | ((i & 0xF0F0F0F0u) >> 4u);
+  i = ((i & 0x00FF00FFu) << 8u) | ((i & 0xFF00FF00u) >> 8u);
+  return double(i) * 0x1.0p-32;
+}
+
 // SplitMix64 finaliser, to derive stream ids.
 inline uint64_t Mix64(uint64_t z) {
   z += 0x9E3779B97F4A7C15ull;
