@@ -378,6 +378,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
     }
   }
 
+  double best_start_rmse = std::numeric_limits<double>::infinity();
   for (double r0 : opt.start_roughness) {
     // Parameter blocks, initialised from the start preset; unlocked colours from the reference.
     std::vector<std::vector<double>> blocks;
@@ -448,7 +449,28 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
     for (auto& b : blocks)
       for (double v : b) finite = finite && std::isfinite(v);
     if (!summary.IsSolutionUsable() || !finite) continue;
-    if (!best.usable || summary.final_cost < best.final_cost) {
+    // Starts are compared by the unweighted RMSE in the fit space (the error reported to the
+    // user), not by the robust weighted cost each start minimised: the two can disagree when
+    // the loss discounts different blocks in different solutions.
+    std::vector<double> flat;
+    for (auto& b : blocks) flat.insert(flat.end(), b.begin(), b.end());
+    double se = 0.0;
+    int count = 0;
+    for (const auto& d : data) {
+      std::vector<Rgb<double>> px;
+      render::EvaluatePreview(*d->cache, flat.data(), px);
+      for (int bl = 0; bl < d->blocks(); ++bl) {
+        Rgb<double> sum(0, 0, 0);
+        const int b0 = d->block_begin[size_t(bl)], b1 = d->block_begin[size_t(bl) + 1];
+        for (int i = b0; i < b1; ++i) sum += px[size_t(i)];
+        const Rgb<double> t = Transform(sum * (1.0 / double(b1 - b0)), d->space, d->op, d->exposure);
+        for (int c = 0; c < 3; ++c) se += std::pow(t[c] - d->ref_t[size_t(bl)][c], 2);
+        count += 3;
+      }
+    }
+    const double start_rmse = std::sqrt(se / std::max(count, 1));
+    if (!best.usable || start_rmse < best_start_rmse) {
+      best_start_rmse = start_rmse;
       const int starts = best.starts, iterations = best.iterations;
       best = FitResult{};
       best.starts = starts;
