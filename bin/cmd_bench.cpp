@@ -125,9 +125,9 @@ void RunBenchFit(const std::string& fabric_list, int spp, const std::string& csv
   const char* env_root = std::getenv("CLOTHFIT_DATASETS");
   const std::string root = env_root ? env_root : CLOTHFIT_SOURCE_DATASETS;
   std::vector<fit::BenchSetting> settings;
-  for (int level : {2, 3, 4, 5})
+  for (int level : {3, 4, 5})
     for (int stride : {0, 1})
-      for (int starts : {1, 2}) settings.push_back({level, stride, starts});
+      for (int starts : {1, 2, 3}) settings.push_back({level, stride, starts});
   std::vector<fit::BenchRow> all;
   std::stringstream ss(fabric_list);
   std::string name;

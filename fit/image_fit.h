@@ -69,7 +69,7 @@ struct FitOptions {
   int level = 2;                  // block size 2^level (see AutoLevel)
   int pixel_stride = 0;           // evaluate every stride-th pixel per block axis (speed);
                                   // 0 = auto: max(1, block / 4), i.e. at most 4 x 4 per block
-  std::vector<double> start_roughness = {0.45, 0.85};  // multi-start values
+  std::vector<double> start_roughness = {0.6, 0.9};  // multi-start values (bench fit: knee)
   int max_iterations = 50;
   double function_tolerance = 1e-7;
   bool verbose = false;
