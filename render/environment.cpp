@@ -33,6 +33,22 @@ int FindInterval(const double* cdf, int n, double x) {
   return int(std::clamp(k, 0L, long(n - 1)));
 }
 
+// FindInterval with a guide table of G = guide_size entries (guide[g] = FindInterval(g / G)):
+// the answer for x lies in [guide[g], guide[g + 1]] with g = floor(x G), so the binary search
+// runs over that short range only and returns exactly what FindInterval returns.
+int FindIntervalGuided(const double* cdf, int n, const int* guide, int guide_size, double x) {
+  const int g = std::clamp(int(x * guide_size), 0, guide_size - 1);
+  const int lo = guide[g];
+  const int hi = g + 1 < guide_size ? guide[g + 1] : n - 1;
+  const double* it = std::upper_bound(cdf + lo, cdf + hi + 2, x);
+  const long k = long(it - cdf) - 1;
+  return int(std::clamp(k, long(lo), long(hi)));
+}
+
+void BuildGuide(const double* cdf, int n, int guide_size, int* guide) {
+  for (int g = 0; g < guide_size; ++g) guide[g] = FindInterval(cdf, n, double(g) / guide_size);
+}
+
 // Largest double below 1: keeps uniform inputs inside [0, 1).
 constexpr double kOneMinusEpsilon = 0x1.fffffffffffffp-1;
 
@@ -383,6 +399,12 @@ void Environment::BuildDistribution() {
     for (int j = 1; j < h; ++j) marginal_cdf_[size_t(j)] = double(j) / h;
   }
   marginal_cdf_[size_t(h)] = 1.0;
+  marginal_guide_.assign(size_t(h), 0);
+  BuildGuide(marginal_cdf_.data(), h, h, marginal_guide_.data());
+  conditional_guide_.assign(size_t(h) * size_t(w), 0);
+  for (int j = 0; j < h; ++j)
+    BuildGuide(&conditional_cdf_[size_t(j) * size_t(w + 1)], w, w,
+               &conditional_guide_[size_t(j) * size_t(w)]);
 }
 
 double Environment::TexelDensity(int i, int j) const {
@@ -409,11 +431,13 @@ Vec3<double> Environment::Sample(double u1, double u2, double* pdf, Rgb<double>*
   }
   // Row from the marginal CDF (u2), column from the row's conditional CDF (u1); the remainder
   // of each uniform places the point inside the texel.
-  const int j = FindInterval(marginal_cdf_.data(), height_, u2);
+  const int j = FindIntervalGuided(marginal_cdf_.data(), height_, marginal_guide_.data(),
+                                   height_, u2);
   const double row_lo = marginal_cdf_[size_t(j)], row_hi = marginal_cdf_[size_t(j + 1)];
   const double dv = std::clamp((u2 - row_lo) / (row_hi - row_lo), 0.0, kOneMinusEpsilon);
   const double* cdf = &conditional_cdf_[size_t(j) * size_t(width_ + 1)];
-  const int i = FindInterval(cdf, width_, u1);
+  const int i = FindIntervalGuided(cdf, width_, &conditional_guide_[size_t(j) * size_t(width_)],
+                                   width_, u1);
   const double du = std::clamp((u1 - cdf[i]) / (cdf[i + 1] - cdf[i]), 0.0, kOneMinusEpsilon);
   const double u = (i + du) / width_;
   const double v = 1.0 - (j + dv) / height_;

@@ -77,6 +77,10 @@ class Environment {
   std::string source_;
   // Sampling: marginal CDF over rows, conditional CDF per row (width_ + 1 entries each).
   std::vector<double> marginal_cdf_, conditional_cdf_;
+  // Guide tables (the cutpoint method, Chen & Asau 1974): guide[g] = FindInterval(cdf, g / G)
+  // per CDF, so a lookup searches only between two guide entries. Same result as the full
+  // binary search, a few cache lines instead of ~10 dependent misses per sample.
+  std::vector<int> marginal_guide_, conditional_guide_;
   std::vector<double> row_weight_;
   double total_weight_ = 0.0;
 };
