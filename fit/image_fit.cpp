@@ -144,6 +144,21 @@ class PreviewCost final : public ceres::CostFunction {
   std::vector<int> sizes_;
 };
 
+// Unweighted sum of squared block errors in the fit space for flat parameters x.
+double SquaredError(const SceneData& d, const double* x) {
+  std::vector<Rgb<double>> px;
+  render::EvaluatePreview(*d.cache, x, px);
+  double se = 0.0;
+  for (int b = 0; b < d.blocks(); ++b) {
+    const int b0 = d.block_begin[size_t(b)], b1 = d.block_begin[size_t(b) + 1];
+    Rgb<double> sum(0, 0, 0);
+    for (int i = b0; i < b1; ++i) sum += px[size_t(i)];
+    const Rgb<double> t = Transform(sum * (1.0 / double(b1 - b0)), d.space, d.op, d.exposure);
+    for (int c = 0; c < 3; ++c) se += std::pow(t[c] - d.ref_t[size_t(b)][c], 2);
+  }
+  return se;
+}
+
 double Mean3(const std::vector<float>& rgb, const std::vector<float>& mask) {
   double s = 0;
   size_t n = 0;
@@ -457,16 +472,8 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
     double se = 0.0;
     int count = 0;
     for (const auto& d : data) {
-      std::vector<Rgb<double>> px;
-      render::EvaluatePreview(*d->cache, flat.data(), px);
-      for (int bl = 0; bl < d->blocks(); ++bl) {
-        Rgb<double> sum(0, 0, 0);
-        const int b0 = d->block_begin[size_t(bl)], b1 = d->block_begin[size_t(bl) + 1];
-        for (int i = b0; i < b1; ++i) sum += px[size_t(i)];
-        const Rgb<double> t = Transform(sum * (1.0 / double(b1 - b0)), d->space, d->op, d->exposure);
-        for (int c = 0; c < 3; ++c) se += std::pow(t[c] - d->ref_t[size_t(bl)][c], 2);
-        count += 3;
-      }
+      se += SquaredError(*d, flat.data());
+      count += 3 * d->blocks();
     }
     const double start_rmse = std::sqrt(se / std::max(count, 1));
     if (!best.usable || start_rmse < best_start_rmse) {
@@ -494,17 +501,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
   double total_se = 0.0;
   int total_n = 0;
   for (const auto& d : data) {
-    std::vector<Rgb<double>> px;
-    render::EvaluatePreview(*d->cache, best.preset.values.data(), px);
-    double se = 0.0;
-    for (int b = 0; b < d->blocks(); ++b) {
-      Rgb<double> sum(0, 0, 0);
-      for (int i = d->block_begin[size_t(b)]; i < d->block_begin[size_t(b) + 1]; ++i) sum += px[size_t(i)];
-      const Rgb<double> t = Transform(
-          sum * (1.0 / double(d->block_begin[size_t(b) + 1] - d->block_begin[size_t(b)])), d->space,
-          d->op, d->exposure);
-      for (int c = 0; c < 3; ++c) se += std::pow(t[c] - d->ref_t[size_t(b)][c], 2);
-    }
+    const double se = SquaredError(*d, best.preset.values.data());
     SceneError e;
     e.scene = d->scene_path;
     e.reference = d->reference_path;
