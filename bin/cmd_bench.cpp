@@ -6,9 +6,10 @@
 
 #include <array>
 #include <cstdlib>
-#include <filesystem>
-#include <sstream>
 #include <cstdio>
+#include <filesystem>
+#include <map>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -120,42 +121,94 @@ void BM_Preview(benchmark::State& state, const render::PreviewCache* cache) {
   state.counters["pixels"] = double(cache->pixels.size());
 }
 
-void RunBenchFit(const std::string& fabric_list, int spp, const std::string& csv,
-                 const std::string& png, bool quiet) {
+struct BenchFitArgs {
+  std::string fabrics = "canvas,twill";
+  std::string widths = "64,128,256,512";
+  std::string strides = "0,1";
+  std::string starts = "1,2,3";
+  int spp = 64;
+  std::string csv = "out/bench-fit.csv", png = "out/bench-fit.png";
+};
+
+std::vector<int> IntList(const std::string& text, const char* flag, int lo, int hi) {
+  std::vector<int> out;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    size_t used = 0;
+    int v = 0;
+    try {
+      v = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != item.size() || v < lo || v > hi)
+      throw std::invalid_argument(std::string(flag) + ": '" + item + "' is not an integer in [" +
+                                  std::to_string(lo) + ", " + std::to_string(hi) + "]");
+    out.push_back(v);
+  }
+  if (out.empty()) throw std::invalid_argument(std::string(flag) + ": empty list");
+  return out;
+}
+
+void RunBenchFit(const BenchFitArgs& a, bool quiet) {
   const char* env_root = std::getenv("CLOTHFIT_DATASETS");
   const std::string root = env_root ? env_root : CLOTHFIT_SOURCE_DATASETS;
   std::vector<fit::BenchSetting> settings;
-  for (int level : {3, 4, 5})
-    for (int stride : {0, 1})
-      for (int starts : {1, 2, 3}) settings.push_back({level, stride, starts});
+  for (int width : IntList(a.widths, "--widths", 16, 4096))
+    for (int stride : IntList(a.strides, "--strides", 0, 16))
+      for (int starts : IntList(a.starts, "--starts", 1, 3)) settings.push_back({width, -1, stride, starts});
   std::vector<fit::BenchRow> all;
-  std::stringstream ss(fabric_list);
+  std::stringstream ss(a.fabrics);
   std::string name;
-  std::printf("%-8s %5s %6s %6s %8s %9s\n", "fabric", "level", "stride", "starts", "seconds", "error");
+  std::printf("%-8s %5s %5s %6s %6s %8s %9s\n", "fabric", "width", "level", "stride", "starts",
+              "seconds", "error");
+  const std::vector<std::string> paths = CanonicalScenes();
   while (std::getline(ss, name, ',')) {
     const std::string fabric_path = root + "/fabrics/" + name + ".json";
-    std::vector<render::Scene> scenes;
+    const double weave_period = render::LoadFabric(fabric_path).weave_period_uv;
+    // Everything loaded here outlives the bench: scenes, environments and references per width.
+    std::map<int, std::vector<render::Scene>> scenes;
+    std::map<int, std::vector<fit::Reference>> refs;
     std::vector<std::unique_ptr<render::Environment>> envs;
-    std::vector<fit::Reference> refs;
-    const std::vector<std::string> paths = CanonicalScenes();
+    for (const std::string& sp : paths) envs.push_back(LoadSceneEnvironment(render::LoadScene(sp), true));
+    auto inputs_at = [&](int width) {
+      auto& sc = scenes[width];
+      auto& rr = refs[width];
+      sc.clear();
+      rr.clear();
+      for (const std::string& sp : paths) {
+        sc.push_back(LoadSceneAtWidth(sp, width));
+        rr.push_back(fit::ReadReference(CachedReference(sp, fabric_path, a.spp, 1, quiet, width)));
+      }
+      std::vector<fit::SceneInput> in;
+      for (size_t i = 0; i < paths.size(); ++i) in.push_back({&sc[i], envs[i].get(), &rr[i], nullptr, paths[i]});
+      return in;
+    };
+    // The common measure is taken at the cards' own resolution (key -1 keeps it apart from a
+    // bench width equal to the card's).
+    std::vector<render::Scene> common_scenes;
+    std::vector<fit::Reference> common_refs;
     for (const std::string& sp : paths) {
-      refs.push_back(fit::ReadReference(CachedReference(sp, fabric_path, spp, 1, quiet)));
-      scenes.push_back(render::LoadScene(sp));
-      envs.push_back(LoadSceneEnvironment(scenes.back(), true));
+      common_scenes.push_back(render::LoadScene(sp));
+      common_refs.push_back(fit::ReadReference(CachedReference(sp, fabric_path, a.spp, 1, quiet)));
     }
-    std::vector<fit::SceneInput> inputs;
-    for (size_t i = 0; i < scenes.size(); ++i)
-      inputs.push_back({&scenes[i], envs[i].get(), &refs[i], nullptr, paths[i]});
+    std::vector<fit::SceneInput> common;
+    for (size_t i = 0; i < paths.size(); ++i)
+      common.push_back({&common_scenes[i], envs[i].get(), &common_refs[i], nullptr, paths[i]});
     fit::FitOptions base;
     base.start = render::DefaultPreset(render::ModelKind::kCloth);
-    const auto rows = fit::RunFitBench(name, inputs, base, settings, [](const fit::BenchRow& r) {
-      std::printf("%-8s %5d %6s %6d %8.2f %9.5f%s\n", r.fabric.c_str(), r.setting.level,
+    const auto rows = fit::RunFitBench(name, inputs_at, common, weave_period, base, settings,
+                                       [](const fit::BenchRow& r) {
+      std::printf("%-8s %5d %5d %6s %6d %8.2f %9.5f%s\n", r.fabric.c_str(), r.width, r.level,
                   r.setting.stride == 0 ? "auto" : std::to_string(r.setting.stride).c_str(),
                   r.setting.starts, r.seconds, r.error, r.usable ? "" : "  (unusable)");
       std::fflush(stdout);
     });
     all.insert(all.end(), rows.begin(), rows.end());
   }
+  const std::string& csv = a.csv;
+  const std::string& png = a.png;
   std::filesystem::create_directories(std::filesystem::path(csv).parent_path().empty()
                                           ? std::filesystem::path(".")
                                           : std::filesystem::path(csv).parent_path());
@@ -173,25 +226,26 @@ void AddBenchCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto scene = std::make_shared<std::string>(std::string(CLOTHFIT_SOURCE_DATASETS) +
                                              "/scenes/sphere.json");
   CLI::App* cmd = app.add_subcommand("bench", "benchmarks (Google Benchmark)");
-  auto fabrics = std::make_shared<std::string>("canvas,twill");
-  auto spp = std::make_shared<int>(64);
-  auto csv = std::make_shared<std::string>("out/bench-fit.csv");
-  auto png = std::make_shared<std::string>("out/bench-fit.png");
+  auto fa = std::make_shared<BenchFitArgs>();
   cmd->add_option("what", *what, "what to benchmark: brdf | preview | fit")
       ->required()
       ->check(CLI::IsMember({"brdf", "preview", "fit"}));
-  cmd->add_option("--fabrics", *fabrics, "`bench fit`: comma-separated fabric names");
-  cmd->add_option("--spp", *spp, "`bench fit`: reference samples per pixel (cached)");
-  cmd->add_option("--csv", *csv, "`bench fit`: output CSV");
-  cmd->add_option("--png", *png, "`bench fit`: output plot (error vs time)");
+  cmd->add_option("--fabrics", fa->fabrics, "`bench fit`: comma-separated fabric names");
+  cmd->add_option("--widths", fa->widths, "`bench fit`: fit resolutions (image widths, px)");
+  cmd->add_option("--strides", fa->strides, "`bench fit`: pixel strides (0 = auto)");
+  cmd->add_option("--starts", fa->starts, "`bench fit`: multi-start counts (1-3)");
+  cmd->add_option("--spp", fa->spp, "`bench fit`: reference samples per pixel (cached)")
+      ->check(CLI::Range(16, 65536));
+  cmd->add_option("--csv", fa->csv, "`bench fit`: output CSV");
+  cmd->add_option("--png", fa->png, "`bench fit`: output plot (error vs time)");
   cmd->add_option("--scene", *scene, "scene card for `bench preview`");
   cmd->allow_extras();
-  cmd->callback([cmd, what, scene, fabrics, spp, csv, png, &g, &exit_code]() {
+  cmd->callback([cmd, what, scene, fa, &g, &exit_code]() {
     (void)lut::DefaultDfg();  // tables are built once, outside the timed loops
     (void)lut::DefaultSheenAlbedo();
     if (*what == "fit") {
       try {
-        RunBenchFit(*fabrics, *spp, *csv, *png, g.quiet);
+        RunBenchFit(*fa, g.quiet);
         exit_code = 0;
       } catch (const std::exception& e) {
         std::fprintf(stderr, "clothfit bench fit: error: %s\n", e.what());

@@ -1,6 +1,8 @@
 // clothfit fit: fit a material preset so the preview matches path-traced references.
 #include <tbb/global_control.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -55,12 +57,24 @@ std::string CacheDir() {
 // Renders (or reuses) the reference of `fabric_path` on `scene_path`. The cache key hashes
 // the contents of every input (scene card, glTF, fabric, weave file) and the settings, so a
 // changed input re-renders and an unchanged one never does.
+render::Scene LoadSceneAtWidth(const std::string& scene_path, int width) {
+  render::Scene scene = render::LoadScene(scene_path);
+  if (width > 0 && width != scene.card.width) {
+    const double aspect = double(scene.card.height) / double(scene.card.width);
+    scene.card.width = width;
+    scene.card.height = std::max(1, int(std::lround(width * aspect)));
+  }
+  return scene;
+}
+
 std::string CachedReference(const std::string& scene_path, const std::string& fabric_path,
-                            int spp, uint64_t seed, bool quiet) {
-  const render::Scene scene = render::LoadScene(scene_path);
+                            int spp, uint64_t seed, bool quiet, int width) {
+  const render::Scene scene = LoadSceneAtWidth(scene_path, width);
   std::string key_text = "clothfit-reference-v1|" + std::to_string(spp) + "|" +
                          std::to_string(seed) + "|" + ReadFileOrEmpty(scene_path) + "|" +
                          ReadFileOrEmpty(scene.card.gltf) + "|" + ReadFileOrEmpty(fabric_path);
+  // The card's own size is already in its content; an override is part of the key.
+  if (width > 0) key_text += "|width=" + std::to_string(scene.card.width) + "x" + std::to_string(scene.card.height);
   // The fabric's weave file (the default location next to the fabric file).
   const render::Fabric fabric = render::LoadFabric(fabric_path);
   const fs::path weave = fs::path(fabric_path).parent_path() / ".." / "weaves" / (fabric.preset + ".weave");
@@ -138,6 +152,17 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
       if (a->threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                       size_t(a->threads));
+      int fixed_level = -1;  // validated before any work
+      if (a->level != "auto") {
+        size_t used = 0;
+        try {
+          fixed_level = std::stoi(a->level, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used == 0 || used != a->level.size() || fixed_level < 0 || fixed_level > 6)
+          throw std::invalid_argument("--level: '" + a->level + "' is not an integer in [0, 6] or auto");
+      }
       std::vector<std::string> refs, refs2, scenes;
       const double weave_period = a->fabric.empty() ? 0.0 : render::LoadFabric(a->fabric).weave_period_uv;
       if (!a->fabric.empty()) {
@@ -199,17 +224,10 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
         rr.push_back(fit::ReadReference(refs[i]));
         if (!refs2.empty()) rr2.push_back(fit::ReadReference(refs2[i]));
       }
-      if (a->level == "auto") {
-        o.level = weave_period > 0 ? fit::AutoLevel(sc[0], weave_period) : 2;
-        for (size_t i = 1; i < sc.size() && weave_period > 0; ++i)
-          o.level = std::max(o.level, fit::AutoLevel(sc[i], weave_period));
-      } else {
-        o.level = std::stoi(a->level);
-        if (o.level < 0 || o.level > 6) throw std::invalid_argument("--level must be in [0, 6] or auto");
-      }
       std::vector<fit::SceneInput> inputs;
       for (size_t i = 0; i < sc.size(); ++i)
         inputs.push_back({&sc[i], envs[i].get(), &rr[i], rr2.empty() ? nullptr : &rr2[i], scenes[i]});
+      o.level = a->level == "auto" ? fit::AutoLevel(inputs, weave_period) : fixed_level;
       const fit::FitResult res = fit::FitImages(inputs, o);
       if (!res.usable) {
         std::fprintf(stderr, "clothfit fit: error: the fit failed (%s); no preset written\n",

@@ -30,9 +30,12 @@ void AddTonemapCommand(CLI::App& app, const Globals& g, int& exit_code);
 // The scene's environment: the card's map, or the procedural sky (warning on stderr unless
 // quiet) when the map is not installed; null when the card has no environment.
 std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& scene, bool quiet);
-// Renders (or reuses from the content-keyed cache) a reference; returns its path.
+// Renders (or reuses from the content-keyed cache) a reference; returns its path. `width` > 0
+// overrides the card's image width (height scaled to keep the aspect ratio; same camera).
 std::string CachedReference(const std::string& scene_path, const std::string& fabric_path,
-                            int spp, uint64_t seed, bool quiet);
+                            int spp, uint64_t seed, bool quiet, int width = 0);
+// The scene card with its image width overridden as above (width <= 0: unchanged).
+render::Scene LoadSceneAtWidth(const std::string& scene_path, int width);
 // The canonical scene cards (datasets/scenes/{sphere,drape,swatch}.json).
 std::vector<std::string> CanonicalScenes();
 // Linear RGB frame -> display RGB in [0, 1] (tone mapping + sRGB).

@@ -7,6 +7,7 @@
 #include <map>
 #include <sstream>
 
+#include "fit/plot.h"
 #include "render/image_io.h"
 
 namespace clothfit::fit {
@@ -60,13 +61,23 @@ double CommonError(const std::vector<SceneInput>& inputs, const render::Material
   return scenes ? total / scenes : std::numeric_limits<double>::quiet_NaN();
 }
 
-std::vector<BenchRow> RunFitBench(const std::string& fabric, const std::vector<SceneInput>& inputs,
+std::vector<BenchRow> RunFitBench(const std::string& fabric,
+                                  const std::function<std::vector<SceneInput>(int width)>& inputs_at,
+                                  const std::vector<SceneInput>& common, double weave_period_uv,
                                   const FitOptions& base, const std::vector<BenchSetting>& settings,
                                   const std::function<void(const BenchRow&)>& log) {
   std::vector<BenchRow> rows;
+  std::map<int, std::vector<SceneInput>> by_width;  // fit inputs per resolution, built once
+  std::map<int, int> auto_level;
   for (const BenchSetting& st : settings) {
+    auto it = by_width.find(st.width);
+    if (it == by_width.end()) {
+      it = by_width.emplace(st.width, inputs_at(st.width)).first;
+      auto_level[st.width] = AutoLevel(it->second, weave_period_uv);
+    }
+    const std::vector<SceneInput>& inputs = it->second;
     FitOptions o = base;
-    o.level = st.level;
+    o.level = st.level >= 0 ? st.level : auto_level[st.width];
     o.pixel_stride = st.stride;
     // Nested start sets, so more starts can only find a lower fit-space error.
     o.start_roughness = st.starts == 1   ? std::vector<double>{0.6}
@@ -75,6 +86,8 @@ std::vector<BenchRow> RunFitBench(const std::string& fabric, const std::vector<S
     BenchRow row;
     row.fabric = fabric;
     row.setting = st;
+    row.width = inputs.empty() ? 0 : inputs.front().scene->card.width;
+    row.level = o.level;
     const auto t0 = std::chrono::steady_clock::now();
     FitResult r;
     try {
@@ -84,7 +97,7 @@ std::vector<BenchRow> RunFitBench(const std::string& fabric, const std::vector<S
     }
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     row.usable = r.usable;
-    row.error = r.usable ? CommonError(inputs, r.preset) : std::numeric_limits<double>::quiet_NaN();
+    row.error = r.usable ? CommonError(common, r.preset) : std::numeric_limits<double>::quiet_NaN();
     if (log) log(row);
     rows.push_back(row);
   }
@@ -93,21 +106,15 @@ std::vector<BenchRow> RunFitBench(const std::string& fabric, const std::vector<S
 
 namespace {
 
-void Plot(std::vector<float>& img, int W, int H, int x, int y, const float rgb[3], int r) {
-  for (int dy = -r; dy <= r; ++dy)
-    for (int dx = -r; dx <= r; ++dx) {
-      const int px = x + dx, py = y + dy;
-      if (px < 0 || py < 0 || px >= W || py >= H) continue;
-      for (int c = 0; c < 3; ++c) img[(size_t(py) * size_t(W) + size_t(px)) * 3 + size_t(c)] = rgb[c];
-    }
+std::string Fmt(const char* f, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
 }
 
-void Line(std::vector<float>& img, int W, int H, int x0, int y0, int x1, int y1, const float rgb[3]) {
-  const int steps = std::max(std::abs(x1 - x0), std::abs(y1 - y0)) + 1;
-  for (int i = 0; i <= steps; ++i) {
-    const double t = double(i) / steps;
-    Plot(img, W, H, int(std::lround(x0 + t * (x1 - x0))), int(std::lround(y0 + t * (y1 - y0))), rgb, 0);
-  }
+std::string CurveName(const BenchRow& r) {
+  return std::string("stride ") + (r.setting.stride == 0 ? "auto" : std::to_string(r.setting.stride)) +
+         ", " + std::to_string(r.setting.starts) + (r.setting.starts == 1 ? " start" : " starts");
 }
 
 }  // namespace
@@ -115,54 +122,82 @@ void Line(std::vector<float>& img, int W, int H, int x0, int y0, int x1, int y1,
 void WriteFitBench(const std::vector<BenchRow>& rows, const std::string& csv_path,
                    const std::string& png_path) {
   std::ostringstream csv;
-  csv << "fabric,level,stride,starts,seconds,error,usable\n";
+  csv << "fabric,width,level,stride,starts,seconds,error,usable\n";
   for (const BenchRow& r : rows) {
-    csv << r.fabric << "," << r.setting.level << "," << r.setting.stride << "," << r.setting.starts
-        << "," << r.seconds << "," << r.error << "," << (r.usable ? 1 : 0) << "\n";
+    csv << r.fabric << "," << r.width << "," << r.level << "," << r.setting.stride << ","
+        << r.setting.starts << "," << r.seconds << "," << r.error << "," << (r.usable ? 1 : 0) << "\n";
   }
   io::WriteTextAtomic(csv_path, csv.str());
 
-  const int W = 640, H = 400, M = 40;
-  std::vector<float> img(size_t(W) * size_t(H) * 3, 1.0f);
-  double tmin = 1e30, tmax = 0, emin = 1e30, emax = 0;
+  // One panel per fabric; one curve per (stride, starts) across resolutions.
+  std::vector<std::string> fabrics;
+  std::vector<std::string> curves;
   for (const BenchRow& r : rows) {
-    if (!r.usable || !std::isfinite(r.error)) continue;
-    tmin = std::min(tmin, r.seconds);
-    tmax = std::max(tmax, r.seconds);
-    emin = std::min(emin, r.error);
-    emax = std::max(emax, r.error);
+    if (std::find(fabrics.begin(), fabrics.end(), r.fabric) == fabrics.end()) fabrics.push_back(r.fabric);
+    if (std::find(curves.begin(), curves.end(), CurveName(r)) == curves.end()) curves.push_back(CurveName(r));
   }
-  if (tmax <= 0) tmin = 0.1, tmax = 1, emin = 0, emax = 1;
-  const double lt0 = std::log(tmin * 0.8), lt1 = std::log(tmax * 1.25);
-  const double e0 = emin * 0.95, e1 = emax * 1.05 + 1e-12;
-  auto X = [&](double t) { return M + int((std::log(t) - lt0) / (lt1 - lt0) * (W - 2 * M)); };
-  auto Y = [&](double e) { return H - M - int((e - e0) / (e1 - e0) * (H - 2 * M)); };
-  const float axis[3] = {0.f, 0.f, 0.f};
-  Line(img, W, H, M, H - M, W - M, H - M, axis);
-  Line(img, W, H, M, H - M, M, M, axis);
-  const float palette[6][3] = {{0.85f, 0.1f, 0.1f}, {0.1f, 0.45f, 0.85f}, {0.1f, 0.6f, 0.2f},
-                               {0.8f, 0.5f, 0.0f},  {0.5f, 0.2f, 0.7f},   {0.3f, 0.3f, 0.3f}};
-  std::map<std::string, int> curve;
-  std::map<std::string, std::vector<const BenchRow*>> members;
-  for (const BenchRow& r : rows) {
-    if (!r.usable || !std::isfinite(r.error)) continue;
-    const std::string key = r.fabric + "/s" + std::to_string(r.setting.stride) + "/n" +
-                            std::to_string(r.setting.starts);
-    if (!curve.count(key)) curve[key] = int(curve.size());
-    members[key].push_back(&r);
-  }
-  for (auto& [key, list] : members) {
-    const float* col = palette[curve[key] % 6];
-    std::sort(list.begin(), list.end(),
-              [](const BenchRow* a, const BenchRow* b) { return a->setting.level < b->setting.level; });
-    for (size_t i = 0; i < list.size(); ++i) {
-      Plot(img, W, H, X(list[i]->seconds), Y(list[i]->error), col, 3);
-      if (i > 0)
-        Line(img, W, H, X(list[i - 1]->seconds), Y(list[i - 1]->error), X(list[i]->seconds),
-             Y(list[i]->error), col);
+  const int PW = 460, PH = 360, L = 70, T = 40, B = 50, legend_h = 24 * int((curves.size() + 2) / 3) + 20;
+  const int W = std::max(940, std::max<int>(1, int(fabrics.size())) * (PW + L) + 20);
+  const int H = T + PH + B + legend_h;
+  Canvas cv(W, H);
+  const Colour black{0, 0, 0}, grey{0.85f, 0.85f, 0.85f}, dark{0.3f, 0.3f, 0.3f};
+  const Colour palette[6] = {{0.85f, 0.1f, 0.1f}, {0.1f, 0.45f, 0.85f}, {0.1f, 0.6f, 0.2f},
+                             {0.8f, 0.5f, 0.0f},  {0.5f, 0.2f, 0.7f},   {0.3f, 0.3f, 0.3f}};
+  cv.Text(10, 22, "clothfit bench fit: error (display RMSE at the card resolution) vs fit wall time", 16, black);
+  for (size_t f = 0; f < fabrics.size(); ++f) {
+    const int x0 = int(f) * (PW + L) + L, y0 = T;  // panel's top-left
+    double tmin = 1e30, tmax = 0, emin = 1e30, emax = 0;
+    for (const BenchRow& r : rows) {
+      if (r.fabric != fabrics[f] || !r.usable || !std::isfinite(r.error)) continue;
+      tmin = std::min(tmin, r.seconds);
+      tmax = std::max(tmax, r.seconds);
+      emin = std::min(emin, r.error);
+      emax = std::max(emax, r.error);
+    }
+    if (tmax <= 0) tmin = 0.1, tmax = 1, emin = 0, emax = 1;
+    const double lt0 = std::log(tmin / 1.3), lt1 = std::log(tmax * 1.3);
+    const double pad = std::max(1e-6, 0.06 * (emax - emin));
+    const double e0 = emin - pad, e1 = emax + pad;
+    auto X = [&](double t) { return x0 + int((std::log(t) - lt0) / (lt1 - lt0) * PW); };
+    auto Y = [&](double e) { return y0 + PH - int((e - e0) / (e1 - e0) * PH); };
+    for (double t : LogTicks(std::exp(lt0), std::exp(lt1))) {
+      cv.Line(X(t), y0, X(t), y0 + PH, grey);
+      cv.Text(X(t) - 8, y0 + PH + 16, t < 1 ? Fmt("%.1f", t) : Fmt("%.0f", t), 12, dark);
+    }
+    for (double e : LinearTicks(e0, e1, 6)) {
+      cv.Line(x0, Y(e), x0 + PW, Y(e), grey);
+      cv.Text(x0 - 52, Y(e) + 4, Fmt("%.4f", e), 12, dark);
+    }
+    cv.Line(x0, y0 + PH, x0 + PW, y0 + PH, black);
+    cv.Line(x0, y0, x0, y0 + PH, black);
+    cv.Text(x0 + 4, y0 + 14, fabrics[f], 14, black);
+    cv.Text(x0 + PW / 2 - 30, y0 + PH + 34, "seconds", 12, dark);
+    for (size_t c = 0; c < curves.size(); ++c) {
+      std::vector<const BenchRow*> list;
+      for (const BenchRow& r : rows)
+        if (r.fabric == fabrics[f] && CurveName(r) == curves[c] && r.usable && std::isfinite(r.error))
+          list.push_back(&r);
+      std::sort(list.begin(), list.end(),
+                [](const BenchRow* a, const BenchRow* b) { return a->width < b->width; });
+      const Colour& col = palette[c % 6];
+      for (size_t i = 0; i < list.size(); ++i) {
+        cv.Dot(X(list[i]->seconds), Y(list[i]->error), col, 3);
+        if (i > 0)
+          cv.Line(X(list[i - 1]->seconds), Y(list[i - 1]->error), X(list[i]->seconds),
+                  Y(list[i]->error), col);
+        if (c == 0)  // resolution labels on the first curve
+          cv.Text(X(list[i]->seconds) + 5, Y(list[i]->error) - 5, std::to_string(list[i]->width) + "px",
+                  11, col);
+      }
     }
   }
-  io::WritePng8(png_path, W, H, img);
+  for (size_t c = 0; c < curves.size(); ++c) {
+    const int lx = 20 + int(c % 3) * 300, ly = T + PH + B + 10 + 24 * int(c / 3);
+    cv.Line(lx, ly, lx + 24, ly, palette[c % 6]);
+    cv.Dot(lx + 12, ly, palette[c % 6], 3);
+    cv.Text(lx + 32, ly + 5, curves[c], 13, black);
+  }
+  cv.WritePng(png_path);
 }
 
 }  // namespace clothfit::fit

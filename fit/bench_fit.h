@@ -6,6 +6,7 @@
 // 16 x 16 blocks that are fabric in both (level 4, every pixel), averaged over the scenes.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -14,14 +15,16 @@
 namespace clothfit::fit {
 
 struct BenchSetting {
-  int level = 4;
-  int stride = 0;  // 0 = auto
-  int starts = 2;
+  int width = 0;    // fit resolution: image width in pixels (0 = the scene card's)
+  int level = -1;   // block level; -1 = auto (from the weave scale at this resolution)
+  int stride = 0;   // pixel stride per block axis; 0 = auto (at most 4 x 4 per block)
+  int starts = 2;   // multi-start count (nested sets: {0.6}, {0.6, 0.9}, {0.6, 0.9, 0.3})
 };
 
 struct BenchRow {
   std::string fabric;
   BenchSetting setting;
+  int width = 0, level = 0;  // the resolution and block level actually used
   double seconds = 0.0;      // FitImages wall time (caches included)
   double error = 0.0;        // the common measure
   bool usable = false;
@@ -30,13 +33,18 @@ struct BenchRow {
 // Common error measure of a preset on the inputs (see above).
 double CommonError(const std::vector<SceneInput>& inputs, const render::MaterialPreset& preset);
 
-// Runs every setting on `inputs` (one fabric). `log` gets one line per finished setting.
-std::vector<BenchRow> RunFitBench(const std::string& fabric, const std::vector<SceneInput>& inputs,
+// Runs every setting for one fabric. `inputs_at(width)` returns the fit inputs (scenes and
+// references) at a resolution (0 = the cards'); `common` are the card-resolution inputs the
+// common measure is taken on. `log` gets one line per finished setting.
+std::vector<BenchRow> RunFitBench(const std::string& fabric,
+                                  const std::function<std::vector<SceneInput>(int width)>& inputs_at,
+                                  const std::vector<SceneInput>& common, double weave_period_uv,
                                   const FitOptions& base, const std::vector<BenchSetting>& settings,
                                   const std::function<void(const BenchRow&)>& log = {});
 
-// Writes rows as CSV (atomically) and an error-vs-time scatter plot as PNG: x = seconds (log
-// scale), y = error; one polyline per (stride, starts) curve across levels, colour by curve.
+// Writes rows as CSV (atomically) and an error-vs-time plot as PNG: x = seconds (log scale),
+// y = error; one polyline per (fabric, stride, starts) across resolutions, with axis ticks and a
+// legend when a TrueType font is installed (DejaVu Sans; without it the plot has no text).
 void WriteFitBench(const std::vector<BenchRow>& rows, const std::string& csv_path,
                    const std::string& png_path);
 

@@ -259,6 +259,14 @@ int AutoLevel(const render::Scene& scene, double weave_period_uv, int max_level)
   return level;
 }
 
+int AutoLevel(const std::vector<SceneInput>& inputs, double weave_period_uv, int max_level) {
+  if (weave_period_uv <= 0.0 || inputs.empty()) return 2;
+  int level = 1;
+  for (const SceneInput& in : inputs)
+    level = std::max(level, AutoLevel(*in.scene, weave_period_uv, max_level));
+  return level;
+}
+
 std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
                                       const render::MaterialPreset& preset) {
   render::PreviewOptions o;

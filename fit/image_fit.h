@@ -109,6 +109,9 @@ struct FitResult {
 // Block size from the weave scale: the smallest level whose block spans at least two weave
 // periods in pixels at the median fabric pixel (uv footprint measured from the G-buffer).
 int AutoLevel(const render::Scene& scene, double weave_period_uv, int max_level = 5);
+// The level for a joint fit: the largest AutoLevel over the scenes (every scene's blocks must
+// average the weave out). weave_period_uv <= 0 (no weave known): level 2.
+int AutoLevel(const std::vector<SceneInput>& inputs, double weave_period_uv, int max_level = 5);
 
 // The fit. Throws FitError on bad input (mismatched sizes, no usable blocks, infeasible
 // start); returns usable = false when the solver fails.

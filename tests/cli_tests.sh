@@ -60,6 +60,13 @@ PY
     "$BIN" stress --evals abc 2>/dev/null && fail "non-numeric --evals accepted"
     "$BIN" lut --out "$TMP/y.exr" --frobnicate 2>/dev/null && fail "unknown flag accepted"
     [ ! -e "$TMP/x.exr" ] || fail "output written despite error"
+    err=$("$BIN" --quiet bench fit --widths 64,abc --csv "$TMP/b.csv" 2>&1) && fail "bad --widths accepted"
+    echo "$err" | grep -q -- "--widths: 'abc'" || fail "error does not name --widths: $err"
+    err=$("$BIN" --quiet bench fit --starts 4 --csv "$TMP/b.csv" 2>&1) && fail "--starts 4 accepted"
+    echo "$err" | grep -q -- "--starts" || fail "error does not name --starts: $err"
+    err=$("$BIN" --quiet fit --fabric x.json --level 3x --out "$TMP/f.json" 2>&1) && fail "--level 3x accepted"
+    echo "$err" | grep -q -- "--level: '3x'" || fail "error does not name --level: $err"
+    [ ! -e "$TMP/b.csv" ] || fail "bench wrote a CSV despite bad arguments"
     ;;
   bench)
     out=$("$BIN" bench brdf --benchmark_filter='cloth/filament/' --benchmark_min_time=0.01 2>&1) \
