@@ -7,7 +7,15 @@
 #include <type_traits>
 #include <atomic>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
 #include <vector>
+
+#include <unistd.h>
 
 #include "brdf/terms.h"
 
@@ -161,44 +169,168 @@ void ParallelRows(int rows, const Progress& progress, RowFn fn) {
 }
 }  // namespace
 
-Table2D ComputeDfg(const Settings& s, const Progress& progress) {
-  Table2D t(s.size, s.size, 3);
-  t.u_axis = "NoV = (i + 0.5) / N";
-  t.v_axis = "perceptual roughness r = (j + 0.5) / N; alpha = r^2";
+namespace {
+
+// One texel of each table; ComputeX and the cache's spot check both use these, so a cached
+// texel and a recomputed one are bit-identical unless the integrator changed.
+void DfgTexel(int i, int j, const Settings& s, float* out) {
+  const double r = Table2D::Centre(j, s.size), NoV = Table2D::Centre(i, s.size);
+  double A, B;
+  IntegrateGgx(NoV, r, s, A, B);
+  out[0] = float(A);
+  out[1] = float(B);
+  out[2] = float(IntegrateClothDg(NoV, r, s));
+}
+
+void SheenTexel(int i, int j, const Settings& s, float* out) {
+  out[0] = float(IntegrateSheenAlbedo(Table2D::Centre(i, s.size), Table2D::Centre(j, s.size), s));
+}
+
+using TexelFn = void (*)(int, int, const Settings&, float*);
+
+Table2D Compute(const Settings& s, int channels, TexelFn texel, const Progress& progress) {
+  Table2D t(s.size, s.size, channels);
   ParallelRows(s.size, progress, [&](int j) {
-    const double r = Table2D::Centre(j, s.size);
-    for (int i = 0; i < s.size; ++i) {
-      const double NoV = Table2D::Centre(i, s.size);
-      double A, B;
-      IntegrateGgx(NoV, r, s, A, B);
-      t.at(i, j, 0) = float(A);
-      t.at(i, j, 1) = float(B);
-      t.at(i, j, 2) = float(IntegrateClothDg(NoV, r, s));
-    }
+    for (int i = 0; i < s.size; ++i) texel(i, j, s, &t.at(i, j, 0));
   });
+  return t;
+}
+
+// ---- On-disk cache of the default tables ---------------------------------------------------
+// Building the DFG table costs ~0.8 s of quadrature on 2 cores, paid by every process that
+// touches the IBL (fit, preview, report...). The tables are cached as raw float files in
+// $CLOTHFIT_TABLE_CACHE (default ${XDG_CACHE_HOME:-$HOME/.cache}/clothfit/tables; "off"
+// disables). A cached file is used only if (1) its header matches the table's name, size and
+// quadrature settings, (2) the FNV-1a checksum of its floats matches (corruption), and (3) 16
+// spot texels recomputed now are bit-identical to the cached ones (a file left by an older
+// integrator: any change to the integrand or quadrature moves these values). Otherwise the
+// table is recomputed and the file rewritten atomically (temporary file + rename).
+
+uint64_t Fnv1a(const void* data, size_t n) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (size_t i = 0; i < n; ++i) {
+    h ^= p[i];
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+std::string CacheDir() {
+  if (const char* d = std::getenv("CLOTHFIT_TABLE_CACHE")) return d;
+  if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::string(x) + "/clothfit/tables";
+  if (const char* h = std::getenv("HOME"); h && *h) return std::string(h) + "/.cache/clothfit/tables";
+  return "";
+}
+
+std::string Header(const std::string& name, const Settings& s, int channels) {
+  return "clothfit-table v1 " + name + " size=" + std::to_string(s.size) +
+         " gl=" + std::to_string(s.gauss_legendre_order) + " az=" + std::to_string(s.azimuth_samples) +
+         " channels=" + std::to_string(channels) + "\n";
+}
+
+bool SpotCheck(const Table2D& t, const Settings& s, TexelFn texel) {
+  for (int k = 0; k < 16; ++k) {
+    // Deterministic spread over the table, corners included.
+    const int i = k == 0 ? 0 : k == 1 ? s.size - 1 : int((uint32_t(k) * 2654435761u) % uint32_t(s.size));
+    const int j = k == 0 ? 0 : k == 1 ? s.size - 1 : int((uint32_t(k) * 40503u + 7u) % uint32_t(s.size));
+    float v[4] = {0, 0, 0, 0};
+    texel(i, j, s, v);
+    for (int c = 0; c < t.channels; ++c)
+      if (std::memcmp(&v[c], &t.data[(size_t(j) * size_t(t.width) + size_t(i)) * size_t(t.channels) + size_t(c)],
+                      sizeof(float)) != 0)
+        return false;
+  }
+  return true;
+}
+
+std::optional<Table2D> ReadCached(const std::string& path, const std::string& header,
+                                  const Settings& s, int channels, TexelFn texel) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return std::nullopt;
+  std::string line;
+  if (!std::getline(in, line) || line + "\n" != header) return std::nullopt;
+  Table2D t(s.size, s.size, channels);
+  uint64_t sum = 0;
+  in.read(reinterpret_cast<char*>(t.data.data()), std::streamsize(t.data.size() * sizeof(float)));
+  in.read(reinterpret_cast<char*>(&sum), sizeof sum);
+  if (!in || in.peek() != std::char_traits<char>::eof()) return std::nullopt;
+  if (sum != Fnv1a(t.data.data(), t.data.size() * sizeof(float))) return std::nullopt;
+  if (!SpotCheck(t, s, texel)) return std::nullopt;
+  return t;
+}
+
+void WriteCached(const std::string& path, const std::string& header, const Table2D& t) {
+  std::error_code ec;
+  std::filesystem::create_directories(std::filesystem::path(path).parent_path(), ec);
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    const uint64_t sum = Fnv1a(t.data.data(), t.data.size() * sizeof(float));
+    out << header;
+    out.write(reinterpret_cast<const char*>(t.data.data()), std::streamsize(t.data.size() * sizeof(float)));
+    out.write(reinterpret_cast<const char*>(&sum), sizeof sum);
+    if (!out) {
+      std::filesystem::remove(tmp, ec);
+      return;  // a cache that cannot be written is not an error: the table is still correct
+    }
+  }
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) std::filesystem::remove(tmp, ec);
+}
+
+Table2D LoadOrCompute(const std::string& name, const Settings& s, int channels, TexelFn texel,
+                      const char* u_axis, const char* v_axis) {
+  const std::string dir = CacheDir();
+  const bool use_cache = !dir.empty() && dir != "off";
+  const std::string header = Header(name, s, channels);
+  const std::string path = use_cache ? dir + "/" + name + "-" + std::to_string(s.size) + ".bin" : "";
+  std::optional<Table2D> t;
+  if (use_cache) t = ReadCached(path, header, s, channels, texel);
+  if (!t) {
+    t = Compute(s, channels, texel, {});
+    if (use_cache) WriteCached(path, header, *t);
+  }
+  t->u_axis = u_axis;
+  t->v_axis = v_axis;
+  return std::move(*t);
+}
+
+constexpr const char* kNoVAxis = "NoV = (i + 0.5) / N";
+constexpr const char* kDfgVAxis = "perceptual roughness r = (j + 0.5) / N; alpha = r^2";
+constexpr const char* kSheenVAxis = "sheen roughness r_s = (j + 0.5) / N; alpha = r_s^2";
+
+}  // namespace
+
+Table2D ComputeDfg(const Settings& s, const Progress& progress) {
+  Table2D t = Compute(s, 3, DfgTexel, progress);
+  t.u_axis = kNoVAxis;
+  t.v_axis = kDfgVAxis;
   return t;
 }
 
 Table2D ComputeSheenAlbedo(const Settings& s, const Progress& progress) {
-  Table2D t(s.size, s.size, 1);
-  t.u_axis = "NoV = (i + 0.5) / N";
-  t.v_axis = "sheen roughness r_s = (j + 0.5) / N; alpha = r_s^2";
-  ParallelRows(s.size, progress, [&](int j) {
-    const double r = Table2D::Centre(j, s.size);
-    for (int i = 0; i < s.size; ++i) {
-      t.at(i, j, 0) = float(IntegrateSheenAlbedo(Table2D::Centre(i, s.size), r, s));
-    }
-  });
+  Table2D t = Compute(s, 1, SheenTexel, progress);
+  t.u_axis = kNoVAxis;
+  t.v_axis = kSheenVAxis;
   return t;
 }
 
+Table2D CachedDfg(const Settings& s) {
+  return LoadOrCompute("dfg", s, 3, DfgTexel, kNoVAxis, kDfgVAxis);
+}
+
+Table2D CachedSheenAlbedo(const Settings& s) {
+  return LoadOrCompute("sheen-albedo", s, 1, SheenTexel, kNoVAxis, kSheenVAxis);
+}
+
 const Table2D& DefaultDfg() {
-  static const Table2D table = ComputeDfg(Settings{128});
+  static const Table2D table = CachedDfg(Settings{128});
   return table;
 }
 
 const Table2D& DefaultSheenAlbedo() {
-  static const Table2D table = ComputeSheenAlbedo(Settings{32});
+  static const Table2D table = CachedSheenAlbedo(Settings{32});
   return table;
 }
 

@@ -44,8 +44,15 @@ void IntegrateGgx(double NoV, double r, const Settings& s, double& A, double& B)
 double IntegrateClothDg(double NoV, double r, const Settings& s = {});
 double IntegrateSheenAlbedo(double NoV, double r, const Settings& s = {});
 
+// The same tables through an on-disk cache ($CLOTHFIT_TABLE_CACHE, default
+// ~/.cache/clothfit/tables; "off" disables): a cached file is used only when its header,
+// checksum and 16 recomputed spot texels all match, else the table is computed and the file
+// rewritten atomically. Bit-identical to ComputeDfg / ComputeSheenAlbedo.
+Table2D CachedDfg(const Settings& s);
+Table2D CachedSheenAlbedo(const Settings& s);
+
 // Process-wide default tables (DFG 128 x 128, sheen albedo 32 x 32, default quadrature),
-// computed on first use (thread-safe) and kept.
+// loaded through the cache above on first use (thread-safe) and kept.
 const Table2D& DefaultDfg();
 const Table2D& DefaultSheenAlbedo();
 

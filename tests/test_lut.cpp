@@ -1,6 +1,11 @@
 // The tables: channels against independent quadrature, texel-centre placement, sampling.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
 #include "brdf/lut.h"
 #include "brdf/terms.h"
 #include "tests/quadrature.h"
@@ -110,6 +115,84 @@ TEST(Lut, DefaultTablesHaveDocumentedShapeAndAxes) {
   const Table2D& e = lut::DefaultSheenAlbedo();
   EXPECT_EQ(e.width, 32);
   EXPECT_EQ(e.channels, 1);
+}
+
+// The on-disk table cache: a hit is bit-identical to a fresh computation; a corrupted file
+// (checksum) and a file left by a different integrator (valid checksum, different values at
+// the spot texels) are both detected and replaced.
+class TableCache : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("clothfit_table_cache_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
+            "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::remove_all(dir_);
+    const char* old = std::getenv("CLOTHFIT_TABLE_CACHE");
+    had_old_ = old != nullptr;
+    if (old) old_ = old;
+    setenv("CLOTHFIT_TABLE_CACHE", dir_.c_str(), 1);
+  }
+  void TearDown() override {
+    if (had_old_) setenv("CLOTHFIT_TABLE_CACHE", old_.c_str(), 1);
+    else unsetenv("CLOTHFIT_TABLE_CACHE");
+    std::filesystem::remove_all(dir_);
+  }
+  std::filesystem::path file() const { return dir_ / "dfg-16.bin"; }
+  static bool Same(const Table2D& a, const Table2D& b) {
+    return a.data.size() == b.data.size() &&
+           std::memcmp(a.data.data(), b.data.data(), a.data.size() * sizeof(float)) == 0;
+  }
+  std::filesystem::path dir_;
+  std::string old_;
+  bool had_old_ = false;
+};
+
+TEST_F(TableCache, HitIsBitIdenticalToAFreshComputation) {
+  const Table2D fresh = lut::ComputeDfg({16});
+  const Table2D first = lut::CachedDfg({16});  // miss: computes and writes
+  ASSERT_TRUE(std::filesystem::exists(file()));
+  const Table2D second = lut::CachedDfg({16});  // hit
+  EXPECT_TRUE(Same(fresh, first));
+  EXPECT_TRUE(Same(fresh, second));
+  EXPECT_EQ(second.u_axis, fresh.u_axis);
+  EXPECT_EQ(second.v_axis, fresh.v_axis);
+}
+
+TEST_F(TableCache, CorruptedFileIsDetectedAndReplaced) {
+  const Table2D fresh = lut::CachedDfg({16});
+  {
+    std::fstream f(file(), std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(200);
+    f.put('\x7f');  // inside the float data: the checksum no longer matches
+  }
+  EXPECT_TRUE(Same(lut::CachedDfg({16}), fresh));
+  std::ofstream(file(), std::ios::trunc) << "garbage";  // truncated / foreign file
+  EXPECT_TRUE(Same(lut::CachedDfg({16}), fresh));
+}
+
+TEST_F(TableCache, FileFromAnotherIntegratorIsDetectedBySpotTexels) {
+  const Table2D fresh = lut::CachedDfg({16});
+  // Rewrite the file as a different integrator would have: every value scaled by 1.001, the
+  // header and a *valid* checksum kept, so only the spot check can notice.
+  std::ifstream in(file(), std::ios::binary);
+  std::string header;
+  std::getline(in, header);
+  std::vector<float> v(fresh.data.size());
+  in.read(reinterpret_cast<char*>(v.data()), std::streamsize(v.size() * sizeof(float)));
+  in.close();
+  for (float& x : v) x *= 1.001f;
+  uint64_t h = 0xcbf29ce484222325ull;
+  const auto* p = reinterpret_cast<const unsigned char*>(v.data());
+  for (size_t i = 0; i < v.size() * sizeof(float); ++i) {
+    h ^= p[i];
+    h *= 0x100000001b3ull;
+  }
+  std::ofstream out(file(), std::ios::binary | std::ios::trunc);
+  out << header << "\n";
+  out.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * sizeof(float)));
+  out.write(reinterpret_cast<const char*>(&h), sizeof h);
+  out.close();
+  EXPECT_TRUE(Same(lut::CachedDfg({16}), fresh));
 }
 
 }  // namespace
