@@ -364,8 +364,10 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
                 s2[c] += double(in.second->rgb[(size_t(y) * size_t(W) + size_t(x)) * 3 + size_t(c)]);
           d->second_t.push_back(Transform(s2 * (1.0 / n), opt.space, d->op, d->exposure));
         }
-        for (int y = by; y < by + B; y += stride)
-          for (int x = bx; x < bx + B; x += stride)
+        // Centre of each stride x stride cell (its first pixel would shift every block's
+        // sample mean by (stride - 1) / 2 pixels against the full-block reference mean).
+        for (int y = by + stride / 2; y < by + B; y += stride)
+          for (int x = bx + stride / 2; x < bx + B; x += stride)
             keep.push_back(cache_index[size_t(y) * size_t(W) + size_t(x)]);
         d->block_begin.push_back(int(keep.size()));
       }
