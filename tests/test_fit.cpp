@@ -1,5 +1,6 @@
 // Image fitting: synthetic recovery for every model, robustness to noise and outliers,
-// explicit errors on bad input, and the cloth model beating the baselines on woven references.
+// explicit errors on bad input, where the cloth model beats the baselines (and where it does
+// not), and fitted parameters that do not drift with the weave scale.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -196,43 +197,69 @@ std::string Datasets() {
   return (fs::path(__FILE__).parent_path().parent_path() / "datasets").string();
 }
 
-// The issue asks that the cloth fit's display error be lower than both baselines' on canvas
-// and twill. Measured, it is NOT (docs/fitting.md: the woven references' yarn highlights are
-// forward-scattered specular reflections that GGX + Fresnel reproduce and the Charlie sheen,
-// which vanishes at n.h = 1, cannot). This test pins what does hold and prints the three
-// errors: every fit is usable and finite, and MeshPhysicalMaterial (GGX + Lambert + sheen, a
-// superset of MeshStandardMaterial) is no worse than MeshStandardMaterial.
-TEST(Fit, CanvasAndTwillFitsOfAllThreeModelsAreUsableAndNested) {
-  render::Scene s = render::LoadScene(Datasets() + "/scenes/sphere.json");
-  s.card.width = s.card.height = 64;
+// Display RMSE of the cloth, MeshPhysicalMaterial (sheen) and MeshStandardMaterial fits to a
+// path-traced reference of `fabric_name` on a canonical scene at size x size, procedural sky.
+struct ModelErrors {
+  double cloth, physical, standard;
+};
+
+ModelErrors FitThreeModels(const std::string& scene_name, const std::string& fabric_name, int size,
+                           int spp, int level) {
+  render::Scene s = render::LoadScene(Datasets() + "/scenes/" + scene_name + ".json");
+  s.card.width = s.card.height = size;
   const render::Environment env = render::Environment::ProceduralSky(1.0, 0.0);
-  for (const char* fabric_name : {"canvas", "twill"}) {
-    const render::Fabric fabric = render::LoadFabric(Datasets() + "/fabrics/" + fabric_name + ".json");
-    render::PathTracer pt(s, *fabric.bsdf, &env);
-    render::RenderSettings st;
-    st.spp = 64;
-    const render::RenderResult rr = pt.Render(st);
-    Reference ref;
-    ref.path = fabric_name;
-    ref.width = ref.height = 64;
-    ref.rgb = rr.rgb;
-    ref.std_error = rr.std_error;
-    ref.fabric = rr.fabric;
-    double err[3];
-    const ModelKind models[3] = {ModelKind::kCloth, ModelKind::kPhysicalSheen, ModelKind::kStandard};
-    for (int m = 0; m < 3; ++m) {
-      FitOptions o;
-      o.start = render::DefaultPreset(models[m]);
-      if (models[m] != ModelKind::kCloth) o.locked = {"metalness"};
-      o.level = 1;
-      const FitResult r = FitImages({{&s, &env, &ref, nullptr, "sphere"}}, o);
-      ASSERT_TRUE(r.usable) << fabric_name << " " << render::ToString(models[m]);
-      ASSERT_TRUE(std::isfinite(r.rmse));
-      err[m] = r.rmse;
-    }
-    std::printf("[ measured ] %s display RMSE: cloth %.5f, physical-sheen %.5f, standard %.5f\n",
-                fabric_name, err[0], err[1], err[2]);
-    EXPECT_LE(err[1], err[2] * 1.02) << fabric_name;
+  const render::Fabric fabric = render::LoadFabric(Datasets() + "/fabrics/" + fabric_name + ".json");
+  render::PathTracer pt(s, *fabric.bsdf, &env);
+  render::RenderSettings st;
+  st.spp = spp;
+  const render::RenderResult rr = pt.Render(st);
+  Reference ref;
+  ref.path = fabric_name + "/" + scene_name;
+  ref.width = ref.height = size;
+  ref.rgb = rr.rgb;
+  ref.std_error = rr.std_error;
+  ref.fabric = rr.fabric;
+  double err[3];
+  const ModelKind models[3] = {ModelKind::kCloth, ModelKind::kPhysicalSheen, ModelKind::kStandard};
+  for (int m = 0; m < 3; ++m) {
+    FitOptions o;
+    o.start = render::DefaultPreset(models[m]);
+    if (models[m] != ModelKind::kCloth) o.locked = {"metalness"};
+    o.level = level;
+    const FitResult r = FitImages({{&s, &env, &ref, nullptr, scene_name}}, o);
+    EXPECT_TRUE(r.usable) << ref.path << " " << render::ToString(models[m]) << ": " << r.message;
+    EXPECT_TRUE(std::isfinite(r.rmse));
+    err[m] = r.rmse;
+  }
+  std::printf("[ measured ] %-6s on %-6s display RMSE: cloth %.5f, physical-sheen %.5f, standard %.5f\n",
+              fabric_name.c_str(), scene_name.c_str(), err[0], err[1], err[2]);
+  return {err[0], err[1], err[2]};
+}
+
+// The issue asked that the cloth fit beat both baselines on canvas and twill. Measured, that
+// holds only where the reference shows sheen (docs/fitting.md, "What the fits show"):
+//  - velvet (Sadeghi: fibres standing out of the surface, back- and grazing scattering) on the
+//    backlit swatch: cloth beats both baselines by a wide margin;
+//  - canvas and twill (Irawan-Marschner: smooth yarns, no fuzz) front-lit on the sphere have no
+//    sheen to fit: every model reduces to nearly Lambert and they tie;
+//  - canvas and twill on the backlit swatch under the studio environment at 256 x 256 carry a
+//    forward-scattered yarn highlight (n.h ~ 1) that GGX reproduces and Charlie sheen, zero at
+//    n.h = 1, cannot: cloth loses 2-5x there (measured with `clothfit fit`, docs/fitting.md;
+//    at this test's 64 x 64 with the procedural sky the three models tie on that scene).
+// MeshPhysicalMaterial (GGX + Lambert + sheen) is a superset of MeshStandardMaterial, so it
+// must never be worse beyond the solver's tolerance.
+TEST(Fit, ClothBeatsBothBaselinesWhereTheReferenceHasSheen) {
+  const ModelErrors v = FitThreeModels("swatch", "velvet", 64, 64, 1);
+  EXPECT_LT(v.cloth, v.physical);
+  EXPECT_LT(v.cloth, v.standard);
+  EXPECT_LE(v.physical, v.standard * 1.02);
+}
+
+TEST(Fit, ClothTiesTheBaselinesOnFrontLitCanvasAndTwill) {
+  for (const char* fabric : {"canvas", "twill"}) {
+    const ModelErrors e = FitThreeModels("sphere", fabric, 64, 64, 1);
+    EXPECT_LT(e.cloth, 1.15 * std::min(e.physical, e.standard)) << fabric;
+    EXPECT_LE(e.physical, e.standard * 1.02) << fabric;
   }
 }
 
@@ -280,7 +307,9 @@ TEST(Fit, FittedParametersDoNotDriftWithWeaveScale) {
       EXPECT_NEAR(fitted[k][p], fitted[0][p], 0.03) << "parameter " << p << ", scale " << k;
     // Roughness only shapes the sheen lobe: with (near) zero sheen it is unidentifiable and
     // its value is arbitrary, so it is compared only when the sheen is visible.
-    if (sheen > 0.05) EXPECT_NEAR(fitted[k][6], fitted[0][6], 0.03) << "roughness, scale " << k;
+    if (sheen > 0.05) {
+      EXPECT_NEAR(fitted[k][6], fitted[0][6], 0.03) << "roughness, scale " << k;
+    }
   }
   // And what matters to users: the fitted presets look the same (display RMSE of their previews).
   auto display = [&](const std::vector<double>& v) {
