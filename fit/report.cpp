@@ -131,11 +131,15 @@ std::string DisplayPng(const metrics::RgbImage& linear, render::ToneMapping op, 
   return Base64(io::EncodePng8(linear.width, linear.height, rgb, what));
 }
 
-std::string MapPng(const metrics::Map& map, const std::string& what) {
+// Outside the mask (not fabric: not in the pooled numbers) the colours are dimmed to 35 %.
+constexpr float kOutsideDim = 0.35f;
+
+std::string MapPng(const metrics::Map& map, const metrics::Map* mask, const std::string& what) {
   std::vector<float> rgb(3 * map.values.size());
   for (size_t i = 0; i < map.values.size(); ++i) {
     const std::array<float, 3> c = metrics::ErrorMapColour(double(map.values[i]));
-    for (size_t k = 0; k < 3; ++k) rgb[3 * i + k] = c[k];
+    const float dim = (mask && !(mask->values[i] > 0.5f)) ? kOutsideDim : 1.0f;
+    for (size_t k = 0; k < 3; ++k) rgb[3 * i + k] = c[k] * dim;
   }
   return Base64(io::EncodePng8(map.width, map.height, rgb, what));
 }
@@ -174,7 +178,7 @@ Comparison Compare(const metrics::RgbImage& ref, const metrics::RgbImage& test,
     out.numbers.counts.nonfinite_ref = bad_ref;
     out.numbers.counts.nonfinite_test = bad_test;
     metrics::Map blank(ref.width, ref.height);
-    out.flip_png = MapPng(blank, test_path);
+    out.flip_png = MapPng(blank, mask, test_path);
     return out;
   }
   Numbers& n = out.numbers;
@@ -193,7 +197,7 @@ Comparison Compare(const metrics::RgbImage& ref, const metrics::RgbImage& test,
   n.ok = NumbersFinite(n);
   if (!n.ok) n.why = "non-finite result";
   for (const auto& m : r.maps)
-    if (m.name == "flip") out.flip_png = MapPng(m.map, test_path);
+    if (m.name == "flip") out.flip_png = MapPng(m.map, mask, test_path);
   return out;
 }
 
@@ -316,9 +320,9 @@ figcaption{font-size:12px;color:#333;margin-top:3px;text-align:center;overflow-w
 background:linear-gradient(to right,#000,#1a1a99,#bf268c,#ff8c0d,#ffffd9)}
 .sw{display:inline-block;width:28px;height:16px;border:1px solid #777;vertical-align:middle;
 margin-right:6px}
-.cards{display:flex;flex-wrap:wrap;gap:12px}.card{background:#fff;border:1px solid #d5d8de;
+.cards{display:flex;flex-wrap:wrap;gap:12px}.card{background:#fff;border:1px solid #d5d8de;max-width:520px;
 padding:8px 12px}
-code{font-size:12px}pre{font-size:12px;white-space:pre-wrap;max-width:1100px}
+code{font-size:12px;overflow-wrap:anywhere}pre{font-size:12px;white-space:pre-wrap;max-width:1100px}
 th.s{cursor:pointer}th.s:after{content:" \2195";color:#889}
 )CSS";
 
@@ -331,22 +335,34 @@ std::string Img(const std::string& b64, const std::string& alt) {
   return "<img alt=\"" + EscapeHtml(alt) + "\" src=\"data:image/png;base64," + b64 + "\">";
 }
 
-std::string MetricsTableHead(bool with_scene) {
+// One metrics table: rows of (label, numbers, is noise floor, name of the test image). The
+// note column (excluded NaN/Inf pixels) appears only when some row has a note.
+struct MetricsRowSpec {
+  std::string label;
+  const Numbers* numbers;
+  bool floor;
+  std::string test_name;
+};
+
+std::string MetricsTable(const std::vector<MetricsRowSpec>& rows) {
+  bool notes = false;
+  for (const MetricsRowSpec& r : rows)
+    notes = notes || !NonFiniteNote(r.numbers->counts, r.test_name).empty();
   std::string s = "<table><tr><th class=\"l\">model</th>";
-  if (with_scene) s += "<th class=\"l\">scene</th>";
   for (const Column& c : Columns())
     s += std::string("<th title=\"") + c.help + "\">" + c.title + "</th>";
-  return s + "<th class=\"l\">note</th></tr>\n";
-}
-
-std::string MetricsRow(const std::string& model, const Numbers& n, bool floor,
-                       const std::string& test_name) {
-  std::string s = floor ? "<tr class=\"floor\">" : "<tr>";
-  s += "<td class=\"l\">" + EscapeHtml(model) + "</td>";
-  for (const Column& c : Columns())
-    s += std::string(n.ok ? "<td>" : "<td class=\"na\">") + EscapeHtml(Cell(n, c)) + "</td>";
-  s += "<td class=\"l\">" + EscapeHtml(NonFiniteNote(n.counts, test_name)) + "</td></tr>\n";
-  return s;
+  s += notes ? "<th class=\"l\">note</th></tr>\n" : "</tr>\n";
+  for (const MetricsRowSpec& r : rows) {
+    const Numbers& n = *r.numbers;
+    s += r.floor ? "<tr class=\"floor\">" : "<tr>";
+    s += "<td class=\"l\">" + EscapeHtml(r.label) + "</td>";
+    for (const Column& c : Columns())
+      s += std::string(n.ok ? "<td>" : "<td class=\"na\">") + EscapeHtml(Cell(n, c)) + "</td>";
+    if (notes)
+      s += "<td class=\"l\">" + EscapeHtml(NonFiniteNote(n.counts, r.test_name)) + "</td>";
+    s += "</tr>\n";
+  }
+  return s + "</table>\n";
 }
 
 // Parameter value cell (+ swatch for colours).
@@ -693,12 +709,14 @@ std::string FabricHtml(const FabricReport& rep) {
        "to beat it). Lower is better except PSNR and SSIM. See docs/report.md.</p>\n";
 
   // Summary: means over scenes.
-  h << "<h2>Metrics, mean over " << spec.scenes.size() << " scenes</h2>\n"
-    << MetricsTableHead(false);
-  if (rep.noise_floor_mean) h << MetricsRow("noise floor", *rep.noise_floor_mean, true, "second reference");
-  for (size_t mi = 0; mi < spec.models.size(); ++mi)
-    h << MetricsRow(ModelTitle(spec.models[mi].model), rep.model_means[mi], false, "preview");
-  h << "</table>\n";
+  {
+    std::vector<MetricsRowSpec> rows;
+    if (rep.noise_floor_mean)
+      rows.push_back({"noise floor", &*rep.noise_floor_mean, true, "second reference"});
+    for (size_t mi = 0; mi < spec.models.size(); ++mi)
+      rows.push_back({ModelTitle(spec.models[mi].model), &rep.model_means[mi], false, "preview"});
+    h << "<h2>Metrics, mean over " << spec.scenes.size() << " scenes</h2>\n" << MetricsTable(rows);
+  }
 
   // Per scene: pictures and a table.
   for (const SceneResult& s : rep.scenes) {
@@ -736,13 +754,15 @@ std::string FabricHtml(const FabricReport& rep) {
         << "<figcaption>FLIP: " << EscapeHtml(ModelTitle(spec.models[mi].model)) << "<br>mean "
         << EscapeHtml(Cell(n, Columns()[3])) << "</figcaption></figure>\n";
     }
-    h << "</div>\n<p class=\"meta\">FLIP error maps (LDR-FLIP of the display images, whole "
-         "frame): 0 <span class=\"bar\"></span> 1</p>\n";
-    h << MetricsTableHead(false);
-    if (s.noise_floor) h << MetricsRow("noise floor", *s.noise_floor, true, "second reference");
+    h << "</div>\n<p class=\"meta\">FLIP error maps (LDR-FLIP of the display images): 0 "
+         "<span class=\"bar\"></span> 1"
+      << (s.mask_from_coverage ? "; outside the fabric (not in the numbers) dimmed to 35 %" : "")
+      << "</p>\n";
+    std::vector<MetricsRowSpec> rows;
+    if (s.noise_floor) rows.push_back({"noise floor", &*s.noise_floor, true, "second reference"});
     for (size_t mi = 0; mi < spec.models.size(); ++mi)
-      h << MetricsRow(ModelTitle(spec.models[mi].model), s.models[mi].numbers, false, "preview");
-    h << "</table>\n";
+      rows.push_back({ModelTitle(spec.models[mi].model), &s.models[mi].numbers, false, "preview"});
+    h << MetricsTable(rows);
   }
 
   // Fitted parameters.
