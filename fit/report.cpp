@@ -206,10 +206,10 @@ Comparison Compare(const metrics::RgbImage& ref, const metrics::RgbImage& test,
 std::string Na(const Numbers& n) { return "n/a (" + n.why + ")"; }
 
 struct Column {
-  const char* key;     // JSON / CSV name
-  const char* title;   // HTML header
+  const char* key;          // JSON / CSV name
+  const char* title;        // HTML header
   const char* short_title;  // terminal header
-  const char* help;    // tooltip
+  const char* help;         // tooltip
   int decimals;
   double Numbers::*field;
   bool psnr;
@@ -320,8 +320,8 @@ figcaption{font-size:12px;color:#333;margin-top:3px;text-align:center;overflow-w
 background:linear-gradient(to right,#000,#1a1a99,#bf268c,#ff8c0d,#ffffd9)}
 .sw{display:inline-block;width:28px;height:16px;border:1px solid #777;vertical-align:middle;
 margin-right:6px}
-.cards{display:flex;flex-wrap:wrap;gap:12px}.card{background:#fff;border:1px solid #d5d8de;max-width:520px;
-padding:8px 12px}
+.cards{display:flex;flex-wrap:wrap;gap:12px}
+.card{background:#fff;border:1px solid #d5d8de;max-width:520px;padding:8px 12px}
 code{font-size:12px;overflow-wrap:anywhere}pre{font-size:12px;white-space:pre-wrap;max-width:1100px}
 th.s{cursor:pointer}th.s:after{content:" \2195";color:#889}
 )CSS";
@@ -358,8 +358,7 @@ std::string MetricsTable(const std::vector<MetricsRowSpec>& rows) {
     s += "<td class=\"l\">" + EscapeHtml(r.label) + "</td>";
     for (const Column& c : Columns())
       s += std::string(n.ok ? "<td>" : "<td class=\"na\">") + EscapeHtml(Cell(n, c)) + "</td>";
-    if (notes)
-      s += "<td class=\"l\">" + EscapeHtml(NonFiniteNote(n.counts, r.test_name)) + "</td>";
+    if (notes) s += "<td class=\"l\">" + EscapeHtml(NonFiniteNote(n.counts, r.test_name)) + "</td>";
     s += "</tr>\n";
   }
   return s + "</table>\n";
@@ -389,8 +388,8 @@ std::string ParameterCells(const std::string& name, const nlohmann::json& v) {
     if (v.size() == 3 && name.find("color") != std::string::npos) {
       if (finite) {
         const std::string hex = SrgbHex(c[0], c[1], c[2]);
-        swatch = "<span class=\"sw\" style=\"background:" + hex + "\"></span><code>" + hex +
-                 "</code>";
+        swatch =
+            "<span class=\"sw\" style=\"background:" + hex + "\"></span><code>" + hex + "</code>";
       } else {
         swatch = "n/a (not finite in input)";
       }
@@ -470,9 +469,7 @@ std::string EscapeHtml(const std::string& text) {
 std::string SrgbHex(double r, double g, double b) {
   if (!std::isfinite(r) || !std::isfinite(g) || !std::isfinite(b)) return "";
   char buf[8];
-  const auto enc = [](double x) {
-    return int(std::lround(255.0 * render::SrgbEncode(x)));
-  };
+  const auto enc = [](double x) { return int(std::lround(255.0 * render::SrgbEncode(x))); };
   std::snprintf(buf, sizeof buf, "#%02x%02x%02x", enc(r), enc(g), enc(b));
   return buf;
 }
@@ -557,8 +554,7 @@ std::vector<FabricSpec> FabricsFromPresets(const std::vector<std::string>& prese
     } else {
       bool same = it->scenes.size() == specs.size();
       for (size_t i = 0; same && i < specs.size(); ++i)
-        same = it->scenes[i].name == specs[i].name &&
-               it->scenes[i].reference == specs[i].reference;
+        same = it->scenes[i].name == specs[i].name && it->scenes[i].reference == specs[i].reference;
       if (!same)
         throw ReportError(path + ": its scenes or references differ from " +
                           first_preset_of[fabric_name] + " (same fabric \"" + fabric_name + "\")");
@@ -592,12 +588,17 @@ Numbers MeanOver(const std::vector<const Numbers*>& per_scene,
     }
   }
   const double n = double(per_scene.size());
-  double Numbers::*fields[] = {&Numbers::rmse_linear, &Numbers::psnr_linear,
-                                &Numbers::rmse_display, &Numbers::psnr_display,
-                                &Numbers::ssim, &Numbers::flip, &Numbers::hdr_flip,
-                                &Numbers::ciede2000_mean, &Numbers::ciede2000_p95,
-                                &Numbers::ciede2000_display_mean,
-                                &Numbers::ciede2000_display_p95};
+  double Numbers::*fields[] = {&Numbers::rmse_linear,
+                               &Numbers::psnr_linear,
+                               &Numbers::rmse_display,
+                               &Numbers::psnr_display,
+                               &Numbers::ssim,
+                               &Numbers::flip,
+                               &Numbers::hdr_flip,
+                               &Numbers::ciede2000_mean,
+                               &Numbers::ciede2000_p95,
+                               &Numbers::ciede2000_display_mean,
+                               &Numbers::ciede2000_display_p95};
   for (auto f : fields) {
     double s = 0.0;
     for (const Numbers* x : per_scene) s += x->*f;  // +inf PSNR stays +inf
@@ -684,8 +685,10 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
   bool all_floor = !rep.scenes.empty();
   std::vector<const Numbers*> floors;
   for (const SceneResult& s : rep.scenes) {
-    if (!s.noise_floor) all_floor = false;
-    else floors.push_back(&*s.noise_floor);
+    if (!s.noise_floor)
+      all_floor = false;
+    else
+      floors.push_back(&*s.noise_floor);
   }
   if (all_floor) rep.noise_floor_mean = MeanOver(floors, names);
   return rep;
@@ -722,14 +725,15 @@ std::string FabricHtml(const FabricReport& rep) {
   for (const SceneResult& s : rep.scenes) {
     const SceneSpec& sc = s.spec;
     h << "<h2 id=\"scene-" << EscapeHtml(sc.name) << "\">Scene: " << EscapeHtml(sc.name)
-      << "</h2>\n<p class=\"meta\"><code>" << EscapeHtml(sc.scene_path) << "</code>; "
-      << s.width << "&times;" << s.height << " px; display "
-      << render::ToneMappingName(sc.tone_mapping) << ", exposure "
-      << FormatNumber(sc.exposure, 2) << "; " << s.fabric_pixels
-      << (s.mask_from_coverage ? " fabric pixels (reference coverage)" : " pixels (no coverage channel: all)")
+      << "</h2>\n<p class=\"meta\"><code>" << EscapeHtml(sc.scene_path) << "</code>; " << s.width
+      << "&times;" << s.height << " px; display " << render::ToneMappingName(sc.tone_mapping)
+      << ", exposure " << FormatNumber(sc.exposure, 2) << "; " << s.fabric_pixels
+      << (s.mask_from_coverage ? " fabric pixels (reference coverage)"
+                               : " pixels (no coverage channel: all)")
       << "; HDR-FLIP range [" << FormatNumber(s.hdr_range.start, 2) << ", "
       << FormatNumber(s.hdr_range.stop, 2) << "] stops ("
-      << (s.hdr_range_automatic ? "automatic from the reference" : "fallback: automatic range not finite")
+      << (s.hdr_range_automatic ? "automatic from the reference"
+                                : "fallback: automatic range not finite")
       << ")</p>\n";
     const size_t cols = 1 + spec.models.size();
     h << "<div class=\"grid\" style=\"--cols:" << cols << "\">\n";
@@ -738,7 +742,8 @@ std::string FabricHtml(const FabricReport& rep) {
       << "</code></figcaption></figure>\n";
     for (size_t mi = 0; mi < spec.models.size(); ++mi) {
       const Numbers& n = s.models[mi].numbers;
-      h << "<figure>" << Img(s.models[mi].preview_png, spec.models[mi].model + " preview " + sc.name)
+      h << "<figure>"
+        << Img(s.models[mi].preview_png, spec.models[mi].model + " preview " + sc.name)
         << "<figcaption>" << EscapeHtml(ModelTitle(spec.models[mi].model)) << " preview<br>RMSE "
         << EscapeHtml(Cell(n, Columns()[0])) << "</figcaption></figure>\n";
     }
@@ -810,14 +815,17 @@ std::string FabricHtml(const FabricReport& rep) {
       bool bad = false;
       for (const auto& s : fit.at("scenes"))
         if (s.is_object() && s.contains("noise_floor")) {
-          if (!s.at("noise_floor").is_number()) bad = true;
+          if (!s.at("noise_floor").is_number())
+            bad = true;
           else {
             sum += s.at("noise_floor").get<double>();
             ++n;
           }
         }
-      if (bad) floor = "n/a (not finite in input)";
-      else if (n) floor = FormatNumber(sum / n, 4);
+      if (bad)
+        floor = "n/a (not finite in input)";
+      else if (n)
+        floor = FormatNumber(sum / n, 4);
     }
     h << "<tr><td class=\"l\">" << EscapeHtml(ModelTitle(m.model)) << "</td><td>"
       << FitValue(fit, "iterations", 0) << "</td><td>" << FitValue(fit, "starts", 0) << "</td><td>"
@@ -826,8 +834,8 @@ std::string FabricHtml(const FabricReport& rep) {
       << FitValue(fit, "setup_seconds", 2) << "</td><td class=\"l\">"
       << FitValue(fit, "termination", 0) << "</td><td class=\"l\">" << FitValue(fit, "space", 0)
       << "</td><td class=\"l\">" << FitValue(fit, "loss", 0) << "</td><td>"
-      << FitValue(fit, "block_pixels", 0) << "</td><td>" << FitValue(fit, "rmse", 4)
-      << "</td><td>" << floor << "</td></tr>\n";
+      << FitValue(fit, "block_pixels", 0) << "</td><td>" << FitValue(fit, "rmse", 4) << "</td><td>"
+      << floor << "</td></tr>\n";
   }
   h << "</table>\n";
   for (const ModelSpec& m : spec.models) {
@@ -934,8 +942,8 @@ nlohmann::json ReportJson(const std::vector<FabricReport>& reports) {
       sj["name"] = s.spec.name;
       sj["scene"] = s.spec.scene_path;
       sj["reference"] = s.spec.reference;
-      sj["reference2"] = s.spec.reference2.empty() ? nlohmann::json(nullptr)
-                                                   : nlohmann::json(s.spec.reference2);
+      sj["reference2"] =
+          s.spec.reference2.empty() ? nlohmann::json(nullptr) : nlohmann::json(s.spec.reference2);
       sj["tone_mapping"] = std::string(render::ToneMappingName(s.spec.tone_mapping));
       sj["exposure"] = s.spec.exposure;
       sj["width"] = s.width;
@@ -975,9 +983,9 @@ std::string ReportCsv(const std::vector<FabricReport>& reports) {
   auto row = [&](const std::string& fabric, const std::string& model, const std::string& scene,
                  const Numbers& n) {
     s << csv_text(fabric) << "," << csv_text(model) << "," << csv_text(scene);
-    for (double v : {n.rmse_linear, n.psnr_linear, n.rmse_display, n.psnr_display, n.ssim, n.flip,
-                     n.hdr_flip, n.ciede2000_mean, n.ciede2000_p95, n.ciede2000_display_mean,
-                     n.ciede2000_display_p95})
+    for (double v :
+         {n.rmse_linear, n.psnr_linear, n.rmse_display, n.psnr_display, n.ssim, n.flip, n.hdr_flip,
+          n.ciede2000_mean, n.ciede2000_p95, n.ciede2000_display_mean, n.ciede2000_display_p95})
       s << "," << (n.ok ? num(v) : std::string());
     s << "," << n.counts.counted << "," << n.counts.nonfinite_ref << "," << n.counts.nonfinite_test
       << "," << csv_text(n.ok ? "ok" : "n/a: " + n.why) << "\n";
@@ -1013,7 +1021,8 @@ std::string TerminalTable(const std::vector<FabricReport>& reports) {
       return;
     }
     for (const Column& c : Columns()) {
-      std::snprintf(buf, sizeof buf, " %8s", FormatNumber(n.*(c.field), c.decimals, c.psnr).c_str());
+      std::snprintf(buf, sizeof buf, " %8s",
+                    FormatNumber(n.*(c.field), c.decimals, c.psnr).c_str());
       s << buf;
     }
     s << "\n";

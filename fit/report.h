@@ -22,9 +22,8 @@
 // infinity is the PSNR of identical images, written "inf" (JSON: the string "inf").
 #pragma once
 
-#include <nlohmann/json.hpp>
-
 #include <cstdint>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -52,9 +51,9 @@ struct SceneSpec {
 };
 
 struct ModelSpec {
-  std::string model;        // preset "model": cloth, physical-sheen, standard, gltf-sheen
+  std::string model;  // preset "model": cloth, physical-sheen, standard, gltf-sheen
   std::string preset_path;
-  nlohmann::json preset;    // the whole preset as read
+  nlohmann::json preset;              // the whole preset as read
   std::vector<std::string> previews;  // linear EXRs, one per scene (FabricSpec::scenes order)
 };
 
@@ -91,19 +90,19 @@ struct SceneResult {
   SceneSpec spec;
   int width = 0, height = 0;
   long long fabric_pixels = 0;
-  bool mask_from_coverage = false;     // false: every pixel counts
+  bool mask_from_coverage = false;  // false: every pixel counts
   metrics::ExposureRange hdr_range;
   bool hdr_range_automatic = false;
-  std::string reference_png;           // base64
-  std::optional<Numbers> noise_floor;  // absent without a second reference
-  std::string noise_flip_png;          // FLIP map reference vs second reference (base64)
+  std::string reference_png;             // base64
+  std::optional<Numbers> noise_floor;    // absent without a second reference
+  std::string noise_flip_png;            // FLIP map reference vs second reference (base64)
   std::vector<ModelSceneResult> models;  // FabricSpec::models order
 };
 
 struct FabricReport {
   FabricSpec spec;
   std::vector<SceneResult> scenes;
-  std::vector<Numbers> model_means;   // mean over scenes, per model
+  std::vector<Numbers> model_means;  // mean over scenes, per model
   std::optional<Numbers> noise_floor_mean;
 };
 

@@ -115,15 +115,20 @@ class ReportTest : public ::testing::Test {
   std::vector<std::string> MakeFit() {
     for (int i = 0; i < 2; ++i) {
       refs_.push_back(WriteImage("ref" + std::to_string(i) + ".exr", 1.0, 1 + unsigned(i), true));
-      refs2_.push_back(WriteImage("ref2_" + std::to_string(i) + ".exr", 1.0, 11 + unsigned(i), true));
-      cloth_.push_back(WriteImage("cloth" + std::to_string(i) + ".exr", 1.08, 21 + unsigned(i), false));
-      standard_.push_back(WriteImage("std" + std::to_string(i) + ".exr", 0.8, 31 + unsigned(i), false));
+      refs2_.push_back(
+          WriteImage("ref2_" + std::to_string(i) + ".exr", 1.0, 11 + unsigned(i), true));
+      cloth_.push_back(
+          WriteImage("cloth" + std::to_string(i) + ".exr", 1.08, 21 + unsigned(i), false));
+      standard_.push_back(
+          WriteImage("std" + std::to_string(i) + ".exr", 0.8, 31 + unsigned(i), false));
     }
-    return {WritePreset("standard.json", "standard", standard_,
-                        {{"base_color", {0.5, 0.25, 0.125}}, {"roughness", 0.75}, {"metalness", 0.0}}),
-            WritePreset("cloth.json", "cloth", cloth_,
-                        {{"base_color", {0.2, 0.3, 0.4}}, {"sheen_color", {1.0, 1.0, 1.0}},
-                         {"roughness", 0.6}})};
+    return {
+        WritePreset("standard.json", "standard", standard_,
+                    {{"base_color", {0.5, 0.25, 0.125}}, {"roughness", 0.75}, {"metalness", 0.0}}),
+        WritePreset("cloth.json", "cloth", cloth_,
+                    {{"base_color", {0.2, 0.3, 0.4}},
+                     {"sheen_color", {1.0, 1.0, 1.0}},
+                     {"roughness", 0.6}})};
   }
 
   fs::path dir_;
@@ -178,10 +183,10 @@ TEST_F(ReportTest, HtmlContainsEveryImageAndNumber) {
   // Per scene: reference, 2 previews, noise-floor FLIP, 2 model FLIP maps.
   EXPECT_EQ(Count(html, "src=\"data:image/png;base64,"), 2u * 6u);
   for (const char* alt : {"reference scene0", "cloth preview scene0", "standard preview scene1",
-                                 "FLIP noise floor scene1", "cloth FLIP scene0", "standard FLIP scene1"})
+                          "FLIP noise floor scene1", "cloth FLIP scene0", "standard FLIP scene1"})
     EXPECT_NE(text.find("alt=\"" + std::string(alt) + "\""), std::string::npos) << alt;
-  for (const char* title : {"reference", "cloth (Filament)", "MeshStandardMaterial",
-                                   "noise floor", "Fitted parameters", "Solver"})
+  for (const char* title : {"reference", "cloth (Filament)", "MeshStandardMaterial", "noise floor",
+                            "Fitted parameters", "Solver"})
     EXPECT_NE(text.find(title), std::string::npos) << title;
 
   // The numbers: computed independently with metrics::Compare over the fabric pixels.
@@ -263,8 +268,7 @@ TEST_F(ReportTest, NonFiniteInputsAreReportedNotPropagated) {
   io::WriteExr(cloth_[1], all);
   // The preset: a NaN final cost (JSON null, as nlohmann writes NaN) and a null colour channel.
   presets[1] = WritePreset("cloth.json", "cloth", cloth_,
-                           {{"base_color", {0.2, nullptr, 0.4}}, {"roughness", nullptr}},
-                           nullptr);
+                           {{"base_color", {0.2, nullptr, 0.4}}, {"roughness", nullptr}}, nullptr);
   const FabricReport rep = BuildFabricReport(FabricsFromPresets(presets)[0]);
   const Numbers& partial = rep.scenes[0].models[0].numbers;
   ASSERT_TRUE(partial.ok);
@@ -275,7 +279,7 @@ TEST_F(ReportTest, NonFiniteInputsAreReportedNotPropagated) {
   EXPECT_EQ(none.why, "NaN/Inf in input");
   EXPECT_FALSE(rep.model_means[0].ok);  // the mean names the scene
   EXPECT_NE(rep.model_means[0].why.find("scene1"), std::string::npos);
-  EXPECT_TRUE(rep.model_means[1].ok);   // the other model is unaffected
+  EXPECT_TRUE(rep.model_means[1].ok);  // the other model is unaffected
 
   const std::string text = WithoutImages(FabricHtml(rep));
   EXPECT_NE(text.find("n/a (NaN/Inf in input)"), std::string::npos);
@@ -286,17 +290,16 @@ TEST_F(ReportTest, NonFiniteInputsAreReportedNotPropagated) {
   std::string stripped = std::regex_replace(text, std::regex("NaN/Inf"), "");
   EXPECT_FALSE(std::regex_search(stripped, bad)) << "page";
   const std::vector<FabricReport> reps = {rep};
-  EXPECT_FALSE(std::regex_search(std::regex_replace(WithoutImages(IndexHtml(reps)),
-                                                    std::regex("NaN/Inf"), ""),
-                                 bad))
+  EXPECT_FALSE(std::regex_search(
+      std::regex_replace(WithoutImages(IndexHtml(reps)), std::regex("NaN/Inf"), ""), bad))
       << "index";
   const std::string json = ReportJson(reps).dump();
   EXPECT_EQ(json.find("nan"), std::string::npos);
   EXPECT_NE(json.find("\"flip\":null"), std::string::npos);
   const std::string csv = std::regex_replace(ReportCsv(reps), std::regex("NaN/Inf"), "");
   EXPECT_FALSE(std::regex_search(csv, bad)) << csv;
-  EXPECT_FALSE(std::regex_search(
-      std::regex_replace(TerminalTable(reps), std::regex("NaN/Inf"), ""), bad));
+  EXPECT_FALSE(
+      std::regex_search(std::regex_replace(TerminalTable(reps), std::regex("NaN/Inf"), ""), bad));
 }
 
 TEST_F(ReportTest, BadInputsNameTheFile) {
