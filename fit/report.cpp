@@ -478,7 +478,7 @@ std::string PageName(const std::string& fabric_name) {
   std::string s;
   for (char c : fabric_name)
     s += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_') ? c : '_';
-  if (s.empty()) s = "fabric";
+  if (s.empty() || s == "index") s = "fabric-" + s;  // never the index page itself
   return s + ".html";
 }
 

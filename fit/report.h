@@ -121,7 +121,7 @@ Numbers MeanOver(const std::vector<const Numbers*>& per_scene,
                  const std::vector<std::string>& scene_names);
 
 // The file name of a fabric's page: "<name>.html" with characters outside [A-Za-z0-9_-]
-// replaced by '_'.
+// replaced by '_' ("fabric-index.html" for a fabric named "index", "fabric-.html" for "").
 std::string PageName(const std::string& fabric_name);
 
 std::string FabricHtml(const FabricReport& report);

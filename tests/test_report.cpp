@@ -160,6 +160,7 @@ TEST(ReportHelpers, NumbersSwatchesEscaping) {
   EXPECT_EQ(EscapeHtml("<a href=\"x\">&'"), "&lt;a href=&quot;x&quot;&gt;&amp;&#39;");
   EXPECT_EQ(PageName("canvas"), "canvas.html");
   EXPECT_EQ(PageName("a b/c"), "a_b_c.html");
+  EXPECT_EQ(PageName("index"), "fabric-index.html");
 }
 
 TEST(ReportHelpers, PngEncodingInMemory) {
