@@ -1,7 +1,4 @@
 // clothfit compare: every image metric (fit/metrics.h) between a reference and a test image.
-//
-// To wire in (bin/commands.h, bin/main.cpp, bin/CMakeLists.txt):
-//   void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code);
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -24,23 +21,6 @@ namespace clothfit::cli {
 void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code);
 
 namespace {
-
-// Our own colour map for error-map PNGs: piecewise linear in display RGB through
-// black -> deep blue -> magenta -> orange -> pale yellow, over t in [0, 1].
-std::array<float, 3> ErrorColour(double t) {
-  static constexpr float kStops[5][3] = {{0.00f, 0.00f, 0.00f},
-                                         {0.10f, 0.10f, 0.60f},
-                                         {0.75f, 0.15f, 0.55f},
-                                         {1.00f, 0.55f, 0.05f},
-                                         {1.00f, 1.00f, 0.85f}};
-  if (!std::isfinite(t)) t = 0.0;
-  const double x = std::clamp(t, 0.0, 1.0) * 4.0;
-  const int i = std::min(3, int(x));
-  const float f = float(x - double(i));
-  std::array<float, 3> c{};
-  for (size_t k = 0; k < 3; ++k) c[k] = kStops[i][k] + f * (kStops[i + 1][k] - kStops[i][k]);
-  return c;
-}
 
 // How each map is shown in its PNG: value v -> colour map position (v - lo) / (hi - lo).
 struct PngScale {
@@ -172,7 +152,7 @@ void WriteMaps(const std::string& dir, const metrics::CompareResult& r) {
     for (size_t i = 0; i < m.map.values.size(); ++i) {
       const double span = sc.hi - sc.lo;
       const double t = span != 0.0 ? (double(m.map.values[i]) - sc.lo) / span : 0.0;
-      const std::array<float, 3> c = ErrorColour(t);
+      const std::array<float, 3> c = metrics::ErrorMapColour(t);
       for (size_t k = 0; k < 3; ++k) rgb[3 * i + k] = c[k];
     }
     io::WritePng8(base + ".png", m.map.width, m.map.height, rgb);

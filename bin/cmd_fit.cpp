@@ -254,10 +254,24 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
       fitj["solver"] = res.solver_report;
       fitj["rmse"] = res.rmse;
       nlohmann::json sj = nlohmann::json::array();
-      for (const auto& e : res.scenes) {
+      for (size_t i = 0; i < res.scenes.size(); ++i) {
+        const auto& e = res.scenes[i];
         nlohmann::json x = {{"scene", e.scene}, {"reference", e.reference}, {"blocks", e.blocks},
                             {"rmse", e.rmse}};
         if (e.noise_floor >= 0) x["noise_floor"] = e.noise_floor;
+        // What `clothfit report` needs: the second-seed reference (noise floor), the display
+        // transform of the scene card, and the linear fitted preview written below.
+        x["reference"] = fs::absolute(e.reference).lexically_normal().string();
+        if (i < refs2.size()) x["reference2"] = fs::absolute(refs2[i]).lexically_normal().string();
+        if (i < sc.size()) {
+          x["tone_mapping"] = sc[i].card.tone_mapping;
+          x["exposure"] = sc[i].card.exposure;
+          if (!a->images.empty())
+            x["preview"] = fs::absolute(fs::path(a->images) /
+                                        (fs::path(scenes[i]).stem().string() + "_preview.exr"))
+                               .lexically_normal()
+                               .string();
+        }
         sj.push_back(x);
       }
       fitj["scenes"] = sj;
@@ -265,7 +279,7 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
       preset.extra["provenance"] = {{"tool", "clothfit 0.1.0"},
                                     {"fabric", a->fabric.empty() ? nlohmann::json(nullptr)
                                                                  : nlohmann::json(a->fabric)}};
-      render::WritePreset(a->out, preset);
+      // Images first, the preset last: a preset on disk means its images are complete.
       if (!a->images.empty()) {
         fs::create_directories(a->images);
         for (size_t i = 0; i < sc.size(); ++i) {
@@ -274,6 +288,14 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
           const auto op = render::ParseToneMapping(sc[i].card.tone_mapping);
           io::WritePng8((fs::path(a->images) / (stem + "_preview.png")).string(), sc[i].card.width,
                         sc[i].card.height, ToDisplayImage(frame, op, sc[i].card.exposure));
+          io::Image prev_img;
+          prev_img.width = sc[i].card.width;
+          prev_img.height = sc[i].card.height;
+          prev_img.channel_names = {"R", "G", "B"};
+          prev_img.pixels = frame;
+          prev_img.metadata["clothfit:preview"] = "fitted preview, linear radiance (un-tonemapped)";
+          prev_img.metadata["clothfit:scene"] = scenes[i];
+          io::WriteExr((fs::path(a->images) / (stem + "_preview.exr")).string(), prev_img);
           io::Image res_img;
           res_img.width = sc[i].card.width;
           res_img.height = sc[i].card.height;
@@ -284,6 +306,7 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
           io::WriteExr((fs::path(a->images) / (stem + "_residual.exr")).string(), res_img);
         }
       }
+      render::WritePreset(a->out, preset);
       double floor = 0.0;
       int nf = 0;
       for (const auto& e : res.scenes)

@@ -26,6 +26,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddTonemapCommand(CLI::App& app, const Globals& g, int& exit_code);
+void AddReportCommand(CLI::App& app, const Globals& g, int& exit_code);
 
 // The scene's environment: the card's map, or the procedural sky (warning on stderr unless
 // quiet) when the map is not installed; null when the card has no environment.

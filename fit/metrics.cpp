@@ -616,6 +616,10 @@ MetricResult Flip(const RgbImage& ref_srgb, const RgbImage& test_srgb, const Fli
 // ---- public: HDR-FLIP -------------------------------------------------------------------------
 
 double HdrFlipToneMap(double x) {
+  // Negative radiance is clipped to 0 first, as the FLIP reference implementation does
+  // (NVlabs/flip tone_map: max(img, 0)); without it the rational function maps large
+  // negative values towards 1 (white): t(-10) = 1.07 before the clamp.
+  x = std::max(x, 0.0);
   const double num = (kTm[0] * x + kTm[1]) * x + kTm[2];
   const double den = (kTm[3] * x + kTm[4]) * x + kTm[5];  // > 0 for all x (no real roots)
   return std::clamp(num / den, 0.0, 1.0);
@@ -633,9 +637,12 @@ ExposureRange AutomaticExposureRange(const RgbImage& ref, const Map* mask) {
                c = kTm[2] - kTmTarget * kTm[5];
   const double x_max = (-b + std::sqrt(b * b - 4.0 * a * c)) / (2.0 * a);
   const double y_max = *std::max_element(lum.begin(), lum.end());
+  // Median as the FLIP reference implementation takes it (numpy percentile 50): the middle
+  // element, or the mean of the two middle elements for an even count.
   const auto mid = lum.begin() + std::ptrdiff_t((lum.size() - 1) / 2);
   std::nth_element(lum.begin(), mid, lum.end());
-  const double y_median = *mid;
+  double y_median = *mid;
+  if (lum.size() % 2 == 0) y_median = 0.5 * (y_median + *std::min_element(mid + 1, lum.end()));
   ExposureRange range;
   range.start = y_max > 0.0 ? std::log2(x_max / y_max) : kInf;
   range.stop = y_median > 0.0 ? std::log2(x_max / y_median) : kInf;
@@ -852,6 +859,21 @@ CompareResult CompareFiles(const std::string& reference_path, const std::string&
                                   " is " + SizeText(ref.width, ref.height));
   }
   return Compare(ref, test, options, mask ? &*mask : nullptr);
+}
+
+std::array<float, 3> ErrorMapColour(double t) {
+  static constexpr float kStops[5][3] = {{0.00f, 0.00f, 0.00f},
+                                         {0.10f, 0.10f, 0.60f},
+                                         {0.75f, 0.15f, 0.55f},
+                                         {1.00f, 0.55f, 0.05f},
+                                         {1.00f, 1.00f, 0.85f}};
+  if (!std::isfinite(t)) t = 0.0;
+  const double x = std::clamp(t, 0.0, 1.0) * 4.0;
+  const int i = std::min(3, int(x));
+  const float f = float(x - double(i));
+  std::array<float, 3> c{};
+  for (size_t k = 0; k < 3; ++k) c[k] = kStops[i][k] + f * (kStops[i + 1][k] - kStops[i][k]);
+  return c;
 }
 
 }  // namespace clothfit::metrics

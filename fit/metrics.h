@@ -172,7 +172,7 @@ struct ExposureRange {
 // HDR-FLIP on linear images: N = max(2, ceil(stop - start)) exposures
 // c_i = start + i (stop - start) / (N - 1); at each, both images are scaled by 2^c_i, tone
 // mapped per channel with the paper's ACES fit (Narkowicz's curve with the 0.6 input scale)
-//   t(x) = clamp((k0 x^2 + k1 x + k2) / (k3 x^2 + k4 x + k5), 0, 1),
+//   t(x) = clamp((k0 x^2 + k1 x + k2) / (k3 x^2 + k4 x + k5), 0, 1), x = max(radiance, 0),
 //   k = (0.6^2 2.51, 0.6 0.03, 0, 0.6^2 2.43, 0.6 0.59, 0.14),
 // and compared with LDR-FLIP (steps 1-7 above, starting from these linear values); the map is
 // the per-pixel maximum over exposures, the pooled value its mean over counted pixels.
@@ -196,7 +196,8 @@ HdrFlipResult HdrFlip(const RgbImage& ref_linear, const RgbImage& test_linear,
                       const HdrFlipOptions& options = {}, const Map* mask = nullptr);
 // The paper's automatic range from the reference's luminance Y (Rec.709 weights) over counted
 // pixels: x_max solves t(x_max) = 0.85;  start = log2(x_max / max Y),  stop = log2(x_max /
-// median Y) (median: the lower middle element for an even count). A median of 0 gives
+// median Y) (median: the mean of the two middle elements for an even count, as numpy's 50th
+// percentile in the FLIP reference implementation). A median of 0 gives
 // stop = +infinity and a maximum of 0 gives start = +infinity: the result is then not finite
 // and must not be used (the caller checks std::isfinite on both ends).
 ExposureRange AutomaticExposureRange(const RgbImage& ref_linear, const Map* mask = nullptr);
@@ -259,6 +260,11 @@ CompareResult Compare(const RgbImage& ref_linear, const RgbImage& test_linear,
 // mismatch or an unusable channel layout.
 CompareResult CompareFiles(const std::string& reference_path, const std::string& test_path,
                            const std::string& mask_path, const CompareOptions& options = {});
+
+// The colour map of error-map pictures (clothfit compare --maps, reports): piecewise linear in
+// display RGB through black -> deep blue -> magenta -> orange -> pale yellow over t in [0, 1]
+// (clamped; non-finite t -> black). Returns display (sRGB-encoded) values in [0, 1].
+std::array<float, 3> ErrorMapColour(double t);
 
 // ---- Internals exposed for tests (FLIP building blocks) ---------------------------------------
 namespace flip_detail {

@@ -1,5 +1,6 @@
 #include "render/image_io.h"
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imageio.h>
 #include <unistd.h>
@@ -138,6 +139,28 @@ void WritePng8(const std::string& path, int width, int height, const std::vector
   spec.attribute("oiio:ColorSpace", "sRGB");
   WriteWithOiio(path, tmp, spec, OIIO::TypeDesc::UINT8, bytes.data());
   RenameInto(tmp, path);
+}
+
+std::vector<unsigned char> EncodePng8(int width, int height, const std::vector<float>& rgb,
+                                      const std::string& what) {
+  if (width <= 0 || height <= 0 || rgb.size() != size_t(width) * size_t(height) * 3)
+    throw IoError(what + ": refusing to encode a PNG with inconsistent size");
+  std::vector<unsigned char> bytes(rgb.size());
+  for (size_t i = 0; i < rgb.size(); ++i) {
+    const float v = std::isfinite(rgb[i]) ? std::min(std::max(rgb[i], 0.0f), 1.0f) : 0.0f;
+    bytes[i] = static_cast<unsigned char>(std::lround(v * 255.0f));
+  }
+  std::vector<unsigned char> png;
+  OIIO::Filesystem::IOVecOutput proxy(png);
+  auto out = OIIO::ImageOutput::create("memory.png");
+  if (!out) throw IoError(what + ": cannot create a PNG writer: " + OIIO::geterror());
+  OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::UINT8);
+  spec.attribute("oiio:ColorSpace", "sRGB");
+  if (!out->set_ioproxy(&proxy) || !out->open("memory.png", spec) ||
+      !out->write_image(OIIO::TypeDesc::UINT8, bytes.data()) || !out->close())
+    throw IoError(what + ": PNG encoding failed: " + out->geterror());
+  if (png.empty()) throw IoError(what + ": PNG encoding produced no data");
+  return png;
 }
 
 void WriteTextAtomic(const std::string& path, const std::string& text) {

@@ -49,6 +49,11 @@ Table2D ImageToTable(const Image& image);
 // 8-bit PNG, atomically. Values are clamped and rounded to nearest.
 void WritePng8(const std::string& path, int width, int height, const std::vector<float>& rgb);
 
+// Encodes display-referred RGB (values in [0, 1], clamped, non-finite -> 0) as an 8-bit PNG
+// in memory (for data URIs in reports). Throws IoError naming `what` on failure.
+std::vector<unsigned char> EncodePng8(int width, int height, const std::vector<float>& rgb,
+                                      const std::string& what);
+
 // Writes text atomically (temporary file + rename). Throws IoError naming the file.
 void WriteTextAtomic(const std::string& path, const std::string& text);
 

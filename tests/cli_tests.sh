@@ -97,6 +97,43 @@ PY
     echo "$err" | grep -q "none.exr" || fail "fit error does not name the file: $err"
     [ ! -e "$TMP/f.json" ] || fail "preset written despite error"
     ;;
+  report)
+    # Small EXRs from the lut command stand in for references and previews (16x16, RGB).
+    "$BIN" --quiet lut --size 16 --out "$TMP/ref.exr" --sheen-out "$TMP/prev.exr" --sheen-size 16 >/dev/null || fail "lut ref"
+    "$BIN" --quiet lut --size 16 --out "$TMP/ref2.exr" >/dev/null || fail "lut ref2"
+    "$BIN" --quiet lut --size 8 --out "$TMP/small.exr" >/dev/null || fail "lut small"
+    cp "$TMP/ref.exr" "$TMP/prev_std.exr"
+    preset() {  # preset <file> <model> <preview>
+      printf '{"schema":"clothfit.preset","version":1,"model":"%s","parameters":{"roughness":0.5},
+"fit":{"iterations":3,"final_cost":0.5,"seconds":0.1,"termination":"CONVERGENCE","scenes":[
+{"scene":"x/sphere.json","reference":"ref.exr","reference2":"ref2.exr","tone_mapping":"ACESFilmic",
+"exposure":1,"preview":"%s"}]},"provenance":{"fabric":"datasets/fabrics/demo.json"}}' "$2" "$3" > "$1"
+    }
+    preset "$TMP/c.json" cloth prev.exr
+    preset "$TMP/s.json" standard prev_std.exr
+    out=$("$BIN" --quiet report "$TMP/c.json" "$TMP/s.json" --out "$TMP/rep") || fail "report exited $?: $out"
+    echo "$out" | grep -q "^report: /.*/rep/index.html$" || fail "no report path in: $out"
+    echo "$out" | grep -q "^demo .*noise floor" || fail "no noise-floor row in: $out"
+    echo "$out" | grep -q "^demo .*standard" || fail "no standard row in: $out"
+    for f in index.html demo.html report.json report.csv; do [ -s "$TMP/rep/$f" ] || fail "no $f"; done
+    [ "$(grep -o 'data:image/png;base64,' "$TMP/rep/demo.html" | wc -l)" -eq 6 ] || fail "expected 6 images"
+    python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert j['fabrics'][0]['scenes'][0]['models']['standard']['psnr_display']=='inf'" \
+      "$TMP/rep/report.json" || fail "identical preview: PSNR not inf in JSON"
+    # Bad inputs: missing preview, size mismatch, corrupt EXR, missing preset -> exit 1 naming the file.
+    preset "$TMP/bad.json" cloth missing.exr
+    err=$("$BIN" --quiet report "$TMP/bad.json" --out "$TMP/rep2" 2>&1) && fail "missing preview accepted"
+    echo "$err" | grep -q "missing.exr" || fail "error does not name the missing file: $err"
+    preset "$TMP/bad.json" cloth small.exr
+    err=$("$BIN" --quiet report "$TMP/bad.json" --out "$TMP/rep2" 2>&1) && fail "size mismatch accepted"
+    echo "$err" | grep -q "small.exr" || fail "size mismatch error does not name the file: $err"
+    printf 'v/1\001 this is not an EXR' > "$TMP/corrupt.exr"
+    preset "$TMP/bad.json" cloth corrupt.exr
+    err=$("$BIN" --quiet report "$TMP/bad.json" --out "$TMP/rep2" 2>&1) && fail "corrupt EXR accepted"
+    echo "$err" | grep -q "corrupt.exr" || fail "corrupt EXR error does not name the file: $err"
+    err=$("$BIN" --quiet report "$TMP/nope.json" --out "$TMP/rep2" 2>&1) && fail "missing preset accepted"
+    echo "$err" | grep -q "nope.json" || fail "missing preset error does not name the file: $err"
+    [ ! -e "$TMP/rep2" ] || fail "report written despite errors"
+    ;;
   *) fail "unknown case $CASE" ;;
 esac
 echo "PASS: $CASE"

@@ -365,6 +365,19 @@ TEST(MetricsHdrFlip, AutomaticRangeIsThePaperFormula) {
   EXPECT_TRUE(h.automatic_range);
   EXPECT_EQ(h.exposures, 4);
   EXPECT_NEAR(h.range.start, r2.start, 1e-12);
+  // Even count: the median is the mean of the two middle values (numpy's 50th percentile, as
+  // in the FLIP reference implementation): 8 pixels at 0.25 and 8 at 1 give a median of 0.625.
+  RgbImage half = Uniform(4, 4, 1.0f, 1.0f, 1.0f);
+  for (size_t i = 0; i < 8; ++i) half.rgb[3 * i] = half.rgb[3 * i + 1] = half.rgb[3 * i + 2] = 0.25f;
+  EXPECT_NEAR(AutomaticExposureRange(half).stop, std::log2(2.118872 / 0.625), 1e-5);
+}
+
+TEST(MetricsHdrFlip, NegativeRadianceIsClippedBeforeToneMapping) {
+  // The rational fit alone would give t(-10) = (90.36 - 0.18) / (87.48 - 3.54 + 0.14) = 1.07,
+  // i.e. white; the reference implementation clips inputs to 0 first.
+  EXPECT_EQ(HdrFlipToneMap(-10.0), 0.0);
+  EXPECT_EQ(HdrFlipToneMap(-1e-3), 0.0);
+  EXPECT_EQ(HdrFlipToneMap(0.0), 0.0);
 }
 
 TEST(MetricsHdrFlip, ZeroMedianReferenceUsesTheExplicitRangeAndStaysFinite) {
