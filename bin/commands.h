@@ -26,6 +26,12 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddTonemapCommand(CLI::App& app, const Globals& g, int& exit_code);
+void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code);
+
+// `clothfit bench convert`: converts a catalogue (generated into a temporary directory by
+// datasets/catalogue/generate.py when `catalogue` is empty) and prints materials/s per kind and
+// the median BRDF-space fit error. Returns the exit status.
+int RunBenchConvert(const std::string& catalogue, int count, int jobs, bool quiet);
 
 // The scene's environment: the card's map, or the procedural sky (warning on stderr unless
 // quiet) when the map is not installed; null when the card has no environment.
