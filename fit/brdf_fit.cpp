@@ -106,6 +106,48 @@ double ErrorOf(const Target& t, render::ModelKind m, const cloth::Options& co, c
   return std::sqrt(se / 3.0);  // weights sum to 1 over the valid samples
 }
 
+// Cloth (explicit sheen, no subsurface) is linear in its colours for a fixed roughness:
+// f n.l = base * a + sheen * b with a = n.l / pi and b = D V n.l. Per channel, the 2 x 2
+// weighted least squares in linear space, weighted by the cube-root compression's slope
+// (d cbrt(y) = dy / (3 (y + eps)^(2/3))), gives the colours that are best to first order in
+// the fit space; a bound hit is clamped and the other colour re-solved.
+void ClosedFormClothColours(const Target& t, const cloth::Options& co, std::vector<double>& x) {
+  double unit_base[10] = {1, 1, 1, 0, 0, 0, x[6], 0, 0, 0};
+  double unit_sheen[10] = {0, 0, 0, 1, 1, 1, x[6], 0, 0, 0};
+  double aa[3] = {0, 0, 0}, ab[3] = {0, 0, 0}, bb[3] = {0, 0, 0}, ay[3] = {0, 0, 0},
+         by[3] = {0, 0, 0};
+  for (size_t k = 0; k < t.cos.size(); ++k) {
+    const Rgb<double> a = EvalDirectFlat(render::ModelKind::kCloth, co, unit_base, t.cos[k]);
+    const Rgb<double> b = EvalDirectFlat(render::ModelKind::kCloth, co, unit_sheen, t.cos[k]);
+    for (int ch = 0; ch < 3; ++ch) {
+      const double y = std::max(std::pow(t.t[k][ch], 3.0) - kCbrtEps, 0.0);
+      const double slope = 1.0 / (3.0 * std::pow(y + kCbrtEps, 2.0 / 3.0));
+      const double w = Sq(t.sw[k] * slope);
+      aa[ch] += w * a[ch] * a[ch];
+      ab[ch] += w * a[ch] * b[ch];
+      bb[ch] += w * b[ch] * b[ch];
+      ay[ch] += w * a[ch] * y;
+      by[ch] += w * b[ch] * y;
+    }
+  }
+  for (int ch = 0; ch < 3; ++ch) {
+    const double det = aa[ch] * bb[ch] - ab[ch] * ab[ch];
+    if (!(std::abs(det) > 1e-300)) continue;
+    double c = (ay[ch] * bb[ch] - by[ch] * ab[ch]) / det;
+    double s = (aa[ch] * by[ch] - ab[ch] * ay[ch]) / det;
+    if (c < 0.0 || c > 1.0) {
+      c = std::clamp(c, 0.0, 1.0);
+      s = (by[ch] - ab[ch] * c) / std::max(bb[ch], 1e-300);
+    }
+    if (s < 0.0 || s > 1.0) {
+      s = std::clamp(s, 0.0, 1.0);
+      c = std::clamp((ay[ch] - ab[ch] * s) / std::max(aa[ch], 1e-300), 0.0, 1.0);
+    }
+    x[size_t(ch)] = c;
+    x[size_t(3 + ch)] = s;
+  }
+}
+
 }  // namespace
 
 const std::vector<DirectionPair>& CanonicalDirections() {
@@ -189,8 +231,9 @@ BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& opt) {
     }
   }
 
+  // Candidate starts: the source itself (same model), then one per roughness start with
+  // colours from the source's albedo (cloth: closed-form colours, ClosedFormClothColours).
   std::vector<std::vector<double>> starts;
-  if (opt.source_preset && opt.source_preset->model == model) starts.push_back(opt.source_preset->values);
   for (double r0 : opt.start_roughness) {
     std::vector<double> x = base.values;
     for (const Block& b : layout.blocks) {
@@ -204,13 +247,28 @@ BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& opt) {
       if (b.name == "subsurface_color")
         for (int c = 0; c < 3; ++c) p[c] = 0.1;
     }
+    for (size_t i = 0; i < x.size(); ++i) x[i] = std::clamp(x[i], lo[i], hi[i]);
+    const bool linear_colours = model == render::ModelKind::kCloth && !opt.cloth.subsurface &&
+                                opt.cloth.sheen_default == cloth::SheenDefault::kExplicit &&
+                                constant.empty();
+    if (linear_colours) ClosedFormClothColours(target, opt.cloth, x);
     starts.push_back(x);
   }
+  // Screening: only the candidate with the lowest error is solved (each solve costs ~15
+  // iterations); the source's own parameters, when given, are solved first and end the search
+  // if they already reproduce the samples.
+  std::stable_sort(starts.begin(), starts.end(), [&](const auto& a, const auto& b) {
+    return ErrorOf(target, model, opt.cloth, a.data()) < ErrorOf(target, model, opt.cloth, b.data());
+  });
+  starts.resize(std::min<size_t>(starts.size(), size_t(std::max(opt.solved_starts, 1))));
+  if (opt.source_preset && opt.source_preset->model == model)
+    starts.insert(starts.begin(), opt.source_preset->values);
 
   BrdfFitResult best;
   best.message = "no start converged to a usable solution";
   double best_error = std::numeric_limits<double>::infinity();
   for (std::vector<double> x : starts) {
+    if (best.usable && best.error < 1e-6) break;  // exact already (the source start)
     for (size_t i = 0; i < x.size(); ++i) x[i] = std::clamp(x[i], lo[i], hi[i]);
     auto* cost = new ceres::DynamicAutoDiffCostFunction<BrdfResidual, 10>(
         new BrdfResidual{&target, model, opt.cloth});
@@ -232,8 +290,8 @@ BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& opt) {
     ceres::Solver::Options so;
     so.linear_solver_type = ceres::DENSE_QR;
     so.max_num_iterations = opt.max_iterations;
-    so.function_tolerance = 1e-10;
-    so.parameter_tolerance = 1e-10;
+    so.function_tolerance = 1e-9;
+    so.parameter_tolerance = 1e-9;
     so.num_threads = 1;  // materials run in parallel, one fit per thread
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);

@@ -97,7 +97,11 @@ struct BrdfFitOptions {
   render::ModelKind model = render::ModelKind::kCloth;
   cloth::Options cloth;                            // target options when model == kCloth
   std::vector<std::string> locked;                 // held at the start preset's values
-  std::vector<double> start_roughness = {0.4, 0.8};
+  // Candidate starts (roughness and sheen roughness; cloth colours in closed form, other
+  // models' colours from the source's albedo), scored by their error; the best
+  // `solved_starts` are solved.
+  std::vector<double> start_roughness = {0.3, 0.45, 0.6, 0.75, 0.9};
+  int solved_starts = 1;
   int max_iterations = 60;
   // The source itself when it is of the target model: added as a start.
   const render::MaterialPreset* source_preset = nullptr;
