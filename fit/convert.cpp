@@ -156,6 +156,13 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
     const BrdfFitResult r = FitOrThrow(s, ModelKind::kPhysicalSheen, {}, m);
     c.physical_sheen = r.preset;
     fits["physical-sheen"] = r.error;
+    if (o.cloth.variant != cloth::Variant::kSeedThreejs) {
+      cloth::Options seed;
+      seed.variant = cloth::Variant::kSeedThreejs;  // the seed's MeshClothMaterial, its own fit
+      const BrdfFitResult sr = FitOrThrow(s, ModelKind::kCloth, seed, m);
+      c.seed_cloth = sr.preset;
+      fits["cloth/seed-threejs"] = sr.error;
+    }
   }
   if (Wants(o, "gltf")) {
     const BrdfFitResult r = FitOrThrow(s, ModelKind::kGltfSheen, {}, m);

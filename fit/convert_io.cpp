@@ -601,7 +601,7 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
 }
 
 void WriteThreejsCloth(const std::string& path, const Converted& c) {
-  const render::MaterialPreset& p = c.cloth;
+  const render::MaterialPreset& p = c.seed_cloth ? *c.seed_cloth : c.cloth;
   json j;
   j["metadata"] = {{"version", 4.6}, {"type", "Material"}, {"generator", "clothfit convert"}};
   j["type"] = "MeshClothMaterial";

@@ -72,6 +72,9 @@ struct Converted {
   render::MaterialPreset cloth;           // always
   std::optional<render::MaterialPreset> physical_sheen;  // three.js target
   std::optional<render::MaterialPreset> gltf_sheen;      // glTF target
+  // The seed's MeshClothMaterial (cloth/seed-threejs, explicit sheen) for the three.js target,
+  // when `cloth` is another variant; WriteThreejsCloth falls back to `cloth`.
+  std::optional<render::MaterialPreset> seed_cloth;
   std::vector<MapRef> maps;
   nlohmann::json provenance = nlohmann::json::object();
 };

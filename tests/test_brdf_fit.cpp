@@ -154,7 +154,7 @@ TEST(Merl, BadFilesNameFileAndField) {
 }
 
 TEST(BrdfFit, WovenFabricAveragedOverTheWeaveConverts) {
-  const fs::path fabrics = fs::path(__FILE__).parent_path().parent_path() / "datasets" / "fabrics";
+  const fs::path fabrics = fs::path(CLOTHFIT_TEST_SOURCE_DIR) / "datasets" / "fabrics";
   const render::Fabric f = render::LoadFabric((fabrics / "canvas.json").string());
   const BrdfSamples s = SampleBsdf(*f.bsdf, f.weave_period_uv, 3, 2);
   const BrdfFitResult r = FitBrdf(s, {});
