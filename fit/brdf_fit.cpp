@@ -250,7 +250,8 @@ BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& opt) {
     for (size_t i = 0; i < x.size(); ++i) x[i] = std::clamp(x[i], lo[i], hi[i]);
     const bool linear_colours = model == render::ModelKind::kCloth && !opt.cloth.subsurface &&
                                 opt.cloth.sheen_default == cloth::SheenDefault::kExplicit &&
-                                constant.empty();
+                                !layout.Find("base_color").locked &&
+                                !layout.Find("sheen_color").locked;
     if (linear_colours) ClosedFormClothColours(target, opt.cloth, x);
     starts.push_back(x);
   }
