@@ -21,15 +21,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::vector<std::string> SplitComma(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, ','))
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
 // "i/N" -> (i, N); throws std::invalid_argument.
 void ParseShard(const std::string& s, int& i, int& n) {
   const size_t slash = s.find('/');
@@ -73,7 +64,7 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
       ->check(CLI::IsMember({"filament", "seed-threejs"}));
   cmd->callback([=, &g, &exit_code]() {
     fit::ConvertOptions o;
-    o.targets = SplitComma(*to);
+    o.targets = SplitList(*to);
     o.out_dir = *out;
     o.jobs = *jobs;
     if (*variant == "seed-threejs") {

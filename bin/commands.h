@@ -39,6 +39,8 @@ std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& s
 // Renders (or reuses from the content-keyed cache) a reference; returns its path.
 std::string CachedReference(const std::string& scene_path, const std::string& fabric_path,
                             int spp, uint64_t seed, bool quiet);
+// "a,b,,c" -> {"a", "b", "c"} (empty items dropped).
+std::vector<std::string> SplitList(const std::string& s);
 // The canonical scene cards (datasets/scenes/{sphere,drape,swatch}.json).
 std::vector<std::string> CanonicalScenes();
 // Linear RGB frame -> display RGB in [0, 1] (tone mapping + sRGB).

@@ -661,8 +661,11 @@ void WriteFilamentMat(const std::string& path, const Converted& c) {
   const MapRef* normal_map = FindMap(c, "normal");
   const Rgb<double> base = Factor(Colour(p, "base_color"), base_map);
   const Rgb<double> sheen = EffectiveSheen(p);
+  std::string name = c.name;  // a string literal in the .mat: no quotes, backslashes, newlines
+  for (char& ch : name)
+    if (ch == '"' || ch == '\\' || ch == '\n') ch = '_';
   std::ostringstream s;
-  s << "// " << c.name << ": written by clothfit convert. Filament cloth shading model\n"
+  s << "// " << name << ": written by clothfit convert. Filament cloth shading model\n"
     << "// (current shader tree). baseColor, sheenColor, subsurfaceColor are linear sRGB;\n"
     << "// roughness is perceptual (Filament squares it). sheenColor is always written\n"
     << "// explicitly (no reliance on Filament's sqrt(baseColor) / white default).\n";
@@ -671,13 +674,17 @@ void WriteFilamentMat(const std::string& path, const Converted& c) {
       << " (sRGB: load it as an SRGB8_A8 texture so sampling decodes to linear)\n";
   if (normal_map)
     s << "// normalMap: " << Relative(normal_map->path, path) << " (linear RGB8 texture)\n";
-  s << "material {\n    name : \"" << c.name << "\",\n    shadingModel : cloth,\n";
+  std::vector<std::string> props = {"    name : \"" + name + "\"", "    shadingModel : cloth"};
   if (base_map || normal_map) {
-    s << "    parameters : [\n";
-    if (base_map) s << "        { type : sampler2d, name : baseColorMap }" << (normal_map ? ",\n" : "\n");
-    if (normal_map) s << "        { type : sampler2d, name : normalMap }\n";
-    s << "    ],\n    requires : [ uv0 ],\n";
+    std::string params = "    parameters : [\n";
+    if (base_map) params += "        { type : sampler2d, name : baseColorMap }";
+    if (base_map && normal_map) params += ",\n";
+    if (normal_map) params += "        { type : sampler2d, name : normalMap }";
+    props.push_back(params + "\n    ]");
+    props.push_back("    requires : [ uv0 ]");
   }
+  s << "material {\n";
+  for (size_t i = 0; i < props.size(); ++i) s << props[i] << (i + 1 < props.size() ? ",\n" : "\n");
   s << "}\n\nfragment {\n    void material(inout MaterialInputs material) {\n";
   if (normal_map)
     s << "        material.normal = texture(materialParams_normalMap, getUV0()).xyz * 2.0 - 1.0;\n";
@@ -719,6 +726,7 @@ render::MaterialPreset ReadThreejsCloth(const std::string& path) {
   const json j = ReadJson(path);
   if (j.value("type", "") != "MeshClothMaterial") Fail(path, "type", "not MeshClothMaterial");
   render::MaterialPreset p = render::DefaultPreset(ModelKind::kCloth);
+  p.cloth.variant = cloth::Variant::kSeedThreejs;  // the seed's material, explicit sheen
   const Rgb<double> c = FromHex(j.value("color", json()), path, "color");
   const Rgb<double> s = FromHex(j.value("sheen", json()), path, "sheen");
   for (int k = 0; k < 3; ++k) {
