@@ -291,8 +291,8 @@ BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& opt) {
     ceres::Solver::Options so;
     so.linear_solver_type = ceres::DENSE_QR;
     so.max_num_iterations = opt.max_iterations;
-    so.function_tolerance = 1e-9;
-    so.parameter_tolerance = 1e-9;
+    so.function_tolerance = 1e-8;
+    so.parameter_tolerance = 1e-8;
     so.num_threads = 1;  // materials run in parallel, one fit per thread
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);

@@ -102,7 +102,7 @@ struct BrdfFitOptions {
   // `solved_starts` are solved.
   std::vector<double> start_roughness = {0.3, 0.45, 0.6, 0.75, 0.9};
   int solved_starts = 1;
-  int max_iterations = 60;
+  int max_iterations = 30;
   // The source itself when it is of the target model: added as a start.
   const render::MaterialPreset* source_preset = nullptr;
 };

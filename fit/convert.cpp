@@ -134,6 +134,13 @@ BrdfFitResult FitOrThrow(const BrdfSamples& s, ModelKind model, const cloth::Opt
   BrdfFitOptions fo;
   fo.model = model;
   fo.cloth = co;
+  // Fabrics are dielectric: metalness is held at 0 (as the image-fit baselines do), except
+  // that a source of the target model starts from, and keeps, its own value.
+  if (model == ModelKind::kPhysicalSheen || model == ModelKind::kStandard) fo.locked = {"metalness"};
+  if (model == ModelKind::kGltfSheen) fo.locked = {"metallic"};
+  // The engines' models cost several times the cloth model per Jacobian (tables, Lambda
+  // curves); their fits stop after 15 iterations (docs/convert.md: error effect measured).
+  if (model != ModelKind::kCloth) fo.max_iterations = 15;
   if (m.analytic && m.analytic->model == model) fo.source_preset = &*m.analytic;
   BrdfFitResult r = FitBrdf(s, fo);
   if (!r.usable)
@@ -152,22 +159,26 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
   c.cloth = cr.preset;
   item.error = cr.error;
   json fits = {{"cloth", cr.error}};
+  json iterations = {{"cloth", cr.iterations}};
   if (Wants(o, "threejs")) {
     const BrdfFitResult r = FitOrThrow(s, ModelKind::kPhysicalSheen, {}, m);
     c.physical_sheen = r.preset;
     fits["physical-sheen"] = r.error;
+    iterations["physical-sheen"] = r.iterations;
     if (o.cloth.variant != cloth::Variant::kSeedThreejs) {
       cloth::Options seed;
       seed.variant = cloth::Variant::kSeedThreejs;  // the seed's MeshClothMaterial, its own fit
       const BrdfFitResult sr = FitOrThrow(s, ModelKind::kCloth, seed, m);
       c.seed_cloth = sr.preset;
       fits["cloth/seed-threejs"] = sr.error;
+      iterations["cloth/seed-threejs"] = sr.iterations;
     }
   }
   if (Wants(o, "gltf")) {
     const BrdfFitResult r = FitOrThrow(s, ModelKind::kGltfSheen, {}, m);
     c.gltf_sheen = r.preset;
     fits["gltf-sheen"] = r.error;
+    iterations["gltf-sheen"] = r.iterations;
   }
   c.provenance = {{"tool", kToolVersion},
                   {"source", m.file},
@@ -180,7 +191,7 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
                            {"directions", CanonicalDirections().size()},
                            {"error", fits},
                            {"starts", cr.starts},
-                           {"iterations", cr.iterations}}},
+                           {"iterations", iterations}}},
                   {"notes", m.notes}};
   const std::vector<std::string> outs = OutputsFor(o, stem);
   size_t k = 0;
