@@ -80,7 +80,7 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
       return;
     }
     try {
-      const auto files = fit::ExpandInputs(*inputs);
+      const auto files = fit::ExpandInputs(*inputs, o.out_dir);
       fs::create_directories(o.out_dir);
       ProgressBar bar("convert", g.quiet);
       o.progress = [&bar](long long done, long long total) { bar.Update(done, total); };

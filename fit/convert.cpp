@@ -268,11 +268,21 @@ void CheckTargets(const std::vector<std::string>& targets) {
                                   "' (valid: preset, threejs, gltf, filament)");
 }
 
-std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args) {
+std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args,
+                                    const std::string& exclude) {
   std::vector<InputFile> out;
+  std::error_code ex_ec;
+  const fs::path skip = exclude.empty() ? fs::path() : fs::weakly_canonical(exclude, ex_ec);
   auto add_dir = [&](const fs::path& dir) {
     std::vector<fs::path> files;
-    for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    for (auto it = fs::recursive_directory_iterator(dir); it != fs::recursive_directory_iterator();
+         ++it) {
+      const auto& e = *it;
+      std::error_code ec;
+      if (!skip.empty() && e.is_directory() && fs::weakly_canonical(e.path(), ec) == skip) {
+        it.disable_recursion_pending();
+        continue;
+      }
       if (!e.is_regular_file()) continue;
       const std::string name = e.path().filename().string();
       if (name.empty() || name[0] == '.') continue;

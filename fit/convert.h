@@ -60,7 +60,10 @@ struct ConvertReport {
 struct InputFile {
   std::string path, stem;
 };
-std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args);
+// Files under `exclude` (the output directory, when it sits inside an input directory) are
+// left out of directory scans.
+std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args,
+                                    const std::string& exclude = "");
 
 // Validates targets (throws std::invalid_argument listing the valid names).
 void CheckTargets(const std::vector<std::string>& targets);

@@ -284,6 +284,20 @@ TEST(ConvertBatch, ResumeSkipsUnchangedAndReconvertsOnlyAChangedInput) {
     }
 }
 
+TEST(ConvertBatch, OutputDirectoryInsideAnInputDirectoryIsNotReadBack) {
+  Catalogue cat;
+  const fs::path in = cat.dir / "presets";
+  const fs::path out = in / "converted";
+  ConvertOptions o;
+  o.out_dir = out.string();
+  const ConvertReport first = RunConvert(ExpandInputs({in.string()}, o.out_dir), o);
+  ASSERT_EQ(first.failed, 0);
+  const auto again = ExpandInputs({in.string()}, o.out_dir);
+  EXPECT_EQ(int(again.size()), first.converted);
+  for (const InputFile& f : again) EXPECT_EQ(f.path.find("converted"), std::string::npos) << f.path;
+  EXPECT_GT(ExpandInputs({in.string()}).size(), again.size());  // without the exclusion
+}
+
 TEST(ConvertBatch, UnionOfShardsEqualsTheUnshardedOutput) {
   Catalogue cat;
   const std::vector<std::string> in = {(cat.dir / "presets").string(), (cat.dir / "seed").string(),
