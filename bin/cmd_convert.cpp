@@ -59,7 +59,8 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--to", *to, "comma-separated targets: preset, threejs, gltf, filament");
   cmd->add_option("--out", *out, "output directory (created)")->required();
   cmd->add_option("-j,--jobs", *jobs, "worker threads (0: all cores)")->check(CLI::Range(0, 1024));
-  cmd->add_option("--shard", *shard, "i/N: convert only the i-th of N deterministic parts (0-based)");
+  cmd->add_option("--shard", *shard,
+                  "i/N: convert only the i-th of N deterministic parts (0-based)");
   cmd->add_option("--cloth-variant", *variant, "cloth target: filament or seed-threejs")
       ->check(CLI::IsMember({"filament", "seed-threejs"}));
   cmd->callback([=, &g, &exit_code]() {
@@ -99,7 +100,8 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
 
 int RunBenchConvert(const std::string& catalogue_in, int count, int jobs, bool quiet) {
   std::string catalogue = catalogue_in;
-  const fs::path tmp = fs::temp_directory_path() / ("clothfit-bench-convert-" + std::to_string(::getpid()));
+  const fs::path tmp =
+      fs::temp_directory_path() / ("clothfit-bench-convert-" + std::to_string(::getpid()));
   if (catalogue.empty()) {
     catalogue = (tmp / "catalogue").string();
     const std::string cmd = "python3 '" + CatalogueScript() + "' --out '" + catalogue +
@@ -120,15 +122,17 @@ int RunBenchConvert(const std::string& catalogue_in, int count, int jobs, bool q
   std::vector<double> errors;
   // Wall-clock rate, and CPU time per material (all threads) with the rate two fully available
   // cores would give: the machine is shared, so the wall clock alone understates it.
-  std::printf("| materials | count | wall s | materials/s (wall) | CPU ms / material | "
-              "materials/s (2 cores, from CPU time) | median fit error |\n"
-              "|---|---:|---:|---:|---:|---:|---:|\n");
+  std::printf(
+      "| materials | count | wall s | materials/s (wall) | CPU ms / material | "
+      "materials/s (2 cores, from CPU time) | median fit error |\n"
+      "|---|---:|---:|---:|---:|---:|---:|\n");
   int status = 0;
   int k = 0;
   for (const Part& p : parts) {
     std::vector<std::string> args;
     for (const std::string& d : p.dirs)
-      if (fs::is_directory(fs::path(catalogue) / d)) args.push_back((fs::path(catalogue) / d).string());
+      if (fs::is_directory(fs::path(catalogue) / d))
+        args.push_back((fs::path(catalogue) / d).string());
     if (args.empty()) continue;
     fit::ConvertOptions o;
     o.targets = {"preset"};

@@ -217,10 +217,10 @@ BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& opt) {
   std::vector<int> constant;
   std::vector<double> lo(size_t(layout.flat_size)), hi(size_t(layout.flat_size));
   for (const Block& b : layout.blocks) {
-    const bool ignored = model == render::ModelKind::kCloth &&
-                         ((b.name == "sheen_color" &&
-                           opt.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
-                          (b.name == "subsurface_color" && !opt.cloth.subsurface));
+    const bool ignored =
+        model == render::ModelKind::kCloth &&
+        ((b.name == "sheen_color" && opt.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
+         (b.name == "subsurface_color" && !opt.cloth.subsurface));
     double lower = b.lower;
     if (model == render::ModelKind::kCloth && b.name == "roughness")
       lower = cloth::MinRoughness(opt.cloth);
@@ -259,7 +259,8 @@ BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& opt) {
   // iterations); the source's own parameters, when given, are solved first and end the search
   // if they already reproduce the samples.
   std::stable_sort(starts.begin(), starts.end(), [&](const auto& a, const auto& b) {
-    return ErrorOf(target, model, opt.cloth, a.data()) < ErrorOf(target, model, opt.cloth, b.data());
+    return ErrorOf(target, model, opt.cloth, a.data()) <
+           ErrorOf(target, model, opt.cloth, b.data());
   });
   starts.resize(std::min<size_t>(starts.size(), size_t(std::max(opt.solved_starts, 1))));
   if (opt.source_preset && opt.source_preset->model == model)

@@ -43,8 +43,8 @@
 
 namespace clothfit::fit {
 
-inline constexpr int kDirNodes = 6;     // Gauss-Legendre nodes per cosine
-inline constexpr int kAzimuths = 8;     // relative azimuths over [0, pi]
+inline constexpr int kDirNodes = 6;  // Gauss-Legendre nodes per cosine
+inline constexpr int kAzimuths = 8;  // relative azimuths over [0, pi]
 inline constexpr double kCbrtEps = 1e-4;
 
 struct DirectionPair {
@@ -76,11 +76,11 @@ Rgb<T> EvalDirectFlat(render::ModelKind m, const cloth::Options& co, const T* x,
       return standard::EvalDirect(standard::Params<T>{rgb(0), x[3], x[4]}, {}, c,
                                   lut::DefaultDfg());
     case render::ModelKind::kPhysicalSheen:
-      return physical_sheen::EvalDirect(
-          physical_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]}, {}, c, lut::DefaultDfg());
+      return physical_sheen::EvalDirect(physical_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]},
+                                        {}, c, lut::DefaultDfg());
     case render::ModelKind::kGltfSheen:
-      return gltf_sheen::EvalDirect(gltf_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]}, {},
-                                    c, lut::DefaultSheenAlbedo());
+      return gltf_sheen::EvalDirect(gltf_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]}, {}, c,
+                                    lut::DefaultSheenAlbedo());
   }
   return Rgb<T>(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
 }
@@ -90,13 +90,12 @@ BrdfSamples SampleAnalytic(const render::MaterialPreset& preset);
 // A woven (spatially varying, possibly anisotropic) BSDF: the mean of Eval * cos over a
 // grid x grid stratified set of points of one weave period [0, period_uv)^2 and over
 // `rotations` azimuthal rotations of the pair about n (an isotropic average).
-BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int grid = 4,
-                       int rotations = 4);
+BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int grid = 4, int rotations = 4);
 
 struct BrdfFitOptions {
   render::ModelKind model = render::ModelKind::kCloth;
-  cloth::Options cloth;                            // target options when model == kCloth
-  std::vector<std::string> locked;                 // held at the start preset's values
+  cloth::Options cloth;             // target options when model == kCloth
+  std::vector<std::string> locked;  // held at the start preset's values
   // Candidate starts (roughness and sheen roughness; cloth colours in closed form, other
   // models' colours from the source's albedo), scored by their error; the best
   // `solved_starts` are solved.

@@ -66,7 +66,8 @@ std::string Uuid(uint64_t a) {
 
 std::string Sanitise(const std::string& s) {
   std::string out;
-  for (char c : s) out += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '.') ? c : '_';
+  for (char c : s)
+    out += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '.') ? c : '_';
   return out;
 }
 
@@ -136,7 +137,8 @@ BrdfFitResult FitOrThrow(const BrdfSamples& s, ModelKind model, const cloth::Opt
   fo.cloth = co;
   // Fabrics are dielectric: metalness is held at 0 (as the image-fit baselines do), except
   // that a source of the target model starts from, and keeps, its own value.
-  if (model == ModelKind::kPhysicalSheen || model == ModelKind::kStandard) fo.locked = {"metalness"};
+  if (model == ModelKind::kPhysicalSheen || model == ModelKind::kStandard)
+    fo.locked = {"metalness"};
   if (model == ModelKind::kGltfSheen) fo.locked = {"metallic"};
   // The engines' models cost several times the cloth model per Jacobian (tables, Lambda
   // curves); their fits stop after 15 iterations (docs/convert.md: error effect measured).
@@ -144,8 +146,8 @@ BrdfFitResult FitOrThrow(const BrdfSamples& s, ModelKind model, const cloth::Opt
   if (m.analytic && m.analytic->model == model) fo.source_preset = &*m.analytic;
   BrdfFitResult r = FitBrdf(s, fo);
   if (!r.usable)
-    throw ConvertError(m.file + ": " + m.name + ": " + render::ToString(model) + " fit failed: " +
-                       r.message);
+    throw ConvertError(m.file + ": " + m.name + ": " + render::ToString(model) +
+                       " fit failed: " + r.message);
   return r;
 }
 
@@ -186,12 +188,14 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
                   {"kind", m.kind},
                   {"content_hash", hash},
                   {"uuid", Uuid(std::stoull(hash, nullptr, 16))},
-                  {"fit", {{"space", "cube-root of cosine-weighted BRDF, canonical directions "
-                                     "(docs/convert.md)"},
-                           {"directions", CanonicalDirections().size()},
-                           {"error", fits},
-                           {"starts", cr.starts},
-                           {"iterations", iterations}}},
+                  {"fit",
+                   {{"space",
+                     "cube-root of cosine-weighted BRDF, canonical directions "
+                     "(docs/convert.md)"},
+                    {"directions", CanonicalDirections().size()},
+                    {"error", fits},
+                    {"starts", cr.starts},
+                    {"iterations", iterations}}},
                   {"notes", m.notes}};
   const std::vector<std::string> outs = OutputsFor(o, stem);
   size_t k = 0;
@@ -203,8 +207,11 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
   if (Wants(o, "gltf")) WriteGltf(outs[k++], c);
   if (Wants(o, "filament")) WriteFilamentMat(outs[k++], c);
   item.outputs = outs;
-  const json record = {{"hash", hash}, {"source", m.file}, {"material", m.name},
-                       {"error", cr.error}, {"outputs", outs}};
+  const json record = {{"hash", hash},
+                       {"source", m.file},
+                       {"material", m.name},
+                       {"error", cr.error},
+                       {"outputs", outs}};
   io::WriteTextAtomic(RecordPath(o, stem), record.dump(2) + "\n");
 }
 
@@ -308,14 +315,16 @@ std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args,
         if (b == std::string::npos || line[b] == '#') continue;
         const size_t e = line.find_last_not_of(" \t\r");
         const std::string entry = line.substr(b, e - b + 1);
-        const fs::path f = fs::path(entry).is_absolute() ? fs::path(entry) : p.parent_path() / entry;
+        const fs::path f =
+            fs::path(entry).is_absolute() ? fs::path(entry) : p.parent_path() / entry;
         if (fs::is_directory(f, ec)) {
           add_dir(f);
         } else if (fs::is_regular_file(f, ec)) {
-          out.push_back({f.string(), StemOf(fs::path(entry).is_absolute() ? f.filename() : fs::path(entry))});
+          out.push_back(
+              {f.string(), StemOf(fs::path(entry).is_absolute() ? f.filename() : fs::path(entry))});
         } else {
-          throw ConvertError(a + ":" + std::to_string(n) + ": no such file or directory '" +
-                             entry + "'");
+          throw ConvertError(a + ":" + std::to_string(n) + ": no such file or directory '" + entry +
+                             "'");
         }
       }
     } else if (fs::is_regular_file(p, ec)) {
@@ -414,8 +423,8 @@ std::string SummaryTable(const ConvertReport& r) {
     s << "\n| failed input | material | reason |\n|---|---|---|\n";
     for (const ItemResult& i : r.items)
       if (i.status == "failed")
-        s << "| " << i.file << " | " << (i.material.empty() ? "-" : i.material) << " | "
-          << i.reason << " |\n";
+        s << "| " << i.file << " | " << (i.material.empty() ? "-" : i.material) << " | " << i.reason
+          << " |\n";
   }
   return s.str();
 }
@@ -423,9 +432,9 @@ std::string SummaryTable(const ConvertReport& r) {
 nlohmann::json ReportJson(const ConvertReport& r, const ConvertOptions& o) {
   json items = json::array();
   for (const ItemResult& i : r.items) {
-    json j = {{"file", i.file}, {"material", i.material}, {"stem", i.stem}, {"kind", i.kind},
-              {"status", i.status}, {"seconds", i.seconds}, {"outputs", i.outputs},
-              {"notes", i.notes}};
+    json j = {{"file", i.file},       {"material", i.material}, {"stem", i.stem},
+              {"kind", i.kind},       {"status", i.status},     {"seconds", i.seconds},
+              {"outputs", i.outputs}, {"notes", i.notes}};
     if (i.error >= 0) j["error"] = i.error;
     if (!i.reason.empty()) j["reason"] = i.reason;
     items.push_back(j);

@@ -31,18 +31,18 @@ inline constexpr const char* kToolVersion = "clothfit 0.1.0";
 struct ConvertOptions {
   std::vector<std::string> targets = {"preset"};  // preset, threejs, gltf, filament
   std::string out_dir;
-  int jobs = 0;                                   // 0: TBB default
+  int jobs = 0;  // 0: TBB default
   int shard_index = 0, shard_count = 1;
-  cloth::Options cloth;                           // target cloth variant
+  cloth::Options cloth;  // target cloth variant
   // Called with (materials done, materials known so far) from worker threads (serialised).
   std::function<void(long long, long long)> progress;
 };
 
 struct ItemResult {
   std::string file, material, stem, kind;
-  std::string status;  // converted, skipped, failed
-  std::string reason;  // failures
-  double error = -1.0; // cloth fit error (cube-root units); -1 when not fitted
+  std::string status;   // converted, skipped, failed
+  std::string reason;   // failures
+  double error = -1.0;  // cloth fit error (cube-root units); -1 when not fitted
   double seconds = 0.0;
   std::vector<std::string> outputs;
   std::vector<std::string> notes;

@@ -81,9 +81,12 @@ struct SharedName {
   int size;
 };
 constexpr SharedName kShared[] = {
-    {"color", "base_color", 3},           {"roughness", "roughness", 1},
-    {"metalness", "metalness", 1},        {"sheenColor", "sheen_color", 3},
-    {"sheenRoughness", "sheen_roughness", 1}, {"subsurfaceColor", "subsurface_color", 3},
+    {"color", "base_color", 3},
+    {"roughness", "roughness", 1},
+    {"metalness", "metalness", 1},
+    {"sheenColor", "sheen_color", 3},
+    {"sheenRoughness", "sheen_roughness", 1},
+    {"subsurfaceColor", "subsurface_color", 3},
 };
 constexpr const char* kSharedList =
     "color, roughness, metalness, sheenColor, sheenRoughness, subsurfaceColor";
@@ -95,8 +98,9 @@ double CheckedNumber(const json& v, const std::string& file, const std::string& 
   if (!v.is_number()) Fail(file, field, "expected a number, got " + std::string(v.type_name()));
   const double x = v.get<double>();
   if (!std::isfinite(x) || x < lo || x > hi)
-    Fail(file, field, "value " + std::to_string(x) + " outside [" + std::to_string(lo) + ", " +
-                          std::to_string(hi) + "]");
+    Fail(file, field,
+         "value " + std::to_string(x) + " outside [" + std::to_string(lo) + ", " +
+             std::to_string(hi) + "]");
   return x;
 }
 
@@ -155,9 +159,8 @@ SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string
   if (!maps.is_object()) Fail(file, at + "maps", "expected an object");
   for (const auto& [attr, v] : maps.items()) {
     const std::string field = at + "maps." + attr;
-    static const std::vector<std::string> kMaps = {"color",     "normal",         "roughness",
-                                                   "metalness", "sheenColor",     "sheenRoughness",
-                                                   "specular"};
+    static const std::vector<std::string> kMaps = {
+        "color", "normal", "roughness", "metalness", "sheenColor", "sheenRoughness", "specular"};
     if (std::find(kMaps.begin(), kMaps.end(), attr) == kMaps.end())
       Fail(file, field, std::string("unknown map attribute (valid: ") + kMapList + ")");
     if (!v.is_object() || !v.contains("uri") || !v["uri"].is_string())
@@ -191,17 +194,17 @@ SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string
       m.notes.push_back(field + ": specular map read (mean " + std::to_string(mean[0]) +
                         ") but not modelled (F0 fixed at 0.04)");
     } else {
-      const std::string param = attr == "roughness"        ? "roughness"
-                                : attr == "metalness"      ? "metalness"
-                                                           : "sheen_roughness";
+      const std::string param = attr == "roughness"   ? "roughness"
+                                : attr == "metalness" ? "metalness"
+                                                      : "sheen_roughness";
       if (!HasParam(model, param)) {
         m.notes.push_back(field + " not used by brdf " + render::ToString(model));
         continue;
       }
-      double x = p.values[size_t(p.Offset(param == "metalness" && model == ModelKind::kGltfSheen
-                                              ? "metallic"
-                                              : param))] *
-                 mean[0];
+      double x =
+          p.values[size_t(p.Offset(
+              param == "metalness" && model == ModelKind::kGltfSheen ? "metallic" : param))] *
+          mean[0];
       SetParam(p, param, &x, 1);
       m.notes.push_back(field + ": reduced to its mean over texels (" + std::to_string(mean[0]) +
                         "), not carried over");
@@ -213,7 +216,8 @@ SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string
 
 ModelKind ParseBrdf(const json& j, const std::string& file, const std::string& field) {
   if (!j.contains("brdf") || !j["brdf"].is_string())
-    Fail(file, field, "missing or not a string (valid: cloth, standard, physical-sheen, gltf-sheen)");
+    Fail(file, field,
+         "missing or not a string (valid: cloth, standard, physical-sheen, gltf-sheen)");
   try {
     return render::ParseModelKind(j["brdf"].get<std::string>());
   } catch (const std::invalid_argument& e) {
@@ -226,8 +230,9 @@ void CheckSchema(const json& j, const std::string& file, const std::string& sche
     Fail(file, "version", "missing or not an integer");
   const int v = j["version"].get<int>();
   if (v != kSeedSchemaVersion)
-    Fail(file, "version", std::to_string(v) + " not supported (this build reads " + schema + " " +
-                              std::to_string(kSeedSchemaVersion) + ")");
+    Fail(file, "version",
+         std::to_string(v) + " not supported (this build reads " + schema + " " +
+             std::to_string(kSeedSchemaVersion) + ")");
 }
 
 std::vector<SourceMaterial> ReadSurfaceMaterial(const json& j, const std::string& file) {
@@ -295,8 +300,9 @@ double GltfNumber(const tinygltf::Value& v, const std::string& file, const std::
   if (!v.IsNumber() && !v.IsInt()) Fail(file, field, "expected a number");
   const double x = v.GetNumberAsDouble();
   if (!std::isfinite(x) || x < lo || x > hi)
-    Fail(file, field, "value " + std::to_string(x) + " outside [" + std::to_string(lo) + ", " +
-                          std::to_string(hi) + "]");
+    Fail(file, field,
+         "value " + std::to_string(x) + " outside [" + std::to_string(lo) + ", " +
+             std::to_string(hi) + "]");
   return x;
 }
 
@@ -386,17 +392,20 @@ std::vector<SourceMaterial> ReadGltf(const std::string& file) {
       const std::string f = at + ".extensions.KHR_materials_sheen";
       if (s.Has("sheenColorFactor")) {
         const tinygltf::Value& c = s.Get("sheenColorFactor");
-        if (!c.IsArray() || c.ArrayLen() != 3) Fail(file, f + ".sheenColorFactor", "expected 3 numbers");
+        if (!c.IsArray() || c.ArrayLen() != 3)
+          Fail(file, f + ".sheenColorFactor", "expected 3 numbers");
         for (int k = 0; k < 3; ++k)
-          p.values[size_t(5 + k)] = GltfNumber(c.Get(k), file, f + ".sheenColorFactor[" +
-                                                                   std::to_string(k) + "]", 0, 1);
+          p.values[size_t(5 + k)] =
+              GltfNumber(c.Get(k), file, f + ".sheenColorFactor[" + std::to_string(k) + "]", 0, 1);
       }
       if (s.Has("sheenRoughnessFactor"))
-        p.values[8] = GltfNumber(s.Get("sheenRoughnessFactor"), file, f + ".sheenRoughnessFactor", 0, 1);
+        p.values[8] =
+            GltfNumber(s.Get("sheenRoughnessFactor"), file, f + ".sheenRoughnessFactor", 0, 1);
       if (s.Has("sheenColorTexture")) {
         const tinygltf::Value& t = s.Get("sheenColorTexture");
-        const std::string path = GltfTexturePath(
-            g, t.Has("index") ? t.Get("index").GetNumberAsInt() : -1, file, f + ".sheenColorTexture", m);
+        const std::string path =
+            GltfTexturePath(g, t.Has("index") ? t.Get("index").GetNumberAsInt() : -1, file,
+                            f + ".sheenColorTexture", m);
         if (!path.empty()) {
           const auto mean = ChannelMeans(path, true);
           for (int c = 0; c < 3; ++c) p.values[size_t(5 + c)] *= mean[size_t(c)];
@@ -406,9 +415,9 @@ std::vector<SourceMaterial> ReadGltf(const std::string& file) {
       }
       if (s.Has("sheenRoughnessTexture")) {
         const tinygltf::Value& t = s.Get("sheenRoughnessTexture");
-        const std::string path = GltfTexturePath(
-            g, t.Has("index") ? t.Get("index").GetNumberAsInt() : -1, file,
-            f + ".sheenRoughnessTexture", m);
+        const std::string path =
+            GltfTexturePath(g, t.Has("index") ? t.Get("index").GetNumberAsInt() : -1, file,
+                            f + ".sheenRoughnessTexture", m);
         if (!path.empty()) {
           const auto mean = ChannelMeans(path, false);  // spec: the alpha channel
           p.values[8] *= mean[3];
@@ -461,8 +470,8 @@ Rgb<double> FromHex(const json& v, const std::string& file, const std::string& f
   if (!v.is_number_integer() || v.get<long long>() < 0 || v.get<long long>() > 0xffffff)
     Fail(file, field, "expected an integer colour 0x000000..0xffffff");
   const long long h = v.get<long long>();
-  return {SrgbToLinear(double((h >> 16) & 255) / 255.0), SrgbToLinear(double((h >> 8) & 255) / 255.0),
-          SrgbToLinear(double(h & 255) / 255.0)};
+  return {SrgbToLinear(double((h >> 16) & 255) / 255.0),
+          SrgbToLinear(double((h >> 8) & 255) / 255.0), SrgbToLinear(double(h & 255) / 255.0)};
 }
 
 Rgb<double> Colour(const render::MaterialPreset& p, const std::string& name) {
@@ -494,9 +503,9 @@ Rgb<double> Factor(const Rgb<double>& fitted, const MapRef* map) {
 json MapsJson(const Converted& c, const std::string& out_file) {
   json maps = json::object();
   for (const MapRef& m : c.maps)
-    maps[m.attribute] = {{"uri", Relative(m.path, out_file)},
-                         {"colour_space", m.colour_space == "srgb" ? "sRGB (decode to linear)"
-                                                                   : "linear"}};
+    maps[m.attribute] = {
+        {"uri", Relative(m.path, out_file)},
+        {"colour_space", m.colour_space == "srgb" ? "sRGB (decode to linear)" : "linear"}};
   return maps;
 }
 
@@ -538,23 +547,29 @@ std::vector<SourceMaterial> ReadMaterials(const std::string& path) {
     m.notes.push_back("MERL table, nearest-cell lookups on the canonical directions");
     return {m};
   }
-  if (ext == ".zip") Fail(path, "file", "zipped TextureStacks are not read: unpack the zip (the "
-                                        "descriptor JSON and its maps) into a folder first");
-  if (ext != ".json") Fail(path, "file", "unknown input type '" + ext + "' (valid: .json, .gltf, "
-                                         ".glb, .binary, .merl)");
+  if (ext == ".zip")
+    Fail(path, "file",
+         "zipped TextureStacks are not read: unpack the zip (the "
+         "descriptor JSON and its maps) into a folder first");
+  if (ext != ".json")
+    Fail(path, "file",
+         "unknown input type '" + ext +
+             "' (valid: .json, .gltf, "
+             ".glb, .binary, .merl)");
   const json j = ReadJson(path);
   if (!j.is_object()) Fail(path, "(root)", "expected a JSON object");
-  const std::string schema = j.contains("schema") && j["schema"].is_string()
-                                 ? j["schema"].get<std::string>()
-                                 : (j.contains("format") && j["format"].is_string()
-                                        ? j["format"].get<std::string>()
-                                        : "");
+  const std::string schema =
+      j.contains("schema") && j["schema"].is_string()
+          ? j["schema"].get<std::string>()
+          : (j.contains("format") && j["format"].is_string() ? j["format"].get<std::string>() : "");
   if (schema == "clothfit.preset") return ReadPresetFile(path);
   if (schema == "clothfit-fabric") return ReadFabricFile(path, j);
   if (schema == "seed.SurfaceMaterial") return ReadSurfaceMaterial(j, path);
   if (schema == "seed.TextureStack") return ReadTextureStack(j, path);
-  Fail(path, "schema", "'" + schema + "' is not a known input (valid: clothfit.preset, "
-                       "clothfit-fabric (\"format\"), seed.SurfaceMaterial, seed.TextureStack)");
+  Fail(path, "schema",
+       "'" + schema +
+           "' is not a known input (valid: clothfit.preset, "
+           "clothfit-fabric (\"format\"), seed.SurfaceMaterial, seed.TextureStack)");
 }
 
 BrdfSamples SampleSource(const SourceMaterial& m) {
@@ -592,11 +607,13 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
   j["sheen"] = 1.0;  // sheen_color = sheenColor x sheen
   j["sheenColor"] = Hex(Factor(Colour(p, "sheen_color"), FindMap(c, "sheen_color")));
   j["sheenRoughness"] = p.values[size_t(p.Offset("sheen_roughness"))];
-  j["userData"] = {{"clothfit", {{"engine", render::EngineOf(p.model)},
-                                 {"colour", "color/sheenColor are sRGB hex (three.js getHex); "
-                                            "MaterialLoader decodes them to linear"},
-                                 {"maps", MapsJson(c, path)},
-                                 {"provenance", c.provenance}}}};
+  j["userData"] = {{"clothfit",
+                    {{"engine", render::EngineOf(p.model)},
+                     {"colour",
+                      "color/sheenColor are sRGB hex (three.js getHex); "
+                      "MaterialLoader decodes them to linear"},
+                     {"maps", MapsJson(c, path)},
+                     {"provenance", c.provenance}}}};
   io::WriteTextAtomic(path, j.dump(2) + "\n");
 }
 
@@ -613,11 +630,13 @@ void WriteThreejsCloth(const std::string& path, const Converted& c) {
     j["subsurface"] = true;
     j["subsurfaceColor"] = Hex(Colour(p, "subsurface_color"));
   }
-  j["userData"] = {{"clothfit", {{"note", "the seed's MeshClothMaterial (three.js fork): color, "
-                                          "sheen, subsurfaceColor as sRGB hex; roughness "
-                                          "perceptual"},
-                                 {"maps", MapsJson(c, path)},
-                                 {"provenance", c.provenance}}}};
+  j["userData"] = {{"clothfit",
+                    {{"note",
+                      "the seed's MeshClothMaterial (three.js fork): color, "
+                      "sheen, subsurfaceColor as sRGB hex; roughness "
+                      "perceptual"},
+                     {"maps", MapsJson(c, path)},
+                     {"provenance", c.provenance}}}};
   io::WriteTextAtomic(path, j.dump(2) + "\n");
 }
 
@@ -642,7 +661,8 @@ void WriteGltf(const std::string& path, const Converted& c) {
     textures.push_back({{"source", int(images.size()) - 1}});
     return json{{"index", int(textures.size()) - 1}};
   };
-  if (const MapRef* map = FindMap(c, "base_color")) m["pbrMetallicRoughness"]["baseColorTexture"] = add(map);
+  if (const MapRef* map = FindMap(c, "base_color"))
+    m["pbrMetallicRoughness"]["baseColorTexture"] = add(map);
   if (const MapRef* map = FindMap(c, "normal")) m["normalTexture"] = add(map);
   if (const MapRef* map = FindMap(c, "sheen_color"))
     m["extensions"]["KHR_materials_sheen"]["sheenColorTexture"] = add(map);

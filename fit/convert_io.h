@@ -38,9 +38,9 @@ class ConvertError : public std::runtime_error {
 inline constexpr int kSeedSchemaVersion = 1;
 
 struct MapRef {
-  std::string attribute;    // "base_color", "normal", "sheen_color" (carried)
-  std::string path;         // resolved file path (as found on disk)
-  std::string colour_space; // "srgb" or "linear"
+  std::string attribute;            // "base_color", "normal", "sheen_color" (carried)
+  std::string path;                 // resolved file path (as found on disk)
+  std::string colour_space;         // "srgb" or "linear"
   Rgb<double> mean{1.0, 1.0, 1.0};  // mean linear texel value (colour maps)
 };
 
@@ -51,8 +51,8 @@ struct SourceMaterial {
   std::optional<render::MaterialPreset> analytic;
   std::shared_ptr<const MerlTable> merl;
   std::shared_ptr<const render::Fabric> fabric;
-  std::vector<MapRef> maps;        // carried over
-  std::vector<std::string> notes;  // what was averaged, dropped or not modelled
+  std::vector<MapRef> maps;               // carried over
+  std::vector<std::string> notes;         // what was averaged, dropped or not modelled
   std::vector<std::string> dependencies;  // further files whose content the output depends on
 };
 
@@ -69,7 +69,7 @@ double LinearToSrgb(double l);
 // ---- writers (all atomic). `maps` are written relative to the output file's directory. ----
 struct Converted {
   std::string name;
-  render::MaterialPreset cloth;           // always
+  render::MaterialPreset cloth;                          // always
   std::optional<render::MaterialPreset> physical_sheen;  // three.js target
   std::optional<render::MaterialPreset> gltf_sheen;      // glTF target
   // The seed's MeshClothMaterial (cloth/seed-threejs, explicit sheen) for the three.js target,

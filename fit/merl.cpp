@@ -82,9 +82,10 @@ MerlTable ReadMerl(const std::string& path) {
   t.n_phi_d = dims[2];
   const size_t expect = 12 + 3 * t.Cells() * sizeof(double);
   if (bytes.size() != expect)
-    Fail(path, "data", "file has " + std::to_string(bytes.size()) + " bytes, header " +
-                           std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
-                           std::to_string(dims[2]) + " needs " + std::to_string(expect));
+    Fail(path, "data",
+         "file has " + std::to_string(bytes.size()) + " bytes, header " + std::to_string(dims[0]) +
+             "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " needs " +
+             std::to_string(expect));
   t.data.resize(3 * t.Cells());
   std::memcpy(t.data.data(), bytes.data() + 12, t.data.size() * sizeof(double));
   for (size_t i = 0; i < t.data.size(); ++i)

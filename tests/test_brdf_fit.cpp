@@ -88,10 +88,12 @@ TEST(BrdfFit, GltfSheenConvertsToClothWithinStatedError) {
 
 TEST(Merl, SyntheticTableOfAnAnalyticClothRecoversItsParameters) {
   const render::MaterialPreset truth = Cloth({0.3, 0.5, 0.25}, {0.6, 0.75, 0.9}, 0.7);
-  const MerlTable t = TabulateMerl(90, 90, 180, [&](const Vec3<double>& wi, const Vec3<double>& wo) {
-    const Cosines<double> c = CosinesFromDirections(wo, wi);
-    return EvalDirectFlat(ModelKind::kCloth, truth.cloth, truth.values.data(), c) * (1.0 / wi.z);
-  });
+  const MerlTable t =
+      TabulateMerl(90, 90, 180, [&](const Vec3<double>& wi, const Vec3<double>& wo) {
+        const Cosines<double> c = CosinesFromDirections(wo, wi);
+        return EvalDirectFlat(ModelKind::kCloth, truth.cloth, truth.values.data(), c) *
+               (1.0 / wi.z);
+      });
   const fs::path dir = fs::temp_directory_path() / "clothfit_test_merl";
   fs::create_directories(dir);
   const std::string path = (dir / "cloth.binary").string();

@@ -1,7 +1,6 @@
 // clothfit convert (fit/convert.h, fit/convert_io.h): round trips per target, readers' errors,
 // and the batch on a generated catalogue (broken entries, resume, shards).
 #include <gtest/gtest.h>
-
 #include <unistd.h>
 
 #include <cstdlib>
@@ -22,8 +21,8 @@ using render::ModelKind;
 fs::path SourceDir() { return fs::path(CLOTHFIT_TEST_SOURCE_DIR); }
 
 fs::path TempDir(const std::string& name) {
-  const fs::path d = fs::temp_directory_path() / ("clothfit_test_convert_" + name + "_" +
-                                                  std::to_string(::getpid()));
+  const fs::path d = fs::temp_directory_path() /
+                     ("clothfit_test_convert_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(d);
   fs::create_directories(d);
   return d;
@@ -196,7 +195,8 @@ struct Catalogue {
   Catalogue() {
     root = TempDir("catalogue");
     dir = root / "cat";
-    const std::string cmd = "python3 '" + (SourceDir() / "datasets/catalogue/generate.py").string() +
+    const std::string cmd = "python3 '" +
+                            (SourceDir() / "datasets/catalogue/generate.py").string() +
                             "' --quiet --count 6 --merl 1 --fabrics 1 --out '" + dir.string() + "'";
     EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
   }
@@ -204,7 +204,8 @@ struct Catalogue {
 };
 
 ConvertReport RunBatch(const std::vector<std::string>& args, const fs::path& out,
-                  std::vector<std::string> targets = {"preset"}, int shard = 0, int shards = 1) {
+                       std::vector<std::string> targets = {"preset"}, int shard = 0,
+                       int shards = 1) {
   ConvertOptions o;
   o.out_dir = out.string();
   o.targets = std::move(targets);
@@ -215,7 +216,8 @@ ConvertReport RunBatch(const std::vector<std::string>& args, const fs::path& out
 
 TEST(ConvertBatch, BrokenEntriesAreReportedWithFileAndReasonWhileTheRestConvert) {
   Catalogue cat;
-  const ConvertReport r = RunBatch({cat.dir.string()}, cat.root / "out", {"preset", "threejs", "gltf", "filament"});
+  const ConvertReport r =
+      RunBatch({cat.dir.string()}, cat.root / "out", {"preset", "threejs", "gltf", "filament"});
   std::map<std::string, std::string> failed;
   for (const ItemResult& i : r.items) {
     if (i.status == "failed") failed[fs::path(i.file).filename().string()] = i.reason;
@@ -238,7 +240,8 @@ TEST(ConvertBatch, BrokenEntriesAreReportedWithFileAndReasonWhileTheRestConvert)
   EXPECT_NE(failed["merl_truncated.binary"].find(": data:"), std::string::npos);
   EXPECT_NE(failed["surface_missing_map.json"].find("maps.color.uri"), std::string::npos);
   EXPECT_EQ(r.failed, int(broken));
-  EXPECT_EQ(r.converted, 26);  // 6 presets, 6 glTF, 6 SurfaceMaterials, 3 stacks x 2, 1 MERL, 1 fabric
+  EXPECT_EQ(r.converted,
+            26);  // 6 presets, 6 glTF, 6 SurfaceMaterials, 3 stacks x 2, 1 MERL, 1 fabric
   for (const ItemResult& i : r.items)
     if (i.status == "converted") {
       EXPECT_LT(i.error, 0.1) << i.file << " " << i.material;
