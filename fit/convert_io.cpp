@@ -9,8 +9,10 @@
 #include <regex>
 #include <sstream>
 
+#include "fit/metrics.h"
 #include "render/gltf_tinygltf.h"
 #include "render/image_io.h"
+#include "render/tonemap.h"
 
 namespace clothfit::fit {
 namespace {
@@ -521,12 +523,9 @@ std::string Num(double x) {
 
 }  // namespace
 
-double SrgbToLinear(double s) {
-  return s <= 0.04045 ? s / 12.92 : std::pow((s + 0.055) / 1.055, 2.4);
-}
-double LinearToSrgb(double l) {
-  return l <= 0.0031308 ? l * 12.92 : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055;
-}
+// The IEC 61966-2-1 transfer functions, shared with the metrics and the tone mapper.
+double SrgbToLinear(double s) { return metrics::flip_detail::SrgbToLinear(s); }
+double LinearToSrgb(double l) { return render::SrgbEncode(l); }
 
 Rgb<double> MeanTexel(const std::string& path, bool srgb) {
   const auto m = ChannelMeans(path, srgb);
