@@ -227,9 +227,17 @@ void AddBenchCommand(CLI::App& app, const Globals& g, int& exit_code) {
                                              "/scenes/sphere.json");
   CLI::App* cmd = app.add_subcommand("bench", "benchmarks (Google Benchmark)");
   auto fa = std::make_shared<BenchFitArgs>();
-  cmd->add_option("what", *what, "what to benchmark: brdf | preview | fit")
+  auto catalogue = std::make_shared<std::string>();
+  auto count = std::make_shared<int>(200);
+  auto jobs = std::make_shared<int>(0);
+  cmd->add_option("what", *what, "what to benchmark: brdf | preview | fit | convert")
       ->required()
-      ->check(CLI::IsMember({"brdf", "preview", "fit"}));
+      ->check(CLI::IsMember({"brdf", "preview", "fit", "convert"}));
+  cmd->add_option("--catalogue", *catalogue,
+                  "`bench convert`: catalogue directory (default: generate one in a temporary "
+                  "directory with datasets/catalogue/generate.py)");
+  cmd->add_option("--count", *count, "`bench convert`: materials per input format when generating");
+  cmd->add_option("-j,--jobs", *jobs, "`bench convert`: worker threads (0: all cores)");
   cmd->add_option("--fabrics", fa->fabrics, "`bench fit`: comma-separated fabric names");
   cmd->add_option("--widths", fa->widths, "`bench fit`: fit resolutions (image widths, px)");
   cmd->add_option("--strides", fa->strides, "`bench fit`: pixel strides (0 = auto)");
@@ -240,9 +248,18 @@ void AddBenchCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--png", fa->png, "`bench fit`: output plot (error vs time)");
   cmd->add_option("--scene", *scene, "scene card for `bench preview`");
   cmd->allow_extras();
-  cmd->callback([cmd, what, scene, fa, &g, &exit_code]() {
+  cmd->callback([cmd, what, scene, fa, catalogue, count, jobs, &g, &exit_code]() {
     (void)lut::DefaultDfg();  // tables are built once, outside the timed loops
     (void)lut::DefaultSheenAlbedo();
+    if (*what == "convert") {
+      try {
+        exit_code = RunBenchConvert(*catalogue, *count, *jobs, g.quiet);
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "clothfit bench convert: error: %s\n", e.what());
+        exit_code = 1;
+      }
+      return;
+    }
     if (*what == "fit") {
       try {
         RunBenchFit(*fa, g.quiet);

@@ -21,8 +21,6 @@
 namespace clothfit::cli {
 namespace fs = std::filesystem;
 
-namespace {
-
 std::vector<std::string> SplitList(const std::string& s) {
   std::vector<std::string> out;
   std::stringstream ss(s);
@@ -31,6 +29,8 @@ std::vector<std::string> SplitList(const std::string& s) {
     if (!item.empty()) out.push_back(item);
   return out;
 }
+
+namespace {
 
 std::string ReadFileOrEmpty(const std::string& path) {
   std::ifstream f(path, std::ios::binary);

@@ -27,6 +27,12 @@ void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddTonemapCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddReportCommand(CLI::App& app, const Globals& g, int& exit_code);
+void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code);
+
+// `clothfit bench convert`: converts a catalogue (generated into a temporary directory by
+// datasets/catalogue/generate.py when `catalogue` is empty) and prints materials/s per kind and
+// the median BRDF-space fit error. Returns the exit status.
+int RunBenchConvert(const std::string& catalogue, int count, int jobs, bool quiet);
 
 // The scene's environment: the card's map, or the procedural sky (warning on stderr unless
 // quiet) when the map is not installed; null when the card has no environment.
@@ -37,6 +43,8 @@ std::string CachedReference(const std::string& scene_path, const std::string& fa
                             int spp, uint64_t seed, bool quiet, int width = 0);
 // The scene card with its image width overridden as above (width <= 0: unchanged).
 render::Scene LoadSceneAtWidth(const std::string& scene_path, int width);
+// "a,b,,c" -> {"a", "b", "c"} (empty items dropped).
+std::vector<std::string> SplitList(const std::string& s);
 // The canonical scene cards (datasets/scenes/{sphere,drape,swatch}.json).
 std::vector<std::string> CanonicalScenes();
 // Linear RGB frame -> display RGB in [0, 1] (tone mapping + sRGB).

@@ -22,30 +22,6 @@
 namespace clothfit::lut {
 namespace {
 
-// Gauss-Legendre nodes and weights on [-1, 1] (Newton iteration on P_n).
-struct GaussLegendre {
-  std::vector<double> x, w;
-  explicit GaussLegendre(int n) : x(size_t(n)), w(size_t(n)) {
-    for (int i = 0; i < n; ++i) {
-      double z = std::cos(kPi * (i + 0.75) / (n + 0.5)), dp = 1.0;
-      for (int it = 0; it < 100; ++it) {
-        double p1 = 1.0, p2 = 0.0;
-        for (int j = 0; j < n; ++j) {
-          const double p3 = p2;
-          p2 = p1;
-          p1 = ((2.0 * j + 1.0) * z * p2 - j * p3) / (j + 1.0);
-        }
-        dp = n * (z * p1 - p2) / (z * z - 1.0);
-        const double z1 = z;
-        z = z1 - p1 / dp;
-        if (std::abs(z - z1) < 1e-15) break;
-      }
-      x[size_t(i)] = z;
-      w[size_t(i)] = 2.0 / ((1.0 - z * z) * dp * dp);
-    }
-  }
-};
-
 // Panel breakpoints in theta_h: uniform every pi/8, plus points clustered where the
 // distribution varies on its own scale (GGX: tan(theta) = alpha s near the normal;
 // Charlie: pi/2 - sqrt(alpha) s near the tangent plane).

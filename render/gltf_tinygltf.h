@@ -11,3 +11,15 @@
 #define TINYGLTF_NO_STB_IMAGE_WRITE
 #define TINYGLTF_NO_EXTERNAL_IMAGE
 #include <tiny_gltf.h>
+
+#include <string>
+
+namespace clothfit::render {
+
+// Loads a .gltf or .glb (chosen by content: the 4-byte magic "glTF", not the extension) with
+// image payloads skipped. Returns false with `err` set on failure; `warn` gets tinygltf's
+// warnings. Newlines in both are replaced by ';'. Never throws.
+bool LoadGltfModel(const std::string& file, tinygltf::Model* model, std::string* err,
+                   std::string* warn);
+
+}  // namespace clothfit::render

@@ -293,12 +293,6 @@ void ResolveEnvironment(const std::string& file, const fs::path& card_dir, Envir
 // ---------------------------------------------------------------------------------------------
 // glTF.
 
-// Image payloads are skipped: scenes use material factors only.
-bool SkipImage(tinygltf::Image*, const int, std::string*, std::string*, int, int,
-               const unsigned char*, int, void*) {
-  return true;
-}
-
 struct GltfContext {
   const std::string& file;  // the glTF path, for messages
   const tinygltf::Model& model;
@@ -933,37 +927,12 @@ Scene LoadScene(const std::string& card_path) {
   if (!fs::exists(file, ec)) Fail(card.path, "field 'gltf'", "glTF file not found: " + file);
   if (!fs::is_regular_file(file, ec)) Fail(card.path, "field 'gltf'", "not a file: " + file);
 
-  // .glb or .gltf by content (the 4-byte magic "glTF"), not by extension.
-  bool binary = false;
-  {
-    std::ifstream in(file, std::ios::binary);
-    if (!in) Fail(card.path, "field 'gltf'", "cannot open " + file);
-    char magic[4] = {0, 0, 0, 0};
-    in.read(magic, 4);
-    binary = in.gcount() == 4 && std::memcmp(magic, "glTF", 4) == 0;
-  }
-
   tinygltf::Model model;
   {
-    tinygltf::TinyGLTF loader;
-    loader.SetImageLoader(&SkipImage, nullptr);
     std::string err, warn;
-    bool ok = false;
-    try {
-      ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, file)
-                  : loader.LoadASCIIFromFile(&model, &err, &warn, file);
-    } catch (const std::exception& e) {
-      err += e.what();
-      ok = false;
-    }
-    const auto trim = [](std::string s) {
-      while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
-      for (char& c : s) c = c == '\n' ? ';' : c;
-      return s;
-    };
-    if (!ok)
-      throw SceneError(file + ": cannot load glTF: " + trim(err.empty() ? "unknown error" : err));
-    if (!warn.empty()) scene.warnings.push_back(file + ": tinygltf: " + trim(warn));
+    if (!LoadGltfModel(file, &model, &err, &warn))
+      throw SceneError(file + ": cannot load glTF: " + err);
+    if (!warn.empty()) scene.warnings.push_back(file + ": tinygltf: " + warn);
   }
   const GltfContext g{file, model};
 

@@ -134,6 +134,27 @@ PY
     echo "$err" | grep -q "nope.json" || fail "missing preset error does not name the file: $err"
     [ ! -e "$TMP/rep2" ] || fail "report written despite errors"
     ;;
+  convert)
+    GEN="$(dirname "$0")/../datasets/catalogue/generate.py"
+    python3 "$GEN" --quiet --count 3 --merl 1 --fabrics 1 --out "$TMP/cat" || fail "generator"
+    out=$("$BIN" --quiet convert "$TMP/cat" --to preset,threejs,gltf,filament --out "$TMP/out" -j 2 2>&1)
+    rc=$?
+    [ $rc -eq 2 ] || fail "convert with broken entries exited $rc (want 2): $out"
+    echo "$out" | grep -q "merl_truncated.binary" || fail "summary does not name the broken file: $out"
+    [ -s "$TMP/out/convert-log.json" ] || fail "no JSON log"
+    ls "$TMP/out"/*.mat >/dev/null 2>&1 || fail "no Filament .mat written"
+    rm -rf "$TMP/cat/broken"
+    out=$("$BIN" --quiet convert "$TMP/cat" --to preset,threejs,gltf,filament --out "$TMP/out" 2>&1) \
+      || fail "clean re-run exited $?: $out"
+    echo "$out" | grep -q "| converted | 0 |" || fail "resume converted again: $out"
+    printf '%s\n' "presets/preset_0000.json" "# a comment" "gltf" > "$TMP/cat/manifest.txt"
+    "$BIN" --quiet convert "$TMP/cat/manifest.txt" --out "$TMP/m" --shard 1/2 >/dev/null || fail "manifest + shard"
+    "$BIN" convert "$TMP/cat" --out "$TMP/x" --to obj 2>/dev/null && fail "unknown target accepted"
+    "$BIN" convert "$TMP/cat" --out "$TMP/x" --shard 2/2 2>/dev/null && fail "bad shard accepted"
+    "$BIN" convert "$TMP/nothing" --out "$TMP/x" 2>/dev/null && fail "missing input accepted"
+    out=$("$BIN" --quiet bench convert --catalogue "$TMP/cat" -j 1 2>&1) || fail "bench convert: $out"
+    echo "$out" | grep -q "materials/s" || fail "bench convert prints no rate: $out"
+    ;;
   *) fail "unknown case $CASE" ;;
 esac
 echo "PASS: $CASE"

@@ -1,0 +1,318 @@
+#include "fit/brdf_fit.h"
+
+#include <ceres/ceres.h>
+#include <ceres/dynamic_autodiff_cost_function.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "brdf/lut.h"
+#include "fit/parameter_layout.h"
+
+namespace clothfit::fit {
+namespace {
+
+std::vector<DirectionPair> BuildDirections() {
+  const lut::GaussLegendre gl(kDirNodes);
+  std::vector<double> mu(kDirNodes), wmu(kDirNodes);
+  for (int i = 0; i < kDirNodes; ++i) {  // [-1, 1] -> [0, 1]
+    mu[size_t(i)] = 0.5 * (gl.x[size_t(i)] + 1.0);
+    wmu[size_t(i)] = 0.5 * gl.w[size_t(i)];
+  }
+  std::vector<DirectionPair> out;
+  double total = 0.0;
+  for (int a = 0; a < kDirNodes; ++a) {
+    const double mv = mu[size_t(a)], sv = std::sqrt(1.0 - mv * mv);
+    for (int b = 0; b < kDirNodes; ++b) {
+      const double ml = mu[size_t(b)], sl = std::sqrt(1.0 - ml * ml);
+      for (int k = 0; k < kAzimuths; ++k) {
+        const double phi = (k + 0.5) * kPi / kAzimuths;
+        DirectionPair d;
+        d.v = Vec3<double>(sv, 0.0, mv);
+        d.l = Vec3<double>(sl * std::cos(phi), sl * std::sin(phi), ml);
+        d.cos = CosinesFromDirections(d.v, d.l);
+        d.weight = wmu[size_t(a)] * wmu[size_t(b)] * (kPi / kAzimuths) * 2.0 * mv;
+        total += d.weight;
+        out.push_back(d);
+      }
+    }
+  }
+  for (DirectionPair& d : out) d.weight /= total;
+  return out;
+}
+
+template <typename T>
+T Compress(const T& x) {
+  using std::cbrt;
+  return cbrt(Max(x, Const<T>(0.0)) + Const<T>(kCbrtEps));
+}
+
+// The valid samples, compressed, with sqrt weights renormalised over them.
+struct Target {
+  std::vector<Cosines<double>> cos;
+  std::vector<Rgb<double>> t;
+  std::vector<double> sw;
+};
+
+Target MakeTarget(const BrdfSamples& s) {
+  const auto& dirs = CanonicalDirections();
+  if (s.value.size() != dirs.size() || s.valid.size() != dirs.size())
+    throw std::invalid_argument("BRDF samples do not match the canonical direction set");
+  Target t;
+  double total = 0.0;
+  for (size_t k = 0; k < dirs.size(); ++k)
+    if (s.valid[k]) total += dirs[k].weight;
+  for (size_t k = 0; k < dirs.size(); ++k) {
+    if (!s.valid[k]) continue;
+    t.cos.push_back(dirs[k].cos);
+    Rgb<double> c;
+    for (int ch = 0; ch < 3; ++ch) c[ch] = Compress(s.value[k][ch]);
+    t.t.push_back(c);
+    t.sw.push_back(std::sqrt(dirs[k].weight / total));
+  }
+  if (t.cos.size() < 16)
+    throw std::invalid_argument("source BRDF has only " + std::to_string(t.cos.size()) +
+                                " valid samples on the canonical directions (need 16)");
+  return t;
+}
+
+struct BrdfResidual {
+  const Target* target;
+  render::ModelKind model;
+  cloth::Options co;
+
+  template <typename T>
+  bool operator()(T const* const* p, T* r) const {
+    const T* x = p[0];
+    for (size_t k = 0; k < target->cos.size(); ++k) {
+      const Cosines<double>& c = target->cos[k];
+      const Cosines<T> cs{Const<T>(c.NoV), Const<T>(c.NoL), Const<T>(c.NoH), Const<T>(c.LoH)};
+      const Rgb<T> f = EvalDirectFlat(model, co, x, cs);
+      for (int ch = 0; ch < 3; ++ch)
+        r[3 * k + size_t(ch)] = Const<T>(target->sw[k]) * (Compress(f[ch]) - target->t[k][ch]);
+    }
+    return true;
+  }
+};
+
+double ErrorOf(const Target& t, render::ModelKind m, const cloth::Options& co, const double* x) {
+  double se = 0.0;
+  for (size_t k = 0; k < t.cos.size(); ++k) {
+    const Rgb<double> f = EvalDirectFlat(m, co, x, t.cos[k]);
+    for (int ch = 0; ch < 3; ++ch) se += std::pow(t.sw[k] * (Compress(f[ch]) - t.t[k][ch]), 2);
+  }
+  return std::sqrt(se / 3.0);  // weights sum to 1 over the valid samples
+}
+
+// Cloth (explicit sheen, no subsurface) is linear in its colours for a fixed roughness:
+// f n.l = base * a + sheen * b with a = n.l / pi and b = D V n.l. Per channel, the 2 x 2
+// weighted least squares in linear space, weighted by the cube-root compression's slope
+// (d cbrt(y) = dy / (3 (y + eps)^(2/3))), gives the colours that are best to first order in
+// the fit space; a bound hit is clamped and the other colour re-solved.
+void ClosedFormClothColours(const Target& t, const cloth::Options& co, std::vector<double>& x) {
+  double unit_base[10] = {1, 1, 1, 0, 0, 0, x[6], 0, 0, 0};
+  double unit_sheen[10] = {0, 0, 0, 1, 1, 1, x[6], 0, 0, 0};
+  double aa[3] = {0, 0, 0}, ab[3] = {0, 0, 0}, bb[3] = {0, 0, 0}, ay[3] = {0, 0, 0},
+         by[3] = {0, 0, 0};
+  for (size_t k = 0; k < t.cos.size(); ++k) {
+    const Rgb<double> a = EvalDirectFlat(render::ModelKind::kCloth, co, unit_base, t.cos[k]);
+    const Rgb<double> b = EvalDirectFlat(render::ModelKind::kCloth, co, unit_sheen, t.cos[k]);
+    for (int ch = 0; ch < 3; ++ch) {
+      const double y = std::max(std::pow(t.t[k][ch], 3.0) - kCbrtEps, 0.0);
+      const double slope = 1.0 / (3.0 * std::pow(y + kCbrtEps, 2.0 / 3.0));
+      const double w = Sq(t.sw[k] * slope);
+      aa[ch] += w * a[ch] * a[ch];
+      ab[ch] += w * a[ch] * b[ch];
+      bb[ch] += w * b[ch] * b[ch];
+      ay[ch] += w * a[ch] * y;
+      by[ch] += w * b[ch] * y;
+    }
+  }
+  for (int ch = 0; ch < 3; ++ch) {
+    const double det = aa[ch] * bb[ch] - ab[ch] * ab[ch];
+    if (!(std::abs(det) > 1e-300)) continue;
+    double c = (ay[ch] * bb[ch] - by[ch] * ab[ch]) / det;
+    double s = (aa[ch] * by[ch] - ab[ch] * ay[ch]) / det;
+    if (c < 0.0 || c > 1.0) {
+      c = std::clamp(c, 0.0, 1.0);
+      s = (by[ch] - ab[ch] * c) / std::max(bb[ch], 1e-300);
+    }
+    if (s < 0.0 || s > 1.0) {
+      s = std::clamp(s, 0.0, 1.0);
+      c = std::clamp((ay[ch] - ab[ch] * s) / std::max(aa[ch], 1e-300), 0.0, 1.0);
+    }
+    x[size_t(ch)] = c;
+    x[size_t(3 + ch)] = s;
+  }
+}
+
+}  // namespace
+
+const std::vector<DirectionPair>& CanonicalDirections() {
+  static const std::vector<DirectionPair> dirs = BuildDirections();
+  return dirs;
+}
+
+BrdfSamples SampleAnalytic(const render::MaterialPreset& preset) {
+  const auto& dirs = CanonicalDirections();
+  BrdfSamples s;
+  for (const DirectionPair& d : dirs) {
+    s.value.push_back(EvalDirectFlat(preset.model, preset.cloth, preset.values.data(), d.cos));
+    s.valid.push_back(1);
+  }
+  return s;
+}
+
+BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int grid, int rotations) {
+  const auto& dirs = CanonicalDirections();
+  BrdfSamples s;
+  const double n = double(grid) * double(grid) * double(rotations);
+  for (const DirectionPair& d : dirs) {
+    Rgb<double> sum(0, 0, 0);
+    for (int r = 0; r < rotations; ++r) {
+      const double a = kPi * r / rotations, ca = std::cos(a), sa = std::sin(a);
+      const render::Vec3d wo(ca * d.v.x - sa * d.v.y, sa * d.v.x + ca * d.v.y, d.v.z);
+      const render::Vec3d wi(ca * d.l.x - sa * d.l.y, sa * d.l.x + ca * d.l.y, d.l.z);
+      for (int i = 0; i < grid; ++i)
+        for (int j = 0; j < grid; ++j) {
+          render::ShadingPoint sp;
+          sp.uv = {(i + 0.5) / grid * period_uv, (j + 0.5) / grid * period_uv};
+          sum += bsdf.Eval(wo, wi, sp) * wi.z;
+        }
+    }
+    const Rgb<double> mean = sum * (1.0 / n);
+    s.value.push_back(mean);
+    s.valid.push_back(std::isfinite(mean[0]) && std::isfinite(mean[1]) && std::isfinite(mean[2]));
+  }
+  return s;
+}
+
+double BrdfError(const BrdfSamples& source, const render::MaterialPreset& preset) {
+  return ErrorOf(MakeTarget(source), preset.model, preset.cloth, preset.values.data());
+}
+
+BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& opt) {
+  const Target target = MakeTarget(source);
+  const render::ModelKind model = opt.model;
+  const auto table = render::ParameterTable(model);
+  const ParameterLayout layout = MakeLayout(table, opt.locked);
+
+  render::MaterialPreset base = render::DefaultPreset(model);
+  if (model == render::ModelKind::kCloth) base.cloth = opt.cloth;
+
+  // Mean albedo-like colour of the source: pi f over the weighted set (f = value / n.l).
+  Rgb<double> albedo(0, 0, 0);
+  for (size_t k = 0; k < target.cos.size(); ++k) {
+    const double w = target.sw[k] * target.sw[k];
+    for (int ch = 0; ch < 3; ++ch) {
+      const double v = std::pow(target.t[k][ch], 3.0) - kCbrtEps;
+      albedo[ch] += w * kPi * std::max(v, 0.0) / std::max(target.cos[k].NoL, 1e-3);
+    }
+  }
+  for (int ch = 0; ch < 3; ++ch) albedo[ch] = std::clamp(albedo[ch], 0.02, 0.95);
+
+  // Which flat entries the solver may move, and their bounds.
+  std::vector<int> constant;
+  std::vector<double> lo(size_t(layout.flat_size)), hi(size_t(layout.flat_size));
+  for (const Block& b : layout.blocks) {
+    const bool ignored =
+        model == render::ModelKind::kCloth &&
+        ((b.name == "sheen_color" && opt.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
+         (b.name == "subsurface_color" && !opt.cloth.subsurface));
+    double lower = b.lower;
+    if (model == render::ModelKind::kCloth && b.name == "roughness")
+      lower = cloth::MinRoughness(opt.cloth);
+    for (int c = 0; c < b.size; ++c) {
+      lo[size_t(b.offset + c)] = lower;
+      hi[size_t(b.offset + c)] = b.upper;
+      if (b.locked || ignored) constant.push_back(b.offset + c);
+    }
+  }
+
+  // Candidate starts: the source itself (same model), then one per roughness start with
+  // colours from the source's albedo (cloth: closed-form colours, ClosedFormClothColours).
+  std::vector<std::vector<double>> starts;
+  for (double r0 : opt.start_roughness) {
+    std::vector<double> x = base.values;
+    for (const Block& b : layout.blocks) {
+      if (b.locked) continue;
+      double* p = &x[size_t(b.offset)];
+      if (b.name == "roughness" || b.name == "sheen_roughness") p[0] = r0;
+      if (b.name == "base_color")
+        for (int c = 0; c < 3; ++c) p[c] = albedo[c];
+      if (b.name == "sheen_color")
+        for (int c = 0; c < 3; ++c) p[c] = 0.5;
+      if (b.name == "subsurface_color")
+        for (int c = 0; c < 3; ++c) p[c] = 0.1;
+    }
+    for (size_t i = 0; i < x.size(); ++i) x[i] = std::clamp(x[i], lo[i], hi[i]);
+    const bool linear_colours = model == render::ModelKind::kCloth && !opt.cloth.subsurface &&
+                                opt.cloth.sheen_default == cloth::SheenDefault::kExplicit &&
+                                !layout.Find("base_color").locked &&
+                                !layout.Find("sheen_color").locked;
+    if (linear_colours) ClosedFormClothColours(target, opt.cloth, x);
+    starts.push_back(x);
+  }
+  // Screening: only the candidate with the lowest error is solved (each solve costs ~15
+  // iterations); the source's own parameters, when given, are solved first and end the search
+  // if they already reproduce the samples.
+  std::stable_sort(starts.begin(), starts.end(), [&](const auto& a, const auto& b) {
+    return ErrorOf(target, model, opt.cloth, a.data()) <
+           ErrorOf(target, model, opt.cloth, b.data());
+  });
+  starts.resize(std::min<size_t>(starts.size(), size_t(std::max(opt.solved_starts, 1))));
+  if (opt.source_preset && opt.source_preset->model == model)
+    starts.insert(starts.begin(), opt.source_preset->values);
+
+  BrdfFitResult best;
+  best.message = "no start converged to a usable solution";
+  double best_error = std::numeric_limits<double>::infinity();
+  for (std::vector<double> x : starts) {
+    if (best.usable && best.error < 1e-6) break;  // exact already (the source start)
+    for (size_t i = 0; i < x.size(); ++i) x[i] = std::clamp(x[i], lo[i], hi[i]);
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<BrdfResidual, 10>(
+        new BrdfResidual{&target, model, opt.cloth});
+    cost->AddParameterBlock(layout.flat_size);
+    cost->SetNumResiduals(int(3 * target.cos.size()));
+    ceres::Problem problem;
+    problem.AddResidualBlock(cost, nullptr, x.data());
+    if (int(constant.size()) == layout.flat_size) {
+      problem.SetParameterBlockConstant(x.data());
+    } else {
+      if (!constant.empty())
+        problem.SetManifold(x.data(), new ceres::SubsetManifold(layout.flat_size, constant));
+      for (int i = 0; i < layout.flat_size; ++i) {
+        if (std::find(constant.begin(), constant.end(), i) != constant.end()) continue;
+        problem.SetParameterLowerBound(x.data(), i, lo[size_t(i)]);
+        problem.SetParameterUpperBound(x.data(), i, hi[size_t(i)]);
+      }
+    }
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = opt.max_iterations;
+    so.function_tolerance = 1e-8;
+    so.parameter_tolerance = 1e-8;
+    so.num_threads = 1;  // materials run in parallel, one fit per thread
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    ++best.starts;
+    best.iterations += int(summary.iterations.size());
+    bool finite = true;
+    for (double v : x) finite = finite && std::isfinite(v);
+    if (!summary.IsSolutionUsable() || !finite) continue;
+    const double e = ErrorOf(target, model, opt.cloth, x.data());
+    if (e < best_error) {
+      best_error = e;
+      best.usable = true;
+      best.message.clear();
+      best.preset = base;
+      best.preset.values = x;
+      best.error = e;
+    }
+  }
+  return best;
+}
+
+}  // namespace clothfit::fit

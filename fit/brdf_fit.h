@@ -1,0 +1,123 @@
+// fit/brdf_fit.h: conversion by fitting in BRDF space (docs/convert.md, "The BRDF-space fit").
+//
+// Directions. A fixed, deterministic set of (view, light) pairs in the shading frame (n = +z):
+//   mu_v = cos(theta_v) and mu_l = cos(theta_l) at the kDirNodes Gauss-Legendre nodes of [0, 1]
+//   (no node at exactly 0 or 1: grazing down to ~86 degrees), relative azimuth
+//   phi = (k + 0.5) pi / kAzimuths, k = 0..kAzimuths-1 (isotropic sources: [0, pi] suffices by
+//   symmetry); v = (sqrt(1 - mu_v^2), 0, mu_v), l = (sin_l cos phi, sin_l sin phi, mu_l).
+// Weights (normalised to sum 1):
+//   w = w_GL(mu_v) * w_GL(mu_l) * (pi / kAzimuths)       solid-angle quadrature, dw = dmu dphi
+//     * 2 mu_v                                           how often a view cosine occurs in the
+//                                                        canonical scenes: the fabric pixels of
+//                                                        a convex object under the camera
+//                                                        have n.v distributed as 2 mu dmu
+//                                                        (projected area; sphere, drape)
+//   Light directions are uniform over the hemisphere (environment light arrives from all
+//   directions; the canonical scenes' key/rim lights sit at a range of elevations): the cosine
+//   of the light is in the compared value itself, not in the weight.
+// Value compared: the cosine-weighted BRDF f(v, l) * n.l (what EvalDirect returns), per RGB
+// channel, compressed by a cube root to tame the sheen and specular peaks:
+//   residual = sqrt(w) * (cbrt(max(f_target n.l, 0) + eps) - cbrt(max(f_source n.l, 0) + eps)),
+//   eps = 1e-4 (keeps the derivative of cbrt finite at 0; shifts cbrt(0) to 0.046).
+// Fit error: sqrt(sum_k w_k sum_c residual^2 / (3 sum_k w_k)), in cube-root units (a value of
+// 0.01 is ~3 % relative error at f n.l = 0.1). Missing source samples (MERL cells marked
+// negative) are dropped and the weights renormalised.
+//
+// Solver: Ceres Levenberg-Marquardt, one parameter block in the model's flat layout
+// (fit/parameter_layout.h bounds; cloth roughness floored at the variant's clamp), dynamic
+// autodiff with ceres::Jet<double, 10>; parameters a model ignores (cloth sheen_color under a
+// non-explicit sheen default, subsurface_color without subsurface) and locked ones are held by
+// a SubsetManifold. Multi-start: roughness starts (sheen roughness too) with colours started
+// from the source's mean albedo, plus the source's own parameters when the source is the same
+// model; the start with the lowest fit error wins.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "brdf/math.h"
+#include "brdf/models.h"
+#include "brdf/params.h"
+#include "render/bsdf.h"
+#include "render/material.h"
+
+namespace clothfit::fit {
+
+inline constexpr int kDirNodes = 6;  // Gauss-Legendre nodes per cosine
+inline constexpr int kAzimuths = 8;  // relative azimuths over [0, pi]
+inline constexpr double kCbrtEps = 1e-4;
+
+struct DirectionPair {
+  Vec3<double> v, l;
+  Cosines<double> cos;
+  double weight = 0.0;  // normalised over the whole set
+};
+
+// The canonical set (kDirNodes^2 * kAzimuths pairs), built once.
+const std::vector<DirectionPair>& CanonicalDirections();
+
+// A source BRDF sampled on the canonical set: value[k] = f * n.l (linear RGB), valid[k] false
+// where the source has no data.
+struct BrdfSamples {
+  std::vector<Rgb<double>> value;
+  std::vector<char> valid;
+};
+
+// Direct reflectance (cosine included, per unit light) of any preset model, flat parameters in
+// parameter-table order; Jet-safe.
+template <typename T>
+Rgb<T> EvalDirectFlat(render::ModelKind m, const cloth::Options& co, const T* x,
+                      const Cosines<T>& c) {
+  auto rgb = [&](int k) { return Rgb<T>(x[k], x[k + 1], x[k + 2]); };
+  switch (m) {
+    case render::ModelKind::kCloth:
+      return cloth::EvalDirect(cloth::Params<T>{rgb(0), rgb(3), x[6], rgb(7)}, co, c);
+    case render::ModelKind::kStandard:
+      return standard::EvalDirect(standard::Params<T>{rgb(0), x[3], x[4]}, {}, c,
+                                  lut::DefaultDfg());
+    case render::ModelKind::kPhysicalSheen:
+      return physical_sheen::EvalDirect(physical_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]},
+                                        {}, c, lut::DefaultDfg());
+    case render::ModelKind::kGltfSheen:
+      return gltf_sheen::EvalDirect(gltf_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]}, {}, c,
+                                    lut::DefaultSheenAlbedo());
+  }
+  return Rgb<T>(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
+}
+
+// An analytic preset sampled on the canonical set.
+BrdfSamples SampleAnalytic(const render::MaterialPreset& preset);
+// A woven (spatially varying, possibly anisotropic) BSDF: the mean of Eval * cos over a
+// grid x grid stratified set of points of one weave period [0, period_uv)^2 and over
+// `rotations` azimuthal rotations of the pair about n (an isotropic average).
+BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int grid = 4, int rotations = 4);
+
+struct BrdfFitOptions {
+  render::ModelKind model = render::ModelKind::kCloth;
+  cloth::Options cloth;             // target options when model == kCloth
+  std::vector<std::string> locked;  // held at the start preset's values
+  // Candidate starts (roughness and sheen roughness; cloth colours in closed form, other
+  // models' colours from the source's albedo), scored by their error; the best
+  // `solved_starts` are solved.
+  std::vector<double> start_roughness = {0.3, 0.45, 0.6, 0.75, 0.9};
+  int solved_starts = 1;
+  int max_iterations = 30;
+  // The source itself when it is of the target model: added as a start.
+  const render::MaterialPreset* source_preset = nullptr;
+};
+
+struct BrdfFitResult {
+  bool usable = false;
+  std::string message;
+  render::MaterialPreset preset;
+  double error = 0.0;  // weighted RMS in cube-root units (see above)
+  int starts = 0, iterations = 0;
+};
+
+// Throws std::invalid_argument when fewer than 16 samples are valid.
+BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& options);
+
+// The fit error of a preset against samples (same metric as BrdfFitResult::error).
+double BrdfError(const BrdfSamples& source, const render::MaterialPreset& preset);
+
+}  // namespace clothfit::fit

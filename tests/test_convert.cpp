@@ -1,0 +1,336 @@
+// clothfit convert (fit/convert.h, fit/convert_io.h): round trips per target, readers' errors,
+// and the batch on a generated catalogue (broken entries, resume, shards).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "fit/convert.h"
+#include "fit/convert_io.h"
+#include "render/image_io.h"
+
+namespace clothfit::fit {
+namespace {
+namespace fs = std::filesystem;
+using render::ModelKind;
+
+fs::path SourceDir() { return fs::path(CLOTHFIT_TEST_SOURCE_DIR); }
+
+fs::path TempDir(const std::string& name) {
+  const fs::path d = fs::temp_directory_path() /
+                     ("clothfit_test_convert_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+std::string Slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+render::MaterialPreset ClothPreset() {
+  render::MaterialPreset p = render::DefaultPreset(ModelKind::kCloth);
+  const double v[10] = {0.42, 0.3, 0.21, 0.7, 0.6, 0.55, 0.63, 0, 0, 0};
+  p.values.assign(v, v + 10);
+  return p;
+}
+
+Converted Example() {
+  Converted c;
+  c.name = "example";
+  c.cloth = ClothPreset();
+  render::MaterialPreset ps = render::DefaultPreset(ModelKind::kPhysicalSheen);
+  const double a[9] = {0.4, 0.29, 0.2, 0.8, 0.0, 0.6, 0.5, 0.45, 0.55};
+  ps.values.assign(a, a + 9);
+  c.physical_sheen = ps;
+  render::MaterialPreset gs = render::DefaultPreset(ModelKind::kGltfSheen);
+  const double b[9] = {0.41, 0.28, 0.19, 0.85, 0.0, 0.62, 0.52, 0.47, 0.5};
+  gs.values.assign(b, b + 9);
+  c.gltf_sheen = gs;
+  return c;
+}
+
+void ExpectNear(const std::vector<double>& a, const std::vector<double>& b, double tol,
+                const std::string& what) {
+  ASSERT_EQ(a.size(), b.size()) << what;
+  for (size_t i = 0; i < a.size(); ++i) EXPECT_NEAR(a[i], b[i], tol) << what << " [" << i << "]";
+}
+
+// Stated tolerances (docs/convert.md): preset and glTF exact (JSON doubles); Filament .mat
+// 1e-8 (9 significant digits); three.js colours 5e-3 in linear (8-bit sRGB hex), scalars exact.
+TEST(ConvertRoundTrip, EveryTargetReadsBackTheSameParameters) {
+  const fs::path d = TempDir("roundtrip");
+  const Converted c = Example();
+  WriteClothPreset((d / "a.preset.json").string(), c);
+  ExpectNear(render::ReadPreset((d / "a.preset.json").string()).values, c.cloth.values, 0.0,
+             "preset");
+
+  WriteFilamentMat((d / "a.mat").string(), c);
+  ExpectNear(ReadFilamentMat((d / "a.mat").string()).values, c.cloth.values, 1e-8, "filament");
+
+  WriteThreejsCloth((d / "a.meshcloth.json").string(), c);
+  ExpectNear(ReadThreejsCloth((d / "a.meshcloth.json").string()).values, c.cloth.values, 5e-3,
+             "MeshClothMaterial");
+
+  WriteThreejsPhysical((d / "a.three.json").string(), c);
+  const render::MaterialPreset t = ReadThreejsPhysical((d / "a.three.json").string());
+  ExpectNear(t.values, c.physical_sheen->values, 5e-3, "MeshPhysicalMaterial");
+  EXPECT_EQ(t.values[3], c.physical_sheen->values[3]);  // roughness: no conversion, exact
+
+  WriteGltf((d / "a.gltf").string(), c);
+  const auto back = ReadMaterials((d / "a.gltf").string());
+  ASSERT_EQ(back.size(), 1u);
+  ASSERT_TRUE(back[0].analytic);
+  EXPECT_EQ(back[0].name, "example");
+  ExpectNear(back[0].analytic->values, c.gltf_sheen->values, 1e-12, "glTF");
+  fs::remove_all(d);
+}
+
+TEST(ConvertRoundTrip, ThreejsHexIsSrgbEncoded) {
+  const fs::path d = TempDir("hex");
+  Converted c = Example();
+  c.physical_sheen->values[0] = 0.214041;  // linear of sRGB 0.5 (= 0x80 / 255 ~ 0.50196)
+  c.physical_sheen->values[1] = 0.0;
+  c.physical_sheen->values[2] = 1.0;
+  WriteThreejsPhysical((d / "h.json").string(), c);
+  std::ifstream in(d / "h.json");
+  nlohmann::json j;
+  in >> j;
+  EXPECT_EQ(j["color"].get<int>(), 0x7f00ff);
+  EXPECT_EQ(j["type"], "MeshPhysicalMaterial");
+  fs::remove_all(d);
+}
+
+TEST(ConvertReaders, SeedSurfaceMaterialAndErrorsNameFileAndField) {
+  const fs::path d = TempDir("seed");
+  {
+    std::ofstream f(d / "ok.json");
+    f << R"({"schema": "seed.SurfaceMaterial", "version": 1, "id": "a", "name": "velvet",
+             "brdf": "gltf-sheen", "parameters": {"color": [0.5, 0.2, 0.1], "roughness": 0.8,
+             "metalness": 0, "sheenColor": [0.9, 0.8, 0.7], "sheenRoughness": 0.4}})";
+  }
+  const auto m = ReadMaterials((d / "ok.json").string());
+  ASSERT_EQ(m.size(), 1u);
+  EXPECT_EQ(m[0].name, "velvet");
+  EXPECT_EQ(m[0].analytic->model, ModelKind::kGltfSheen);
+  EXPECT_DOUBLE_EQ(m[0].analytic->values[8], 0.4);
+  {
+    std::ofstream f(d / "bad.json");
+    f << R"({"schema": "seed.SurfaceMaterial", "version": 1, "id": "a", "name": "x",
+             "brdf": "cloth", "parameters": {"color": [0.5, 1.2, 0.1]}})";
+  }
+  try {
+    ReadMaterials((d / "bad.json").string());
+    FAIL();
+  } catch (const ConvertError& e) {
+    EXPECT_NE(std::string(e.what()).find((d / "bad.json").string() + ": parameters.color[1]"),
+              std::string::npos)
+        << e.what();
+  }
+  fs::remove_all(d);
+}
+
+// glTF sheen material -> cloth preset through the reader: the stated error (docs/convert.md)
+// is 0.02 cube-root units on the canonical directions.
+TEST(ConvertReaders, GltfSheenFileConvertsToClothWithinStatedError) {
+  const fs::path d = TempDir("gltfsheen");
+  const Converted c = Example();
+  WriteGltf((d / "s.gltf").string(), c);
+  const auto m = ReadMaterials((d / "s.gltf").string());
+  ASSERT_EQ(m.size(), 1u);
+  const BrdfSamples s = SampleSource(m[0]);
+  const BrdfFitResult r = FitBrdf(s, {});
+  ASSERT_TRUE(r.usable);
+  EXPECT_LT(r.error, 0.02);
+  EXPECT_LT(BrdfError(s, r.preset), BrdfError(s, render::DefaultPreset(ModelKind::kCloth)) / 3);
+  fs::remove_all(d);
+}
+
+// A base colour map is sRGB: an 8-bit 128 texel is linear 0.2158; the fit sees factor x that
+// mean, and the writers carry the map with factor = fitted / mean.
+TEST(ConvertReaders, GltfBaseColourMapIsDecodedFromSrgbAndCarried) {
+  const fs::path d = TempDir("maps");
+  fs::create_directories(d / "tex");
+  io::WritePng8((d / "tex" / "albedo.png").string(), 2, 2, std::vector<float>(12, 128.f / 255.f));
+  {
+    std::ofstream f(d / "m.gltf");
+    f << R"({"asset": {"version": "2.0"}, "images": [{"uri": "tex/albedo.png"}],
+             "textures": [{"source": 0}],
+             "materials": [{"name": "mapped", "pbrMetallicRoughness": {
+               "baseColorFactor": [1.0, 0.5, 1.0, 1.0], "roughnessFactor": 0.9,
+               "metallicFactor": 0.0, "baseColorTexture": {"index": 0}}}]})";
+  }
+  EXPECT_NEAR(MeanTexel((d / "tex" / "albedo.png").string(), true)[0], 0.2158605, 1e-6);
+  const auto m = ReadMaterials((d / "m.gltf").string());
+  ASSERT_EQ(m.size(), 1u);
+  EXPECT_NEAR(m[0].analytic->values[0], 0.2158605, 1e-6);
+  EXPECT_NEAR(m[0].analytic->values[1], 0.5 * 0.2158605, 1e-6);
+  ASSERT_EQ(m[0].maps.size(), 1u);
+  EXPECT_EQ(m[0].maps[0].colour_space, "srgb");
+  Converted c = Example();
+  c.maps = m[0].maps;
+  // A fitted colour below the map's mean (a factor above 1 cannot be written; it is clamped).
+  c.gltf_sheen->values[0] = 0.1, c.gltf_sheen->values[1] = 0.05, c.gltf_sheen->values[2] = 0.2;
+  fs::create_directories(d / "out");
+  WriteGltf((d / "out" / "o.gltf").string(), c);
+  const auto back = ReadMaterials((d / "out" / "o.gltf").string());
+  ASSERT_EQ(back.size(), 1u);
+  ASSERT_EQ(back[0].maps.size(), 1u);  // the map, found again relative to the output
+  // factor x mean(map) = the fitted colour.
+  for (size_t k = 0; k < 3; ++k)
+    EXPECT_NEAR(back[0].analytic->values[k], c.gltf_sheen->values[k], 1e-9) << k;
+  fs::remove_all(d);
+}
+
+// The catalogue, generated at test time (small), converted in one batch.
+struct Catalogue {
+  fs::path root, dir;
+  Catalogue() {
+    root = TempDir("catalogue");
+    dir = root / "cat";
+    const std::string cmd = "python3 '" +
+                            (SourceDir() / "datasets/catalogue/generate.py").string() +
+                            "' --quiet --count 6 --merl 1 --fabrics 1 --out '" + dir.string() + "'";
+    EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  }
+  ~Catalogue() { fs::remove_all(root); }
+};
+
+ConvertReport RunBatch(const std::vector<std::string>& args, const fs::path& out,
+                       std::vector<std::string> targets = {"preset"}, int shard = 0,
+                       int shards = 1) {
+  ConvertOptions o;
+  o.out_dir = out.string();
+  o.targets = std::move(targets);
+  o.shard_index = shard;
+  o.shard_count = shards;
+  return RunConvert(ExpandInputs(args), o);
+}
+
+TEST(ConvertBatch, BrokenEntriesAreReportedWithFileAndReasonWhileTheRestConvert) {
+  Catalogue cat;
+  const ConvertReport r =
+      RunBatch({cat.dir.string()}, cat.root / "out", {"preset", "threejs", "gltf", "filament"});
+  std::map<std::string, std::string> failed;
+  for (const ItemResult& i : r.items) {
+    if (i.status == "failed") failed[fs::path(i.file).filename().string()] = i.reason;
+    if (i.status == "converted") {
+      EXPECT_EQ(i.outputs.size(), 5u);
+      for (const auto& o : i.outputs) EXPECT_TRUE(fs::exists(o)) << o;
+    }
+  }
+  // Exactly the broken/ entries fail, each naming its file and the field.
+  size_t broken = 0;
+  for (const auto& e : fs::directory_iterator(cat.dir / "broken")) {
+    ++broken;
+    const std::string name = e.path().filename().string();
+    ASSERT_TRUE(failed.count(name)) << name << " was not reported";
+    EXPECT_NE(failed[name].find(e.path().string()), std::string::npos) << failed[name];
+  }
+  EXPECT_EQ(failed.size(), broken);
+  EXPECT_NE(failed["preset_colour_out_of_range.json"].find("base_color[1]"), std::string::npos);
+  EXPECT_NE(failed["gltf_sheen_out_of_range.gltf"].find("sheenColorFactor[1]"), std::string::npos);
+  EXPECT_NE(failed["merl_truncated.binary"].find(": data:"), std::string::npos);
+  EXPECT_NE(failed["surface_missing_map.json"].find("maps.color.uri"), std::string::npos);
+  EXPECT_EQ(r.failed, int(broken));
+  EXPECT_EQ(r.converted,
+            26);  // 6 presets, 6 glTF, 6 SurfaceMaterials, 3 stacks x 2, 1 MERL, 1 fabric
+  for (const ItemResult& i : r.items)
+    if (i.status == "converted") {
+      EXPECT_LT(i.error, 0.1) << i.file << " " << i.material;
+    }
+  // The summary names the failures; the JSON log has one entry per item.
+  EXPECT_NE(SummaryTable(r).find("merl_truncated.binary"), std::string::npos);
+  ConvertOptions o;
+  EXPECT_EQ(ReportJson(r, o)["items"].size(), r.items.size());
+}
+
+TEST(ConvertBatch, ResumeSkipsUnchangedAndReconvertsOnlyAChangedInput) {
+  Catalogue cat;
+  const std::vector<std::string> in = {(cat.dir / "presets").string(), (cat.dir / "gltf").string(),
+                                       (cat.dir / "stacks").string()};
+  const fs::path out = cat.root / "out";
+  const ConvertReport first = RunBatch(in, out);
+  ASSERT_EQ(first.failed, 0);
+  ASSERT_GT(first.converted, 10);
+  const ConvertReport second = RunBatch(in, out);
+  EXPECT_EQ(second.converted, 0);
+  EXPECT_EQ(second.skipped, first.converted);
+  // Change one preset's content.
+  const fs::path p = cat.dir / "presets" / "preset_0000.json";
+  nlohmann::json j = nlohmann::json::parse(Slurp(p));
+  j["parameters"]["roughness"] = 0.77;
+  std::ofstream(p) << j.dump();
+  const ConvertReport third = RunBatch(in, out);
+  EXPECT_EQ(third.converted, 1);
+  ASSERT_EQ(third.failed, 0);
+  for (const ItemResult& i : third.items)
+    if (i.status == "converted") {
+      EXPECT_EQ(fs::path(i.file).filename(), "preset_0000.json");
+    }
+  // A map is a dependency too: touching its bytes reconverts that stack's material(s) only.
+  const fs::path map = cat.dir / "stacks" / "stack_0000" / "front_roughness.png";
+  ASSERT_TRUE(fs::exists(map));
+  std::ofstream(map, std::ios::app) << "x";  // trailing bytes after IEND: same image, new hash
+  const ConvertReport fourth = RunBatch(in, out);
+  EXPECT_EQ(fourth.converted, 1);
+  for (const ItemResult& i : fourth.items)
+    if (i.status == "converted") {
+      EXPECT_EQ(i.material, "stack_0000-front");
+    }
+}
+
+TEST(ConvertBatch, OutputDirectoryInsideAnInputDirectoryIsNotReadBack) {
+  Catalogue cat;
+  const fs::path in = cat.dir / "presets";
+  const fs::path out = in / "converted";
+  ConvertOptions o;
+  o.out_dir = out.string();
+  const ConvertReport first = RunConvert(ExpandInputs({in.string()}, o.out_dir), o);
+  ASSERT_EQ(first.failed, 0);
+  const auto again = ExpandInputs({in.string()}, o.out_dir);
+  EXPECT_EQ(int(again.size()), first.converted);
+  for (const InputFile& f : again) EXPECT_EQ(f.path.find("converted"), std::string::npos) << f.path;
+  EXPECT_GT(ExpandInputs({in.string()}).size(), again.size());  // without the exclusion
+}
+
+TEST(ConvertBatch, UnionOfShardsEqualsTheUnshardedOutput) {
+  Catalogue cat;
+  const std::vector<std::string> in = {(cat.dir / "presets").string(), (cat.dir / "seed").string(),
+                                       (cat.dir / "gltf").string()};
+  const ConvertReport all = RunBatch(in, cat.root / "all", {"preset", "filament"});
+  ASSERT_EQ(all.failed, 0);
+  std::map<std::string, std::string> whole, shards;
+  for (const auto& e : fs::directory_iterator(cat.root / "all"))
+    if (e.is_regular_file() && e.path().filename().string().rfind("convert-log", 0) != 0)
+      whole[e.path().filename().string()] = Slurp(e.path());
+  int total = 0;
+  for (int i = 0; i < 3; ++i) {
+    const fs::path out = cat.root / ("shard" + std::to_string(i));
+    const ConvertReport r = RunBatch(in, out, {"preset", "filament"}, i, 3);
+    total += r.converted;
+    EXPECT_GT(r.converted, 0);
+    for (const auto& e : fs::directory_iterator(out))
+      if (e.is_regular_file()) {
+        const std::string name = e.path().filename().string();
+        EXPECT_FALSE(shards.count(name)) << name << " written by two shards";
+        shards[name] = Slurp(e.path());
+      }
+  }
+  EXPECT_EQ(total, all.converted);
+  EXPECT_EQ(shards.size(), whole.size());
+  for (const auto& [name, text] : whole) {
+    ASSERT_TRUE(shards.count(name)) << name;
+    EXPECT_EQ(shards[name], text) << name;
+  }
+}
+
+}  // namespace
+}  // namespace clothfit::fit
