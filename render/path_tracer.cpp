@@ -130,7 +130,9 @@ struct PathTracer::Impl {
     double depth = 0.0;
   };
 
-  SampleOut TracePath(const Vec3d& org0, const Vec3d& dir0, Pcg32& rng,
+  // first_u: BatchStrata::kDims numbers for the first vertex (environment sample (0, 1),
+  // BSDF sample (2, 3), lobe choice (4)), or null to draw them from rng.
+  SampleOut TracePath(const Vec3d& org0, const Vec3d& dir0, Pcg32& rng, const double* first_u,
                       const RenderSettings& st, uint64_t& rays) const {
     SampleOut out;
     Vec3d org = org0, dir = dir0;
@@ -180,7 +182,15 @@ struct PathTracer::Impl {
       if (has_env) {
         double pdf_l = 0.0;
         // Radiance looked up only for a sample that contributes (below).
-        const Vec3d wi = env->Sample(rng.Uniform(), rng.Uniform(), &pdf_l, nullptr);
+        double u1, u2;
+        if (depth == 0 && first_u) {
+          u1 = first_u[0];
+          u2 = first_u[1];
+        } else {
+          u1 = rng.Uniform();
+          u2 = rng.Uniform();
+        }
+        const Vec3d wi = env->Sample(u1, u2, &pdf_l, nullptr);
         const Vec3d wi_local = fr.ToLocal(wi);
         if (pdf_l > 0.0 && wi_local.z > 0.0 && Dot(wi, ng) > 0.0) {
           const Rgbd f = bsdf.Eval(wo_local, wi_local, sp);
@@ -199,8 +209,17 @@ struct PathTracer::Impl {
 
       // BSDF sampling continues the path.
       BsdfSample bs;
-      const Point2d u{rng.Uniform(), rng.Uniform()};
-      if (!bsdf.Sample(wo_local, u, rng.Uniform(), sp, &bs) || bs.pdf <= 0.0) break;
+      Point2d u;
+      double uc;
+      if (depth == 0 && first_u) {
+        u = {first_u[2], first_u[3]};
+        uc = first_u[4];
+      } else {
+        u.x = rng.Uniform();
+        u.y = rng.Uniform();
+        uc = rng.Uniform();
+      }
+      if (!bsdf.Sample(wo_local, u, uc, sp, &bs) || bs.pdf <= 0.0) break;
       if (bs.wi.z <= 0.0) break;
       const Vec3d wi = fr.ToWorld(bs.wi);
       if (Dot(wi, ng) <= 0.0) break;
@@ -259,6 +278,7 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   tbb::parallel_for(0, tiles, [&](int tile) {
     const int tx = tile % tiles_x, ty = tile / tiles_x;
     uint64_t rays = 0;
+    BatchStrata strata;
     for (int y = ty * st.tile_size; y < std::min(H, (ty + 1) * st.tile_size); ++y) {
       for (int x = tx * st.tile_size; x < std::min(W, (tx + 1) * st.tile_size); ++x) {
         const size_t pix = size_t(y) * size_t(W) + size_t(x);
@@ -281,7 +301,10 @@ RenderResult PathTracer::Render(const RenderSettings& st,
           if (m == 0) {
             shift_u = shift_rng.Uniform();
             shift_v = shift_rng.Uniform();
+            if (M > 1) strata.Reset(M, shift_rng);
           }
+          double first_u[BatchStrata::kDims];
+          if (M > 1) strata.Get(m, first_u);
           Pcg32 rng = PixelSampler(st.seed, pix, uint64_t(s));
           double ju = (m + 0.5) / M + shift_u, jv = RadicalInverse2(uint32_t(m)) + shift_v;
           ju -= std::floor(ju);
@@ -292,7 +315,8 @@ RenderResult PathTracer::Render(const RenderSettings& st,
           }
           A3 org, dir;
           scene.CameraRay(x + ju, y + jv, org, dir);
-          Impl::SampleOut so = impl_->TracePath(V(org), V(dir), rng, st, rays);
+          Impl::SampleOut so =
+              impl_->TracePath(V(org), V(dir), rng, M > 1 ? first_u : nullptr, st, rays);
           double v[3] = {so.L.r, so.L.g, so.L.b};
           for (int c = 0; c < 3; ++c) {
             if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel

@@ -4,6 +4,8 @@
 #pragma once
 
 #include <cstdint>
+#include <utility>
+#include <vector>
 
 namespace clothfit::render {
 
@@ -41,6 +43,55 @@ inline double RadicalInverse2(uint32_t i) {
   i = ((i & 0x00FF00FFu) << 8u) | ((i & 0xFF00FF00u) >> 8u);
   return double(i) * 0x1.0p-32;
 }
+
+// Padded stratified points for one batch of M samples (pbrt's "padding" of low-dimensional
+// sets, Pharr et al., PBR 3rd ed. 7.3): dimension group g of sample m is point perm_g[m] of an
+// M-point set, Cranley-Patterson rotated by a shift drawn per batch and group. 2-D groups use
+// the Hammersley set (i + 1/2) / M, radical inverse of i; 1-D groups (i + 1/2) / M. Every point
+// is marginally uniform on its unit square (the rotation), so any estimator stays unbiased;
+// within a batch the points of a group are stratified; the groups are decorrelated from each
+// other by independent random permutations; and a batch draws everything from its own stream,
+// so batch means stay i.i.d.
+class BatchStrata {
+ public:
+  static constexpr int kGroups2d = 2, kGroups1d = 1;
+  static constexpr int kDims = 2 * kGroups2d + kGroups1d;
+
+  // A new batch of m_count points from `rng` (permutations and shifts).
+  void Reset(int m_count, Pcg32& rng) {
+    m_ = m_count;
+    for (int g = 0; g < kGroups2d + kGroups1d; ++g) {
+      std::vector<uint32_t>& p = perm_[g];
+      p.resize(size_t(m_));
+      for (int i = 0; i < m_; ++i) p[size_t(i)] = uint32_t(i);
+      for (int i = m_ - 1; i > 0; --i) {  // Fisher-Yates (Lemire's multiply-shift bound)
+        const auto j = uint32_t((uint64_t(rng.Next()) * uint64_t(i + 1)) >> 32);
+        std::swap(p[size_t(i)], p[size_t(j)]);
+      }
+    }
+    for (double& s : shift_) s = rng.Uniform();
+  }
+  // The kDims numbers of sample m: groups (0, 1), (2, 3) are 2-D, 4 is 1-D.
+  void Get(int m, double* out) const {
+    const double inv_m = 1.0 / m_;
+    for (int g = 0; g < kGroups2d; ++g) {
+      const uint32_t i = perm_[g][size_t(m)];
+      out[2 * g] = Wrap((i + 0.5) * inv_m + shift_[2 * g]);
+      out[2 * g + 1] = Wrap(RadicalInverse2(i) + shift_[2 * g + 1]);
+    }
+    for (int g = 0; g < kGroups1d; ++g) {
+      const uint32_t i = perm_[kGroups2d + g][size_t(m)];
+      out[2 * kGroups2d + g] = Wrap((i + 0.5) * inv_m + shift_[2 * kGroups2d + g]);
+    }
+  }
+
+ private:
+  // x in [0, 2) -> [0, 1).
+  static double Wrap(double x) { return x >= 1.0 ? x - 1.0 : x; }
+  int m_ = 0;
+  std::vector<uint32_t> perm_[kGroups2d + kGroups1d];
+  double shift_[kDims] = {};
+};
 
 // SplitMix64 finaliser, to derive stream ids.
 inline uint64_t Mix64(uint64_t z) {
