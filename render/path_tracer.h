@@ -31,6 +31,9 @@ struct RenderSettings {
   int rr_start_depth = 3;  // Russian roulette from this depth on
   uint64_t seed = 1;
   int tile_size = 16;
+  // Environment samples at the camera ray's hit (stratified over the pixel's batch; deeper
+  // vertices take one). Only with batches of more than one sample (spp >= 32, a multiple of 16).
+  int first_env_samples = 1;
   AovSet aovs;
   double max_sample_value = 0.0;  // > 0: clamp each sample's channels (biased; 0 = off)
 };
