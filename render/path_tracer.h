@@ -33,7 +33,8 @@ struct RenderSettings {
   int tile_size = 16;
   // Environment samples at the camera ray's hit (stratified over the pixel's batch; deeper
   // vertices take one). Only with batches of more than one sample (spp >= 32, a multiple of 16).
-  int first_env_samples = 1;
+  // 2: measured best over the canonical scenes (docs/reference-renderer.md).
+  int first_env_samples = 2;
   AovSet aovs;
   double max_sample_value = 0.0;  // > 0: clamp each sample's channels (biased; 0 = off)
 };
