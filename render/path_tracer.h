@@ -1,6 +1,8 @@
 // render/path_tracer.h: the reference renderer. Unidirectional path tracing with next-event
 // estimation, environment importance sampling, MIS (power heuristic) between BSDF and
 // environment sampling, Russian roulette, deterministic per-pixel streams and TBB tiles.
+// At the camera ray's hit: first_env_samples environment samples (multi-sample MIS), and the
+// random numbers of that vertex stratified across the pixel's batch (docs/reference-renderer.md).
 //
 // What is skipped when the scene does not need it: no environment -> no environment
 // sampling (escaping rays see the card's background only from the camera); punctual lights
