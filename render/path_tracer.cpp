@@ -333,8 +333,8 @@ RenderResult PathTracer::Render(const RenderSettings& st,
           }
           A3 org, dir;
           scene.CameraRay(x + ju, y + jv, org, dir);
-          Impl::SampleOut so =
-              impl_->TracePath(V(org), V(dir), rng, M > 1 ? &first : nullptr, env_samples, st, rays);
+          Impl::SampleOut so = impl_->TracePath(V(org), V(dir), rng, M > 1 ? &first : nullptr,
+                                                env_samples, st, rays);
           double v[3] = {so.L.r, so.L.g, so.L.b};
           for (int c = 0; c < 3; ++c) {
             if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel
