@@ -58,7 +58,7 @@ bool ParseAovs(const std::string& list, render::AovSet& aovs, std::string& bad) 
 void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   struct Args {
     std::string scene, fabric, out, aov;
-    int spp = 64, threads = 0, max_depth = 8;
+    int spp = 64, threads = 0, max_depth = 8, env_samples = -1;
     uint64_t seed = 1;
   };
   auto args = std::make_shared<Args>();
@@ -72,6 +72,9 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--threads", args->threads, "worker threads (0 = all cores)")
       ->check(CLI::Range(0, 1024));
   cmd->add_option("--max-depth", args->max_depth, "maximum path depth")->check(CLI::Range(1, 64));
+  cmd->add_option("--env-samples", args->env_samples,
+                  "environment samples at each camera ray's hit (default: the renderer's)")
+      ->check(CLI::Range(1, 16));
   cmd->add_option("--aov", args->aov,
                   "comma-separated AOVs: normal,position,uv,tangent,depth,all");
   cmd->callback([args, &g, &exit_code]() {
@@ -80,6 +83,7 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       st.spp = args->spp;
       st.seed = args->seed;
       st.max_depth = args->max_depth;
+      if (args->env_samples > 0) st.first_env_samples = args->env_samples;
       std::string bad;
       if (!ParseAovs(args->aov, st.aovs, bad)) {
         std::fprintf(stderr, "clothfit render-reference: error: --aov: unknown AOV '%s'\n",
@@ -107,6 +111,7 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
            {"clothfit:spp", std::to_string(args->spp)},
            {"clothfit:seed", std::to_string(args->seed)},
            {"clothfit:max_depth", std::to_string(args->max_depth)},
+           {"clothfit:env_samples", std::to_string(st.first_env_samples)},
            {"clothfit:environment", env ? env->source() : std::string("none")},
            {"clothfit:renderer", "clothfit reference path tracer (NEE + env MIS, power heuristic)"}});
       const double mrays = double(r.rays) / r.seconds * 1e-6;

@@ -130,12 +130,24 @@ struct PathTracer::Impl {
     double depth = 0.0;
   };
 
-  SampleOut TracePath(const Vec3d& org0, const Vec3d& dir0, Pcg32& rng,
-                      const RenderSettings& st, uint64_t& rays) const {
+  // Random numbers of the first vertex (the camera ray's hit), drawn stratified per batch:
+  // the BSDF sample (u.x, u.y, uc) and env_samples environment samples (2 each).
+  static constexpr int kMaxFirstEnvSamples = 16;
+  struct FirstVertexU {
+    double bsdf[3];
+    double env[2 * kMaxFirstEnvSamples];
+  };
+
+  // first: stratified numbers for the first vertex, or null to draw them from rng (then one
+  // environment sample). env_samples: environment samples at the first vertex (Veach's
+  // multi-sample MIS: with n_l light samples and one BSDF sample, the power heuristic weighs
+  // n_l pdf_l against pdf_b; each light sample counts 1 / n_l).
+  SampleOut TracePath(const Vec3d& org0, const Vec3d& dir0, Pcg32& rng, const FirstVertexU* first,
+                      int env_samples, const RenderSettings& st, uint64_t& rays) const {
     SampleOut out;
     Vec3d org = org0, dir = dir0;
     Rgbd T(1, 1, 1);
-    double prev_bsdf_pdf = 0.0;
+    double prev_bsdf_pdf = 0.0, prev_light_count = 1.0;
     bool specular_bounce = true;  // camera ray: env seen directly with weight 1
     const double eps = 1e-5 * bvh.scale();
     for (int depth = 0;; ++depth) {
@@ -144,7 +156,9 @@ struct PathTracer::Impl {
       if (!h.valid) {
         if (has_env) {
           const Rgbd Le = env->Eval(dir);
-          const double w = specular_bounce ? 1.0 : PowerHeuristic(prev_bsdf_pdf, env->Pdf(dir));
+          const double w = specular_bounce
+                               ? 1.0
+                               : PowerHeuristic(prev_bsdf_pdf, prev_light_count * env->Pdf(dir));
           out.L += T * Le * w;
         } else if (depth == 0) {
           out.L += Rgbd(scene.card.background[0], scene.card.background[1],
@@ -177,35 +191,53 @@ struct PathTracer::Impl {
 
       // Next-event estimation: punctual lights, then the environment (MIS).
       out.L += T * PunctualLights(p, ng, fr, wo_local, bsdf, sp, eps, rays);
+      const int n_l = depth == 0 && first ? env_samples : 1;
       if (has_env) {
-        double pdf_l = 0.0;
-        // Radiance looked up only for a sample that contributes (below).
-        const Vec3d wi = env->Sample(rng.Uniform(), rng.Uniform(), &pdf_l, nullptr);
-        const Vec3d wi_local = fr.ToLocal(wi);
-        if (pdf_l > 0.0 && wi_local.z > 0.0 && Dot(wi, ng) > 0.0) {
-          const Rgbd f = bsdf.Eval(wo_local, wi_local, sp);
-          if (f.r > 0.0 || f.g > 0.0 || f.b > 0.0) {
-            ++rays;
-            if (!bvh.Occluded(A(p + ng * eps), A(wi), 0.0,
-                              std::numeric_limits<double>::infinity())) {
-              const Rgbd Le = env->Eval(wi);
-              const double pdf_b = bsdf.Pdf(wo_local, wi_local, sp);
-              const double w = PowerHeuristic(pdf_l, pdf_b);
-              out.L += T * f * Le * (wi_local.z * w / pdf_l);
-            }
+        for (int k = 0; k < n_l; ++k) {
+          double pdf_l = 0.0, u1, u2;
+          if (depth == 0 && first) {
+            u1 = first->env[2 * k];
+            u2 = first->env[2 * k + 1];
+          } else {
+            u1 = rng.Uniform();
+            u2 = rng.Uniform();
           }
+          // Radiance looked up only for a sample that contributes (below).
+          const Vec3d wi = env->Sample(u1, u2, &pdf_l, nullptr);
+          const Vec3d wi_local = fr.ToLocal(wi);
+          if (!(pdf_l > 0.0 && wi_local.z > 0.0 && Dot(wi, ng) > 0.0)) continue;
+          const Rgbd f = bsdf.Eval(wo_local, wi_local, sp);
+          if (!(f.r > 0.0 || f.g > 0.0 || f.b > 0.0)) continue;
+          ++rays;
+          if (bvh.Occluded(A(p + ng * eps), A(wi), 0.0, std::numeric_limits<double>::infinity())) {
+            continue;
+          }
+          const Rgbd Le = env->Eval(wi);
+          const double pdf_b = bsdf.Pdf(wo_local, wi_local, sp);
+          const double w = PowerHeuristic(n_l * pdf_l, pdf_b);
+          out.L += T * f * Le * (wi_local.z * w / (n_l * pdf_l));
         }
       }
 
       // BSDF sampling continues the path.
       BsdfSample bs;
-      const Point2d u{rng.Uniform(), rng.Uniform()};
-      if (!bsdf.Sample(wo_local, u, rng.Uniform(), sp, &bs) || bs.pdf <= 0.0) break;
+      Point2d u;
+      double uc;
+      if (depth == 0 && first) {
+        u = {first->bsdf[0], first->bsdf[1]};
+        uc = first->bsdf[2];
+      } else {
+        u.x = rng.Uniform();
+        u.y = rng.Uniform();
+        uc = rng.Uniform();
+      }
+      if (!bsdf.Sample(wo_local, u, uc, sp, &bs) || bs.pdf <= 0.0) break;
       if (bs.wi.z <= 0.0) break;
       const Vec3d wi = fr.ToWorld(bs.wi);
       if (Dot(wi, ng) <= 0.0) break;
       T = T * bs.f * (bs.wi.z / bs.pdf);
       prev_bsdf_pdf = bs.pdf;
+      prev_light_count = n_l;
       specular_bounce = false;
       // Without an environment, an escaping bounce ray carries nothing: stop early.
       org = p + ng * eps;
@@ -249,6 +281,7 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   const int K = (st.spp >= 32 && st.spp % 16 == 0) ? 16 : st.spp;
   const int M = st.spp / K;
   r.batches = K;
+  const int env_samples = std::clamp(st.first_env_samples, 1, Impl::kMaxFirstEnvSamples);
   const int tiles_x = (W + st.tile_size - 1) / st.tile_size;
   const int tiles_y = (H + st.tile_size - 1) / st.tile_size;
   const int tiles = tiles_x * tiles_y;
@@ -259,6 +292,7 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   tbb::parallel_for(0, tiles, [&](int tile) {
     const int tx = tile % tiles_x, ty = tile / tiles_x;
     uint64_t rays = 0;
+    BatchStrata strata({{2, 1}, {1, 1}, {2, env_samples}});
     for (int y = ty * st.tile_size; y < std::min(H, (ty + 1) * st.tile_size); ++y) {
       for (int x = tx * st.tile_size; x < std::min(W, (tx + 1) * st.tile_size); ++x) {
         const size_t pix = size_t(y) * size_t(W) + size_t(x);
@@ -281,6 +315,13 @@ RenderResult PathTracer::Render(const RenderSettings& st,
           if (m == 0) {
             shift_u = shift_rng.Uniform();
             shift_v = shift_rng.Uniform();
+            if (M > 1) strata.Reset(M, shift_rng);
+          }
+          Impl::FirstVertexU first;
+          if (M > 1) {
+            strata.Get(0, m, 0, first.bsdf);
+            strata.Get(1, m, 0, first.bsdf + 2);
+            for (int k = 0; k < env_samples; ++k) strata.Get(2, m, k, first.env + 2 * k);
           }
           Pcg32 rng = PixelSampler(st.seed, pix, uint64_t(s));
           double ju = (m + 0.5) / M + shift_u, jv = RadicalInverse2(uint32_t(m)) + shift_v;
@@ -292,7 +333,8 @@ RenderResult PathTracer::Render(const RenderSettings& st,
           }
           A3 org, dir;
           scene.CameraRay(x + ju, y + jv, org, dir);
-          Impl::SampleOut so = impl_->TracePath(V(org), V(dir), rng, st, rays);
+          Impl::SampleOut so = impl_->TracePath(V(org), V(dir), rng, M > 1 ? &first : nullptr,
+                                                env_samples, st, rays);
           double v[3] = {so.L.r, so.L.g, so.L.b};
           for (int c = 0; c < 3; ++c) {
             if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel
