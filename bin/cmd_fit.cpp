@@ -70,7 +70,8 @@ render::Scene LoadSceneAtWidth(const std::string& scene_path, int width) {
 std::string CachedReference(const std::string& scene_path, const std::string& fabric_path,
                             int spp, uint64_t seed, bool quiet, int width) {
   const render::Scene scene = LoadSceneAtWidth(scene_path, width);
-  std::string key_text = "clothfit-reference-v1|" + std::to_string(spp) + "|" +
+  std::string key_text = "clothfit-reference-v1|renderer=" +
+                         std::to_string(render::kReferenceRendererVersion) + "|" + std::to_string(spp) + "|" +
                          std::to_string(seed) + "|" + ReadFileOrEmpty(scene_path) + "|" +
                          ReadFileOrEmpty(scene.card.gltf) + "|" + ReadFileOrEmpty(fabric_path);
   // The card's own size is already in its content; an override is part of the key.
@@ -97,7 +98,8 @@ std::string CachedReference(const std::string& scene_path, const std::string& fa
                          {{"clothfit:scene", scene_path},
                           {"clothfit:fabric", fabric_path},
                           {"clothfit:spp", std::to_string(spp)},
-                          {"clothfit:seed", std::to_string(seed)}});
+                          {"clothfit:seed", std::to_string(seed)},
+                          {"clothfit:renderer_version", std::to_string(render::kReferenceRendererVersion)}});
   if (!quiet)
     std::fprintf(stderr, "clothfit: rendered %s (%.1f s, mean std error %.2f%% of mean)\n",
                  path.c_str(), r.seconds,

@@ -113,7 +113,8 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
            {"clothfit:max_depth", std::to_string(args->max_depth)},
            {"clothfit:env_samples", std::to_string(st.first_env_samples)},
            {"clothfit:environment", env ? env->source() : std::string("none")},
-           {"clothfit:renderer", "clothfit reference path tracer (NEE + env MIS, power heuristic)"}});
+           {"clothfit:renderer", "clothfit reference path tracer (NEE + env MIS, power heuristic)"},
+           {"clothfit:renderer_version", std::to_string(render::kReferenceRendererVersion)}});
       const double mrays = double(r.rays) / r.seconds * 1e-6;
       std::printf(
           "render-reference: %s on %s: %dx%d, %d spp, %.2f s, %.2f Mrays/s, mean value %.4g, "

@@ -27,6 +27,12 @@ struct AovSet {
   bool any() const { return normal || position || uv || tangent || depth; }
 };
 
+// Version of the reference renderer's sampling: bumped whenever a change alters the images a
+// seed produces (even when the expectation is unchanged), so content-keyed caches of reference
+// renders (bin/cmd_fit.cpp CachedReference) never mix renders of different renderers.
+// 2: stratified first-vertex environment/BSDF numbers and two environment samples there.
+inline constexpr int kReferenceRendererVersion = 2;
+
 struct RenderSettings {
   int spp = 64;
   int max_depth = 8;       // path vertices after the camera (1 = direct light only)
