@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <mutex>
+#include <set>
 #include <sstream>
 #include <string>
 
@@ -22,8 +24,13 @@ std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& s
                                                           bool quiet) {
   if (!scene.card.environment) return nullptr;
   const render::EnvironmentSpec& e = *scene.card.environment;
+  // Each distinct warning is printed once per process (fit and bench load the same map for
+  // every reference they render).
   auto warn = [quiet](const std::string& msg) {
-    if (!quiet) std::fprintf(stderr, "clothfit: warning: %s\n", msg.c_str());
+    static std::mutex mutex;
+    static std::set<std::string> said;
+    std::lock_guard<std::mutex> lock(mutex);
+    if (!quiet && said.insert(msg).second) std::fprintf(stderr, "clothfit: warning: %s\n", msg.c_str());
   };
   if (e.path != "procedural-sky" && std::filesystem::exists(e.path)) {
     return std::make_unique<render::Environment>(
