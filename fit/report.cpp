@@ -144,12 +144,36 @@ std::string MapPng(const metrics::Map& map, const metrics::Map* mask, const std:
   return Base64(io::EncodePng8(map.width, map.height, rgb, what));
 }
 
+// The scalar metrics a report carries, in report order: JSON keys and CSV columns. Each is
+// copied from the metrics::CompareResult member of the same name; a PSNR may be +inf
+// (identical images), every other value must be finite.
+struct MetricField {
+  const char* name;
+  double Numbers::*numbers;
+  double metrics::CompareResult::*result;
+  bool psnr;
+};
+constexpr MetricField kMetricFields[] = {
+    {"rmse_linear", &Numbers::rmse_linear, &metrics::CompareResult::rmse_linear, false},
+    {"psnr_linear", &Numbers::psnr_linear, &metrics::CompareResult::psnr_linear, true},
+    {"rmse_display", &Numbers::rmse_display, &metrics::CompareResult::rmse_display, false},
+    {"psnr_display", &Numbers::psnr_display, &metrics::CompareResult::psnr_display, true},
+    {"ssim", &Numbers::ssim, &metrics::CompareResult::ssim, false},
+    {"flip", &Numbers::flip, &metrics::CompareResult::flip, false},
+    {"hdr_flip", &Numbers::hdr_flip, &metrics::CompareResult::hdr_flip, false},
+    {"ciede2000_mean", &Numbers::ciede2000_mean, &metrics::CompareResult::ciede2000_mean, false},
+    {"ciede2000_p95", &Numbers::ciede2000_p95, &metrics::CompareResult::ciede2000_p95, false},
+    {"ciede2000_display_mean", &Numbers::ciede2000_display_mean,
+     &metrics::CompareResult::ciede2000_display_mean, false},
+    {"ciede2000_display_p95", &Numbers::ciede2000_display_p95,
+     &metrics::CompareResult::ciede2000_display_p95, false},
+};
+
 bool NumbersFinite(const Numbers& n) {
-  for (double v : {n.rmse_linear, n.rmse_display, n.ssim, n.flip, n.hdr_flip, n.ciede2000_mean,
-                   n.ciede2000_p95, n.ciede2000_display_mean, n.ciede2000_display_p95})
-    if (!std::isfinite(v)) return false;
-  for (double v : {n.psnr_linear, n.psnr_display})
-    if (std::isnan(v) || (std::isinf(v) && v < 0)) return false;
+  for (const MetricField& f : kMetricFields) {
+    const double v = n.*f.numbers;
+    if (f.psnr ? (std::isnan(v) || (std::isinf(v) && v < 0)) : !std::isfinite(v)) return false;
+  }
   return true;
 }
 
@@ -182,17 +206,7 @@ Comparison Compare(const metrics::RgbImage& ref, const metrics::RgbImage& test,
     return out;
   }
   Numbers& n = out.numbers;
-  n.rmse_linear = r.rmse_linear;
-  n.psnr_linear = r.psnr_linear;
-  n.rmse_display = r.rmse_display;
-  n.psnr_display = r.psnr_display;
-  n.ssim = r.ssim;
-  n.flip = r.flip;
-  n.hdr_flip = r.hdr_flip;
-  n.ciede2000_mean = r.ciede2000_mean;
-  n.ciede2000_p95 = r.ciede2000_p95;
-  n.ciede2000_display_mean = r.ciede2000_display_mean;
-  n.ciede2000_display_p95 = r.ciede2000_display_p95;
+  for (const MetricField& f : kMetricFields) n.*f.numbers = r.*f.result;
   n.counts = r.counts;
   n.ok = NumbersFinite(n);
   if (!n.ok) n.why = "non-finite result";
@@ -262,20 +276,8 @@ nlohmann::json NumbersJson(const Numbers& n) {
   nlohmann::json j;
   j["ok"] = n.ok;
   if (!n.ok) j["why"] = n.why;
-  const std::array<std::pair<const char*, double>, 11> fields = {{
-      {"rmse_linear", n.rmse_linear},
-      {"psnr_linear", n.psnr_linear},
-      {"rmse_display", n.rmse_display},
-      {"psnr_display", n.psnr_display},
-      {"ssim", n.ssim},
-      {"flip", n.flip},
-      {"hdr_flip", n.hdr_flip},
-      {"ciede2000_mean", n.ciede2000_mean},
-      {"ciede2000_p95", n.ciede2000_p95},
-      {"ciede2000_display_mean", n.ciede2000_display_mean},
-      {"ciede2000_display_p95", n.ciede2000_display_p95},
-  }};
-  for (const auto& [k, v] : fields) j[k] = n.ok ? JsonNumber(v) : nlohmann::json(nullptr);
+  for (const MetricField& f : kMetricFields)
+    j[f.name] = n.ok ? JsonNumber(n.*f.numbers) : nlohmann::json(nullptr);
   j["pixels"] = {{"counted", n.counts.counted},
                  {"nonfinite_reference", n.counts.nonfinite_ref},
                  {"nonfinite_test", n.counts.nonfinite_test}};
@@ -588,21 +590,10 @@ Numbers MeanOver(const std::vector<const Numbers*>& per_scene,
     }
   }
   const double n = double(per_scene.size());
-  double Numbers::*fields[] = {&Numbers::rmse_linear,
-                               &Numbers::psnr_linear,
-                               &Numbers::rmse_display,
-                               &Numbers::psnr_display,
-                               &Numbers::ssim,
-                               &Numbers::flip,
-                               &Numbers::hdr_flip,
-                               &Numbers::ciede2000_mean,
-                               &Numbers::ciede2000_p95,
-                               &Numbers::ciede2000_display_mean,
-                               &Numbers::ciede2000_display_p95};
-  for (auto f : fields) {
+  for (const MetricField& f : kMetricFields) {
     double s = 0.0;
-    for (const Numbers* x : per_scene) s += x->*f;  // +inf PSNR stays +inf
-    m.*f = s / n;
+    for (const Numbers* x : per_scene) s += x->*f.numbers;  // +inf PSNR stays +inf
+    m.*f.numbers = s / n;
   }
   for (const Numbers* x : per_scene) {
     m.counts.counted += x->counts.counted;
@@ -968,9 +959,9 @@ nlohmann::json ReportJson(const std::vector<FabricReport>& reports) {
 
 std::string ReportCsv(const std::vector<FabricReport>& reports) {
   std::ostringstream s;
-  s << "fabric,model,scene,rmse_linear,psnr_linear,rmse_display,psnr_display,ssim,flip,hdr_flip,"
-       "ciede2000_mean,ciede2000_p95,ciede2000_display_mean,ciede2000_display_p95,"
-       "pixels_counted,nonfinite_reference,nonfinite_test,status\n";
+  s << "fabric,model,scene";
+  for (const MetricField& f : kMetricFields) s << "," << f.name;
+  s << ",pixels_counted,nonfinite_reference,nonfinite_test,status\n";
   auto num = [](double v) -> std::string {
     if (std::isfinite(v)) return Fmt("%.9g", v);
     return (std::isinf(v) && v > 0) ? "inf" : "";
@@ -983,10 +974,7 @@ std::string ReportCsv(const std::vector<FabricReport>& reports) {
   auto row = [&](const std::string& fabric, const std::string& model, const std::string& scene,
                  const Numbers& n) {
     s << csv_text(fabric) << "," << csv_text(model) << "," << csv_text(scene);
-    for (double v :
-         {n.rmse_linear, n.psnr_linear, n.rmse_display, n.psnr_display, n.ssim, n.flip, n.hdr_flip,
-          n.ciede2000_mean, n.ciede2000_p95, n.ciede2000_display_mean, n.ciede2000_display_p95})
-      s << "," << (n.ok ? num(v) : std::string());
+    for (const MetricField& f : kMetricFields) s << "," << (n.ok ? num(n.*f.numbers) : std::string());
     s << "," << n.counts.counted << "," << n.counts.nonfinite_ref << "," << n.counts.nonfinite_test
       << "," << csv_text(n.ok ? "ok" : "n/a: " + n.why) << "\n";
   };
