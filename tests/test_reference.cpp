@@ -78,42 +78,28 @@ Scene LitSphereScene() {
   return s;
 }
 
+RenderResult RenderWithThreads(const PathTracer& pt, const RenderSettings& st, size_t threads) {
+  tbb::global_control c(tbb::global_control::max_allowed_parallelism, threads);
+  return pt.Render(st);
+}
+
 TEST(Reference, SameSeedSameImageWithOneOrTwoThreads) {
   Scene s = LitSphereScene();
   const Environment env = Environment::ProceduralSky(1.0, 0.3);
   LambertBsdf fabric(Rgbd(0.6, 0.5, 0.4));
   PathTracer pt(s, fabric, &env);
   RenderSettings st;
-  st.spp = 8;
   st.seed = 42;
-  RenderResult one, two;
-  {
-    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
-    one = pt.Render(st);
+  // spp 8: i.i.d. samples; spp 32: stratified batches (spp a multiple of 16, >= 32).
+  for (int spp : {8, 32}) {
+    st.spp = spp;
+    const RenderResult one = RenderWithThreads(pt, st, 1), two = RenderWithThreads(pt, st, 2);
+    EXPECT_EQ(one.rgb, two.rgb) << spp << " spp";  // bit-identical
+    EXPECT_EQ(one.std_error, two.std_error) << spp << " spp";
+    RenderSettings other = st;
+    other.seed = 43;
+    EXPECT_NE(pt.Render(other).rgb, one.rgb) << spp << " spp";  // and the seed matters
   }
-  {
-    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
-    two = pt.Render(st);
-  }
-  EXPECT_EQ(one.rgb, two.rgb);  // bit-identical
-  EXPECT_EQ(one.std_error, two.std_error);
-  {  // and with stratified batches (spp a multiple of 16, >= 32)
-    st.spp = 32;
-    RenderResult b1, b2;
-    {
-      tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
-      b1 = pt.Render(st);
-    }
-    {
-      tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
-      b2 = pt.Render(st);
-    }
-    EXPECT_EQ(b1.rgb, b2.rgb);
-    EXPECT_EQ(b1.std_error, b2.std_error);
-    st.spp = 8;
-  }
-  st.seed = 43;
-  EXPECT_NE(pt.Render(st).rgb, one.rgb);  // and the seed matters
 }
 
 // Slope of log RMSE against log spp (against a 1024-spp render) over `spps`.
