@@ -16,8 +16,8 @@
 #include "bin/commands.h"
 #include "brdf/models.h"
 #include "fit/bench_fit.h"
-#include "render/fabric.h"
-#include "render/preview.h"
+#include "render/reference/fabric.h"
+#include "render/preview/preview.h"
 
 namespace clothfit::cli {
 namespace {

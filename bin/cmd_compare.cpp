@@ -1,4 +1,4 @@
-// clothfit compare: every image metric (fit/metrics.h) between a reference and a test image.
+// clothfit compare: every image metric (fit/metrics/metrics.h) between a reference and a test image.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -12,9 +12,9 @@
 #include <vector>
 
 #include "bin/commands.h"
-#include "fit/metrics.h"
-#include "render/image_io.h"
-#include "render/tonemap.h"
+#include "fit/metrics/metrics.h"
+#include "render/scene/image_io.h"
+#include "render/scene/tonemap.h"
 
 namespace clothfit::cli {
 

@@ -1,6 +1,6 @@
 // clothfit convert: batch conversion of captured materials (glTF, MERL, fabric definitions,
 // clothfit presets, the seed's SurfaceMaterial / TextureStack) into cloth presets and engine
-// materials, by fitting in BRDF space (fit/convert.h, docs/convert.md). Also `bench convert`.
+// materials, by fitting in BRDF space (fit/convert/convert.h, docs/convert.md). Also `bench convert`.
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,8 +13,8 @@
 
 #include "bin/commands.h"
 #include "bin/progress.h"
-#include "fit/convert.h"
-#include "render/image_io.h"
+#include "fit/convert/convert.h"
+#include "render/scene/image_io.h"
 
 namespace clothfit::cli {
 namespace {

@@ -14,9 +14,9 @@
 #include "bin/commands.h"
 #include "bin/progress.h"
 #include "fit/image_fit.h"
-#include "render/fabric.h"
-#include "render/image_io.h"
-#include "render/path_tracer.h"
+#include "render/reference/fabric.h"
+#include "render/scene/image_io.h"
+#include "render/reference/path_tracer.h"
 
 namespace clothfit::cli {
 namespace fs = std::filesystem;

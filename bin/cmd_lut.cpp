@@ -6,7 +6,7 @@
 #include "bin/commands.h"
 #include "bin/progress.h"
 #include "brdf/lut.h"
-#include "render/image_io.h"
+#include "render/scene/image_io.h"
 
 namespace clothfit::cli {
 namespace {

@@ -5,10 +5,10 @@
 #include <string>
 
 #include "bin/commands.h"
-#include "render/image_io.h"
-#include "render/material.h"
-#include "render/preview.h"
-#include "render/tonemap.h"
+#include "render/scene/image_io.h"
+#include "render/scene/material.h"
+#include "render/preview/preview.h"
+#include "render/scene/tonemap.h"
 
 namespace clothfit::cli {
 

@@ -11,10 +11,10 @@
 
 #include "bin/commands.h"
 #include "bin/progress.h"
-#include "render/environment.h"
-#include "render/fabric.h"
-#include "render/path_tracer.h"
-#include "render/scene.h"
+#include "render/scene/environment.h"
+#include "render/reference/fabric.h"
+#include "render/reference/path_tracer.h"
+#include "render/scene/scene.h"
 
 namespace clothfit::cli {
 

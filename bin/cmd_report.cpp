@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "bin/commands.h"
-#include "fit/report.h"
+#include "fit/metrics/report.h"
 
 namespace clothfit::cli {
 

@@ -7,9 +7,9 @@
 #include <string>
 #include <vector>
 
-#include "render/environment.h"
-#include "render/scene.h"
-#include "render/tonemap.h"
+#include "render/scene/environment.h"
+#include "render/scene/scene.h"
+#include "render/scene/tonemap.h"
 
 namespace clothfit::cli {
 

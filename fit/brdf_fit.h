@@ -38,8 +38,8 @@
 #include "brdf/math.h"
 #include "brdf/models.h"
 #include "brdf/params.h"
-#include "render/bsdf.h"
-#include "render/material.h"
+#include "render/reference/bsdf.h"
+#include "render/scene/material.h"
 
 namespace clothfit::fit {
 

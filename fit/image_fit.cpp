@@ -7,8 +7,8 @@
 #include <cmath>
 #include <limits>
 
-#include "render/embree_scene.h"
-#include "render/image_io.h"
+#include "render/scene/embree_scene.h"
+#include "render/scene/image_io.h"
 
 namespace clothfit::fit {
 namespace {

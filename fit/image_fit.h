@@ -1,6 +1,6 @@
 // fit/image_fit.h: fit a material's parameters so the preview matches path-traced references.
 //
-// Problem. For each (scene, reference) pair the preview cache of the scene (render/preview.h)
+// Problem. For each (scene, reference) pair the preview cache of the scene (render/preview/preview.h)
 // is built once. Residuals are taken per block of B x B pixels, B = 2^level (the
 // mesostructure footprint: a woven reference shows yarn-scale structure a uniform material
 // cannot reproduce, so both images are averaged over blocks larger than the weave period
@@ -30,11 +30,11 @@
 #include <string>
 #include <vector>
 
-#include "render/environment.h"
-#include "render/material.h"
-#include "render/preview.h"
-#include "render/scene.h"
-#include "render/tonemap.h"
+#include "render/scene/environment.h"
+#include "render/scene/material.h"
+#include "render/preview/preview.h"
+#include "render/scene/scene.h"
+#include "render/scene/tonemap.h"
 
 namespace clothfit::fit {
 

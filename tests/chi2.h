@@ -34,8 +34,8 @@
 #include <string>
 #include <vector>
 
-#include "render/bsdf.h"
-#include "render/sampler.h"
+#include "render/reference/bsdf.h"
+#include "render/scene/sampler.h"
 
 namespace clothfit::testing {
 
@@ -160,7 +160,7 @@ inline Chi2Result RunChi2(const SampleFn& sample, const PdfFn& pdf, const Chi2Co
       [&](const tbb::blocked_range<int64_t>& r, Hist h) {
         for (int64_t c = r.begin(); c != r.end(); ++c) {
           // State and stream both hashed from (seed, chunk): PCG generators that share a seed
-          // and differ only in the stream are correlated (render/sampler.h), which made the
+          // and differ only in the stream are correlated (render/scene/sampler.h), which made the
           // chunks' counts correlated and chi^2 too large (p-values leaned low).
           render::Pcg32 rng = render::PixelSampler(cfg.seed, uint64_t(c), 0x43484932ull);
           const int64_t end = std::min(cfg.n_samples, (c + 1) * chunk);

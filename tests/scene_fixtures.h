@@ -3,7 +3,7 @@
 
 #include <cmath>
 
-#include "render/scene.h"
+#include "render/scene/scene.h"
 
 namespace clothfit::render {
 

@@ -1,4 +1,4 @@
-// BRDF-space fitting (fit/brdf_fit.h) and the MERL reader (fit/merl.h): the direction set,
+// BRDF-space fitting (fit/brdf_fit.h) and the MERL reader (fit/convert/merl.h): the direction set,
 // self-conversion of every model, glTF sheen -> cloth within the stated error, recovery of an
 // analytic BRDF from a synthetic MERL file, and reader errors naming file and field.
 #include <gtest/gtest.h>
@@ -7,8 +7,8 @@
 #include <fstream>
 
 #include "fit/brdf_fit.h"
-#include "fit/merl.h"
-#include "render/fabric.h"
+#include "fit/convert/merl.h"
+#include "render/reference/fabric.h"
 
 namespace clothfit::fit {
 namespace {

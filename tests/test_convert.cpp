@@ -1,4 +1,4 @@
-// clothfit convert (fit/convert.h, fit/convert_io.h): round trips per target, readers' errors,
+// clothfit convert (fit/convert/convert.h, fit/convert/convert_io.h): round trips per target, readers' errors,
 // and the batch on a generated catalogue (broken entries, resume, shards).
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -9,9 +9,9 @@
 #include <map>
 #include <sstream>
 
-#include "fit/convert.h"
-#include "fit/convert_io.h"
-#include "render/image_io.h"
+#include "fit/convert/convert.h"
+#include "fit/convert/convert_io.h"
+#include "render/scene/image_io.h"
 
 namespace clothfit::fit {
 namespace {

@@ -16,9 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "render/environment.h"
-#include "render/image_io.h"
-#include "render/sampler.h"
+#include "render/scene/environment.h"
+#include "render/scene/image_io.h"
+#include "render/scene/sampler.h"
 
 namespace clothfit::render {
 namespace {

@@ -7,11 +7,11 @@
 #include <random>
 
 #include "fit/image_fit.h"
-#include "render/fabric.h"
-#include "render/irawan.h"
-#include "render/weave_pattern.h"
-#include "render/image_io.h"
-#include "render/path_tracer.h"
+#include "render/reference/fabric.h"
+#include "render/reference/irawan.h"
+#include "render/reference/weave_pattern.h"
+#include "render/scene/image_io.h"
+#include "render/reference/path_tracer.h"
 #include "tests/scene_fixtures.h"
 
 namespace clothfit::fit {

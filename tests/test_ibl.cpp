@@ -1,5 +1,5 @@
-// Image-based lighting of the preview: order-2 SH irradiance (render/sh.h) and the
-// prefiltered radiance chains (render/prefilter.h).
+// Image-based lighting of the preview: order-2 SH irradiance (render/preview/sh.h) and the
+// prefiltered radiance chains (render/preview/prefilter.h).
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -13,10 +13,10 @@
 #include <random>
 #include <string>
 
-#include "render/environment.h"
-#include "render/image_io.h"
-#include "render/prefilter.h"
-#include "render/sh.h"
+#include "render/scene/environment.h"
+#include "render/scene/image_io.h"
+#include "render/preview/prefilter.h"
+#include "render/preview/sh.h"
 
 namespace clothfit::render {
 namespace {

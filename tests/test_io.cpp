@@ -5,7 +5,7 @@
 #include <fstream>
 
 #include "brdf/lut.h"
-#include "render/image_io.h"
+#include "render/scene/image_io.h"
 
 namespace clothfit {
 namespace {

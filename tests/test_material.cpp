@@ -4,7 +4,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "render/material.h"
+#include "render/scene/material.h"
 
 namespace clothfit::render {
 namespace {

@@ -1,4 +1,4 @@
-// Image metrics (fit/metrics.h): identities, published CIEDE2000 data, hand-derived FLIP/SSIM/
+// Image metrics (fit/metrics/metrics.h): identities, published CIEDE2000 data, hand-derived FLIP/SSIM/
 // PSNR values, FLIP properties, the HDR-FLIP exposure-range rule, masks, non-finite input and
 // bad input.
 #include <gtest/gtest.h>
@@ -13,8 +13,8 @@
 #include <string>
 #include <vector>
 
-#include "fit/metrics.h"
-#include "render/image_io.h"
+#include "fit/metrics/metrics.h"
+#include "render/scene/image_io.h"
 
 namespace clothfit::metrics {
 namespace {

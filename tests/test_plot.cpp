@@ -7,8 +7,8 @@
 #include <sstream>
 
 #include "fit/bench_fit.h"
-#include "fit/plot.h"
-#include "render/image_io.h"
+#include "fit/metrics/plot.h"
+#include "render/scene/image_io.h"
 
 namespace clothfit {
 namespace {

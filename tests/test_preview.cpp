@@ -8,11 +8,11 @@
 
 #include "brdf/cloth.h"
 #include "brdf/lut.h"
-#include "render/embree_scene.h"
-#include "render/environment.h"
-#include "render/lights.h"
-#include "render/path_tracer.h"
-#include "render/preview.h"
+#include "render/scene/embree_scene.h"
+#include "render/scene/environment.h"
+#include "render/scene/lights.h"
+#include "render/reference/path_tracer.h"
+#include "render/preview/preview.h"
 #include "tests/scene_fixtures.h"
 
 namespace clothfit::render {

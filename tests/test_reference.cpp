@@ -6,9 +6,9 @@
 #include <cmath>
 #include <cstdio>
 
-#include "render/environment.h"
-#include "render/path_tracer.h"
-#include "render/scene.h"
+#include "render/scene/environment.h"
+#include "render/reference/path_tracer.h"
+#include "render/scene/scene.h"
 #include "tests/scene_fixtures.h"
 
 namespace clothfit::render {

@@ -1,4 +1,4 @@
-// Reports (fit/report.h): a small synthetic fit on disk -> HTML containing every expected
+// Reports (fit/metrics/report.h): a small synthetic fit on disk -> HTML containing every expected
 // image and number; JSON/CSV with the same numbers; non-finite inputs reported, never
 // propagated; bad inputs give errors naming the file.
 #include <gtest/gtest.h>
@@ -13,9 +13,9 @@
 #include <string>
 #include <vector>
 
-#include "fit/metrics.h"
-#include "fit/report.h"
-#include "render/image_io.h"
+#include "fit/metrics/metrics.h"
+#include "fit/metrics/report.h"
+#include "render/scene/image_io.h"
 
 namespace clothfit::report {
 namespace {

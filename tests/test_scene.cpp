@@ -14,8 +14,8 @@
 #include <string>
 #include <vector>
 
-#include "render/gltf_tinygltf.h"
-#include "render/scene.h"
+#include "render/scene/gltf_tinygltf.h"
+#include "render/scene/scene.h"
 
 namespace clothfit::render {
 namespace {

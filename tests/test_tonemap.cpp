@@ -9,7 +9,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "render/tonemap.h"
+#include "render/scene/tonemap.h"
 
 namespace clothfit::render {
 namespace {
@@ -22,7 +22,7 @@ struct Case {
   const char* derivation;
 };
 
-// Expected values: evaluated step by step from the formulas quoted in render/tonemap.h (a
+// Expected values: evaluated step by step from the formulas quoted in render/scene/tonemap.h (a
 // short derivation per row; the matrices are the published ones, rows = GLSL columns). The
 // numbers were produced with a separate 40-line script of those formulas, not with this code.
 const Case kCases[] = {

@@ -12,11 +12,11 @@
 #include <string>
 #include <vector>
 
-#include "render/fabric.h"
-#include "render/irawan.h"
-#include "render/sadeghi.h"
-#include "render/sampler.h"
-#include "render/weave_pattern.h"
+#include "render/reference/fabric.h"
+#include "render/reference/irawan.h"
+#include "render/reference/sadeghi.h"
+#include "render/scene/sampler.h"
+#include "render/reference/weave_pattern.h"
 #include "tests/chi2.h"
 
 namespace clothfit::render {

@@ -1,0 +1,790 @@
+#include "fit/convert/convert_io.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <regex>
+#include <sstream>
+
+#include "fit/metrics/metrics.h"
+#include "render/scene/gltf_tinygltf.h"
+#include "render/scene/image_io.h"
+#include "render/scene/tonemap.h"
+
+namespace clothfit::fit {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using render::ModelKind;
+
+[[noreturn]] void Fail(const std::string& file, const std::string& field, const std::string& msg) {
+  throw ConvertError(file + ": " + field + ": " + msg);
+}
+
+json ReadJson(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) Fail(path, "file", "cannot open");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string text = ss.str();
+  try {
+    return json::parse(text);
+  } catch (const json::parse_error& e) {
+    const size_t at = std::min(size_t(e.byte), text.size());
+    const long line = 1 + std::count(text.begin(), text.begin() + long(at), '\n');
+    Fail(path, "line " + std::to_string(line), std::string("malformed JSON: ") + e.what());
+  }
+}
+
+std::string Lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+// ---- maps ----
+
+// Means of the first three channels (a one-channel image is replicated), sRGB-decoded texel by
+// texel when `srgb`, and of the fourth channel (alpha; 1 when absent).
+std::array<double, 4> ChannelMeans(const std::string& path, bool srgb) {
+  const io::Image img = io::ReadImage(path);
+  const int nc = img.channels();
+  std::array<double, 4> sum{0, 0, 0, 0};
+  const size_t np = size_t(img.width) * size_t(img.height);
+  for (size_t p = 0; p < np; ++p) {
+    const float* px = &img.pixels[p * size_t(nc)];
+    for (int c = 0; c < 3; ++c) {
+      const double v = double(px[std::min(c, nc - 1)]);
+      sum[size_t(c)] += srgb ? SrgbToLinear(v) : v;
+    }
+    sum[3] += nc >= 4 ? double(px[3]) : 1.0;
+  }
+  for (double& s : sum) s /= double(std::max<size_t>(np, 1));
+  return sum;
+}
+
+std::string ResolveUri(const std::string& file, const std::string& field, const std::string& uri) {
+  if (uri.empty()) Fail(file, field, "empty uri");
+  if (uri.rfind("data:", 0) == 0) Fail(file, field, "embedded data URIs are not supported");
+  const fs::path p = fs::path(file).parent_path() / uri;
+  std::error_code ec;
+  if (!fs::is_regular_file(p, ec)) Fail(file, field, "map file not found: " + p.string());
+  return p.string();
+}
+
+// ---- the seed's shared parametrisation (docs/convert.md) ----
+
+struct SharedName {
+  const char* shared;
+  const char* param;  // clothfit parameter name; "metalness" maps to glTF's "metallic"
+  int size;
+};
+constexpr SharedName kShared[] = {
+    {"color", "base_color", 3},
+    {"roughness", "roughness", 1},
+    {"metalness", "metalness", 1},
+    {"sheenColor", "sheen_color", 3},
+    {"sheenRoughness", "sheen_roughness", 1},
+    {"subsurfaceColor", "subsurface_color", 3},
+};
+constexpr const char* kSharedList =
+    "color, roughness, metalness, sheenColor, sheenRoughness, subsurfaceColor";
+constexpr const char* kMapList =
+    "color, normal, roughness, metalness, sheenColor, sheenRoughness, specular";
+
+double CheckedNumber(const json& v, const std::string& file, const std::string& field, double lo,
+                     double hi) {
+  if (!v.is_number()) Fail(file, field, "expected a number, got " + std::string(v.type_name()));
+  const double x = v.get<double>();
+  if (!std::isfinite(x) || x < lo || x > hi)
+    Fail(file, field,
+         "value " + std::to_string(x) + " outside [" + std::to_string(lo) + ", " +
+             std::to_string(hi) + "]");
+  return x;
+}
+
+void SetParam(render::MaterialPreset& p, const std::string& name, const double* v, int n) {
+  std::string key = name;
+  if (p.model == ModelKind::kGltfSheen && key == "metalness") key = "metallic";
+  const int off = p.Offset(key);
+  for (int c = 0; c < n; ++c) p.values[size_t(off + c)] = v[c];
+}
+
+bool HasParam(ModelKind m, std::string name) {
+  if (m == ModelKind::kGltfSheen && name == "metalness") name = "metallic";
+  for (const ParamInfo& info : render::ParameterTable(m))
+    if (info.name == name) return true;
+  return false;
+}
+
+// One SurfaceMaterial-like body: brdf + parameters + maps, at JSON path `at`.
+SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string& file,
+                            const std::string& at, const std::string& name,
+                            const std::string& kind) {
+  SourceMaterial m;
+  m.file = file;
+  m.name = name;
+  m.kind = kind;
+  render::MaterialPreset p = render::DefaultPreset(model);
+  if (model == ModelKind::kGltfSheen || model == ModelKind::kPhysicalSheen) {
+    // Absent sheen means no sheen.
+    const int off = p.Offset("sheen_color");
+    for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] = 0.0;
+  }
+  const json params = body.value("parameters", json::object());
+  if (!params.is_object()) Fail(file, at + "parameters", "expected an object");
+  for (const auto& [key, v] : params.items()) {
+    const SharedName* s = nullptr;
+    for (const SharedName& n : kShared)
+      if (key == n.shared) s = &n;
+    const std::string field = at + "parameters." + key;
+    if (!s) Fail(file, field, std::string("unknown parameter (valid: ") + kSharedList + ")");
+    double x[3];
+    if (s->size == 3) {
+      if (!v.is_array() || v.size() != 3) Fail(file, field, "expected [r, g, b] (linear sRGB)");
+      for (int c = 0; c < 3; ++c)
+        x[c] = CheckedNumber(v[size_t(c)], file, field + "[" + std::to_string(c) + "]", 0, 1);
+    } else {
+      x[0] = CheckedNumber(v, file, field, 0, 1);
+    }
+    if (!HasParam(model, s->param)) {
+      m.notes.push_back(field + " not used by brdf " + render::ToString(model));
+      continue;
+    }
+    if (model == ModelKind::kCloth && key == "subsurfaceColor") p.cloth.subsurface = true;
+    SetParam(p, s->param, x, s->size);
+  }
+  const json maps = body.value("maps", json::object());
+  if (!maps.is_object()) Fail(file, at + "maps", "expected an object");
+  for (const auto& [attr, v] : maps.items()) {
+    const std::string field = at + "maps." + attr;
+    static const std::vector<std::string> kMaps = {
+        "color", "normal", "roughness", "metalness", "sheenColor", "sheenRoughness", "specular"};
+    if (std::find(kMaps.begin(), kMaps.end(), attr) == kMaps.end())
+      Fail(file, field, std::string("unknown map attribute (valid: ") + kMapList + ")");
+    if (!v.is_object() || !v.contains("uri") || !v["uri"].is_string())
+      Fail(file, field, "expected {\"uri\": \"...\", \"colorSpace\": \"srgb\"|\"linear\"}");
+    const bool colour = attr == "color" || attr == "sheenColor";
+    const std::string cs = v.value("colorSpace", colour ? "srgb" : "linear");
+    if (cs != "srgb" && cs != "linear")
+      Fail(file, field + ".colorSpace", "'" + cs + "' is not srgb or linear");
+    const std::string path = ResolveUri(file, field + ".uri", v["uri"].get<std::string>());
+    m.dependencies.push_back(path);
+    if (attr == "normal") {
+      m.maps.push_back({"normal", path, cs, {1, 1, 1}});
+      continue;
+    }
+    std::array<double, 4> mean;
+    try {
+      mean = ChannelMeans(path, cs == "srgb");
+    } catch (const std::exception& e) {
+      Fail(file, field + ".uri", e.what());
+    }
+    if (colour) {
+      const std::string param = attr == "color" ? "base_color" : "sheen_color";
+      if (!HasParam(model, param)) {
+        m.notes.push_back(field + " not used by brdf " + render::ToString(model));
+        continue;
+      }
+      const int off = p.Offset(param);
+      for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] *= mean[size_t(c)];
+      m.maps.push_back({param, path, cs, {mean[0], mean[1], mean[2]}});
+    } else if (attr == "specular") {
+      m.notes.push_back(field + ": specular map read (mean " + std::to_string(mean[0]) +
+                        ") but not modelled (F0 fixed at 0.04)");
+    } else {
+      const std::string param = attr == "roughness"   ? "roughness"
+                                : attr == "metalness" ? "metalness"
+                                                      : "sheen_roughness";
+      if (!HasParam(model, param)) {
+        m.notes.push_back(field + " not used by brdf " + render::ToString(model));
+        continue;
+      }
+      double x =
+          p.values[size_t(p.Offset(
+              param == "metalness" && model == ModelKind::kGltfSheen ? "metallic" : param))] *
+          mean[0];
+      SetParam(p, param, &x, 1);
+      m.notes.push_back(field + ": reduced to its mean over texels (" + std::to_string(mean[0]) +
+                        "), not carried over");
+    }
+  }
+  m.analytic = p;
+  return m;
+}
+
+ModelKind ParseBrdf(const json& j, const std::string& file, const std::string& field) {
+  if (!j.contains("brdf") || !j["brdf"].is_string())
+    Fail(file, field,
+         "missing or not a string (valid: cloth, standard, physical-sheen, gltf-sheen)");
+  try {
+    return render::ParseModelKind(j["brdf"].get<std::string>());
+  } catch (const std::invalid_argument& e) {
+    Fail(file, field, e.what());
+  }
+}
+
+void CheckSchema(const json& j, const std::string& file, const std::string& schema) {
+  if (!j.contains("version") || !j["version"].is_number_integer())
+    Fail(file, "version", "missing or not an integer");
+  const int v = j["version"].get<int>();
+  if (v != kSeedSchemaVersion)
+    Fail(file, "version",
+         std::to_string(v) + " not supported (this build reads " + schema + " " +
+             std::to_string(kSeedSchemaVersion) + ")");
+}
+
+std::vector<SourceMaterial> ReadSurfaceMaterial(const json& j, const std::string& file) {
+  CheckSchema(j, file, "seed.SurfaceMaterial");
+  for (const char* k : {"id", "name"})
+    if (!j.contains(k) || !j[k].is_string()) Fail(file, k, "missing or not a string");
+  if (j.contains("metadata") && !j["metadata"].is_object())
+    Fail(file, "metadata", "expected an object");
+  const ModelKind model = ParseBrdf(j, file, "brdf");
+  return {ParseSurface(j, model, file, "", j["name"].get<std::string>(), "surface-material")};
+}
+
+std::vector<SourceMaterial> ReadTextureStack(const json& j, const std::string& file) {
+  CheckSchema(j, file, "seed.TextureStack");
+  for (const char* k : {"id", "fabricId", "name"})
+    if (!j.contains(k) || !j[k].is_string()) Fail(file, k, "missing or not a string");
+  const ModelKind model = ParseBrdf(j, file, "brdf");
+  if (!j.contains("sides") || !j["sides"].is_object() || j["sides"].empty())
+    Fail(file, "sides", "missing or empty (expected {\"front\": {...}, \"back\": {...}})");
+  std::vector<SourceMaterial> out;
+  for (const auto& [side, body] : j["sides"].items()) {
+    if (side != "front" && side != "back") Fail(file, "sides." + side, "not front or back");
+    if (!body.is_object()) Fail(file, "sides." + side, "expected an object");
+    out.push_back(ParseSurface(body, model, file, "sides." + side + ".",
+                               j["name"].get<std::string>() + "-" + side, "texture-stack"));
+  }
+  return out;
+}
+
+std::vector<SourceMaterial> ReadPresetFile(const std::string& file) {
+  SourceMaterial m;
+  m.file = file;
+  m.name = fs::path(file).stem().string();
+  m.kind = "preset";
+  try {
+    m.analytic = render::ReadPreset(file);
+  } catch (const std::exception& e) {
+    throw ConvertError(e.what());
+  }
+  return {m};
+}
+
+std::vector<SourceMaterial> ReadFabricFile(const std::string& file, const json& j) {
+  SourceMaterial m;
+  m.file = file;
+  m.name = j.value("name", fs::path(file).stem().string());
+  m.kind = "fabric";
+  try {
+    m.fabric = std::make_shared<render::Fabric>(render::LoadFabric(file));
+  } catch (const std::exception& e) {
+    throw ConvertError(e.what());
+  }
+  if (m.fabric->model == "irawan") {
+    const std::string weave = j.value("weave_file", "../weaves/" + m.fabric->preset + ".weave");
+    m.dependencies.push_back((fs::path(file).parent_path() / weave).string());
+  }
+  m.notes.push_back("woven BSDF averaged over one weave period (4 x 4 points) and 4 azimuths");
+  return {m};
+}
+
+// ---- glTF ----
+
+double GltfNumber(const tinygltf::Value& v, const std::string& file, const std::string& field,
+                  double lo, double hi) {
+  if (!v.IsNumber() && !v.IsInt()) Fail(file, field, "expected a number");
+  const double x = v.GetNumberAsDouble();
+  if (!std::isfinite(x) || x < lo || x > hi)
+    Fail(file, field,
+         "value " + std::to_string(x) + " outside [" + std::to_string(lo) + ", " +
+             std::to_string(hi) + "]");
+  return x;
+}
+
+void CheckRange(double x, const std::string& file, const std::string& field) {
+  if (!std::isfinite(x) || x < 0.0 || x > 1.0)
+    Fail(file, field, "value " + std::to_string(x) + " outside [0, 1]");
+}
+
+// The file behind a texture index, or "" (with a note) when it cannot be carried.
+std::string GltfTexturePath(const tinygltf::Model& g, int index, const std::string& file,
+                            const std::string& field, SourceMaterial& m) {
+  if (index < 0 || index >= int(g.textures.size()))
+    Fail(file, field + ".index", std::to_string(index) + " out of range");
+  const int src = g.textures[size_t(index)].source;
+  if (src < 0 || src >= int(g.images.size())) Fail(file, field, "texture has no image source");
+  const std::string& uri = g.images[size_t(src)].uri;
+  if (uri.empty() || uri.rfind("data:", 0) == 0) {
+    m.notes.push_back(field + ": embedded image not carried over, not averaged");
+    return "";
+  }
+  return ResolveUri(file, "images[" + std::to_string(src) + "].uri", uri);
+}
+
+std::vector<SourceMaterial> ReadGltf(const std::string& file) {
+  tinygltf::Model g;
+  std::string err, warn;
+  if (!render::LoadGltfModel(file, &g, &err, &warn)) Fail(file, "glTF", err);
+  if (g.materials.empty()) Fail(file, "materials", "the file has no materials");
+  std::vector<SourceMaterial> out;
+  std::map<std::string, int> seen;
+  for (size_t i = 0; i < g.materials.size(); ++i) {
+    const tinygltf::Material& gm = g.materials[i];
+    const std::string at = "materials[" + std::to_string(i) + "]";
+    SourceMaterial m;
+    m.file = file;
+    m.kind = "gltf";
+    m.name = gm.name.empty() ? "material" + std::to_string(i) : gm.name;
+    if (seen[m.name]++ > 0) m.name += "-" + std::to_string(i);
+    render::MaterialPreset p = render::DefaultPreset(ModelKind::kGltfSheen);
+    const auto& pbr = gm.pbrMetallicRoughness;
+    if (pbr.baseColorFactor.size() != 4)
+      Fail(file, at + ".pbrMetallicRoughness.baseColorFactor", "expected 4 numbers");
+    for (int c = 0; c < 3; ++c) {
+      CheckRange(pbr.baseColorFactor[size_t(c)], file,
+                 at + ".pbrMetallicRoughness.baseColorFactor[" + std::to_string(c) + "]");
+      p.values[size_t(c)] = pbr.baseColorFactor[size_t(c)];
+    }
+    CheckRange(pbr.roughnessFactor, file, at + ".pbrMetallicRoughness.roughnessFactor");
+    CheckRange(pbr.metallicFactor, file, at + ".pbrMetallicRoughness.metallicFactor");
+    p.values[3] = pbr.roughnessFactor;
+    p.values[4] = pbr.metallicFactor;
+    for (int c = 0; c < 3; ++c) p.values[size_t(5 + c)] = 0.0;  // no sheen unless extended
+    p.values[8] = 0.0;
+    if (pbr.baseColorTexture.index >= 0) {
+      const std::string f = at + ".pbrMetallicRoughness.baseColorTexture";
+      const std::string path = GltfTexturePath(g, pbr.baseColorTexture.index, file, f, m);
+      if (!path.empty()) {
+        const auto mean = ChannelMeans(path, true);  // glTF: baseColor textures are sRGB
+        for (int c = 0; c < 3; ++c) p.values[size_t(c)] *= mean[size_t(c)];
+        m.maps.push_back({"base_color", path, "srgb", {mean[0], mean[1], mean[2]}});
+        m.dependencies.push_back(path);
+      }
+    }
+    if (pbr.metallicRoughnessTexture.index >= 0) {
+      const std::string f = at + ".pbrMetallicRoughness.metallicRoughnessTexture";
+      const std::string path = GltfTexturePath(g, pbr.metallicRoughnessTexture.index, file, f, m);
+      if (!path.empty()) {
+        const auto mean = ChannelMeans(path, false);  // G = roughness, B = metalness (linear)
+        p.values[3] *= mean[1];
+        p.values[4] *= mean[2];
+        m.dependencies.push_back(path);
+        m.notes.push_back(f + ": reduced to its mean over texels (roughness " +
+                          std::to_string(mean[1]) + ", metalness " + std::to_string(mean[2]) +
+                          "), not carried over");
+      }
+    }
+    if (gm.normalTexture.index >= 0) {
+      const std::string path =
+          GltfTexturePath(g, gm.normalTexture.index, file, at + ".normalTexture", m);
+      if (!path.empty()) {
+        m.maps.push_back({"normal", path, "linear", {1, 1, 1}});
+        m.dependencies.push_back(path);
+      }
+    }
+    if (auto it = gm.extensions.find("KHR_materials_sheen"); it != gm.extensions.end()) {
+      const tinygltf::Value& s = it->second;
+      const std::string f = at + ".extensions.KHR_materials_sheen";
+      if (s.Has("sheenColorFactor")) {
+        const tinygltf::Value& c = s.Get("sheenColorFactor");
+        if (!c.IsArray() || c.ArrayLen() != 3)
+          Fail(file, f + ".sheenColorFactor", "expected 3 numbers");
+        for (int k = 0; k < 3; ++k)
+          p.values[size_t(5 + k)] =
+              GltfNumber(c.Get(k), file, f + ".sheenColorFactor[" + std::to_string(k) + "]", 0, 1);
+      }
+      if (s.Has("sheenRoughnessFactor"))
+        p.values[8] =
+            GltfNumber(s.Get("sheenRoughnessFactor"), file, f + ".sheenRoughnessFactor", 0, 1);
+      if (s.Has("sheenColorTexture")) {
+        const tinygltf::Value& t = s.Get("sheenColorTexture");
+        const std::string path =
+            GltfTexturePath(g, t.Has("index") ? t.Get("index").GetNumberAsInt() : -1, file,
+                            f + ".sheenColorTexture", m);
+        if (!path.empty()) {
+          const auto mean = ChannelMeans(path, true);
+          for (int c = 0; c < 3; ++c) p.values[size_t(5 + c)] *= mean[size_t(c)];
+          m.maps.push_back({"sheen_color", path, "srgb", {mean[0], mean[1], mean[2]}});
+          m.dependencies.push_back(path);
+        }
+      }
+      if (s.Has("sheenRoughnessTexture")) {
+        const tinygltf::Value& t = s.Get("sheenRoughnessTexture");
+        const std::string path =
+            GltfTexturePath(g, t.Has("index") ? t.Get("index").GetNumberAsInt() : -1, file,
+                            f + ".sheenRoughnessTexture", m);
+        if (!path.empty()) {
+          const auto mean = ChannelMeans(path, false);  // spec: the alpha channel
+          p.values[8] *= mean[3];
+          m.dependencies.push_back(path);
+          m.notes.push_back(f + ".sheenRoughnessTexture: reduced to its mean over texels");
+        }
+      }
+    }
+    if (auto it = gm.extensions.find("KHR_materials_specular"); it != gm.extensions.end()) {
+      const tinygltf::Value& s = it->second;
+      const std::string f = at + ".extensions.KHR_materials_specular";
+      double factor = 1.0;
+      if (s.Has("specularFactor"))
+        factor = GltfNumber(s.Get("specularFactor"), file, f + ".specularFactor", 0, 1);
+      if (s.Has("specularColorFactor")) {
+        const tinygltf::Value& c = s.Get("specularColorFactor");
+        if (!c.IsArray() || c.ArrayLen() != 3)
+          Fail(file, f + ".specularColorFactor", "expected 3 numbers");
+        for (int k = 0; k < 3; ++k)
+          GltfNumber(c.Get(k), file, f + ".specularColorFactor[" + std::to_string(k) + "]", 0, 1e6);
+      }
+      m.notes.push_back(f + ": read (specularFactor " + std::to_string(factor) +
+                        ") but not modelled: the glTF sheen model keeps F0 = 0.04");
+    }
+    m.analytic = p;
+    out.push_back(std::move(m));
+  }
+  return out;
+}
+
+// ---- writers ----
+
+std::string Relative(const std::string& target, const std::string& out_file) {
+  std::error_code ec;
+  const fs::path base = fs::absolute(fs::path(out_file).parent_path(), ec);
+  const fs::path rel = fs::relative(fs::absolute(target, ec), base, ec);
+  return ec || rel.empty() ? fs::absolute(target, ec).string() : rel.generic_string();
+}
+
+int Hex(const Rgb<double>& linear) {
+  int h = 0;
+  for (int c = 0; c < 3; ++c) {
+    const double s = LinearToSrgb(std::clamp(linear[c], 0.0, 1.0));
+    h = (h << 8) | int(std::lround(s * 255.0));
+  }
+  return h;
+}
+
+Rgb<double> FromHex(const json& v, const std::string& file, const std::string& field) {
+  if (!v.is_number_integer() || v.get<long long>() < 0 || v.get<long long>() > 0xffffff)
+    Fail(file, field, "expected an integer colour 0x000000..0xffffff");
+  const long long h = v.get<long long>();
+  return {SrgbToLinear(double((h >> 16) & 255) / 255.0),
+          SrgbToLinear(double((h >> 8) & 255) / 255.0), SrgbToLinear(double(h & 255) / 255.0)};
+}
+
+Rgb<double> Colour(const render::MaterialPreset& p, const std::string& name) {
+  const int o = p.Offset(name);
+  return {p.values[size_t(o)], p.values[size_t(o + 1)], p.values[size_t(o + 2)]};
+}
+
+// The cloth sheen colour the engine sees, whatever the sheen default.
+Rgb<double> EffectiveSheen(const render::MaterialPreset& p) {
+  const cloth::Params<double> q{Colour(p, "base_color"), Colour(p, "sheen_color"), p.values[6],
+                                Colour(p, "subsurface_color")};
+  return cloth::EffectiveSheen(q, p.cloth);
+}
+
+const MapRef* FindMap(const Converted& c, const std::string& attr) {
+  for (const MapRef& m : c.maps)
+    if (m.attribute == attr) return &m;
+  return nullptr;
+}
+
+// factor x mean(map) = fitted colour.
+Rgb<double> Factor(const Rgb<double>& fitted, const MapRef* map) {
+  if (!map) return fitted;
+  Rgb<double> f;
+  for (int c = 0; c < 3; ++c) f[c] = std::clamp(fitted[c] / std::max(map->mean[c], 1e-6), 0.0, 1.0);
+  return f;
+}
+
+json MapsJson(const Converted& c, const std::string& out_file) {
+  json maps = json::object();
+  for (const MapRef& m : c.maps)
+    maps[m.attribute] = {
+        {"uri", Relative(m.path, out_file)},
+        {"colour_space", m.colour_space == "srgb" ? "sRGB (decode to linear)" : "linear"}};
+  return maps;
+}
+
+json Arr(const Rgb<double>& c) { return json::array({c[0], c[1], c[2]}); }
+
+std::string Num(double x) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.9g", x);
+  std::string s = buf;
+  if (s.find_first_of(".e") == std::string::npos) s += ".0";
+  return s;
+}
+
+}  // namespace
+
+// The IEC 61966-2-1 transfer functions, shared with the metrics and the tone mapper.
+double SrgbToLinear(double s) { return metrics::flip_detail::SrgbToLinear(s); }
+double LinearToSrgb(double l) { return render::SrgbEncode(l); }
+
+Rgb<double> MeanTexel(const std::string& path, bool srgb) {
+  const auto m = ChannelMeans(path, srgb);
+  return {m[0], m[1], m[2]};
+}
+
+std::vector<SourceMaterial> ReadMaterials(const std::string& path) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) Fail(path, "file", "not found or not a regular file");
+  const std::string ext = Lower(fs::path(path).extension().string());
+  if (ext == ".gltf" || ext == ".glb") return ReadGltf(path);
+  if (ext == ".binary" || ext == ".merl") {
+    SourceMaterial m;
+    m.file = path;
+    m.name = fs::path(path).stem().string();
+    m.kind = "merl";
+    m.merl = std::make_shared<MerlTable>(ReadMerl(path));
+    m.notes.push_back("MERL table, nearest-cell lookups on the canonical directions");
+    return {m};
+  }
+  if (ext == ".zip")
+    Fail(path, "file",
+         "zipped TextureStacks are not read: unpack the zip (the "
+         "descriptor JSON and its maps) into a folder first");
+  if (ext != ".json")
+    Fail(path, "file",
+         "unknown input type '" + ext +
+             "' (valid: .json, .gltf, "
+             ".glb, .binary, .merl)");
+  const json j = ReadJson(path);
+  if (!j.is_object()) Fail(path, "(root)", "expected a JSON object");
+  const std::string schema =
+      j.contains("schema") && j["schema"].is_string()
+          ? j["schema"].get<std::string>()
+          : (j.contains("format") && j["format"].is_string() ? j["format"].get<std::string>() : "");
+  if (schema == "clothfit.preset") return ReadPresetFile(path);
+  if (schema == "clothfit-fabric") return ReadFabricFile(path, j);
+  if (schema == "seed.SurfaceMaterial") return ReadSurfaceMaterial(j, path);
+  if (schema == "seed.TextureStack") return ReadTextureStack(j, path);
+  Fail(path, "schema",
+       "'" + schema +
+           "' is not a known input (valid: clothfit.preset, "
+           "clothfit-fabric (\"format\"), seed.SurfaceMaterial, seed.TextureStack)");
+}
+
+BrdfSamples SampleSource(const SourceMaterial& m) {
+  if (m.analytic) return SampleAnalytic(*m.analytic);
+  if (m.merl) return SampleMerl(*m.merl);
+  if (m.fabric) return SampleBsdf(*m.fabric->bsdf, m.fabric->weave_period_uv, 4, 4);
+  throw ConvertError(m.file + ": " + m.name + ": no BRDF to sample");
+}
+
+void WriteClothPreset(const std::string& path, const Converted& c) {
+  render::MaterialPreset p = c.cloth;
+  p.extra["provenance"] = c.provenance;
+  if (!c.maps.empty()) {
+    json maps = MapsJson(c, path);
+    if (const MapRef* m = FindMap(c, "base_color"))
+      maps["base_color"]["factor"] = Arr(Factor(Colour(p, "base_color"), m));
+    if (const MapRef* m = FindMap(c, "sheen_color"))
+      maps["sheen_color"]["factor"] = Arr(Factor(Colour(p, "sheen_color"), m));
+    p.extra["maps"] = maps;
+  }
+  render::WritePreset(path, p);
+}
+
+void WriteThreejsPhysical(const std::string& path, const Converted& c) {
+  if (!c.physical_sheen) throw ConvertError(path + ": no physical-sheen fit to write");
+  const render::MaterialPreset& p = *c.physical_sheen;
+  json j;
+  j["metadata"] = {{"version", 4.6}, {"type", "Material"}, {"generator", "clothfit convert"}};
+  j["uuid"] = c.provenance.value("uuid", "00000000-0000-4000-8000-000000000000");
+  j["type"] = "MeshPhysicalMaterial";
+  j["name"] = c.name;
+  j["color"] = Hex(Factor(Colour(p, "base_color"), FindMap(c, "base_color")));
+  j["roughness"] = p.values[size_t(p.Offset("roughness"))];
+  j["metalness"] = p.values[size_t(p.Offset("metalness"))];
+  j["sheen"] = 1.0;  // sheen_color = sheenColor x sheen
+  j["sheenColor"] = Hex(Factor(Colour(p, "sheen_color"), FindMap(c, "sheen_color")));
+  j["sheenRoughness"] = p.values[size_t(p.Offset("sheen_roughness"))];
+  j["userData"] = {{"clothfit",
+                    {{"engine", render::EngineOf(p.model)},
+                     {"colour",
+                      "color/sheenColor are sRGB hex (three.js getHex); "
+                      "MaterialLoader decodes them to linear"},
+                     {"maps", MapsJson(c, path)},
+                     {"provenance", c.provenance}}}};
+  io::WriteTextAtomic(path, j.dump(2) + "\n");
+}
+
+void WriteThreejsCloth(const std::string& path, const Converted& c) {
+  const render::MaterialPreset& p = c.seed_cloth ? *c.seed_cloth : c.cloth;
+  json j;
+  j["metadata"] = {{"version", 4.6}, {"type", "Material"}, {"generator", "clothfit convert"}};
+  j["type"] = "MeshClothMaterial";
+  j["name"] = c.name;
+  j["color"] = Hex(Factor(Colour(p, "base_color"), FindMap(c, "base_color")));
+  j["sheen"] = Hex(EffectiveSheen(p));
+  j["roughness"] = p.values[6];
+  if (p.cloth.subsurface) {
+    j["subsurface"] = true;
+    j["subsurfaceColor"] = Hex(Colour(p, "subsurface_color"));
+  }
+  j["userData"] = {{"clothfit",
+                    {{"note",
+                      "the seed's MeshClothMaterial (three.js fork): color, "
+                      "sheen, subsurfaceColor as sRGB hex; roughness "
+                      "perceptual"},
+                     {"maps", MapsJson(c, path)},
+                     {"provenance", c.provenance}}}};
+  io::WriteTextAtomic(path, j.dump(2) + "\n");
+}
+
+void WriteGltf(const std::string& path, const Converted& c) {
+  if (!c.gltf_sheen) throw ConvertError(path + ": no glTF sheen fit to write");
+  const render::MaterialPreset& p = *c.gltf_sheen;
+  json j;
+  j["asset"] = {{"version", "2.0"}, {"generator", "clothfit convert"}};
+  j["extensionsUsed"] = json::array({"KHR_materials_sheen"});
+  json m;
+  m["name"] = c.name;
+  const Rgb<double> base = Factor(Colour(p, "base_color"), FindMap(c, "base_color"));
+  m["pbrMetallicRoughness"] = {{"baseColorFactor", {base[0], base[1], base[2], 1.0}},
+                               {"roughnessFactor", p.values[3]},
+                               {"metallicFactor", p.values[4]}};
+  m["extensions"]["KHR_materials_sheen"] = {
+      {"sheenColorFactor", Arr(Factor(Colour(p, "sheen_color"), FindMap(c, "sheen_color")))},
+      {"sheenRoughnessFactor", p.values[8]}};
+  json images = json::array(), textures = json::array();
+  auto add = [&](const MapRef* map) {
+    images.push_back({{"uri", Relative(map->path, path)}});
+    textures.push_back({{"source", int(images.size()) - 1}});
+    return json{{"index", int(textures.size()) - 1}};
+  };
+  if (const MapRef* map = FindMap(c, "base_color"))
+    m["pbrMetallicRoughness"]["baseColorTexture"] = add(map);
+  if (const MapRef* map = FindMap(c, "normal")) m["normalTexture"] = add(map);
+  if (const MapRef* map = FindMap(c, "sheen_color"))
+    m["extensions"]["KHR_materials_sheen"]["sheenColorTexture"] = add(map);
+  m["extras"] = {{"clothfit", c.provenance}};
+  j["materials"] = json::array({m});
+  if (!images.empty()) {
+    j["images"] = images;
+    j["textures"] = textures;
+  }
+  io::WriteTextAtomic(path, j.dump(2) + "\n");
+}
+
+void WriteFilamentMat(const std::string& path, const Converted& c) {
+  const render::MaterialPreset& p = c.cloth;
+  const MapRef* base_map = FindMap(c, "base_color");
+  const MapRef* normal_map = FindMap(c, "normal");
+  const Rgb<double> base = Factor(Colour(p, "base_color"), base_map);
+  const Rgb<double> sheen = EffectiveSheen(p);
+  std::string name = c.name;  // a string literal in the .mat: no quotes, backslashes, newlines
+  for (char& ch : name)
+    if (ch == '"' || ch == '\\' || ch == '\n') ch = '_';
+  std::ostringstream s;
+  s << "// " << name << ": written by clothfit convert. Filament cloth shading model\n"
+    << "// (current shader tree). baseColor, sheenColor, subsurfaceColor are linear sRGB;\n"
+    << "// roughness is perceptual (Filament squares it). sheenColor is always written\n"
+    << "// explicitly (no reliance on Filament's sqrt(baseColor) / white default).\n";
+  if (base_map)
+    s << "// baseColorMap: " << Relative(base_map->path, path)
+      << " (sRGB: load it as an SRGB8_A8 texture so sampling decodes to linear)\n";
+  if (normal_map)
+    s << "// normalMap: " << Relative(normal_map->path, path) << " (linear RGB8 texture)\n";
+  std::vector<std::string> props = {"    name : \"" + name + "\"", "    shadingModel : cloth"};
+  if (base_map || normal_map) {
+    std::string params = "    parameters : [\n";
+    if (base_map) params += "        { type : sampler2d, name : baseColorMap }";
+    if (base_map && normal_map) params += ",\n";
+    if (normal_map) params += "        { type : sampler2d, name : normalMap }";
+    props.push_back(params + "\n    ]");
+    props.push_back("    requires : [ uv0 ]");
+  }
+  s << "material {\n";
+  for (size_t i = 0; i < props.size(); ++i) s << props[i] << (i + 1 < props.size() ? ",\n" : "\n");
+  s << "}\n\nfragment {\n    void material(inout MaterialInputs material) {\n";
+  if (normal_map)
+    s << "        material.normal = texture(materialParams_normalMap, getUV0()).xyz * 2.0 - 1.0;\n";
+  s << "        prepareMaterial(material);\n";
+  s << "        material.baseColor = vec4(" << Num(base[0]) << ", " << Num(base[1]) << ", "
+    << Num(base[2]) << ", 1.0)";
+  if (base_map) s << " * texture(materialParams_baseColorMap, getUV0())";
+  s << ";\n";
+  s << "        material.roughness = " << Num(p.values[6]) << ";\n";
+  s << "        material.sheenColor = vec3(" << Num(sheen[0]) << ", " << Num(sheen[1]) << ", "
+    << Num(sheen[2]) << ");\n";
+  if (p.cloth.subsurface) {
+    const Rgb<double> sub = Colour(p, "subsurface_color");
+    s << "        material.subsurfaceColor = vec3(" << Num(sub[0]) << ", " << Num(sub[1]) << ", "
+      << Num(sub[2]) << ");\n";
+  }
+  s << "    }\n}\n";
+  io::WriteTextAtomic(path, s.str());
+}
+
+render::MaterialPreset ReadThreejsPhysical(const std::string& path) {
+  const json j = ReadJson(path);
+  if (j.value("type", "") != "MeshPhysicalMaterial") Fail(path, "type", "not MeshPhysicalMaterial");
+  render::MaterialPreset p = render::DefaultPreset(ModelKind::kPhysicalSheen);
+  const Rgb<double> c = FromHex(j.value("color", json()), path, "color");
+  const Rgb<double> s = FromHex(j.value("sheenColor", json()), path, "sheenColor");
+  const double sheen = CheckedNumber(j.value("sheen", json(1.0)), path, "sheen", 0, 1);
+  for (int k = 0; k < 3; ++k) {
+    p.values[size_t(k)] = c[k];
+    p.values[size_t(5 + k)] = s[k] * sheen;
+  }
+  p.values[3] = CheckedNumber(j.value("roughness", json()), path, "roughness", 0, 1);
+  p.values[4] = CheckedNumber(j.value("metalness", json()), path, "metalness", 0, 1);
+  p.values[8] = CheckedNumber(j.value("sheenRoughness", json()), path, "sheenRoughness", 0, 1);
+  return p;
+}
+
+render::MaterialPreset ReadThreejsCloth(const std::string& path) {
+  const json j = ReadJson(path);
+  if (j.value("type", "") != "MeshClothMaterial") Fail(path, "type", "not MeshClothMaterial");
+  render::MaterialPreset p = render::DefaultPreset(ModelKind::kCloth);
+  p.cloth.variant = cloth::Variant::kSeedThreejs;  // the seed's material, explicit sheen
+  const Rgb<double> c = FromHex(j.value("color", json()), path, "color");
+  const Rgb<double> s = FromHex(j.value("sheen", json()), path, "sheen");
+  for (int k = 0; k < 3; ++k) {
+    p.values[size_t(k)] = c[k];
+    p.values[size_t(3 + k)] = s[k];
+  }
+  p.values[6] = CheckedNumber(j.value("roughness", json()), path, "roughness", 0, 1);
+  if (j.value("subsurface", false)) {
+    p.cloth.subsurface = true;
+    const Rgb<double> u = FromHex(j.value("subsurfaceColor", json()), path, "subsurfaceColor");
+    for (int k = 0; k < 3; ++k) p.values[size_t(7 + k)] = u[k];
+  }
+  return p;
+}
+
+render::MaterialPreset ReadFilamentMat(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) Fail(path, "file", "cannot open");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string text = ss.str();
+  if (text.find("shadingModel : cloth") == std::string::npos)
+    Fail(path, "shadingModel", "not cloth");
+  render::MaterialPreset p = render::DefaultPreset(ModelKind::kCloth);
+  const std::string num = R"(([-+0-9.eE]+))";
+  auto vec = [&](const std::string& field, int n, int offset) {
+    std::string pat = "material\\." + field + " = vec" + std::to_string(n == 1 ? 0 : n) + "\\(";
+    if (n == 1) pat = "material\\." + field + " = ";
+    for (int k = 0; k < n; ++k) pat += num + (k + 1 < n ? ", " : "");
+    std::smatch m;
+    if (!std::regex_search(text, m, std::regex(pat))) return false;
+    for (int k = 0; k < n; ++k) p.values[size_t(offset + k)] = std::stod(m[size_t(k + 1)].str());
+    return true;
+  };
+  if (!vec("baseColor", 4, 0)) Fail(path, "material.baseColor", "not found");
+  if (!vec("roughness", 1, 6)) Fail(path, "material.roughness", "not found");
+  if (!vec("sheenColor", 3, 3)) Fail(path, "material.sheenColor", "not found");
+  if (vec("subsurfaceColor", 3, 7)) p.cloth.subsurface = true;
+  return p;
+}
+
+}  // namespace clothfit::fit

@@ -1,0 +1,97 @@
+// fit/convert/convert_io.h: readers and writers of `clothfit convert` (docs/convert.md).
+//
+// Readers turn one input file into one or more source materials: an analytic model with its
+// parameters (clothfit preset, glTF 2.0 material, seed SurfaceMaterial / TextureStack side), a
+// measured MERL table, or a woven fabric definition. Errors throw ConvertError whose message
+// is "<file>: <field>: <reason>".
+//
+// Maps. Colour maps (base colour, sheen colour) are sRGB-encoded, decoded to linear before any
+// use; normal maps are linear (tangent space, +Y up, as glTF). Each map is carried over by
+// reference (its path relative to the output directory when possible, else absolute) with its
+// colour space. For the fit, a colour map's mean linear texel value multiplies the colour
+// factor; scalar maps (roughness, metalness, sheen roughness, specular) are reduced to their
+// mean over texels times the factor and are NOT carried over (the targets get the fitted
+// scalar). Normal maps do not enter the BRDF-space fit (it is taken on a flat surface).
+// Writers emit the carried maps with factor = fitted colour / map mean (per channel, clamped
+// to [0, 1]), so factor x mean(map) reproduces the fitted colour.
+#pragma once
+
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "fit/brdf_fit.h"
+#include "fit/convert/merl.h"
+#include "render/reference/fabric.h"
+#include "render/scene/material.h"
+
+namespace clothfit::fit {
+
+class ConvertError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+inline constexpr int kSeedSchemaVersion = 1;
+
+struct MapRef {
+  std::string attribute;            // "base_color", "normal", "sheen_color" (carried)
+  std::string path;                 // resolved file path (as found on disk)
+  std::string colour_space;         // "srgb" or "linear"
+  Rgb<double> mean{1.0, 1.0, 1.0};  // mean linear texel value (colour maps)
+};
+
+struct SourceMaterial {
+  std::string file;  // the input file
+  std::string name;  // material name, unique within the file
+  std::string kind;  // preset, gltf, merl, fabric, surface-material, texture-stack
+  std::optional<render::MaterialPreset> analytic;
+  std::shared_ptr<const MerlTable> merl;
+  std::shared_ptr<const render::Fabric> fabric;
+  std::vector<MapRef> maps;               // carried over
+  std::vector<std::string> notes;         // what was averaged, dropped or not modelled
+  std::vector<std::string> dependencies;  // further files whose content the output depends on
+};
+
+// Every input file kind, chosen by extension and, for .json, by its "schema"/"format" field.
+std::vector<SourceMaterial> ReadMaterials(const std::string& path);
+// The source's BRDF on the canonical directions.
+BrdfSamples SampleSource(const SourceMaterial& m);
+
+// Mean linear RGB of an image file (colour maps decoded from sRGB when `srgb`).
+Rgb<double> MeanTexel(const std::string& path, bool srgb);
+double SrgbToLinear(double s);
+double LinearToSrgb(double l);
+
+// ---- writers (all atomic). `maps` are written relative to the output file's directory. ----
+struct Converted {
+  std::string name;
+  render::MaterialPreset cloth;                          // always
+  std::optional<render::MaterialPreset> physical_sheen;  // three.js target
+  std::optional<render::MaterialPreset> gltf_sheen;      // glTF target
+  // The seed's MeshClothMaterial (cloth/seed-threejs, explicit sheen) for the three.js target,
+  // when `cloth` is another variant; WriteThreejsCloth falls back to `cloth`.
+  std::optional<render::MaterialPreset> seed_cloth;
+  std::vector<MapRef> maps;
+  nlohmann::json provenance = nlohmann::json::object();
+};
+
+void WriteClothPreset(const std::string& path, const Converted& c);
+// three.js r187 MaterialLoader JSON (MeshPhysicalMaterial with sheen).
+void WriteThreejsPhysical(const std::string& path, const Converted& c);
+// The seed's MeshClothMaterial parameters (same layout, type "MeshClothMaterial").
+void WriteThreejsCloth(const std::string& path, const Converted& c);
+// glTF 2.0 (materials only) with KHR_materials_sheen.
+void WriteGltf(const std::string& path, const Converted& c);
+// Filament material source (.mat) for shadingModel: cloth.
+void WriteFilamentMat(const std::string& path, const Converted& c);
+
+// Readers of our own outputs (round trips; the glTF reader is ReadMaterials).
+render::MaterialPreset ReadThreejsPhysical(const std::string& path);
+render::MaterialPreset ReadThreejsCloth(const std::string& path);
+render::MaterialPreset ReadFilamentMat(const std::string& path);
+
+}  // namespace clothfit::fit

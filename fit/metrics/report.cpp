@@ -1,0 +1,1041 @@
+#include "fit/metrics/report.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <utility>
+
+#include "render/scene/image_io.h"
+
+namespace clothfit::report {
+namespace fs = std::filesystem;
+
+namespace {
+
+// ---- small helpers -------------------------------------------------------------------------
+
+std::string Fmt(const char* format, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, format, v);
+  return buf;
+}
+
+// Canonical column order of the models in a report.
+int ModelRank(const std::string& model) {
+  if (model == "cloth") return 0;
+  if (model == "physical-sheen") return 1;
+  if (model == "standard") return 2;
+  if (model == "gltf-sheen") return 3;
+  return 4;
+}
+
+std::string ModelTitle(const std::string& model) {
+  if (model == "cloth") return "cloth (Filament)";
+  if (model == "physical-sheen") return "MeshPhysicalMaterial (sheen)";
+  if (model == "standard") return "MeshStandardMaterial";
+  if (model == "gltf-sheen") return "glTF KHR_materials_sheen";
+  return model;
+}
+
+// Resolves a path written in a preset: absolute as is, relative to the preset's directory.
+std::string Resolve(const std::string& path, const std::string& preset_path) {
+  const fs::path p(path);
+  if (p.is_absolute()) return path;
+  return (fs::path(preset_path).parent_path() / p).lexically_normal().string();
+}
+
+const nlohmann::json& Field(const nlohmann::json& j, const std::string& key,
+                            const std::string& where) {
+  if (!j.is_object() || !j.contains(key))
+    throw ReportError(where + ": missing field \"" + key + "\"");
+  return j.at(key);
+}
+
+std::string StringField(const nlohmann::json& j, const std::string& key, const std::string& where,
+                        const std::string& hint = "") {
+  if (!j.is_object() || !j.contains(key))
+    throw ReportError(where + ": missing field \"" + key + "\"" + hint);
+  const nlohmann::json& v = j.at(key);
+  if (!v.is_string()) throw ReportError(where + ": field \"" + key + "\" must be a string");
+  return v.get<std::string>();
+}
+
+// Reads an image and converts it to RGB; every error names the file.
+struct LoadedImage {
+  metrics::RgbImage rgb;
+  std::optional<metrics::Map> coverage;  // "fabric", else "A"
+};
+
+LoadedImage Load(const std::string& path, bool want_coverage) {
+  io::Image img;
+  try {
+    img = io::ReadImage(path);
+  } catch (const std::exception& e) {
+    throw ReportError(e.what());
+  }
+  LoadedImage out;
+  try {
+    out.rgb = metrics::ToRgb(img, path);
+  } catch (const std::exception& e) {
+    throw ReportError(e.what());
+  }
+  if (want_coverage) {
+    for (const char* name : {"fabric", "A"}) {
+      const auto it = std::find(img.channel_names.begin(), img.channel_names.end(), name);
+      if (it == img.channel_names.end()) continue;
+      const size_t c = size_t(it - img.channel_names.begin());
+      const size_t nc = size_t(img.channels());
+      metrics::Map m(img.width, img.height);
+      for (size_t i = 0; i < m.values.size(); ++i) {
+        const float v = img.pixels[i * nc + c];
+        m.values[i] = std::isfinite(v) ? v : 0.0f;  // non-finite coverage: not fabric
+      }
+      out.coverage = std::move(m);
+      break;
+    }
+  }
+  return out;
+}
+
+long long CountNonFinite(const metrics::RgbImage& img) {
+  long long n = 0;
+  for (size_t i = 0; i < img.pixel_count(); ++i)
+    if (!std::isfinite(img.rgb[3 * i]) || !std::isfinite(img.rgb[3 * i + 1]) ||
+        !std::isfinite(img.rgb[3 * i + 2]))
+      ++n;
+  return n;
+}
+
+// The display picture of a linear image (scene card transform); non-finite pixels magenta.
+std::string DisplayPng(const metrics::RgbImage& linear, render::ToneMapping op, double exposure,
+                       const std::string& what) {
+  std::vector<float> rgb(linear.rgb.size());
+  for (size_t i = 0; i < linear.pixel_count(); ++i) {
+    const float* p = &linear.rgb[3 * i];
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
+      rgb[3 * i] = 1.0f;
+      rgb[3 * i + 1] = 0.0f;
+      rgb[3 * i + 2] = 1.0f;
+      continue;
+    }
+    const Rgb<double> d = render::ToDisplay(Rgb<double>(p[0], p[1], p[2]), op, exposure);
+    for (int k = 0; k < 3; ++k) rgb[3 * i + size_t(k)] = float(d[k]);
+  }
+  return Base64(io::EncodePng8(linear.width, linear.height, rgb, what));
+}
+
+// Outside the mask (not fabric: not in the pooled numbers) the colours are dimmed to 35 %.
+constexpr float kOutsideDim = 0.35f;
+
+std::string MapPng(const metrics::Map& map, const metrics::Map* mask, const std::string& what) {
+  std::vector<float> rgb(3 * map.values.size());
+  for (size_t i = 0; i < map.values.size(); ++i) {
+    const std::array<float, 3> c = metrics::ErrorMapColour(double(map.values[i]));
+    const float dim = (mask && !(mask->values[i] > 0.5f)) ? kOutsideDim : 1.0f;
+    for (size_t k = 0; k < 3; ++k) rgb[3 * i + k] = c[k] * dim;
+  }
+  return Base64(io::EncodePng8(map.width, map.height, rgb, what));
+}
+
+// The scalar metrics a report carries, in report order: JSON keys and CSV columns. Each is
+// copied from the metrics::CompareResult member of the same name; a PSNR may be +inf
+// (identical images), every other value must be finite.
+struct MetricField {
+  const char* name;
+  double Numbers::*numbers;
+  double metrics::CompareResult::*result;
+  bool psnr;
+};
+constexpr MetricField kMetricFields[] = {
+    {"rmse_linear", &Numbers::rmse_linear, &metrics::CompareResult::rmse_linear, false},
+    {"psnr_linear", &Numbers::psnr_linear, &metrics::CompareResult::psnr_linear, true},
+    {"rmse_display", &Numbers::rmse_display, &metrics::CompareResult::rmse_display, false},
+    {"psnr_display", &Numbers::psnr_display, &metrics::CompareResult::psnr_display, true},
+    {"ssim", &Numbers::ssim, &metrics::CompareResult::ssim, false},
+    {"flip", &Numbers::flip, &metrics::CompareResult::flip, false},
+    {"hdr_flip", &Numbers::hdr_flip, &metrics::CompareResult::hdr_flip, false},
+    {"ciede2000_mean", &Numbers::ciede2000_mean, &metrics::CompareResult::ciede2000_mean, false},
+    {"ciede2000_p95", &Numbers::ciede2000_p95, &metrics::CompareResult::ciede2000_p95, false},
+    {"ciede2000_display_mean", &Numbers::ciede2000_display_mean,
+     &metrics::CompareResult::ciede2000_display_mean, false},
+    {"ciede2000_display_p95", &Numbers::ciede2000_display_p95,
+     &metrics::CompareResult::ciede2000_display_p95, false},
+};
+
+bool NumbersFinite(const Numbers& n) {
+  for (const MetricField& f : kMetricFields) {
+    const double v = n.*f.numbers;
+    if (f.psnr ? (std::isnan(v) || (std::isinf(v) && v < 0)) : !std::isfinite(v)) return false;
+  }
+  return true;
+}
+
+struct Comparison {
+  Numbers numbers;
+  std::string flip_png;
+};
+
+Comparison Compare(const metrics::RgbImage& ref, const metrics::RgbImage& test,
+                   const metrics::Map* mask, const SceneSpec& scene,
+                   const metrics::ExposureRange& range, const ReportOptions& options,
+                   const std::string& test_path) {
+  Comparison out;
+  metrics::CompareOptions o;
+  o.tone_mapping = scene.tone_mapping;
+  o.exposure = scene.exposure;
+  o.ppd = options.ppd;
+  o.hdr_range = range;
+  const long long bad_ref = CountNonFinite(ref), bad_test = CountNonFinite(test);
+  metrics::CompareResult r;
+  try {
+    r = metrics::Compare(ref, test, o, mask);
+  } catch (const std::invalid_argument& e) {
+    out.numbers.ok = false;
+    out.numbers.why = (bad_ref || bad_test) ? "NaN/Inf in input" : std::string(e.what());
+    out.numbers.counts.nonfinite_ref = bad_ref;
+    out.numbers.counts.nonfinite_test = bad_test;
+    metrics::Map blank(ref.width, ref.height);
+    out.flip_png = MapPng(blank, mask, test_path);
+    return out;
+  }
+  Numbers& n = out.numbers;
+  for (const MetricField& f : kMetricFields) n.*f.numbers = r.*f.result;
+  n.counts = r.counts;
+  n.ok = NumbersFinite(n);
+  if (!n.ok) n.why = "non-finite result";
+  for (const auto& m : r.maps)
+    if (m.name == "flip") out.flip_png = MapPng(m.map, mask, test_path);
+  return out;
+}
+
+// ---- formatting --------------------------------------------------------------------------
+
+std::string Na(const Numbers& n) { return "n/a (" + n.why + ")"; }
+
+struct Column {
+  const char* key;          // JSON / CSV name
+  const char* title;        // HTML header
+  const char* short_title;  // terminal header
+  const char* help;         // tooltip
+  int decimals;
+  double Numbers::*field;
+  bool psnr;
+};
+
+// The columns of every table, in order (HTML, terminal; JSON and CSV add the linear-Lab
+// Delta E and the pixel counts).
+const std::array<Column, 8>& Columns() {
+  static const std::array<Column, 8> kColumns = {{
+      {"rmse_display", "RMSE", "RMSE", "display values (tone mapped, sRGB), lower is better", 4,
+       &Numbers::rmse_display, false},
+      {"psnr_display", "PSNR dB", "PSNR", "display values, peak 1, higher is better", 2,
+       &Numbers::psnr_display, true},
+      {"ssim", "SSIM", "SSIM", "display values, 11x11 Gaussian, higher is better", 4,
+       &Numbers::ssim, false},
+      {"flip", "FLIP", "FLIP", "LDR-FLIP of the display values, PPD 67, lower is better", 4,
+       &Numbers::flip, false},
+      {"hdr_flip", "HDR-FLIP", "HDRFLIP", "HDR-FLIP of linear values, shared exposure range", 4,
+       &Numbers::hdr_flip, false},
+      {"ciede2000_display_mean", "&Delta;E00 mean", "dE mean",
+       "CIEDE2000 of the displayed colour, mean", 2, &Numbers::ciede2000_display_mean, false},
+      {"ciede2000_display_p95", "&Delta;E00 p95", "dE p95",
+       "CIEDE2000 of the displayed colour, 95th percentile", 2, &Numbers::ciede2000_display_p95,
+       false},
+      {"rmse_linear", "RMSE lin", "RMSElin", "linear radiance", 4, &Numbers::rmse_linear, false},
+  }};
+  return kColumns;
+}
+
+std::string Cell(const Numbers& n, const Column& c) {
+  if (!n.ok) return Na(n);
+  return FormatNumber(n.*(c.field), c.decimals, c.psnr);
+}
+
+// Sort key for the index table: numbers as is, n/a last (empty), inf as a large number.
+std::string SortKey(const Numbers& n, const Column& c) {
+  if (!n.ok) return "";
+  const double v = n.*(c.field);
+  if (std::isinf(v)) return v > 0 ? "1e308" : "-1e308";
+  return Fmt("%.9g", v);
+}
+
+nlohmann::json JsonNumber(double v) {
+  if (std::isfinite(v)) return v;
+  if (std::isinf(v) && v > 0) return "inf";  // PSNR of identical images (as clothfit compare)
+  return nullptr;
+}
+
+nlohmann::json NumbersJson(const Numbers& n) {
+  nlohmann::json j;
+  j["ok"] = n.ok;
+  if (!n.ok) j["why"] = n.why;
+  for (const MetricField& f : kMetricFields)
+    j[f.name] = n.ok ? JsonNumber(n.*f.numbers) : nlohmann::json(nullptr);
+  j["pixels"] = {{"counted", n.counts.counted},
+                 {"nonfinite_reference", n.counts.nonfinite_ref},
+                 {"nonfinite_test", n.counts.nonfinite_test}};
+  return j;
+}
+
+// A value from the preset's "fit" object for the solver table.
+std::string FitValue(const nlohmann::json& fit, const std::string& key, int decimals) {
+  if (!fit.is_object() || !fit.contains(key)) return "n/a (missing)";
+  const nlohmann::json& v = fit.at(key);
+  if (v.is_number()) return FormatNumber(v.get<double>(), decimals);
+  if (v.is_null()) return "n/a (not finite in input)";
+  if (v.is_string()) return EscapeHtml(v.get<std::string>());
+  return EscapeHtml(v.dump());
+}
+
+std::string NonFiniteNote(const metrics::PixelCounts& c, const std::string& test_name) {
+  if (c.nonfinite_ref == 0 && c.nonfinite_test == 0) return "";
+  std::string s = "NaN/Inf pixels excluded:";
+  if (c.nonfinite_ref) s += " reference " + std::to_string(c.nonfinite_ref);
+  if (c.nonfinite_test) s += " " + test_name + " " + std::to_string(c.nonfinite_test);
+  return s;
+}
+
+const char* kCss = R"CSS(
+body{font:14px/1.4 system-ui,-apple-system,"Segoe UI",sans-serif;margin:24px auto;max-width:1200px;
+color:#1d2127;background:#fafafa;padding:0 16px}
+h1{font-size:24px;margin:0 0 4px}h2{font-size:19px;margin:28px 0 8px;border-bottom:1px solid #ccd;
+padding-bottom:4px}h3{font-size:16px;margin:20px 0 6px}
+.meta{color:#556;font-size:13px;margin:2px 0}
+table{border-collapse:collapse;margin:6px 0 12px;font-size:13px;background:#fff}
+th,td{border:1px solid #d5d8de;padding:3px 8px;text-align:right;white-space:nowrap}
+th{background:#eef0f4;font-weight:600}td.l,th.l{text-align:left}
+tr.floor td{color:#556;font-style:italic;background:#f4f4f7}
+td.na{color:#a33}
+.grid{display:grid;grid-template-columns:repeat(var(--cols),minmax(0,1fr));gap:8px;
+max-width:calc(var(--cols)*264px)}
+figure{margin:0;background:#fff;border:1px solid #d5d8de;padding:4px}
+figure img{display:block;width:100%;height:auto;max-width:256px;margin:0 auto}
+figcaption{font-size:12px;color:#333;margin-top:3px;text-align:center;overflow-wrap:anywhere}
+.bar{display:inline-block;width:200px;height:12px;vertical-align:middle;border:1px solid #999;
+background:linear-gradient(to right,#000,#1a1a99,#bf268c,#ff8c0d,#ffffd9)}
+.sw{display:inline-block;width:28px;height:16px;border:1px solid #777;vertical-align:middle;
+margin-right:6px}
+.cards{display:flex;flex-wrap:wrap;gap:12px}
+.card{background:#fff;border:1px solid #d5d8de;max-width:520px;padding:8px 12px}
+code{font-size:12px;overflow-wrap:anywhere}pre{font-size:12px;white-space:pre-wrap;max-width:1100px}
+th.s{cursor:pointer}th.s:after{content:" \2195";color:#889}
+)CSS";
+
+std::string Header(const std::string& title) {
+  return "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>" +
+         EscapeHtml(title) + "</title>\n<style>" + kCss + "</style></head><body>\n";
+}
+
+std::string Img(const std::string& b64, const std::string& alt) {
+  return "<img alt=\"" + EscapeHtml(alt) + "\" src=\"data:image/png;base64," + b64 + "\">";
+}
+
+// One metrics table: rows of (label, numbers, is noise floor, name of the test image). The
+// note column (excluded NaN/Inf pixels) appears only when some row has a note.
+struct MetricsRowSpec {
+  std::string label;
+  const Numbers* numbers;
+  bool floor;
+  std::string test_name;
+};
+
+std::string MetricsTable(const std::vector<MetricsRowSpec>& rows) {
+  bool notes = false;
+  for (const MetricsRowSpec& r : rows)
+    notes = notes || !NonFiniteNote(r.numbers->counts, r.test_name).empty();
+  std::string s = "<table><tr><th class=\"l\">model</th>";
+  for (const Column& c : Columns())
+    s += std::string("<th title=\"") + c.help + "\">" + c.title + "</th>";
+  s += notes ? "<th class=\"l\">note</th></tr>\n" : "</tr>\n";
+  for (const MetricsRowSpec& r : rows) {
+    const Numbers& n = *r.numbers;
+    s += r.floor ? "<tr class=\"floor\">" : "<tr>";
+    s += "<td class=\"l\">" + EscapeHtml(r.label) + "</td>";
+    for (const Column& c : Columns())
+      s += std::string(n.ok ? "<td>" : "<td class=\"na\">") + EscapeHtml(Cell(n, c)) + "</td>";
+    if (notes) s += "<td class=\"l\">" + EscapeHtml(NonFiniteNote(n.counts, r.test_name)) + "</td>";
+    s += "</tr>\n";
+  }
+  return s + "</table>\n";
+}
+
+// Parameter value cell (+ swatch for colours).
+std::string ParameterCells(const std::string& name, const nlohmann::json& v) {
+  auto num = [](const nlohmann::json& x) -> std::optional<double> {
+    if (x.is_number()) {
+      const double d = x.get<double>();
+      if (std::isfinite(d)) return d;
+    }
+    return std::nullopt;
+  };
+  if (v.is_array()) {
+    std::string text = "(";
+    std::array<double, 3> c{};
+    bool finite = true;
+    for (size_t i = 0; i < v.size(); ++i) {
+      const auto d = num(v[i]);
+      text += (i ? ", " : "") + (d ? FormatNumber(*d, 4) : std::string("n/a"));
+      if (!d) finite = false;
+      if (i < 3 && d) c[i] = *d;
+    }
+    text += ")";
+    std::string swatch;
+    if (v.size() == 3 && name.find("color") != std::string::npos) {
+      if (finite) {
+        const std::string hex = SrgbHex(c[0], c[1], c[2]);
+        swatch =
+            "<span class=\"sw\" style=\"background:" + hex + "\"></span><code>" + hex + "</code>";
+      } else {
+        swatch = "n/a (not finite in input)";
+      }
+    }
+    if (!finite) text += " n/a (not finite in input)";
+    return "<td class=\"l\"><code>" + EscapeHtml(text) + "</code></td><td class=\"l\">" + swatch +
+           "</td>";
+  }
+  const auto d = num(v);
+  return "<td class=\"l\"><code>" +
+         (d ? FormatNumber(*d, 4) : std::string("n/a (not finite in input)")) +
+         "</code></td><td></td>";
+}
+
+}  // namespace
+
+// ---- public helpers ------------------------------------------------------------------------
+
+std::string Base64(const std::string& bytes) {
+  static const char kAlphabet[] =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  size_t i = 0;
+  for (; i + 2 < bytes.size(); i += 3) {
+    const unsigned v = (unsigned(static_cast<unsigned char>(bytes[i])) << 16) |
+                       (unsigned(static_cast<unsigned char>(bytes[i + 1])) << 8) |
+                       unsigned(static_cast<unsigned char>(bytes[i + 2]));
+    out += kAlphabet[(v >> 18) & 63];
+    out += kAlphabet[(v >> 12) & 63];
+    out += kAlphabet[(v >> 6) & 63];
+    out += kAlphabet[v & 63];
+  }
+  const size_t rest = bytes.size() - i;
+  if (rest > 0) {
+    unsigned v = unsigned(static_cast<unsigned char>(bytes[i])) << 16;
+    if (rest == 2) v |= unsigned(static_cast<unsigned char>(bytes[i + 1])) << 8;
+    out += kAlphabet[(v >> 18) & 63];
+    out += kAlphabet[(v >> 12) & 63];
+    out += rest == 2 ? kAlphabet[(v >> 6) & 63] : '=';
+    out += '=';
+  }
+  return out;
+}
+
+std::string Base64(const std::vector<unsigned char>& bytes) {
+  return Base64(std::string(bytes.begin(), bytes.end()));
+}
+
+std::string FormatNumber(double v, int decimals, bool allow_infinity) {
+  if (std::isnan(v)) return "n/a (not finite in input)";
+  if (std::isinf(v)) {
+    if (!allow_infinity) return "n/a (not finite in input)";
+    return v > 0 ? "inf" : "-inf";
+  }
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
+  return buf;
+}
+
+std::string EscapeHtml(const std::string& text) {
+  std::string out;
+  out.reserve(text.size());
+  for (char c : text) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      case '\'': out += "&#39;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+std::string SrgbHex(double r, double g, double b) {
+  if (!std::isfinite(r) || !std::isfinite(g) || !std::isfinite(b)) return "";
+  char buf[8];
+  const auto enc = [](double x) { return int(std::lround(255.0 * render::SrgbEncode(x))); };
+  std::snprintf(buf, sizeof buf, "#%02x%02x%02x", enc(r), enc(g), enc(b));
+  return buf;
+}
+
+std::string PageName(const std::string& fabric_name) {
+  std::string s;
+  for (char c : fabric_name)
+    s += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_') ? c : '_';
+  if (s.empty() || s == "index") s = "fabric-" + s;  // never the index page itself
+  return s + ".html";
+}
+
+// ---- inputs --------------------------------------------------------------------------------
+
+std::vector<FabricSpec> FabricsFromPresets(const std::vector<std::string>& preset_paths) {
+  if (preset_paths.empty()) throw ReportError("report: no fit presets given");
+  std::vector<FabricSpec> fabrics;
+  std::map<std::string, std::string> first_preset_of;  // fabric -> preset path (for errors)
+  for (const std::string& path : preset_paths) {
+    if (!fs::exists(path)) throw ReportError(path + ": no such file");
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw ReportError(path + ": cannot open for reading");
+    nlohmann::json j;
+    try {
+      j = nlohmann::json::parse(f);
+    } catch (const nlohmann::json::exception& e) {
+      throw ReportError(path + ": malformed JSON: " + e.what());
+    }
+    ModelSpec m;
+    m.preset_path = path;
+    m.preset = j;
+    m.model = StringField(j, "model", path);
+    const nlohmann::json& fit =
+        j.is_object() && j.contains("fit")
+            ? j.at("fit")
+            : throw ReportError(path + ": missing field \"fit\" (not written by clothfit fit?)");
+    const nlohmann::json& scenes = Field(fit, "scenes", path + ": fit");
+    if (!scenes.is_array() || scenes.empty())
+      throw ReportError(path + ": fit.scenes must be a non-empty array");
+    std::vector<SceneSpec> specs;
+    for (size_t i = 0; i < scenes.size(); ++i) {
+      const std::string where = path + ": fit.scenes[" + std::to_string(i) + "]";
+      const nlohmann::json& s = scenes[i];
+      SceneSpec sp;
+      sp.scene_path = StringField(s, "scene", where);
+      sp.name = fs::path(sp.scene_path).stem().string();
+      sp.reference = Resolve(StringField(s, "reference", where), path);
+      if (s.contains("reference2") && s.at("reference2").is_string())
+        sp.reference2 = Resolve(s.at("reference2").get<std::string>(), path);
+      const std::string op =
+          StringField(s, "tone_mapping", where, " (re-run clothfit fit with --images)");
+      try {
+        sp.tone_mapping = render::ParseToneMapping(op);
+      } catch (const std::invalid_argument& e) {
+        throw ReportError(where + ": " + e.what());
+      }
+      const nlohmann::json& ex = Field(s, "exposure", where);
+      if (!ex.is_number() || !std::isfinite(ex.get<double>()) || !(ex.get<double>() > 0))
+        throw ReportError(where + ": exposure must be a finite number > 0");
+      sp.exposure = ex.get<double>();
+      m.previews.push_back(Resolve(
+          StringField(s, "preview", where, " (re-run clothfit fit with --images DIR)"), path));
+      specs.push_back(sp);
+    }
+    std::string fabric_name = fs::path(path).stem().string();
+    std::string fabric_path;
+    if (j.contains("provenance") && j.at("provenance").is_object() &&
+        j.at("provenance").contains("fabric") && j.at("provenance").at("fabric").is_string()) {
+      fabric_path = j.at("provenance").at("fabric").get<std::string>();
+      fabric_name = fs::path(fabric_path).stem().string();
+    }
+    auto it = std::find_if(fabrics.begin(), fabrics.end(),
+                           [&](const FabricSpec& fs_) { return fs_.name == fabric_name; });
+    if (it == fabrics.end()) {
+      FabricSpec fsp;
+      fsp.name = fabric_name;
+      fsp.fabric_path = fabric_path;
+      fsp.scenes = specs;
+      fabrics.push_back(fsp);
+      first_preset_of[fabric_name] = path;
+      it = fabrics.end() - 1;
+    } else {
+      bool same = it->scenes.size() == specs.size();
+      for (size_t i = 0; same && i < specs.size(); ++i)
+        same = it->scenes[i].name == specs[i].name && it->scenes[i].reference == specs[i].reference;
+      if (!same)
+        throw ReportError(path + ": its scenes or references differ from " +
+                          first_preset_of[fabric_name] + " (same fabric \"" + fabric_name + "\")");
+      for (const ModelSpec& other : it->models)
+        if (other.model == m.model)
+          throw ReportError(path + ": model \"" + m.model + "\" of fabric \"" + fabric_name +
+                            "\" given twice (also " + other.preset_path + ")");
+    }
+    it->models.push_back(std::move(m));
+  }
+  for (FabricSpec& f : fabrics)
+    std::stable_sort(f.models.begin(), f.models.end(), [](const ModelSpec& a, const ModelSpec& b) {
+      return ModelRank(a.model) < ModelRank(b.model);
+    });
+  return fabrics;
+}
+
+// ---- numbers -------------------------------------------------------------------------------
+
+Numbers MeanOver(const std::vector<const Numbers*>& per_scene,
+                 const std::vector<std::string>& scene_names) {
+  Numbers m;
+  if (per_scene.empty()) {
+    m.why = "no scenes";
+    return m;
+  }
+  for (size_t i = 0; i < per_scene.size(); ++i) {
+    if (!per_scene[i]->ok) {
+      m.why = (i < scene_names.size() ? scene_names[i] : "a scene") + ": " + per_scene[i]->why;
+      return m;
+    }
+  }
+  const double n = double(per_scene.size());
+  for (const MetricField& f : kMetricFields) {
+    double s = 0.0;
+    for (const Numbers* x : per_scene) s += x->*f.numbers;  // +inf PSNR stays +inf
+    m.*f.numbers = s / n;
+  }
+  for (const Numbers* x : per_scene) {
+    m.counts.counted += x->counts.counted;
+    m.counts.masked_out += x->counts.masked_out;
+    m.counts.nonfinite_ref += x->counts.nonfinite_ref;
+    m.counts.nonfinite_test += x->counts.nonfinite_test;
+  }
+  m.ok = NumbersFinite(m);
+  if (!m.ok) m.why = "non-finite mean";
+  return m;
+}
+
+FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& options) {
+  FabricReport rep;
+  rep.spec = spec;
+  rep.scenes.resize(spec.scenes.size());
+  for (const ModelSpec& m : spec.models)
+    if (m.previews.size() != spec.scenes.size())
+      throw ReportError(m.preset_path + ": " + std::to_string(m.previews.size()) +
+                        " previews for " + std::to_string(spec.scenes.size()) + " scenes");
+  for (size_t si = 0; si < spec.scenes.size(); ++si) {
+    const SceneSpec& sc = spec.scenes[si];
+    SceneResult& out = rep.scenes[si];
+    out.spec = sc;
+    const LoadedImage ref = Load(sc.reference, true);
+    out.width = ref.rgb.width;
+    out.height = ref.rgb.height;
+    const metrics::Map* mask = ref.coverage ? &*ref.coverage : nullptr;
+    out.mask_from_coverage = mask != nullptr;
+    out.fabric_pixels = 0;
+    for (size_t i = 0; i < ref.rgb.pixel_count(); ++i)
+      if (!mask || mask->values[i] > 0.5f) ++out.fabric_pixels;
+    // One HDR-FLIP range per reference, shared by every comparison with it.
+    const metrics::ExposureRange automatic = metrics::AutomaticExposureRange(ref.rgb, mask);
+    out.hdr_range_automatic = std::isfinite(automatic.start) && std::isfinite(automatic.stop) &&
+                              automatic.start <= automatic.stop;
+    out.hdr_range = out.hdr_range_automatic ? automatic : kFallbackHdrRange;
+    out.reference_png = DisplayPng(ref.rgb, sc.tone_mapping, sc.exposure, sc.reference);
+
+    // The test images: the second reference (noise floor) and each model's preview.
+    std::vector<std::string> paths;
+    if (!sc.reference2.empty()) paths.push_back(sc.reference2);
+    for (const ModelSpec& m : spec.models) paths.push_back(m.previews[si]);
+    std::vector<LoadedImage> tests(paths.size());
+    for (size_t k = 0; k < paths.size(); ++k) {
+      tests[k] = Load(paths[k], false);
+      if (tests[k].rgb.width != ref.rgb.width || tests[k].rgb.height != ref.rgb.height)
+        throw ReportError(paths[k] + ": size " + std::to_string(tests[k].rgb.width) + "x" +
+                          std::to_string(tests[k].rgb.height) + " differs from the reference " +
+                          sc.reference + " (" + std::to_string(ref.rgb.width) + "x" +
+                          std::to_string(ref.rgb.height) + ")");
+    }
+    std::vector<Comparison> results(paths.size());
+    std::vector<std::string> pictures(paths.size());
+    tbb::parallel_for(size_t(0), paths.size(), [&](size_t k) {
+      results[k] = Compare(ref.rgb, tests[k].rgb, mask, sc, out.hdr_range, options, paths[k]);
+      pictures[k] = DisplayPng(tests[k].rgb, sc.tone_mapping, sc.exposure, paths[k]);
+    });
+    size_t k = 0;
+    if (!sc.reference2.empty()) {
+      out.noise_floor = results[0].numbers;
+      out.noise_flip_png = results[0].flip_png;
+      k = 1;
+    }
+    for (size_t mi = 0; mi < spec.models.size(); ++mi, ++k) {
+      ModelSceneResult r;
+      r.numbers = results[k].numbers;
+      r.flip_png = results[k].flip_png;
+      r.preview_png = pictures[k];
+      out.models.push_back(std::move(r));
+    }
+  }
+  std::vector<std::string> names;
+  for (const SceneSpec& s : spec.scenes) names.push_back(s.name);
+  for (size_t mi = 0; mi < spec.models.size(); ++mi) {
+    std::vector<const Numbers*> per;
+    for (const SceneResult& s : rep.scenes) per.push_back(&s.models[mi].numbers);
+    rep.model_means.push_back(MeanOver(per, names));
+  }
+  bool all_floor = !rep.scenes.empty();
+  std::vector<const Numbers*> floors;
+  for (const SceneResult& s : rep.scenes) {
+    if (!s.noise_floor)
+      all_floor = false;
+    else
+      floors.push_back(&*s.noise_floor);
+  }
+  if (all_floor) rep.noise_floor_mean = MeanOver(floors, names);
+  return rep;
+}
+
+// ---- pages ---------------------------------------------------------------------------------
+
+std::string FabricHtml(const FabricReport& rep) {
+  const FabricSpec& spec = rep.spec;
+  std::ostringstream h;
+  h << Header(spec.name + " - clothfit report");
+  h << "<p class=\"meta\"><a href=\"index.html\">&larr; all fabrics</a></p>\n";
+  h << "<h1>" << EscapeHtml(spec.name) << "</h1>\n";
+  if (!spec.fabric_path.empty())
+    h << "<p class=\"meta\">fabric definition <code>" << EscapeHtml(spec.fabric_path)
+      << "</code></p>\n";
+  h << "<p class=\"meta\">Images are tone mapped with each scene card's operator and exposure "
+       "(three.js r187 display transform, sRGB). Metrics compare each fitted preview with the "
+       "path-traced reference over the fabric pixels only; the noise floor compares the "
+       "reference with a second reference rendered with another seed (no fit can be expected "
+       "to beat it). Lower is better except PSNR and SSIM. See docs/report.md.</p>\n";
+
+  // Summary: means over scenes.
+  {
+    std::vector<MetricsRowSpec> rows;
+    if (rep.noise_floor_mean)
+      rows.push_back({"noise floor", &*rep.noise_floor_mean, true, "second reference"});
+    for (size_t mi = 0; mi < spec.models.size(); ++mi)
+      rows.push_back({ModelTitle(spec.models[mi].model), &rep.model_means[mi], false, "preview"});
+    h << "<h2>Metrics, mean over " << spec.scenes.size() << " scenes</h2>\n" << MetricsTable(rows);
+  }
+
+  // Per scene: pictures and a table.
+  for (const SceneResult& s : rep.scenes) {
+    const SceneSpec& sc = s.spec;
+    h << "<h2 id=\"scene-" << EscapeHtml(sc.name) << "\">Scene: " << EscapeHtml(sc.name)
+      << "</h2>\n<p class=\"meta\"><code>" << EscapeHtml(sc.scene_path) << "</code>; " << s.width
+      << "&times;" << s.height << " px; display " << render::ToneMappingName(sc.tone_mapping)
+      << ", exposure " << FormatNumber(sc.exposure, 2) << "; " << s.fabric_pixels
+      << (s.mask_from_coverage ? " fabric pixels (reference coverage)"
+                               : " pixels (no coverage channel: all)")
+      << "; HDR-FLIP range [" << FormatNumber(s.hdr_range.start, 2) << ", "
+      << FormatNumber(s.hdr_range.stop, 2) << "] stops ("
+      << (s.hdr_range_automatic ? "automatic from the reference"
+                                : "fallback: automatic range not finite")
+      << ")</p>\n";
+    const size_t cols = 1 + spec.models.size();
+    h << "<div class=\"grid\" style=\"--cols:" << cols << "\">\n";
+    h << "<figure>" << Img(s.reference_png, "reference " + sc.name)
+      << "<figcaption>reference<br><code>" << EscapeHtml(fs::path(sc.reference).filename().string())
+      << "</code></figcaption></figure>\n";
+    for (size_t mi = 0; mi < spec.models.size(); ++mi) {
+      const Numbers& n = s.models[mi].numbers;
+      h << "<figure>"
+        << Img(s.models[mi].preview_png, spec.models[mi].model + " preview " + sc.name)
+        << "<figcaption>" << EscapeHtml(ModelTitle(spec.models[mi].model)) << " preview<br>RMSE "
+        << EscapeHtml(Cell(n, Columns()[0])) << "</figcaption></figure>\n";
+    }
+    if (s.noise_floor)
+      h << "<figure>" << Img(s.noise_flip_png, "FLIP noise floor " + sc.name)
+        << "<figcaption>FLIP: reference vs second seed<br>mean "
+        << EscapeHtml(Cell(*s.noise_floor, Columns()[3])) << "</figcaption></figure>\n";
+    else
+      h << "<figure><figcaption>no second reference: no noise floor</figcaption></figure>\n";
+    for (size_t mi = 0; mi < spec.models.size(); ++mi) {
+      const Numbers& n = s.models[mi].numbers;
+      h << "<figure>" << Img(s.models[mi].flip_png, spec.models[mi].model + " FLIP " + sc.name)
+        << "<figcaption>FLIP: " << EscapeHtml(ModelTitle(spec.models[mi].model)) << "<br>mean "
+        << EscapeHtml(Cell(n, Columns()[3])) << "</figcaption></figure>\n";
+    }
+    h << "</div>\n<p class=\"meta\">FLIP error maps (LDR-FLIP of the display images): 0 "
+         "<span class=\"bar\"></span> 1"
+      << (s.mask_from_coverage ? "; outside the fabric (not in the numbers) dimmed to 35 %" : "")
+      << "</p>\n";
+    std::vector<MetricsRowSpec> rows;
+    if (s.noise_floor) rows.push_back({"noise floor", &*s.noise_floor, true, "second reference"});
+    for (size_t mi = 0; mi < spec.models.size(); ++mi)
+      rows.push_back({ModelTitle(spec.models[mi].model), &s.models[mi].numbers, false, "preview"});
+    h << MetricsTable(rows);
+  }
+
+  // Fitted parameters.
+  h << "<h2>Fitted parameters</h2>\n<p class=\"meta\">Parameter values are <b>linear</b> sRGB "
+       "(Rec.709 primaries) as the engines take them (a three.js <code>Color</code> after "
+       "<code>convertSRGBToLinear</code>, a Filament <code>baseColor</code>); swatches show the "
+       "colour <b>sRGB-encoded</b> for the screen (hex = what a colour picker shows). Roughness "
+       "is perceptual <i>r</i> (the models use &alpha; = r&sup2;). docs/preset-format.md.</p>\n"
+       "<div class=\"cards\">\n";
+  for (const ModelSpec& m : spec.models) {
+    h << "<div class=\"card\"><h3>" << EscapeHtml(ModelTitle(m.model)) << "</h3>\n";
+    if (m.preset.contains("engine") && m.preset.at("engine").is_string())
+      h << "<p class=\"meta\">" << EscapeHtml(m.preset.at("engine").get<std::string>()) << "</p>";
+    if (m.preset.contains("cloth") && m.preset.at("cloth").is_object())
+      h << "<p class=\"meta\">cloth options <code>" << EscapeHtml(m.preset.at("cloth").dump())
+        << "</code></p>";
+    h << "<p class=\"meta\">preset <code>" << EscapeHtml(m.preset_path) << "</code></p>\n";
+    h << "<table><tr><th class=\"l\">parameter</th><th class=\"l\">value (linear)</th>"
+         "<th class=\"l\">swatch (sRGB-encoded)</th></tr>\n";
+    if (m.preset.contains("parameters") && m.preset.at("parameters").is_object()) {
+      for (const auto& [name, v] : m.preset.at("parameters").items())
+        h << "<tr><td class=\"l\">" << EscapeHtml(name) << "</td>" << ParameterCells(name, v)
+          << "</tr>\n";
+    } else {
+      h << "<tr><td class=\"l na\" colspan=\"3\">n/a (no parameters in the preset)</td></tr>";
+    }
+    h << "</table></div>\n";
+  }
+  h << "</div>\n";
+
+  // Solver summary.
+  h << "<h2>Solver</h2>\n<p class=\"meta\">Ceres Levenberg-Marquardt with bounds, multi-start; "
+       "cost and RMSE in the fit space over block means (docs/fitting.md); fit noise floor = "
+       "RMSE between the two references / &radic;2 over the same blocks.</p>\n"
+       "<table><tr><th class=\"l\">model</th><th>iterations</th><th>starts</th>"
+       "<th>initial cost</th><th>final cost</th><th>fit s</th><th>setup s</th>"
+       "<th class=\"l\">termination</th><th class=\"l\">space</th><th class=\"l\">loss</th>"
+       "<th>block px</th><th>fit RMSE</th><th>fit noise floor</th></tr>\n";
+  for (const ModelSpec& m : spec.models) {
+    const nlohmann::json fit = m.preset.value("fit", nlohmann::json::object());
+    std::string floor = "n/a (no second reference)";
+    if (fit.contains("scenes") && fit.at("scenes").is_array()) {
+      double sum = 0.0;
+      int n = 0;
+      bool bad = false;
+      for (const auto& s : fit.at("scenes"))
+        if (s.is_object() && s.contains("noise_floor")) {
+          if (!s.at("noise_floor").is_number())
+            bad = true;
+          else {
+            sum += s.at("noise_floor").get<double>();
+            ++n;
+          }
+        }
+      if (bad)
+        floor = "n/a (not finite in input)";
+      else if (n)
+        floor = FormatNumber(sum / n, 4);
+    }
+    h << "<tr><td class=\"l\">" << EscapeHtml(ModelTitle(m.model)) << "</td><td>"
+      << FitValue(fit, "iterations", 0) << "</td><td>" << FitValue(fit, "starts", 0) << "</td><td>"
+      << FitValue(fit, "initial_cost", 4) << "</td><td>" << FitValue(fit, "final_cost", 4)
+      << "</td><td>" << FitValue(fit, "seconds", 2) << "</td><td>"
+      << FitValue(fit, "setup_seconds", 2) << "</td><td class=\"l\">"
+      << FitValue(fit, "termination", 0) << "</td><td class=\"l\">" << FitValue(fit, "space", 0)
+      << "</td><td class=\"l\">" << FitValue(fit, "loss", 0) << "</td><td>"
+      << FitValue(fit, "block_pixels", 0) << "</td><td>" << FitValue(fit, "rmse", 4) << "</td><td>"
+      << floor << "</td></tr>\n";
+  }
+  h << "</table>\n";
+  for (const ModelSpec& m : spec.models) {
+    const nlohmann::json fit = m.preset.value("fit", nlohmann::json::object());
+    if (fit.contains("solver") && fit.at("solver").is_string())
+      h << "<details><summary>" << EscapeHtml(ModelTitle(m.model))
+        << ": Ceres report</summary><pre>" << EscapeHtml(fit.at("solver").get<std::string>())
+        << "</pre></details>\n";
+  }
+  h << "</body></html>\n";
+  return h.str();
+}
+
+std::string IndexHtml(const std::vector<FabricReport>& reports) {
+  std::ostringstream h;
+  h << Header("clothfit report");
+  h << "<h1>clothfit report</h1>\n<p class=\"meta\">One row per fabric and model: metrics of "
+       "the fitted real-time preview against the path-traced reference, mean over the scenes, "
+       "fabric pixels only. The noise-floor rows compare two references with different seeds. "
+       "Click a column header to sort. Same numbers: <a href=\"report.json\">report.json</a>, "
+       "<a href=\"report.csv\">report.csv</a>; definitions in docs/report.md.</p>\n";
+  h << "<table id=\"summary\"><thead><tr><th class=\"l s\" data-t=\"s\">fabric</th>"
+       "<th class=\"l s\" data-t=\"s\">model</th>";
+  for (const Column& c : Columns())
+    h << "<th class=\"s\" title=\"" << c.help << "\">" << c.title << "</th>";
+  h << "<th class=\"s\">fit s</th></tr></thead><tbody>\n";
+  auto row = [&](const FabricReport& r, const std::string& model, const Numbers& n, bool floor,
+                 const std::string& seconds, const std::string& seconds_key) {
+    h << (floor ? "<tr class=\"floor\">" : "<tr>") << "<td class=\"l\" data-v=\""
+      << EscapeHtml(r.spec.name) << "\"><a href=\"" << EscapeHtml(PageName(r.spec.name)) << "\">"
+      << EscapeHtml(r.spec.name) << "</a></td><td class=\"l\" data-v=\"" << EscapeHtml(model)
+      << "\">" << EscapeHtml(model) << "</td>";
+    for (const Column& c : Columns())
+      h << (n.ok ? "<td" : "<td class=\"na\"") << " data-v=\"" << SortKey(n, c) << "\">"
+        << EscapeHtml(Cell(n, c)) << "</td>";
+    h << "<td data-v=\"" << seconds_key << "\">" << seconds << "</td></tr>\n";
+  };
+  for (const FabricReport& r : reports) {
+    if (r.noise_floor_mean) row(r, "noise floor", *r.noise_floor_mean, true, "", "");
+    for (size_t mi = 0; mi < r.spec.models.size(); ++mi) {
+      const nlohmann::json fit = r.spec.models[mi].preset.value("fit", nlohmann::json::object());
+      std::string sec = "n/a (missing)", key;
+      if (fit.contains("seconds") && fit.at("seconds").is_number()) {
+        sec = FormatNumber(fit.at("seconds").get<double>(), 2);
+        key = Fmt("%.9g", fit.at("seconds").get<double>());
+      }
+      row(r, ModelTitle(r.spec.models[mi].model), r.model_means[mi], false, sec, key);
+    }
+  }
+  h << "</tbody></table>\n<h2>Fabrics</h2>\n<ul>\n";
+  for (const FabricReport& r : reports)
+    h << "<li><a href=\"" << EscapeHtml(PageName(r.spec.name)) << "\">" << EscapeHtml(r.spec.name)
+      << "</a> (" << r.spec.models.size() << " models, " << r.spec.scenes.size()
+      << " scenes)</li>\n";
+  h << "</ul>\n";
+  // Sort: numeric when both keys parse, text otherwise; empty keys (n/a) always last.
+  h << R"JS(<script>
+(function(){var t=document.getElementById('summary');var hs=t.tHead.rows[0].cells;
+for(var i=0;i<hs.length;i++)(function(i){var asc=true;hs[i].onclick=function(){
+var b=t.tBodies[0],rs=Array.prototype.slice.call(b.rows);
+rs.sort(function(x,y){var a=x.cells[i].getAttribute('data-v'),c=y.cells[i].getAttribute('data-v');
+if(a===''&&c==='')return 0;if(a==='')return 1;if(c==='')return -1;
+var p=parseFloat(a),q=parseFloat(c),r=(!isNaN(p)&&!isNaN(q))?p-q:a.localeCompare(c);
+return asc?r:-r;});rs.forEach(function(r){b.appendChild(r);});asc=!asc;};})(i);})();
+</script>
+)JS";
+  h << "</body></html>\n";
+  return h.str();
+}
+
+nlohmann::json ReportJson(const std::vector<FabricReport>& reports) {
+  nlohmann::json j;
+  j["schema"] = "clothfit.report";
+  j["version"] = 1;
+  j["region"] = "fabric pixels of the reference (coverage > 0.5)";
+  nlohmann::json fabrics = nlohmann::json::array();
+  for (const FabricReport& r : reports) {
+    nlohmann::json f;
+    f["name"] = r.spec.name;
+    f["fabric"] = r.spec.fabric_path;
+    f["page"] = PageName(r.spec.name);
+    nlohmann::json models = nlohmann::json::array();
+    for (size_t mi = 0; mi < r.spec.models.size(); ++mi) {
+      const ModelSpec& m = r.spec.models[mi];
+      nlohmann::json mj;
+      mj["model"] = m.model;
+      mj["preset"] = m.preset_path;
+      mj["parameters"] = m.preset.value("parameters", nlohmann::json(nullptr));
+      const nlohmann::json fit = m.preset.value("fit", nlohmann::json::object());
+      nlohmann::json solver;
+      for (const char* k : {"iterations", "starts", "initial_cost", "final_cost", "seconds",
+                            "setup_seconds", "termination", "space", "loss", "rmse"})
+        solver[k] = fit.contains(k) ? fit.at(k) : nlohmann::json(nullptr);
+      mj["solver"] = solver;
+      mj["mean"] = NumbersJson(r.model_means[mi]);
+      models.push_back(mj);
+    }
+    f["models"] = models;
+    f["noise_floor_mean"] =
+        r.noise_floor_mean ? NumbersJson(*r.noise_floor_mean) : nlohmann::json(nullptr);
+    nlohmann::json scenes = nlohmann::json::array();
+    for (const SceneResult& s : r.scenes) {
+      nlohmann::json sj;
+      sj["name"] = s.spec.name;
+      sj["scene"] = s.spec.scene_path;
+      sj["reference"] = s.spec.reference;
+      sj["reference2"] =
+          s.spec.reference2.empty() ? nlohmann::json(nullptr) : nlohmann::json(s.spec.reference2);
+      sj["tone_mapping"] = std::string(render::ToneMappingName(s.spec.tone_mapping));
+      sj["exposure"] = s.spec.exposure;
+      sj["width"] = s.width;
+      sj["height"] = s.height;
+      sj["fabric_pixels"] = s.fabric_pixels;
+      sj["hdr_flip_range"] = {{"start", s.hdr_range.start},
+                              {"stop", s.hdr_range.stop},
+                              {"automatic", s.hdr_range_automatic}};
+      sj["noise_floor"] = s.noise_floor ? NumbersJson(*s.noise_floor) : nlohmann::json(nullptr);
+      nlohmann::json ms = nlohmann::json::object();
+      for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
+        ms[r.spec.models[mi].model] = NumbersJson(s.models[mi].numbers);
+      sj["models"] = ms;
+      scenes.push_back(sj);
+    }
+    f["scenes"] = scenes;
+    fabrics.push_back(f);
+  }
+  j["fabrics"] = fabrics;
+  return j;
+}
+
+std::string ReportCsv(const std::vector<FabricReport>& reports) {
+  std::ostringstream s;
+  s << "fabric,model,scene";
+  for (const MetricField& f : kMetricFields) s << "," << f.name;
+  s << ",pixels_counted,nonfinite_reference,nonfinite_test,status\n";
+  auto num = [](double v) -> std::string {
+    if (std::isfinite(v)) return Fmt("%.9g", v);
+    return (std::isinf(v) && v > 0) ? "inf" : "";
+  };
+  auto csv_text = [](const std::string& t) {
+    std::string q = "\"";
+    for (char c : t) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+    return q + "\"";
+  };
+  auto row = [&](const std::string& fabric, const std::string& model, const std::string& scene,
+                 const Numbers& n) {
+    s << csv_text(fabric) << "," << csv_text(model) << "," << csv_text(scene);
+    for (const MetricField& f : kMetricFields) s << "," << (n.ok ? num(n.*f.numbers) : std::string());
+    s << "," << n.counts.counted << "," << n.counts.nonfinite_ref << "," << n.counts.nonfinite_test
+      << "," << csv_text(n.ok ? "ok" : "n/a: " + n.why) << "\n";
+  };
+  for (const FabricReport& r : reports) {
+    for (const SceneResult& sc : r.scenes) {
+      if (sc.noise_floor) row(r.spec.name, "noise-floor", sc.spec.name, *sc.noise_floor);
+      for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
+        row(r.spec.name, r.spec.models[mi].model, sc.spec.name, sc.models[mi].numbers);
+    }
+    if (r.noise_floor_mean) row(r.spec.name, "noise-floor", "mean", *r.noise_floor_mean);
+    for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
+      row(r.spec.name, r.spec.models[mi].model, "mean", r.model_means[mi]);
+  }
+  return s.str();
+}
+
+std::string TerminalTable(const std::vector<FabricReport>& reports) {
+  std::ostringstream s;
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "%-10s %-15s", "fabric", "model");
+  s << buf;
+  for (const Column& c : Columns()) {
+    std::snprintf(buf, sizeof buf, " %8s", c.short_title);
+    s << buf;
+  }
+  s << "\n";
+  auto row = [&](const std::string& fabric, const std::string& model, const Numbers& n) {
+    std::snprintf(buf, sizeof buf, "%-10s %-15s", fabric.c_str(), model.c_str());
+    s << buf;
+    if (!n.ok) {
+      s << " " << Na(n) << "\n";
+      return;
+    }
+    for (const Column& c : Columns()) {
+      std::snprintf(buf, sizeof buf, " %8s",
+                    FormatNumber(n.*(c.field), c.decimals, c.psnr).c_str());
+      s << buf;
+    }
+    s << "\n";
+  };
+  for (const FabricReport& r : reports) {
+    if (r.noise_floor_mean) row(r.spec.name, "noise floor", *r.noise_floor_mean);
+    for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
+      row(r.spec.name, r.spec.models[mi].model, r.model_means[mi]);
+  }
+  s << "(mean over scenes, fabric pixels; display values except RMSElin and HDRFLIP; dE = "
+       "CIEDE2000 of the displayed colour)\n";
+  return s.str();
+}
+
+std::string WriteReport(const std::vector<FabricReport>& reports, const std::string& dir) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) throw ReportError(dir + ": cannot create the report directory: " + ec.message());
+  for (const FabricReport& r : reports)
+    io::WriteTextAtomic((fs::path(dir) / PageName(r.spec.name)).string(), FabricHtml(r));
+  io::WriteTextAtomic((fs::path(dir) / "report.json").string(), ReportJson(reports).dump(2) + "\n");
+  io::WriteTextAtomic((fs::path(dir) / "report.csv").string(), ReportCsv(reports));
+  const std::string index = (fs::path(dir) / "index.html").string();
+  io::WriteTextAtomic(index, IndexHtml(reports));
+  return index;
+}
+
+}  // namespace clothfit::report

@@ -1,0 +1,362 @@
+#include "render/preview/preview.h"
+
+#include <ceres/jet.h>
+#include <tbb/parallel_for.h>
+
+#include <chrono>
+#include <map>
+#include <mutex>
+#include <cmath>
+
+#include "brdf/cloth.h"
+#include "brdf/gltf_sheen.h"
+#include "brdf/lut.h"
+#include "brdf/physical_sheen.h"
+#include "brdf/standard.h"
+#include "render/scene/embree_scene.h"
+#include "render/scene/lights.h"
+#include "render/preview/prefilter.h"
+#include "render/preview/sh.h"
+
+namespace clothfit::render {
+namespace {
+
+using Vec3d = Vec3<double>;
+Vec3d V(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
+
+// Direction of the prefiltered lookup for roughness r, per engine.
+Vec3d DominantDirection(ModelKind m, const Vec3d& n, const Vec3d& R, double r) {
+  if (m == ModelKind::kGltfSheen) return R;  // sample viewer: plain reflection
+  // Filament getSpecularDominantDirection: mix(R, n, alpha^2), alpha = r^2; the same mix is
+  // used for the three.js models (documented approximation).
+  const double t = cloth::DominantDirectionMix(r);
+  return Normalize(R * (1.0 - t) + n * t);
+}
+
+double LodFor(ModelKind m, const PrefilteredEnvironment& pre, double r, int levels) {
+  if (m == ModelKind::kGltfSheen) return r * double(levels - 1);  // sample viewer
+  return pre.LodForRoughness(r);
+}
+
+// Prefiltered chains are the expensive part of a cache build and depend only on the
+// environment (file, intensity, rotation) and the chain settings: build each once per process.
+std::shared_ptr<const PrefilteredEnvironment> SharedPrefilter(const Environment& env,
+                                                              PrefilteredEnvironment::Kernel k,
+                                                              const PreviewOptions& o) {
+  static std::mutex mutex;
+  static std::map<std::string, std::shared_ptr<const PrefilteredEnvironment>> cache;
+  // Only named sources are shareable (procedural and constant maps are cheap to rebuild and
+  // may differ in content under the same name).
+  const bool shareable = !env.source().empty() && env.source().find('/') != std::string::npos;
+  const std::string key = env.source() + "|" + std::to_string(env.intensity()) + "|" +
+                          std::to_string(env.rotation_y()) + "|" + std::to_string(int(k)) + "|" +
+                          std::to_string(o.prefilter_levels) + "|" +
+                          std::to_string(o.prefilter_base_width) + "|" +
+                          std::to_string(o.prefilter_samples);
+  if (shareable) {
+    std::lock_guard<std::mutex> lock(mutex);
+    auto it = cache.find(key);
+    if (it != cache.end()) return it->second;
+  }
+  auto built = std::make_shared<const PrefilteredEnvironment>(PrefilteredEnvironment::Build(
+      env, k, o.prefilter_levels, o.prefilter_base_width, o.prefilter_samples, {}));
+  if (shareable) {
+    std::lock_guard<std::mutex> lock(mutex);
+    cache.emplace(key, built);
+  }
+  return built;
+}
+
+}  // namespace
+
+PreviewCache::~PreviewCache() = default;
+
+std::unique_ptr<PreviewCache> PreviewCache::Build(
+    const Scene& scene, const Environment* env, const PreviewOptions& opt,
+    const std::function<void(const std::string&)>& log) {
+  const auto t0 = std::chrono::steady_clock::now();
+  auto c = std::make_unique<PreviewCache>();
+  c->width = scene.card.width;
+  c->height = scene.card.height;
+  c->options = opt;
+  c->features.direct = !scene.lights.empty();
+  c->features.ibl = env != nullptr;
+  c->features.subsurface = opt.model == ModelKind::kCloth && opt.cloth.subsurface;
+  c->features.shadows = opt.shadows && c->features.direct;
+  c->dfg = &lut::DefaultDfg();
+  c->sheen_albedo = &lut::DefaultSheenAlbedo();
+  const int W = c->width, H = c->height, K = opt.roughness_nodes;
+  const size_t np = size_t(W) * size_t(H);
+  c->background.assign(np * 3, 0.f);
+  c->fabric_mask.assign(np, 0.f);
+
+  EmbreeScene bvh(scene);
+  const double eps = 1e-5 * bvh.scale();
+
+  // Environment-derived data (only when the scene has an environment).
+  Sh9 sh{};
+  std::shared_ptr<const PrefilteredEnvironment> ggx, charlie;
+  if (env) {
+    if (log) log("preview: projecting the environment on SH and prefiltering");
+    sh = ProjectEnvironment(*env);
+    ggx = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kGgx, opt);
+    if (opt.model == ModelKind::kGltfSheen)
+      charlie = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kCharlie, opt);
+  }
+
+  // Primary visibility at pixel centres. Per-pixel work is independent; gather per row.
+  struct PixelData {
+    int index;
+    float nov;
+    std::vector<PreviewLightSample> lights;
+    std::array<float, 3> irr{};
+    std::vector<float> rad, srad;
+  };
+  std::vector<std::vector<PixelData>> rows(static_cast<size_t>(H));
+  const bool wrap_past_terminator = c->features.subsurface &&
+                                    opt.cloth.variant == cloth::Variant::kFilament;
+  tbb::parallel_for(0, H, [&](int y) {
+    for (int x = 0; x < W; ++x) {
+      const size_t pix = size_t(y) * size_t(W) + size_t(x);
+      std::array<double, 3> org, dir;
+      scene.CameraRay(x + 0.5, y + 0.5, org, dir);
+      const Hit h = bvh.Intersect(org, dir);
+      const Vec3d d = V(dir);
+      if (!h.valid) {
+        const Rgb<double> bg = env ? env->Eval(d)
+                                   : Rgb<double>(scene.card.background[0], scene.card.background[1],
+                                                 scene.card.background[2]);
+        for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(bg[k]);
+        continue;
+      }
+      const SurfaceAttributes a = bvh.Attributes(h);
+      const Vec3d v = d * -1.0;
+      Vec3d n = V(a.normal);
+      if (Dot(n, v) < 0.0) n = n * -1.0;  // two-sided, as the reference renderer
+      const Vec3d p = V(a.position) + V(h.ng) * (Dot(V(h.ng), v) > 0 ? eps : -eps);
+      const double NoV = Dot(n, v);
+      const Mesh& mesh = scene.meshes[size_t(h.mesh)];
+      std::vector<PreviewLightSample> ls;
+      for (const Light& light : scene.lights) {
+        const LightSample s = EvaluateLight(light, p);
+        if (s.scale <= 0.0) continue;
+        const double NoL = Dot(n, s.wi);
+        if (NoL <= 0.0 && !(wrap_past_terminator && mesh.is_fabric && NoL > -0.5)) continue;
+        if (c->features.shadows &&
+            bvh.Occluded({p.x, p.y, p.z}, {s.wi.x, s.wi.y, s.wi.z}, 0.0,
+                         std::isinf(s.distance) ? s.distance : s.distance * (1 - 1e-6)))
+          continue;
+        const Vec3d hv = Normalize(v + s.wi);
+        PreviewLightSample q;
+        q.NoL = float(NoL);
+        q.NoH = float(Dot(n, hv));
+        q.LoH = float(Dot(s.wi, hv));
+        for (int k = 0; k < 3; ++k) q.irradiance[k] = float(s.scale * light.color[size_t(k)]);
+        ls.push_back(q);
+      }
+      Rgb<double> Ed(0, 0, 0);
+      if (env) Ed = IrradianceOverPi(sh, n);
+      const Vec3d R = n * (2.0 * NoV) - v;
+      if (!mesh.is_fabric) {
+        // Constant layer: MeshStandardMaterial, glTF base colour, roughness 1.
+        standard::Params<double> sp;
+        sp.base_color = {mesh.base_color[0], mesh.base_color[1], mesh.base_color[2]};
+        Rgb<double> out(0, 0, 0);
+        for (const PreviewLightSample& q : ls) {
+          if (q.NoL <= 0.f) continue;
+          const Cosines<double> cs{NoV, double(q.NoL), double(q.NoH), double(q.LoH)};
+          const Rgb<double> f = standard::EvalDirect(sp, {}, cs, *c->dfg);
+          out += f * Rgb<double>(q.irradiance[0], q.irradiance[1], q.irradiance[2]);
+        }
+        if (env) {
+          const IblWeights<double> w = standard::EvalIbl(sp, {}, NoV, *c->dfg);
+          const Vec3d dd = DominantDirection(ModelKind::kStandard, n, R, 1.0);
+          out += w.specular * ggx->Sample(dd, ggx->LodForRoughness(1.0)) + w.diffuse * Ed;
+        }
+        for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(out[k]);
+        continue;
+      }
+      PixelData pd;
+      pd.index = int(pix);
+      pd.nov = float(NoV);
+      pd.lights = std::move(ls);
+      for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
+      if (env) {
+        pd.rad.resize(size_t(K) * 3);
+        for (int k = 0; k < K; ++k) {
+          const double r = double(k) / double(K - 1);
+          const Vec3d dd = DominantDirection(opt.model, n, R, r);
+          const Rgb<double> L = ggx->Sample(dd, LodFor(opt.model, *ggx, r, opt.prefilter_levels));
+          for (int ch = 0; ch < 3; ++ch) pd.rad[size_t(k) * 3 + size_t(ch)] = float(L[ch]);
+        }
+        if (charlie) {
+          pd.srad.resize(size_t(K) * 3);
+          for (int k = 0; k < K; ++k) {
+            const double r = double(k) / double(K - 1);
+            const Rgb<double> L = charlie->Sample(R, r * double(opt.prefilter_levels - 1));
+            for (int ch = 0; ch < 3; ++ch) pd.srad[size_t(k) * 3 + size_t(ch)] = float(L[ch]);
+          }
+        }
+      }
+      rows[size_t(y)].push_back(std::move(pd));
+    }
+  });
+
+  c->light_begin.push_back(0);
+  for (auto& row : rows) {
+    for (PixelData& pd : row) {
+      c->pixels.push_back(pd.index);
+      c->fabric_mask[size_t(pd.index)] = 1.f;
+      c->NoV.push_back(pd.nov);
+      c->light_samples.insert(c->light_samples.end(), pd.lights.begin(), pd.lights.end());
+      c->light_begin.push_back(int(c->light_samples.size()));
+      c->irradiance.insert(c->irradiance.end(), pd.irr.begin(), pd.irr.end());
+      c->radiance.insert(c->radiance.end(), pd.rad.begin(), pd.rad.end());
+      c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
+    }
+  }
+  c->build_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return c;
+}
+
+namespace {
+
+// Interpolation of the K-node radiance table at roughness r: a uniform Catmull-Rom cubic
+// (C1, so the solver's Jacobian has no jumps at the nodes; end segments use clamped
+// neighbours). Jet-differentiable through the weights.
+template <typename T>
+Rgb<T> TableRadiance(const float* table, int K, const T& r) {
+  const T s = Clamp(r, Const<T>(0.0), Const<T>(1.0)) * Const<T>(double(K - 1));
+  int i1 = int(std::floor(ScalarPart(s)));
+  i1 = std::clamp(i1, 0, K - 2);
+  const int i0 = std::max(i1 - 1, 0), i2 = i1 + 1, i3 = std::min(i1 + 2, K - 1);
+  const T t = s - Const<T>(double(i1));
+  const T t2 = t * t, t3 = t2 * t;
+  // Catmull-Rom basis (tension 0.5)
+  const T w0 = Const<T>(-0.5) * t3 + t2 - Const<T>(0.5) * t;
+  const T w1 = Const<T>(1.5) * t3 - Const<T>(2.5) * t2 + Const<T>(1.0);
+  const T w2 = Const<T>(-1.5) * t3 + Const<T>(2.0) * t2 + Const<T>(0.5) * t;
+  const T w3 = Const<T>(0.5) * t3 - Const<T>(0.5) * t2;
+  Rgb<T> out;
+  for (int ch = 0; ch < 3; ++ch) {
+    out[ch] = Const<T>(double(table[i0 * 3 + ch])) * w0 + Const<T>(double(table[i1 * 3 + ch])) * w1 +
+              Const<T>(double(table[i2 * 3 + ch])) * w2 + Const<T>(double(table[i3 * 3 + ch])) * w3;
+    out[ch] = Max(out[ch], Const<T>(0.0));  // cubic overshoot must not create negative light
+  }
+  return out;
+}
+
+template <typename T>
+Rgb<T> LoadRgb(const float* p) {
+  return {Const<T>(double(p[0])), Const<T>(double(p[1])), Const<T>(double(p[2]))};
+}
+
+template <typename T, ModelKind M, bool kDirect, bool kIbl, bool kSub>
+void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
+  const int K = c.options.roughness_nodes;
+  const size_t n = c.pixels.size();
+  out.resize(n);
+  cloth::Options co = c.options.cloth;
+  co.subsurface = kSub;  // compile-time constant after inlining: no per-pixel wrap branch
+  auto rgb = [&](int k) { return Rgb<T>(x[k], x[k + 1], x[k + 2]); };
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& br) {
+    for (size_t i = br.begin(); i != br.end(); ++i) {
+      const T NoV = Const<T>(double(c.NoV[i]));
+      Rgb<T> L(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
+      if constexpr (kDirect) {
+        for (int s = c.light_begin[i]; s < c.light_begin[i + 1]; ++s) {
+          const PreviewLightSample& q = c.light_samples[size_t(s)];
+          const Cosines<T> cs{NoV, Const<T>(double(q.NoL)), Const<T>(double(q.NoH)),
+                              Const<T>(double(q.LoH))};
+          Rgb<T> f;
+          if constexpr (M == ModelKind::kCloth) {
+            f = cloth::EvalDirect(cloth::Params<T>{rgb(0), rgb(3), x[6], rgb(7)}, co, cs);
+          } else if constexpr (M == ModelKind::kStandard) {
+            f = standard::EvalDirect(standard::Params<T>{rgb(0), x[3], x[4]}, {}, cs, *c.dfg);
+          } else if constexpr (M == ModelKind::kPhysicalSheen) {
+            f = physical_sheen::EvalDirect(
+                physical_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]}, {}, cs, *c.dfg);
+          } else {
+            f = gltf_sheen::EvalDirect(gltf_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]},
+                                       {}, cs, *c.sheen_albedo);
+          }
+          L += f * LoadRgb<T>(q.irradiance);
+        }
+      }
+      if constexpr (kIbl) {
+        const Rgb<T> Ed = LoadRgb<T>(&c.irradiance[i * 3]);
+        const float* rad = &c.radiance[i * size_t(K) * 3];
+        if constexpr (M == ModelKind::kCloth) {
+          const cloth::Params<T> p{rgb(0), rgb(3), x[6], rgb(7)};
+          const IblWeights<T> w = cloth::EvalIbl(p, co, NoV, *c.dfg);
+          L += w.specular * TableRadiance(rad, K, cloth::ClampedRoughness(p.roughness, co)) +
+               w.diffuse * Ed;
+        } else if constexpr (M == ModelKind::kStandard) {
+          const standard::Params<T> p{rgb(0), x[3], x[4]};
+          const IblWeights<T> w = standard::EvalIbl(p, {}, NoV, *c.dfg);
+          L += w.specular * TableRadiance(rad, K, standard::ClampedRoughness(p.roughness, {})) +
+               w.diffuse * Ed;
+        } else if constexpr (M == ModelKind::kPhysicalSheen) {
+          const physical_sheen::Params<T> p{rgb(0), x[3], x[4], rgb(5), x[8]};
+          const IblWeights<T> w = physical_sheen::EvalIbl(p, {}, NoV, *c.dfg);
+          L += w.specular * TableRadiance(rad, K, standard::ClampedRoughness(p.roughness, {})) +
+               w.diffuse * Ed;
+        } else {
+          const gltf_sheen::Params<T> p{rgb(0), x[3], x[4], rgb(5), x[8]};
+          const IblWeights<T> w = gltf_sheen::EvalIbl(p, {}, NoV, *c.dfg, *c.sheen_albedo);
+          const float* srad = &c.sheen_radiance[i * size_t(K) * 3];
+          L += w.specular * TableRadiance(rad, K, gltf_sheen::ClampedRoughness(p.roughness)) +
+               w.diffuse * Ed +
+               w.sheen * TableRadiance(srad, K, gltf_sheen::ClampedSheenRoughness(p.sheen_roughness));
+        }
+      }
+      out[i] = L;
+    }
+  });
+}
+
+template <typename T, ModelKind M>
+void DispatchFeatures(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
+  const PreviewFeatures& f = c.features;
+  const int key = (f.direct ? 4 : 0) | (f.ibl ? 2 : 0) | (f.subsurface ? 1 : 0);
+  switch (key) {
+    case 0: return Kernel<T, M, false, false, false>(c, x, out);
+    case 1: return Kernel<T, M, false, false, true>(c, x, out);
+    case 2: return Kernel<T, M, false, true, false>(c, x, out);
+    case 3: return Kernel<T, M, false, true, true>(c, x, out);
+    case 4: return Kernel<T, M, true, false, false>(c, x, out);
+    case 5: return Kernel<T, M, true, false, true>(c, x, out);
+    case 6: return Kernel<T, M, true, true, false>(c, x, out);
+    default: return Kernel<T, M, true, true, true>(c, x, out);
+  }
+}
+
+}  // namespace
+
+template <typename T>
+void EvaluatePreview(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
+  switch (c.options.model) {
+    case ModelKind::kCloth: return DispatchFeatures<T, ModelKind::kCloth>(c, x, out);
+    case ModelKind::kStandard: return DispatchFeatures<T, ModelKind::kStandard>(c, x, out);
+    case ModelKind::kPhysicalSheen:
+      return DispatchFeatures<T, ModelKind::kPhysicalSheen>(c, x, out);
+    case ModelKind::kGltfSheen: return DispatchFeatures<T, ModelKind::kGltfSheen>(c, x, out);
+  }
+}
+
+template void EvaluatePreview<double>(const PreviewCache&, const double*, std::vector<Rgb<double>>&);
+template void EvaluatePreview<float>(const PreviewCache&, const float*, std::vector<Rgb<float>>&);
+template void EvaluatePreview<ceres::Jet<double, 10>>(const PreviewCache&,
+                                                       const ceres::Jet<double, 10>*,
+                                                       std::vector<Rgb<ceres::Jet<double, 10>>>&);
+
+std::vector<float> ComposeFrame(const PreviewCache& c, const std::vector<Rgb<double>>& fabric) {
+  std::vector<float> frame = c.background;
+  for (size_t i = 0; i < c.pixels.size() && i < fabric.size(); ++i)
+    for (int ch = 0; ch < 3; ++ch)
+      frame[size_t(c.pixels[i]) * 3 + size_t(ch)] = float(fabric[i][ch]);
+  return frame;
+}
+
+}  // namespace clothfit::render

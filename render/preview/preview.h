@@ -1,0 +1,99 @@
+// render/preview/preview.h: what the real-time engine draws for a scene, computed on the CPU, pixel
+// aligned with the reference renderer and differentiable in the material parameters.
+//
+// Pipeline (per scene, once): primary visibility at pixel centres through the same camera
+// (Scene::CameraRay(x + 0.5, y + 0.5), the reference renderer's pixel convention) -> a
+// G-buffer of the fabric pixels -> a cache of everything that does not depend on material
+// parameters: per light the shading cosines, the light's irradiance colour and (optionally)
+// its ray-traced visibility; the SH irradiance E_d(n); and the prefiltered environment
+// radiance each pixel needs, tabulated over roughness (K nodes, dominant direction and LOD
+// recomputed per node as the engine does) so that evaluating a frame for new parameters
+// interpolates that table (Catmull-Rom cubic in r: C1, differentiable in roughness) instead of touching the
+// environment. Non-fabric meshes are shaded once (MeshStandardMaterial, their glTF base
+// colour, roughness 1) into a constant layer.
+//
+// Per frame: for each cached fabric pixel, sum over lights model.EvalDirect x irradiance,
+// plus the IBL weights x (tabulated radiance, E_d, Charlie radiance). The kernel is a
+// template specialised on (model, direct?, IBL?, subsurface?) chosen once per scene: no
+// environment -> no IBL code path; no lights -> no direct path; no subsurface -> no wrap.
+//
+// Approximations, stated: one prefiltered chain (GGX, Filament's LOD mapping
+// lod = (levels - 1) r (2 - r)) serves the three.js models too (three.js's PMREM uses its
+// own blur schedule); three.js's geometryRoughness term is 0 (flat G-buffer); the seed
+// variant's accumulation of `directDiffuse *= saturate(subsurface + NoL)` across lights is
+// evaluated per light.
+#pragma once
+
+#include <array>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "brdf/math.h"
+#include "brdf/table.h"
+#include "render/scene/environment.h"
+#include "render/scene/material.h"
+#include "render/scene/scene.h"
+
+namespace clothfit::render {
+
+class PrefilteredEnvironment;
+
+struct PreviewOptions {
+  ModelKind model = ModelKind::kCloth;
+  cloth::Options cloth;      // model == kCloth
+  bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
+  int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
+  int prefilter_levels = 6;  // mip levels of the prefiltered environment
+  int prefilter_base_width = 256;
+  int prefilter_samples = 128;
+};
+
+// Which code paths a scene needs (decided once when the cache is built).
+struct PreviewFeatures {
+  bool direct = false;      // the scene has punctual lights
+  bool ibl = false;         // the scene has an environment
+  bool subsurface = false;  // cloth with subsurface colour
+  bool shadows = false;
+};
+
+struct PreviewLightSample {
+  float NoL, NoH, LoH;  // raw cosines for this light at this pixel
+  float irradiance[3];  // light colour x intensity x attenuation x visibility
+};
+
+class PreviewCache {
+ public:
+  // `environment` may be null. `progress` may be empty. Throws on bad input.
+  static std::unique_ptr<PreviewCache> Build(
+      const Scene& scene, const Environment* environment, const PreviewOptions& options,
+      const std::function<void(const std::string&)>& log = {});
+  ~PreviewCache();
+
+  int width = 0, height = 0;
+  PreviewOptions options;
+  PreviewFeatures features;
+  std::vector<int> pixels;       // image index (y * W + x) of each fabric pixel
+  std::vector<float> NoV;        // per fabric pixel
+  std::vector<int> light_begin;  // CSR: samples of pixel i in [begin[i], begin[i+1])
+  std::vector<PreviewLightSample> light_samples;
+  std::vector<float> irradiance;          // E_d(n), 3 per fabric pixel
+  std::vector<float> radiance;            // K x 3 per fabric pixel: GGX-prefiltered, node k
+  std::vector<float> sheen_radiance;      // K x 3 per fabric pixel: Charlie (gltf-sheen only)
+  std::vector<float> background;          // linear RGB of every pixel without fabric
+  std::vector<float> fabric_mask;         // 1 where a fabric pixel is shaded
+  const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
+  const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table
+  double build_seconds = 0.0;
+};
+
+// Linear radiance of every fabric pixel (3 per pixel, cache order) for flat parameters `x`
+// in the model's parameter-table order. T = double, float or ceres::Jet.
+template <typename T>
+void EvaluatePreview(const PreviewCache& cache, const T* x, std::vector<Rgb<T>>& out);
+
+// The full linear frame (fabric pixels + constant background), 3 floats per pixel.
+std::vector<float> ComposeFrame(const PreviewCache& cache, const std::vector<Rgb<double>>& fabric);
+
+}  // namespace clothfit::render

@@ -1,0 +1,119 @@
+// render/reference/fabric.cpp: the fabric JSON loader (schema in fabric.h and docs/woven-cloth.md).
+#include "render/reference/fabric.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "render/reference/irawan.h"
+#include "render/reference/sadeghi.h"
+#include "render/reference/weave_pattern.h"
+
+namespace clothfit::render {
+namespace {
+
+[[noreturn]] void Fail(const std::string& path, const std::string& message) {
+  throw FabricError(path + ": " + message);
+}
+
+std::string LineColumn(const std::string& text, size_t byte) {
+  size_t line = 1, col = 1;
+  for (size_t i = 0; i < text.size() && i + 1 < byte; ++i) {
+    if (text[i] == '\n') {
+      ++line;
+      col = 1;
+    } else {
+      ++col;
+    }
+  }
+  return "line " + std::to_string(line) + ", column " + std::to_string(col);
+}
+
+std::string GetString(const nlohmann::json& j, const char* field, const std::string& path) {
+  if (!j.contains(field)) Fail(path, std::string("missing field '") + field + "'");
+  const auto& v = j.at(field);
+  if (!v.is_string()) Fail(path, std::string("field '") + field + "' must be a string");
+  const std::string s = v.get<std::string>();
+  if (s.empty() || s.size() > 256) {
+    Fail(path, std::string("field '") + field + "' must be a non-empty string (<= 256 chars)");
+  }
+  return s;
+}
+
+}  // namespace
+
+Fabric ParseFabric(const std::string& text, const std::string& path) {
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    Fail(path, "JSON syntax error at " + LineColumn(text, e.byte) + ": " + e.what());
+  }
+  if (!j.is_object()) Fail(path, "top level must be a JSON object");
+  static const std::set<std::string> known = {"format", "version",    "name",      "model",
+                                              "preset", "weave_file", "uv_repeats"};
+  for (const auto& item : j.items()) {
+    if (!known.count(item.key())) {
+      Fail(path, "unknown field '" + item.key() +
+                     "' (valid: format, version, name, model, preset, weave_file, uv_repeats)");
+    }
+  }
+  if (GetString(j, "format", path) != "clothfit-fabric") {
+    Fail(path, "field 'format' must be \"clothfit-fabric\"");
+  }
+  if (!j.contains("version")) Fail(path, "missing field 'version'");
+  if (!j.at("version").is_number_integer() || j.at("version").get<long>() != 1) {
+    Fail(path, "field 'version' must be 1");
+  }
+  Fabric f;
+  f.name = GetString(j, "name", path);
+  f.model = GetString(j, "model", path);
+  f.preset = GetString(j, "preset", path);
+  if (!j.contains("uv_repeats")) Fail(path, "missing field 'uv_repeats'");
+  if (!j.at("uv_repeats").is_number()) Fail(path, "field 'uv_repeats' must be a number");
+  f.uv_repeats = j.at("uv_repeats").get<double>();
+  if (!std::isfinite(f.uv_repeats) || !(f.uv_repeats > 0.0) || f.uv_repeats > 10000.0) {
+    Fail(path, "field 'uv_repeats' must be in (0, 10000], got " + j.at("uv_repeats").dump());
+  }
+  f.weave_period_uv = 1.0 / f.uv_repeats;
+  if (f.model == "irawan") {
+    std::filesystem::path weave;
+    if (j.contains("weave_file")) {
+      weave = GetString(j, "weave_file", path);
+    } else {
+      weave = std::filesystem::path("..") / "weaves" / (f.preset + ".weave");
+    }
+    if (weave.is_relative()) weave = std::filesystem::path(path).parent_path() / weave;
+    try {
+      WeavePattern pattern = LoadWeave(weave.lexically_normal().string());
+      f.bsdf = std::make_unique<IrawanBsdf>(std::move(pattern), f.uv_repeats, f.uv_repeats);
+    } catch (const WeavePatternError& e) {
+      Fail(path, std::string("field 'preset'/'weave_file': ") + e.what());
+    }
+  } else if (f.model == "sadeghi") {
+    if (j.contains("weave_file")) Fail(path, "field 'weave_file' applies to model 'irawan' only");
+    try {
+      f.bsdf = std::make_unique<SadeghiBsdf>(SadeghiPreset(f.preset));
+    } catch (const std::invalid_argument& e) {
+      Fail(path, std::string("field 'preset': ") + e.what());
+    }
+  } else {
+    Fail(path, "field 'model' must be \"irawan\" or \"sadeghi\", got \"" + f.model + "\"");
+  }
+  return f;
+}
+
+Fabric LoadFabric(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FabricError(path + ": cannot open fabric file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  const std::string text = ss.str();
+  if (text.size() > (size_t(1) << 20)) throw FabricError(path + ": file larger than 1 MiB");
+  return ParseFabric(text, path);
+}
+
+}  // namespace clothfit::render

@@ -1,0 +1,462 @@
+#include "render/reference/path_tracer.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+
+#include "render/scene/embree_scene.h"
+#include "render/scene/image_io.h"
+#include "render/scene/lights.h"
+#include "render/scene/sampler.h"
+
+namespace clothfit::render {
+namespace {
+
+using A3 = std::array<double, 3>;
+
+Vec3d V(const A3& a) { return {a[0], a[1], a[2]}; }
+A3 A(const Vec3d& v) { return {v.x, v.y, v.z}; }
+
+// Orthonormal shading frame: x = tangent, y = bitangent, z = normal.
+struct Frame {
+  Vec3d t, b, n;
+  Vec3d ToLocal(const Vec3d& w) const { return {Dot(w, t), Dot(w, b), Dot(w, n)}; }
+  Vec3d ToWorld(const Vec3d& w) const { return t * w.x + b * w.y + n * w.z; }
+};
+
+// atan2 to about 1e-5 rad, for cache prefetch hints only (never for a result).
+double RoughAtan2(double y, double x) {
+  const double ax = std::abs(x), ay = std::abs(y);
+  const double mx = std::max(ax, ay), mn = std::min(ax, ay);
+  if (!(mx > 0.0)) return 0.0;
+  const double a = mn / mx, s = a * a;
+  double r = ((-0.0464964749 * s + 0.15931422) * s - 0.327622764) * s * a + a;
+  if (ay > ax) r = 0.5 * kPi - r;
+  if (x < 0.0) r = kPi - r;
+  return y < 0.0 ? -r : r;
+}
+
+double PowerHeuristic(double a, double b) {
+  const double a2 = a * a, b2 = b * b;
+  return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
+}
+
+}  // namespace
+
+struct PathTracer::Impl {
+  const Scene& scene;
+  const Bsdf& fabric;
+  const Environment* env;
+  EmbreeScene bvh;
+  std::vector<std::unique_ptr<Bsdf>> lamberts;  // per mesh (null for fabric meshes)
+  bool has_env = false;
+  double env_cos_rot = 1.0, env_sin_rot = 0.0;  // of env->rotation_y()
+
+  Impl(const Scene& s, const Bsdf& f, const Environment* e)
+      : scene(s), fabric(f), env(e), bvh(s), has_env(e != nullptr) {
+    if (env) {
+      env_cos_rot = std::cos(env->rotation_y());
+      env_sin_rot = std::sin(env->rotation_y());
+    }
+    for (const Mesh& m : s.meshes) {
+      if (m.is_fabric) {
+        lamberts.emplace_back(nullptr);
+      } else {
+        lamberts.emplace_back(std::make_unique<LambertBsdf>(
+            Rgbd(m.base_color[0], m.base_color[1], m.base_color[2])));
+      }
+    }
+  }
+
+  // A bounce ray that escapes reads the environment map at its direction (Eval, bilinear) after
+  // the intersection test; start loading those texels now so the cache misses overlap the
+  // traversal. A hint only: (u, v) per environment.h's convention, approximately.
+  void PrefetchEnvironment(const Vec3d& d) const {
+    const int w = env->width(), h = env->height();
+    if (w <= 0 || h <= 0) return;
+    const double mx = env_cos_rot * d.x - env_sin_rot * d.z;
+    const double mz = env_sin_rot * d.x + env_cos_rot * d.z;
+    const double u = RoughAtan2(mz, mx) * (0.5 * kInvPi) + 0.5;
+    const double v = RoughAtan2(d.y, std::sqrt(mx * mx + mz * mz)) * kInvPi + 0.5;
+    const double x = u * w - 0.5, y = (1.0 - v) * h - 0.5;
+    if (!std::isfinite(x) || !std::isfinite(y)) return;
+    const int i0 = std::clamp(int(std::floor(x)), 0, w - 1);
+    const int i1 = std::min(i0 + 1, w - 1);
+    const int j0 = std::clamp(int(std::floor(y)), 0, h - 1);
+    const int j1 = std::min(j0 + 1, h - 1);
+    const float* px = env->pixels().data();
+    for (const int j : {j0, j1}) {
+      __builtin_prefetch(px + (size_t(j) * size_t(w) + size_t(i0)) * 3);
+      __builtin_prefetch(px + (size_t(j) * size_t(w) + size_t(i1)) * 3 + 2);
+    }
+  }
+
+  const Bsdf& BsdfOf(int mesh) const {
+    return scene.meshes[size_t(mesh)].is_fabric ? fabric : *lamberts[size_t(mesh)];
+  }
+
+  // Direct light from the punctual lights at a shading point (delta lights: no MIS).
+  Rgbd PunctualLights(const Vec3d& p, const Vec3d& ng, const Frame& fr, const Vec3d& wo_local,
+                      const Bsdf& bsdf, const ShadingPoint& sp, double eps,
+                      uint64_t& rays) const {
+    Rgbd sum(0, 0, 0);
+    for (const Light& light : scene.lights) {
+      const LightSample ls = EvaluateLight(light, p);
+      const Vec3d wi = ls.wi;
+      const double dist = ls.distance;
+      const double scale = ls.scale;
+      if (scale <= 0.0) continue;
+      const Vec3d wi_local = fr.ToLocal(wi);
+      if (wi_local.z <= 0.0 || Dot(wi, ng) <= 0.0) continue;
+      const Rgbd f = bsdf.Eval(wo_local, wi_local, sp);
+      if (f.r <= 0.0 && f.g <= 0.0 && f.b <= 0.0) continue;
+      ++rays;
+      const double tfar = std::isinf(dist) ? dist : dist * (1.0 - 1e-6) - eps;
+      if (bvh.Occluded(A(p + ng * eps), A(wi), 0.0, tfar)) continue;
+      const Rgbd c(light.color[0], light.color[1], light.color[2]);
+      sum += f * c * (scale * wi_local.z);
+    }
+    return sum;
+  }
+
+  struct SampleOut {
+    Rgbd L{0, 0, 0};
+    bool hit = false, fabric = false;
+    SurfaceAttributes first;
+    double depth = 0.0;
+  };
+
+  // Random numbers of the first vertex (the camera ray's hit), drawn stratified per batch:
+  // the BSDF sample (u.x, u.y, uc) and env_samples environment samples (2 each).
+  static constexpr int kMaxFirstEnvSamples = 16;
+  struct FirstVertexU {
+    double bsdf[3];
+    double env[2 * kMaxFirstEnvSamples];
+  };
+
+  // first: stratified numbers for the first vertex, or null to draw them from rng (then one
+  // environment sample). env_samples: environment samples at the first vertex (Veach's
+  // multi-sample MIS: with n_l light samples and one BSDF sample, the power heuristic weighs
+  // n_l pdf_l against pdf_b; each light sample counts 1 / n_l).
+  SampleOut TracePath(const Vec3d& org0, const Vec3d& dir0, Pcg32& rng, const FirstVertexU* first,
+                      int env_samples, const RenderSettings& st, uint64_t& rays) const {
+    SampleOut out;
+    Vec3d org = org0, dir = dir0;
+    Rgbd T(1, 1, 1);
+    double prev_bsdf_pdf = 0.0, prev_light_count = 1.0;
+    bool specular_bounce = true;  // camera ray: env seen directly with weight 1
+    const double eps = 1e-5 * bvh.scale();
+    for (int depth = 0;; ++depth) {
+      ++rays;
+      const Hit h = bvh.Intersect(A(org), A(dir), depth == 0 ? 0.0 : eps);
+      if (!h.valid) {
+        if (has_env) {
+          const Rgbd Le = env->Eval(dir);
+          const double w = specular_bounce
+                               ? 1.0
+                               : PowerHeuristic(prev_bsdf_pdf, prev_light_count * env->Pdf(dir));
+          out.L += T * Le * w;
+        } else if (depth == 0) {
+          out.L += Rgbd(scene.card.background[0], scene.card.background[1],
+                        scene.card.background[2]);
+        }
+        break;
+      }
+      SurfaceAttributes a = bvh.Attributes(h);
+      if (depth == 0) {
+        out.hit = true;
+        out.fabric = scene.meshes[size_t(h.mesh)].is_fabric;
+        out.first = a;
+        out.depth = h.t;
+      }
+      if (depth >= st.max_depth) break;
+      // Two-sided: put the frame on the viewer's side of the geometric normal.
+      Vec3d ng = V(h.ng), n = V(a.normal);
+      const Vec3d wo = dir * -1.0;
+      if (Dot(ng, wo) < 0.0) ng = ng * -1.0;
+      if (Dot(n, ng) < 0.0) n = n * -1.0;
+      Vec3d t = V(a.tangent);
+      t = Normalize(t - n * Dot(t, n));
+      const Vec3d b = Cross(n, t) * a.tangent_sign;
+      const Frame fr{t, b, n};
+      const Vec3d wo_local = fr.ToLocal(wo);
+      if (wo_local.z <= 0.0) break;  // shading normal facing away: no contribution
+      const Bsdf& bsdf = BsdfOf(h.mesh);
+      const ShadingPoint sp{{a.uv[0], a.uv[1]}};
+      const Vec3d p = V(a.position);
+
+      // Next-event estimation: punctual lights, then the environment (MIS).
+      out.L += T * PunctualLights(p, ng, fr, wo_local, bsdf, sp, eps, rays);
+      const int n_l = depth == 0 && first ? env_samples : 1;
+      if (has_env) {
+        for (int k = 0; k < n_l; ++k) {
+          double pdf_l = 0.0, u1, u2;
+          if (depth == 0 && first) {
+            u1 = first->env[2 * k];
+            u2 = first->env[2 * k + 1];
+          } else {
+            u1 = rng.Uniform();
+            u2 = rng.Uniform();
+          }
+          // Radiance looked up only for a sample that contributes (below).
+          const Vec3d wi = env->Sample(u1, u2, &pdf_l, nullptr);
+          const Vec3d wi_local = fr.ToLocal(wi);
+          if (!(pdf_l > 0.0 && wi_local.z > 0.0 && Dot(wi, ng) > 0.0)) continue;
+          const Rgbd f = bsdf.Eval(wo_local, wi_local, sp);
+          if (!(f.r > 0.0 || f.g > 0.0 || f.b > 0.0)) continue;
+          ++rays;
+          if (bvh.Occluded(A(p + ng * eps), A(wi), 0.0, std::numeric_limits<double>::infinity())) {
+            continue;
+          }
+          const Rgbd Le = env->Eval(wi);
+          const double pdf_b = bsdf.Pdf(wo_local, wi_local, sp);
+          const double w = PowerHeuristic(n_l * pdf_l, pdf_b);
+          out.L += T * f * Le * (wi_local.z * w / (n_l * pdf_l));
+        }
+      }
+
+      // BSDF sampling continues the path.
+      BsdfSample bs;
+      Point2d u;
+      double uc;
+      if (depth == 0 && first) {
+        u = {first->bsdf[0], first->bsdf[1]};
+        uc = first->bsdf[2];
+      } else {
+        u.x = rng.Uniform();
+        u.y = rng.Uniform();
+        uc = rng.Uniform();
+      }
+      if (!bsdf.Sample(wo_local, u, uc, sp, &bs) || bs.pdf <= 0.0) break;
+      if (bs.wi.z <= 0.0) break;
+      const Vec3d wi = fr.ToWorld(bs.wi);
+      if (Dot(wi, ng) <= 0.0) break;
+      T = T * bs.f * (bs.wi.z / bs.pdf);
+      prev_bsdf_pdf = bs.pdf;
+      prev_light_count = n_l;
+      specular_bounce = false;
+      // Without an environment, an escaping bounce ray carries nothing: stop early.
+      org = p + ng * eps;
+      dir = wi;
+      if (has_env) PrefetchEnvironment(dir);
+      if (depth + 1 >= st.rr_start_depth) {
+        const double q = std::max(0.05, 1.0 - std::max({T.r, T.g, T.b}));
+        if (rng.Uniform() < q) break;
+        T = T * (1.0 / (1.0 - q));
+      }
+    }
+    return out;
+  }
+};
+
+PathTracer::PathTracer(const Scene& scene, const Bsdf& fabric, const Environment* environment)
+    : impl_(std::make_unique<Impl>(scene, fabric, environment)) {}
+PathTracer::~PathTracer() = default;
+
+RenderResult PathTracer::Render(const RenderSettings& st,
+                                const std::function<void(int, int)>& progress) const {
+  const auto t0 = std::chrono::steady_clock::now();
+  const Scene& scene = impl_->scene;
+  const int W = scene.card.width, H = scene.card.height;
+  RenderResult r;
+  r.width = W;
+  r.height = H;
+  const size_t np = size_t(W) * size_t(H);
+  r.rgb.assign(np * 3, 0.f);
+  r.std_error.assign(np * 3, 0.f);
+  r.coverage.assign(np, 0.f);
+  r.fabric.assign(np, 0.f);
+  if (st.aovs.normal) r.normal.assign(np * 3, 0.f);
+  if (st.aovs.position) r.position.assign(np * 3, 0.f);
+  if (st.aovs.tangent) r.tangent.assign(np * 3, 0.f);
+  if (st.aovs.uv) r.uv.assign(np * 2, 0.f);
+  if (st.aovs.depth) r.depth.assign(np, 0.f);
+
+  // Batches for the standard-error estimate: K = 16 batches of M = spp / 16 stratified
+  // samples when spp is a multiple of 16 (>= 32), else K = spp batches of one i.i.d. sample.
+  const int K = (st.spp >= 32 && st.spp % 16 == 0) ? 16 : st.spp;
+  const int M = st.spp / K;
+  r.batches = K;
+  const int env_samples = std::clamp(st.first_env_samples, 1, Impl::kMaxFirstEnvSamples);
+  const int tiles_x = (W + st.tile_size - 1) / st.tile_size;
+  const int tiles_y = (H + st.tile_size - 1) / st.tile_size;
+  const int tiles = tiles_x * tiles_y;
+  std::atomic<int> done{0};
+  std::atomic<uint64_t> total_rays{0};
+  std::mutex progress_mutex;
+
+  tbb::parallel_for(0, tiles, [&](int tile) {
+    const int tx = tile % tiles_x, ty = tile / tiles_x;
+    uint64_t rays = 0;
+    BatchStrata strata({{2, 1}, {1, 1}, {2, env_samples}});
+    for (int y = ty * st.tile_size; y < std::min(H, (ty + 1) * st.tile_size); ++y) {
+      for (int x = tx * st.tile_size; x < std::min(W, (tx + 1) * st.tile_size); ++x) {
+        const size_t pix = size_t(y) * size_t(W) + size_t(x);
+        double mean[3] = {0, 0, 0}, m2[3] = {0, 0, 0};
+        int hits = 0, fabric_hits = 0;
+        double aov_n[3] = {0, 0, 0}, aov_p[3] = {0, 0, 0}, aov_t[3] = {0, 0, 0}, aov_uv[2] = {0, 0};
+        double aov_z = 0.0;
+        // Pixel positions: K independently shifted copies (Cranley-Patterson rotations) of
+        // an M-point stratified set (Hammersley), K x M = spp. Each batch's mean is an
+        // unbiased estimate and the K batch means are i.i.d., so the standard error is
+        // estimated from their spread: stratification lowers the error (the weave's
+        // sub-pixel structure is antialiased far better than by i.i.d. jitter) and the
+        // estimate of it stays honest.
+        double batch_sum[3] = {0, 0, 0};
+        int batch_count = 0;
+        Pcg32 shift_rng = PixelSampler(st.seed ^ 0xA5A5A5A5DEADBEEFull, pix, 0);
+        double shift_u = 0.0, shift_v = 0.0;
+        for (int s = 0; s < st.spp; ++s) {
+          const int m = s % M, b = s / M;  // sample m of batch b
+          if (m == 0) {
+            shift_u = shift_rng.Uniform();
+            shift_v = shift_rng.Uniform();
+            if (M > 1) strata.Reset(M, shift_rng);
+          }
+          Impl::FirstVertexU first;
+          if (M > 1) {
+            strata.Get(0, m, 0, first.bsdf);
+            strata.Get(1, m, 0, first.bsdf + 2);
+            for (int k = 0; k < env_samples; ++k) strata.Get(2, m, k, first.env + 2 * k);
+          }
+          Pcg32 rng = PixelSampler(st.seed, pix, uint64_t(s));
+          double ju = (m + 0.5) / M + shift_u, jv = RadicalInverse2(uint32_t(m)) + shift_v;
+          ju -= std::floor(ju);
+          jv -= std::floor(jv);
+          if (M == 1) {
+            ju = rng.Uniform();
+            jv = rng.Uniform();
+          }
+          A3 org, dir;
+          scene.CameraRay(x + ju, y + jv, org, dir);
+          Impl::SampleOut so = impl_->TracePath(V(org), V(dir), rng, M > 1 ? &first : nullptr,
+                                                env_samples, st, rays);
+          double v[3] = {so.L.r, so.L.g, so.L.b};
+          for (int c = 0; c < 3; ++c) {
+            if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel
+            if (st.max_sample_value > 0.0) v[c] = std::min(v[c], st.max_sample_value);
+            batch_sum[c] += v[c];
+          }
+          if (m == M - 1) {  // batch complete: Welford over batch means
+            ++batch_count;
+            for (int c = 0; c < 3; ++c) {
+              const double bm = batch_sum[c] / M;
+              const double delta = bm - mean[c];
+              mean[c] += delta / batch_count;
+              m2[c] += delta * (bm - mean[c]);
+              batch_sum[c] = 0.0;
+            }
+          }
+          (void)b;
+          if (so.hit) {
+            ++hits;
+            if (so.fabric) ++fabric_hits;
+            for (int c = 0; c < 3; ++c) {
+              aov_n[c] += so.first.normal[size_t(c)];
+              aov_p[c] += so.first.position[size_t(c)];
+              aov_t[c] += so.first.tangent[size_t(c)];
+            }
+            aov_uv[0] += so.first.uv[0];
+            aov_uv[1] += so.first.uv[1];
+            aov_z += so.depth;
+          }
+        }
+        for (int c = 0; c < 3; ++c) {
+          r.rgb[pix * 3 + size_t(c)] = float(mean[c]);
+          const double var = K > 1 ? m2[c] / (K - 1) : 0.0;  // variance of one batch mean
+          r.std_error[pix * 3 + size_t(c)] = float(std::sqrt(var / K));
+        }
+        r.coverage[pix] = float(hits) / float(st.spp);
+        r.fabric[pix] = float(fabric_hits) / float(st.spp);
+        if (hits > 0) {
+          const double inv = 1.0 / hits;
+          for (int c = 0; c < 3; ++c) {
+            if (st.aovs.normal) r.normal[pix * 3 + size_t(c)] = float(aov_n[c] * inv);
+            if (st.aovs.position) r.position[pix * 3 + size_t(c)] = float(aov_p[c] * inv);
+            if (st.aovs.tangent) r.tangent[pix * 3 + size_t(c)] = float(aov_t[c] * inv);
+          }
+          if (st.aovs.uv) {
+            r.uv[pix * 2] = float(aov_uv[0] * inv);
+            r.uv[pix * 2 + 1] = float(aov_uv[1] * inv);
+          }
+          if (st.aovs.depth) r.depth[pix] = float(aov_z * inv);
+        }
+      }
+    }
+    total_rays += rays;
+    const int d = ++done;
+    if (progress) {
+      std::lock_guard<std::mutex> lock(progress_mutex);
+      progress(d, tiles);
+    }
+  });
+
+  r.rays = total_rays.load();
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  double se_sum = 0.0, v_sum = 0.0, rel_sum = 0.0;
+  size_t rel_n = 0;
+  for (size_t p = 0; p < np; ++p) {
+    double v = 0.0, se = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      v += double(r.rgb[p * 3 + size_t(c)]);
+      se += double(r.std_error[p * 3 + size_t(c)]);
+    }
+    se_sum += se;
+    v_sum += v;
+    if (r.coverage[p] > 0.0f && v > 1e-6) {
+      rel_sum += se / v;
+      ++rel_n;
+    }
+  }
+  r.mean_std_error = se_sum / double(np * 3);
+  r.mean_value = v_sum / double(np * 3);
+  r.mean_relative_std_error = rel_n ? rel_sum / double(rel_n) : 0.0;
+  return r;
+}
+
+void WriteRenderExr(const std::string& path, const RenderResult& r,
+                    const std::vector<std::pair<std::string, std::string>>& extra) {
+  io::Image img;
+  img.width = r.width;
+  img.height = r.height;
+  struct Plane {
+    std::string name;
+    const std::vector<float>* data;
+    int stride, offset;
+  };
+  std::vector<Plane> planes = {{"R", &r.rgb, 3, 0},          {"G", &r.rgb, 3, 1},
+                               {"B", &r.rgb, 3, 2},          {"A", &r.coverage, 1, 0},
+                               {"fabric", &r.fabric, 1, 0},  {"stderr.R", &r.std_error, 3, 0},
+                               {"stderr.G", &r.std_error, 3, 1}, {"stderr.B", &r.std_error, 3, 2}};
+  auto add3 = [&](const char* prefix, const std::vector<float>& v) {
+    if (v.empty()) return;
+    const char* s[3] = {"X", "Y", "Z"};
+    for (int c = 0; c < 3; ++c) planes.push_back({std::string(prefix) + "." + s[c], &v, 3, c});
+  };
+  add3("N", r.normal);
+  add3("P", r.position);
+  add3("T", r.tangent);
+  if (!r.uv.empty()) {
+    planes.push_back({"uv.U", &r.uv, 2, 0});
+    planes.push_back({"uv.V", &r.uv, 2, 1});
+  }
+  if (!r.depth.empty()) planes.push_back({"Z", &r.depth, 1, 0});
+  const size_t np = size_t(r.width) * size_t(r.height);
+  img.pixels.resize(np * planes.size());
+  for (const Plane& pl : planes) img.channel_names.push_back(pl.name);
+  for (size_t p = 0; p < np; ++p)
+    for (size_t k = 0; k < planes.size(); ++k)
+      img.pixels[p * planes.size() + k] =
+          (*planes[k].data)[p * size_t(planes[k].stride) + size_t(planes[k].offset)];
+  for (const auto& [k, v] : extra) img.metadata[k] = v;
+  img.metadata["clothfit:colour_space"] = "linear Rec.709 / sRGB primaries, scene-referred radiance";
+  img.metadata["clothfit:stderr"] = "stderr.* = standard error of the pixel mean, sqrt(var/n)";
+  img.metadata["clothfit:alpha"] = "A = fraction of camera samples that hit geometry";
+  io::WriteExr(path, img);
+}
+
+}  // namespace clothfit::render

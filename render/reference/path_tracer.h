@@ -1,0 +1,89 @@
+// render/reference/path_tracer.h: the reference renderer. Unidirectional path tracing with next-event
+// estimation, environment importance sampling, MIS (power heuristic) between BSDF and
+// environment sampling, Russian roulette, deterministic per-pixel streams and TBB tiles.
+// At the camera ray's hit: first_env_samples environment samples (multi-sample MIS), and the
+// random numbers of that vertex stratified across the pixel's batch (docs/reference-renderer.md).
+//
+// What is skipped when the scene does not need it: no environment -> no environment
+// sampling (escaping rays see the card's background only from the camera); punctual lights
+// are delta lights -> sampled once each, no MIS; AOV buffers only when requested.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "render/reference/bsdf.h"
+#include "render/scene/environment.h"
+#include "render/scene/scene.h"
+
+namespace clothfit::render {
+
+struct AovSet {
+  bool normal = false, position = false, uv = false, tangent = false, depth = false;
+  bool any() const { return normal || position || uv || tangent || depth; }
+};
+
+// Version of the reference renderer's sampling: bumped whenever a change alters the images a
+// seed produces (even when the expectation is unchanged), so content-keyed caches of reference
+// renders (bin/cmd_fit.cpp CachedReference) never mix renders of different renderers.
+// 2: stratified first-vertex environment/BSDF numbers and two environment samples there.
+inline constexpr int kReferenceRendererVersion = 2;
+
+struct RenderSettings {
+  int spp = 64;
+  int max_depth = 8;       // path vertices after the camera (1 = direct light only)
+  int rr_start_depth = 3;  // Russian roulette from this depth on
+  uint64_t seed = 1;
+  int tile_size = 16;
+  // Environment samples at the camera ray's hit (stratified over the pixel's batch; deeper
+  // vertices take one). Only with batches of more than one sample (spp >= 32, a multiple of 16).
+  // 2: measured best over the canonical scenes (docs/reference-renderer.md).
+  int first_env_samples = 2;
+  AovSet aovs;
+  double max_sample_value = 0.0;  // > 0: clamp each sample's channels (biased; 0 = off)
+};
+
+struct RenderResult {
+  int width = 0, height = 0;
+  std::vector<float> rgb;        // mean radiance, linear, 3 per pixel, top row first
+  std::vector<float> std_error;  // standard error of the pixel mean per channel, from the
+                                 // spread of `batches` i.i.d. batch means (see Render)
+  int batches = 0;
+  std::vector<float> coverage;   // fraction of camera samples hitting geometry (alpha)
+  std::vector<float> fabric;     // fraction of camera samples hitting the fabric material
+  // AOVs (first-hit, averaged over the pixel's samples that hit; empty unless requested)
+  std::vector<float> normal, position, tangent;  // 3 per pixel
+  std::vector<float> uv;                         // 2 per pixel
+  std::vector<float> depth;                      // distance along the camera ray
+  // Statistics
+  double seconds = 0.0;
+  uint64_t rays = 0;                              // all rays traced (camera, bounce, shadow)
+  double mean_relative_std_error = 0.0;           // mean over covered pixels of stderr / mean value
+  double mean_std_error = 0.0, mean_value = 0.0;  // over all pixels and channels
+};
+
+// Material assignment: the fabric BSDF for meshes with is_fabric, Lambert(base_color) for
+// every other mesh. `environment` may be null (no environment lighting).
+class PathTracer {
+ public:
+  PathTracer(const Scene& scene, const Bsdf& fabric, const Environment* environment);
+  ~PathTracer();
+  // `progress(done_tiles, total_tiles)` may be empty; called from worker threads, serialised.
+  RenderResult Render(const RenderSettings& settings,
+                      const std::function<void(int, int)>& progress = {}) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Writes the result as one EXR: R, G, B, A (coverage), fabric, stderr.R/G/B, and the
+// requested AOVs (N.X/Y/Z, P.X/Y/Z, T.X/Y/Z, uv.U/V, Z), with metadata `extra`.
+void WriteRenderExr(const std::string& path, const RenderResult& r,
+                    const std::vector<std::pair<std::string, std::string>>& extra);
+
+}  // namespace clothfit::render

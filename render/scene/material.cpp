@@ -1,0 +1,246 @@
+#include "render/scene/material.h"
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "brdf/gltf_sheen.h"
+#include "brdf/physical_sheen.h"
+#include "brdf/standard.h"
+#include "render/scene/image_io.h"
+
+namespace clothfit::render {
+
+using nlohmann::json;
+
+std::string ToString(ModelKind m) {
+  switch (m) {
+    case ModelKind::kCloth: return "cloth";
+    case ModelKind::kStandard: return "standard";
+    case ModelKind::kPhysicalSheen: return "physical-sheen";
+    case ModelKind::kGltfSheen: return "gltf-sheen";
+  }
+  return "?";
+}
+
+ModelKind ParseModelKind(const std::string& s) {
+  if (s == "cloth") return ModelKind::kCloth;
+  if (s == "standard") return ModelKind::kStandard;
+  if (s == "physical-sheen") return ModelKind::kPhysicalSheen;
+  if (s == "gltf-sheen") return ModelKind::kGltfSheen;
+  throw std::invalid_argument("unknown model '" + s +
+                              "' (valid: cloth, standard, physical-sheen, gltf-sheen)");
+}
+
+std::span<const ParamInfo> ParameterTable(ModelKind m) {
+  switch (m) {
+    case ModelKind::kCloth: return cloth::kParameterTable;
+    case ModelKind::kStandard: return standard::kParameterTable;
+    case ModelKind::kPhysicalSheen: return physical_sheen::kParameterTable;
+    case ModelKind::kGltfSheen: return gltf_sheen::kParameterTable;
+  }
+  return {};
+}
+
+std::string EngineOf(ModelKind m) {
+  switch (m) {
+    case ModelKind::kCloth: return "Filament cloth shading model / seed MeshClothMaterial (three.js fork)";
+    case ModelKind::kStandard: return std::string(standard::kEngine);
+    case ModelKind::kPhysicalSheen: return std::string(physical_sheen::kEngine);
+    case ModelKind::kGltfSheen: return std::string(gltf_sheen::kEngine);
+  }
+  return "?";
+}
+
+int MaterialPreset::Offset(const std::string& name) const {
+  int off = 0;
+  for (const ParamInfo& p : ParameterTable(model)) {
+    if (p.name == name) return off;
+    off += p.size;
+  }
+  throw std::invalid_argument("model " + ToString(model) + " has no parameter '" + name + "'");
+}
+
+MaterialPreset DefaultPreset(ModelKind m) {
+  MaterialPreset p;
+  p.model = m;
+  for (const ParamInfo& info : ParameterTable(m))
+    for (int c = 0; c < info.size; ++c) p.values.push_back(info.def[size_t(c)]);
+  return p;
+}
+
+namespace {
+
+[[noreturn]] void Fail(const std::string& where, const std::string& field, const std::string& msg) {
+  throw MaterialError(where + ": " + field + ": " + msg);
+}
+
+double Number(const json& v, const std::string& where, const std::string& field) {
+  if (!v.is_number()) Fail(where, field, "expected a number, got " + std::string(v.type_name()));
+  const double x = v.get<double>();
+  if (!std::isfinite(x)) Fail(where, field, "not finite");
+  return x;
+}
+
+}  // namespace
+
+MaterialPreset ParsePreset(const json& j, const std::string& where) {
+  if (!j.is_object()) Fail(where, "(top level)", "expected a JSON object");
+  if (!j.contains("schema") || j["schema"] != "clothfit.preset")
+    Fail(where, "schema", "expected \"clothfit.preset\"");
+  if (!j.contains("version") || !j["version"].is_number_integer())
+    Fail(where, "version", "missing or not an integer");
+  if (j["version"].get<int>() != 1)
+    Fail(where, "version", "unsupported version " + j["version"].dump() + " (this build reads 1)");
+  if (!j.contains("model") || !j["model"].is_string()) Fail(where, "model", "missing or not a string");
+  MaterialPreset p;
+  try {
+    p = DefaultPreset(ParseModelKind(j["model"].get<std::string>()));
+  } catch (const std::invalid_argument& e) {
+    Fail(where, "model", e.what());
+  }
+  if (j.contains("cloth")) {
+    if (p.model != ModelKind::kCloth) Fail(where, "cloth", "only allowed with model \"cloth\"");
+    const json& c = j["cloth"];
+    if (!c.is_object()) Fail(where, "cloth", "expected an object");
+    for (auto it = c.begin(); it != c.end(); ++it) {
+      const std::string k = it.key();
+      const std::string f = "cloth." + k;
+      if (k == "variant") {
+        const std::string v = it->is_string() ? it->get<std::string>() : "";
+        if (v == "filament") p.cloth.variant = cloth::Variant::kFilament;
+        else if (v == "seed-threejs") p.cloth.variant = cloth::Variant::kSeedThreejs;
+        else Fail(where, f, "expected \"filament\" or \"seed-threejs\"");
+      } else if (k == "sheen_default") {
+        const std::string v = it->is_string() ? it->get<std::string>() : "";
+        if (v == "explicit") p.cloth.sheen_default = cloth::SheenDefault::kExplicit;
+        else if (v == "sqrt-base-color") p.cloth.sheen_default = cloth::SheenDefault::kSqrtBaseColor;
+        else if (v == "white") p.cloth.sheen_default = cloth::SheenDefault::kWhite;
+        else Fail(where, f, "expected \"explicit\", \"sqrt-base-color\" or \"white\"");
+      } else if (k == "subsurface") {
+        if (!it->is_boolean()) Fail(where, f, "expected true or false");
+        p.cloth.subsurface = it->get<bool>();
+      } else if (k == "platform") {
+        const std::string v = it->is_string() ? it->get<std::string>() : "";
+        if (v == "desktop") p.cloth.platform = Platform::kDesktop;
+        else if (v == "mobile") p.cloth.platform = Platform::kMobile;
+        else Fail(where, f, "expected \"desktop\" or \"mobile\"");
+      } else {
+        Fail(where, f, "unknown key (valid: variant, sheen_default, subsurface, platform)");
+      }
+    }
+  }
+  if (!j.contains("parameters") || !j["parameters"].is_object())
+    Fail(where, "parameters", "missing or not an object");
+  const auto table = ParameterTable(p.model);
+  for (auto it = j["parameters"].begin(); it != j["parameters"].end(); ++it) {
+    const std::string name = it.key();
+    const std::string f = "parameters." + name;
+    int off = 0;
+    const ParamInfo* info = nullptr;
+    for (const ParamInfo& q : table) {
+      if (q.name == name) {
+        info = &q;
+        break;
+      }
+      off += q.size;
+    }
+    if (!info) {
+      std::string valid;
+      for (const ParamInfo& q : table) valid += (valid.empty() ? "" : ", ") + std::string(q.name);
+      Fail(where, f, "unknown parameter for model " + ToString(p.model) + " (valid: " + valid + ")");
+    }
+    std::vector<double> v;
+    if (info->size == 1) {
+      v.push_back(Number(*it, where, f));
+    } else {
+      if (!it->is_array() || it->size() != size_t(info->size))
+        Fail(where, f, "expected an array of " + std::to_string(info->size) + " numbers");
+      for (size_t c = 0; c < it->size(); ++c)
+        v.push_back(Number((*it)[c], where, f + "[" + std::to_string(c) + "]"));
+    }
+    // Colours and metalness must be in range; roughness values may be given below the
+    // engine clamp (the engine clamps them), but not outside [0, 1].
+    const bool is_roughness = name.find("roughness") != std::string::npos;
+    const double lo = is_roughness ? 0.0 : info->lower;
+    for (size_t c = 0; c < v.size(); ++c) {
+      if (v[c] < lo || v[c] > info->upper) {
+        std::ostringstream os;
+        os << "value " << v[c] << " outside [" << lo << ", " << info->upper << "]";
+        Fail(where, info->size == 1 ? f : f + "[" + std::to_string(c) + "]", os.str());
+      }
+      p.values[size_t(off) + c] = v[c];
+    }
+  }
+  static const char* kKnown[] = {"schema", "version", "model", "engine", "cloth", "conventions",
+                                 "parameters"};
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    bool known = false;
+    for (const char* k : kKnown) known = known || it.key() == k;
+    if (!known) p.extra[it.key()] = *it;
+  }
+  return p;
+}
+
+MaterialPreset ReadPreset(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw MaterialError(path + ": cannot open material preset");
+  json j;
+  try {
+    j = json::parse(f);
+  } catch (const json::parse_error& e) {
+    // e.byte is the offset; report line and column.
+    std::ifstream g(path);
+    std::string text((std::istreambuf_iterator<char>(g)), std::istreambuf_iterator<char>());
+    size_t line = 1, col = 1;
+    for (size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
+      if (text[i] == '\n') {
+        ++line;
+        col = 1;
+      } else {
+        ++col;
+      }
+    }
+    throw MaterialError(path + ":" + std::to_string(line) + ":" + std::to_string(col) +
+                        ": malformed JSON: " + e.what());
+  }
+  return ParsePreset(j, path);
+}
+
+json PresetToJson(const MaterialPreset& p) {
+  json j = json::object();
+  j["schema"] = "clothfit.preset";
+  j["version"] = 1;
+  j["model"] = ToString(p.model);
+  j["engine"] = EngineOf(p.model);
+  if (p.model == ModelKind::kCloth) {
+    j["cloth"] = {{"variant", std::string(cloth::ToString(p.cloth.variant))},
+                  {"sheen_default", std::string(cloth::ToString(p.cloth.sheen_default))},
+                  {"subsurface", p.cloth.subsurface},
+                  {"platform", p.cloth.platform == Platform::kMobile ? "mobile" : "desktop"}};
+  }
+  j["conventions"] = {{"colour_space", "linear sRGB (Rec.709 primaries), not gamma-encoded"},
+                      {"roughness", "perceptual r in [0, 1]; the models use alpha = r^2"}};
+  json params = json::object();
+  int off = 0;
+  for (const ParamInfo& info : ParameterTable(p.model)) {
+    if (info.size == 1) {
+      params[std::string(info.name)] = p.values[size_t(off)];
+    } else {
+      params[std::string(info.name)] = json::array(
+          {p.values[size_t(off)], p.values[size_t(off) + 1], p.values[size_t(off) + 2]});
+    }
+    off += info.size;
+  }
+  j["parameters"] = params;
+  for (auto it = p.extra.begin(); it != p.extra.end(); ++it) j[it.key()] = *it;
+  return j;
+}
+
+void WritePreset(const std::string& path, const MaterialPreset& p) {
+  for (double v : p.values)
+    if (!std::isfinite(v)) throw MaterialError(path + ": refusing to write a non-finite parameter");
+  io::WriteTextAtomic(path, PresetToJson(p).dump(2) + "\n");
+}
+
+}  // namespace clothfit::render

@@ -1,0 +1,64 @@
+// render/scene/material.h: the material preset format (JSON, versioned): what the preview renders,
+// what the fitter writes, what `clothfit convert` will emit. docs/preset-format.md.
+//
+//   {
+//     "schema": "clothfit.preset", "version": 1,
+//     "model": "cloth" | "standard" | "physical-sheen" | "gltf-sheen",
+//     "engine": "<engine release the parameters are meant for>"        (written, informative)
+//     "cloth": {"variant": "filament" | "seed-threejs",
+//               "sheen_default": "explicit" | "sqrt-base-color" | "white",
+//               "subsurface": true | false, "platform": "desktop" | "mobile"}   (cloth only)
+//     "conventions": {"colour_space": "linear sRGB (Rec.709 primaries)",
+//                     "roughness": "perceptual r; alpha = r^2"}          (written, informative)
+//     "parameters": {"<name>": number | [r, g, b], ...}   names from the model's parameter
+//                   table (brdf/*.h kParameterTable); missing ones take the table default
+//                   (sheen_color of a cloth preset with sheen_default != explicit is ignored)
+//     ... any further top-level keys (e.g. "fit", "provenance") are kept but not interpreted
+//   }
+// Reading validates every field and range and throws MaterialError naming the file and the
+// field; unknown parameter names and unknown keys inside "cloth"/"parameters" are errors.
+#pragma once
+
+#include <map>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "brdf/cloth.h"
+#include "brdf/params.h"
+
+namespace clothfit::render {
+
+class MaterialError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+enum class ModelKind { kCloth, kStandard, kPhysicalSheen, kGltfSheen };
+
+std::string ToString(ModelKind m);
+ModelKind ParseModelKind(const std::string& s);  // throws std::invalid_argument
+std::span<const ParamInfo> ParameterTable(ModelKind m);
+std::string EngineOf(ModelKind m);
+
+struct MaterialPreset {
+  ModelKind model = ModelKind::kCloth;
+  cloth::Options cloth;                             // used when model == kCloth
+  std::vector<double> values;                       // flat, in parameter-table order
+  nlohmann::json extra = nlohmann::json::object();  // uninterpreted top-level keys
+
+  // Flat index of a named parameter (throws std::invalid_argument).
+  int Offset(const std::string& name) const;
+};
+
+// Defaults of a model (parameter-table defaults).
+MaterialPreset DefaultPreset(ModelKind m);
+
+MaterialPreset ReadPreset(const std::string& path);
+MaterialPreset ParsePreset(const nlohmann::json& j, const std::string& where);
+nlohmann::json PresetToJson(const MaterialPreset& p);
+// Writes atomically; refuses non-finite values (nlohmann would write them as null).
+void WritePreset(const std::string& path, const MaterialPreset& p);
+
+}  // namespace clothfit::render
