@@ -10,6 +10,7 @@
 
 #include "render/reference/irawan.h"
 #include "render/reference/sadeghi.h"
+#include "render/reference/simple_bsdf.h"
 #include "render/reference/weave_pattern.h"
 
 namespace clothfit::render {
@@ -43,6 +44,24 @@ std::string GetString(const nlohmann::json& j, const char* field, const std::str
   return s;
 }
 
+// An RGB triple of finite numbers in [0, 1] (reflectances).
+Rgbd GetRgb01(const nlohmann::json& j, const char* field, const std::string& path) {
+  if (!j.contains(field)) Fail(path, std::string("missing field '") + field + "'");
+  const auto& v = j.at(field);
+  if (!v.is_array() || v.size() != 3) {
+    Fail(path, std::string("field '") + field + "' must be an array of 3 numbers");
+  }
+  double c[3];
+  for (size_t i = 0; i < 3; ++i) {
+    if (!v[i].is_number()) Fail(path, std::string("field '") + field + "' must hold numbers");
+    c[i] = v[i].get<double>();
+    if (!std::isfinite(c[i]) || c[i] < 0.0 || c[i] > 1.0) {
+      Fail(path, std::string("field '") + field + "' must be in [0, 1], got " + v.dump());
+    }
+  }
+  return Rgbd(c[0], c[1], c[2]);
+}
+
 }  // namespace
 
 Fabric ParseFabric(const std::string& text, const std::string& path) {
@@ -53,12 +72,14 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
     Fail(path, "JSON syntax error at " + LineColumn(text, e.byte) + ": " + e.what());
   }
   if (!j.is_object()) Fail(path, "top level must be a JSON object");
-  static const std::set<std::string> known = {"format", "version",    "name",      "model",
-                                              "preset", "weave_file", "uv_repeats"};
+  static const std::set<std::string> known = {"format", "version",    "name",       "model",
+                                              "preset", "weave_file", "uv_repeats", "albedo",
+                                              "colour", "roughness"};
   for (const auto& item : j.items()) {
     if (!known.count(item.key())) {
       Fail(path, "unknown field '" + item.key() +
-                     "' (valid: format, version, name, model, preset, weave_file, uv_repeats)");
+                     "' (valid: format, version, name, model, preset, weave_file, uv_repeats, "
+                     "albedo, colour, roughness)");
     }
   }
   if (GetString(j, "format", path) != "clothfit-fabric") {
@@ -71,6 +92,31 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
   Fabric f;
   f.name = GetString(j, "name", path);
   f.model = GetString(j, "model", path);
+  // Simple materials (simple_bsdf.h): no weave, no preset; for comparisons with other renderers.
+  if (f.model == "lambert" || f.model == "ggx_conductor") {
+    for (const char* woven : {"preset", "weave_file", "uv_repeats"}) {
+      if (j.contains(woven)) Fail(path, std::string("field '") + woven + "' applies to woven models only");
+    }
+    const char* other = f.model == "lambert" ? "colour" : "albedo";
+    if (j.contains(other)) Fail(path, std::string("field '") + other + "' does not apply to model '" + f.model + "'");
+    if (f.model == "lambert") {
+      if (j.contains("roughness")) Fail(path, "field 'roughness' does not apply to model 'lambert'");
+      f.bsdf = std::make_unique<LambertBsdf>(GetRgb01(j, "albedo", path));
+    } else {
+      if (!j.contains("roughness") || !j.at("roughness").is_number()) {
+        Fail(path, "field 'roughness' must be a number in [0, 1]");
+      }
+      const double r = j.at("roughness").get<double>();
+      if (!std::isfinite(r) || r < 0.0 || r > 1.0) {
+        Fail(path, "field 'roughness' must be in [0, 1], got " + j.at("roughness").dump());
+      }
+      f.bsdf = std::make_unique<GgxConductorBsdf>(GetRgb01(j, "colour", path), r);
+    }
+    return f;
+  }
+  for (const char* simple : {"albedo", "colour", "roughness"}) {
+    if (j.contains(simple)) Fail(path, std::string("field '") + simple + "' applies to models lambert/ggx_conductor only");
+  }
   f.preset = GetString(j, "preset", path);
   if (!j.contains("uv_repeats")) Fail(path, "missing field 'uv_repeats'");
   if (!j.at("uv_repeats").is_number()) Fail(path, "field 'uv_repeats' must be a number");
@@ -101,7 +147,8 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
       Fail(path, std::string("field 'preset': ") + e.what());
     }
   } else {
-    Fail(path, "field 'model' must be \"irawan\" or \"sadeghi\", got \"" + f.model + "\"");
+    Fail(path, "field 'model' must be \"irawan\", \"sadeghi\", \"lambert\" or \"ggx_conductor\", got \"" +
+                   f.model + "\"");
   }
   return f;
 }

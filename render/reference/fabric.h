@@ -10,6 +10,12 @@
 //                                         // default "../weaves/<preset>.weave"
 //     "uv_repeats": 40                    // weave tiles per UV unit, (0, 10000]
 //   }
+// or a simple material (render/reference/simple_bsdf.h; no preset, weave_file or uv_repeats),
+// which renders identically in Blender Cycles (scripts/cycles-reference):
+//   {"format": "clothfit-fabric", "version": 1, "name": "grey", "model": "lambert",
+//    "albedo": [0.5, 0.5, 0.5]}
+//   {"format": "clothfit-fabric", "version": 1, "name": "gold", "model": "ggx_conductor",
+//    "colour": [1.0, 0.78, 0.34], "roughness": 0.4}    // roughness as Cycles' node: alpha = r^2
 // Unknown fields are rejected. Errors throw FabricError naming the file and the field (JSON
 // syntax errors give the line and column); weave-file errors keep their file:line.
 #pragma once
