@@ -3,6 +3,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -33,6 +34,16 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code);
 // datasets/catalogue/generate.py when `catalogue` is empty) and prints materials/s per kind and
 // the median BRDF-space fit error. Returns the exit status.
 int RunBenchConvert(const std::string& catalogue, int count, int jobs, bool quiet);
+
+// `clothfit bench reference` (bin/cmd_bench_reference.cpp): clothfit vs Blender Cycles on a
+// simple material (time ratio), or a woven fabric's time to a target mean standard error.
+struct BenchReferenceArgs {
+  std::string scene, fabric, cycles_script;
+  int spp = 64, max_depth = 8, width = 0, threads = 0;
+  uint64_t seed = 1;
+  double target_error = 0.02;
+};
+int RunBenchReference(const BenchReferenceArgs& args, bool quiet);
 
 // The scene's environment: the card's map, or the procedural sky (warning on stderr unless
 // quiet) when the map is not installed; null when the card has no environment.

@@ -155,7 +155,7 @@ TEST_P(CyclesAgreement, SphereStudioAndSunsWithinNoise) {
   Scene scene = LoadScene(card);
   ASSERT_TRUE(scene.card.environment.has_value());
   if (!scene.card.environment->found) GTEST_SKIP() << "studio map not installed (scripts/fetch-data)";
-  const std::string fabric_path = kSrc + "/tests/data/fabrics/" + GetParam() + ".json";
+  const std::string fabric_path = kSrc + "/datasets/materials/" + GetParam() + ".json";
 
   // Cycles, two seeds, run concurrently (one thread each).
   const fs::path dir = fs::temp_directory_path() /
