@@ -13,7 +13,7 @@
 //    over hundreds of pixels it is accurate). Pixels are independent, so the standard error
 //    of a mean over n pixels is sqrt(sum se_p^2) / n.
 //  - Global: per channel, z = (mean_clothfit - mean_cycles) / sqrt(se_c^2 + se_y^2), |z| < 2.
-//  - Regional (no systematic bias anywhere): the image in 4 x 4 regions; for every region with
+//  - Regional (no systematic bias anywhere): the image in R x R regions (R = max(4, width / 32)); for every region with
 //    >= 16 compared pixels and every channel the same z; max |z| below the Sidak-corrected
 //    two-sided 1 % threshold for the number of tests.
 //  - Power (the test can fail): the same check on clothfit renders with a convention broken on
@@ -21,6 +21,7 @@
 //    high (an energy error) - must fail.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -40,8 +41,18 @@ namespace {
 namespace fs = std::filesystem;
 
 const std::string kSrc = CLOTHFIT_TEST_SOURCE_DIR;
-constexpr int kSize = 48;
-constexpr int kCyclesSpp = 64;
+// make test: 48 x 48 on the sphere card. The full-size figures of docs/reference-renderer.md
+// come from the same test with CLOTHFIT_CYCLES_SIZE=256 (and CLOTHFIT_CYCLES_SCENE=swatch).
+int EnvInt(const char* name, int def) {
+  const char* v = std::getenv(name);
+  return v ? std::atoi(v) : def;
+}
+const int kSize = EnvInt("CLOTHFIT_CYCLES_SIZE", 48);
+const int kCyclesSpp = EnvInt("CLOTHFIT_CYCLES_SPP", 64);
+std::string SceneName() {
+  const char* v = std::getenv("CLOTHFIT_CYCLES_SCENE");
+  return v ? v : "sphere";
+}
 
 bool HaveBlender() { return std::system("command -v blender >/dev/null 2>&1") == 0; }
 
@@ -102,10 +113,10 @@ struct Agreement {
 
 Agreement Compare(const RenderResult& c, const Plane3& ya, const Plane3& yb) {
   const int W = c.width, H = c.height;
-  constexpr int kRegions = 4;
-  double sum_c[kRegions * kRegions + 1][3] = {}, sum_y[kRegions * kRegions + 1][3] = {};
-  double var_c[kRegions * kRegions + 1][3] = {}, var_y[kRegions * kRegions + 1][3] = {};
-  int n[kRegions * kRegions + 1] = {};
+  const int kRegions = std::max(4, W / 32);
+  const size_t nr = size_t(kRegions * kRegions + 1);
+  std::vector<std::array<double, 3>> sum_c(nr), sum_y(nr), var_c(nr), var_y(nr);
+  std::vector<int> n(nr, 0);
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
       const size_t p = size_t(y) * size_t(W) + size_t(x);
@@ -151,7 +162,7 @@ class CyclesAgreement : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(CyclesAgreement, SphereStudioAndSunsWithinNoise) {
   if (!HaveBlender()) GTEST_SKIP() << "blender not installed (Debian 'blender')";
-  const std::string card = kSrc + "/datasets/scenes/sphere.json";
+  const std::string card = kSrc + "/datasets/scenes/" + SceneName() + ".json";
   Scene scene = LoadScene(card);
   ASSERT_TRUE(scene.card.environment.has_value());
   if (!scene.card.environment->found) GTEST_SKIP() << "studio map not installed (scripts/fetch-data)";
@@ -187,14 +198,19 @@ TEST_P(CyclesAgreement, SphereStudioAndSunsWithinNoise) {
   };
   const Fabric fabric = LoadFabric(fabric_path);
   const Agreement ok = Compare(render(*fabric.bsdf, e.rotation_y), ya, yb);
-  std::printf("[cycles %s] %s\n", GetParam(), ok.Str().c_str());
-  EXPECT_GT(ok.pixels, 500);
+  std::printf("[cycles %s %s %dx%d] %s\n", SceneName().c_str(), GetParam(), kSize, kSize,
+              ok.Str().c_str());
+  EXPECT_GT(ok.pixels, kSize * kSize / 5);
   EXPECT_TRUE(ok.Pass()) << ok.Str();
 
-  // Power: a broken convention must fail the same check.
-  const Agreement turned = Compare(render(*fabric.bsdf, e.rotation_y + kPi), ya, yb);
-  std::printf("[cycles %s, environment turned 180 deg] %s\n", GetParam(), turned.Str().c_str());
-  EXPECT_FALSE(turned.Pass());
+  // Power: a broken convention must fail the same check. (The environment turn is checked on
+  // the sphere only: the swatch, facing the camera under a backlight, sees a part of the studio
+  // map that looks alike after a half turn: z = +0.4 there.)
+  if (SceneName() == "sphere") {
+    const Agreement turned = Compare(render(*fabric.bsdf, e.rotation_y + kPi), ya, yb);
+    std::printf("[cycles %s, environment turned 180 deg] %s\n", GetParam(), turned.Str().c_str());
+    EXPECT_FALSE(turned.Pass());
+  }
   if (std::string(GetParam()) == "lambert") {
     const LambertBsdf bright(Rgbd(0.6, 0.45, 0.3) * 1.04);
     const Agreement energy = Compare(render(bright, e.rotation_y), ya, yb);
