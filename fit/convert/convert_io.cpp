@@ -120,22 +120,9 @@ bool HasParam(ModelKind m, std::string name) {
   return false;
 }
 
-// One SurfaceMaterial-like body: brdf + parameters + maps, at JSON path `at`.
-SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string& file,
-                            const std::string& at, const std::string& name,
-                            const std::string& kind) {
-  SourceMaterial m;
-  m.file = file;
-  m.name = name;
-  m.kind = kind;
-  render::MaterialPreset p = render::DefaultPreset(model);
-  if (model == ModelKind::kGltfSheen || model == ModelKind::kPhysicalSheen) {
-    // Absent sheen means no sheen.
-    const int off = p.Offset("sheen_color");
-    for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] = 0.0;
-  }
-  const json params = body.value("parameters", json::object());
-  if (!params.is_object()) Fail(file, at + "parameters", "expected an object");
+// The "parameters" object of a surface body, into the preset p (unused ones: a note in m).
+void ApplySurfaceParameters(const json& params, ModelKind model, const std::string& file,
+                            const std::string& at, render::MaterialPreset& p, SourceMaterial& m) {
   for (const auto& [key, v] : params.items()) {
     const SharedName* s = nullptr;
     for (const SharedName& n : kShared)
@@ -157,61 +144,86 @@ SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string
     if (model == ModelKind::kCloth && key == "subsurfaceColor") p.cloth.subsurface = true;
     SetParam(p, s->param, x, s->size);
   }
+}
+
+// One entry of the "maps" object at JSON path `field`: a colour map scales its colour by the
+// map's mean, a scalar map is reduced to its mean, a normal map is carried as is.
+void ApplySurfaceMap(const std::string& attr, const json& v, ModelKind model,
+                     const std::string& file, const std::string& field, render::MaterialPreset& p,
+                     SourceMaterial& m) {
+  static const std::vector<std::string> kMaps = {
+      "color", "normal", "roughness", "metalness", "sheenColor", "sheenRoughness", "specular"};
+  if (std::find(kMaps.begin(), kMaps.end(), attr) == kMaps.end())
+    Fail(file, field, std::string("unknown map attribute (valid: ") + kMapList + ")");
+  if (!v.is_object() || !v.contains("uri") || !v["uri"].is_string())
+    Fail(file, field, "expected {\"uri\": \"...\", \"colorSpace\": \"srgb\"|\"linear\"}");
+  const bool colour = attr == "color" || attr == "sheenColor";
+  const std::string cs = v.value("colorSpace", colour ? "srgb" : "linear");
+  if (cs != "srgb" && cs != "linear")
+    Fail(file, field + ".colorSpace", "'" + cs + "' is not srgb or linear");
+  const std::string path = ResolveUri(file, field + ".uri", v["uri"].get<std::string>());
+  m.dependencies.push_back(path);
+  if (attr == "normal") {
+    m.maps.push_back({"normal", path, cs, {1, 1, 1}});
+    return;
+  }
+  std::array<double, 4> mean;
+  try {
+    mean = ChannelMeans(path, cs == "srgb");
+  } catch (const std::exception& e) {
+    Fail(file, field + ".uri", e.what());
+  }
+  if (colour) {
+    const std::string param = attr == "color" ? "base_color" : "sheen_color";
+    if (!HasParam(model, param)) {
+      m.notes.push_back(field + " not used by brdf " + render::ToString(model));
+      return;
+    }
+    const int off = p.Offset(param);
+    for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] *= mean[size_t(c)];
+    m.maps.push_back({param, path, cs, {mean[0], mean[1], mean[2]}});
+  } else if (attr == "specular") {
+    m.notes.push_back(field + ": specular map read (mean " + std::to_string(mean[0]) +
+                      ") but not modelled (F0 fixed at 0.04)");
+  } else {
+    const std::string param = attr == "roughness"   ? "roughness"
+                              : attr == "metalness" ? "metalness"
+                                                    : "sheen_roughness";
+    if (!HasParam(model, param)) {
+      m.notes.push_back(field + " not used by brdf " + render::ToString(model));
+      return;
+    }
+    double x =
+        p.values[size_t(p.Offset(
+            param == "metalness" && model == ModelKind::kGltfSheen ? "metallic" : param))] *
+        mean[0];
+    SetParam(p, param, &x, 1);
+    m.notes.push_back(field + ": reduced to its mean over texels (" + std::to_string(mean[0]) +
+                      "), not carried over");
+  }
+}
+
+// One SurfaceMaterial-like body: brdf + parameters + maps, at JSON path `at`.
+SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string& file,
+                            const std::string& at, const std::string& name,
+                            const std::string& kind) {
+  SourceMaterial m;
+  m.file = file;
+  m.name = name;
+  m.kind = kind;
+  render::MaterialPreset p = render::DefaultPreset(model);
+  if (model == ModelKind::kGltfSheen || model == ModelKind::kPhysicalSheen) {
+    // Absent sheen means no sheen.
+    const int off = p.Offset("sheen_color");
+    for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] = 0.0;
+  }
+  const json params = body.value("parameters", json::object());
+  if (!params.is_object()) Fail(file, at + "parameters", "expected an object");
+  ApplySurfaceParameters(params, model, file, at, p, m);
   const json maps = body.value("maps", json::object());
   if (!maps.is_object()) Fail(file, at + "maps", "expected an object");
-  for (const auto& [attr, v] : maps.items()) {
-    const std::string field = at + "maps." + attr;
-    static const std::vector<std::string> kMaps = {
-        "color", "normal", "roughness", "metalness", "sheenColor", "sheenRoughness", "specular"};
-    if (std::find(kMaps.begin(), kMaps.end(), attr) == kMaps.end())
-      Fail(file, field, std::string("unknown map attribute (valid: ") + kMapList + ")");
-    if (!v.is_object() || !v.contains("uri") || !v["uri"].is_string())
-      Fail(file, field, "expected {\"uri\": \"...\", \"colorSpace\": \"srgb\"|\"linear\"}");
-    const bool colour = attr == "color" || attr == "sheenColor";
-    const std::string cs = v.value("colorSpace", colour ? "srgb" : "linear");
-    if (cs != "srgb" && cs != "linear")
-      Fail(file, field + ".colorSpace", "'" + cs + "' is not srgb or linear");
-    const std::string path = ResolveUri(file, field + ".uri", v["uri"].get<std::string>());
-    m.dependencies.push_back(path);
-    if (attr == "normal") {
-      m.maps.push_back({"normal", path, cs, {1, 1, 1}});
-      continue;
-    }
-    std::array<double, 4> mean;
-    try {
-      mean = ChannelMeans(path, cs == "srgb");
-    } catch (const std::exception& e) {
-      Fail(file, field + ".uri", e.what());
-    }
-    if (colour) {
-      const std::string param = attr == "color" ? "base_color" : "sheen_color";
-      if (!HasParam(model, param)) {
-        m.notes.push_back(field + " not used by brdf " + render::ToString(model));
-        continue;
-      }
-      const int off = p.Offset(param);
-      for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] *= mean[size_t(c)];
-      m.maps.push_back({param, path, cs, {mean[0], mean[1], mean[2]}});
-    } else if (attr == "specular") {
-      m.notes.push_back(field + ": specular map read (mean " + std::to_string(mean[0]) +
-                        ") but not modelled (F0 fixed at 0.04)");
-    } else {
-      const std::string param = attr == "roughness"   ? "roughness"
-                                : attr == "metalness" ? "metalness"
-                                                      : "sheen_roughness";
-      if (!HasParam(model, param)) {
-        m.notes.push_back(field + " not used by brdf " + render::ToString(model));
-        continue;
-      }
-      double x =
-          p.values[size_t(p.Offset(
-              param == "metalness" && model == ModelKind::kGltfSheen ? "metallic" : param))] *
-          mean[0];
-      SetParam(p, param, &x, 1);
-      m.notes.push_back(field + ": reduced to its mean over texels (" + std::to_string(mean[0]) +
-                        "), not carried over");
-    }
-  }
+  for (const auto& [attr, v] : maps.items())
+    ApplySurfaceMap(attr, v, model, file, at + "maps." + attr, p, m);
   m.analytic = p;
   return m;
 }
