@@ -486,87 +486,123 @@ std::string PageName(const std::string& fabric_name) {
 
 // ---- inputs --------------------------------------------------------------------------------
 
+namespace {
+
+// ---- inputs: the pieces of FabricsFromPresets ----
+
+nlohmann::json ReadPresetJson(const std::string& path) {
+  if (!fs::exists(path)) throw ReportError(path + ": no such file");
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw ReportError(path + ": cannot open for reading");
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(f);
+  } catch (const nlohmann::json::exception& e) {
+    throw ReportError(path + ": malformed JSON: " + e.what());
+  }
+  return j;
+}
+
+// fit.scenes[i] of the preset at `path` (`where` names the entry): the scene, and the path of
+// the model's preview of it (appended to `previews`).
+SceneSpec ParseFitScene(const nlohmann::json& s, const std::string& where, const std::string& path,
+                        std::vector<std::string>& previews) {
+  SceneSpec sp;
+  sp.scene_path = StringField(s, "scene", where);
+  sp.name = fs::path(sp.scene_path).stem().string();
+  sp.reference = Resolve(StringField(s, "reference", where), path);
+  if (s.contains("reference2") && s.at("reference2").is_string())
+    sp.reference2 = Resolve(s.at("reference2").get<std::string>(), path);
+  const std::string op =
+      StringField(s, "tone_mapping", where, " (re-run clothfit fit with --images)");
+  try {
+    sp.tone_mapping = render::ParseToneMapping(op);
+  } catch (const std::invalid_argument& e) {
+    throw ReportError(where + ": " + e.what());
+  }
+  const nlohmann::json& ex = Field(s, "exposure", where);
+  if (!ex.is_number() || !std::isfinite(ex.get<double>()) || !(ex.get<double>() > 0))
+    throw ReportError(where + ": exposure must be a finite number > 0");
+  sp.exposure = ex.get<double>();
+  previews.push_back(Resolve(
+      StringField(s, "preview", where, " (re-run clothfit fit with --images DIR)"), path));
+  return sp;
+}
+
+// One fit preset: the model it holds, the scenes it was fitted on and the fabric it belongs to.
+struct FitPreset {
+  ModelSpec model;
+  std::vector<SceneSpec> scenes;
+  std::string fabric_name, fabric_path;
+};
+
+FitPreset ReadFitPreset(const std::string& path) {
+  const nlohmann::json j = ReadPresetJson(path);
+  FitPreset p;
+  ModelSpec& m = p.model;
+  m.preset_path = path;
+  m.preset = j;
+  m.model = StringField(j, "model", path);
+  const nlohmann::json& fit =
+      j.is_object() && j.contains("fit")
+          ? j.at("fit")
+          : throw ReportError(path + ": missing field \"fit\" (not written by clothfit fit?)");
+  const nlohmann::json& scenes = Field(fit, "scenes", path + ": fit");
+  if (!scenes.is_array() || scenes.empty())
+    throw ReportError(path + ": fit.scenes must be a non-empty array");
+  for (size_t i = 0; i < scenes.size(); ++i) {
+    const std::string where = path + ": fit.scenes[" + std::to_string(i) + "]";
+    p.scenes.push_back(ParseFitScene(scenes[i], where, path, m.previews));
+  }
+  p.fabric_name = fs::path(path).stem().string();
+  if (j.contains("provenance") && j.at("provenance").is_object() &&
+      j.at("provenance").contains("fabric") && j.at("provenance").at("fabric").is_string()) {
+    p.fabric_path = j.at("provenance").at("fabric").get<std::string>();
+    p.fabric_name = fs::path(p.fabric_path).stem().string();
+  }
+  return p;
+}
+
+// Adds a preset to its fabric (a new one when first seen). Throws when the fabric's scenes
+// differ from its first preset's or the fabric already has this model.
+void AddToFabric(std::vector<FabricSpec>& fabrics,
+                 std::map<std::string, std::string>& first_preset_of, FitPreset&& p) {
+  const std::string& path = p.model.preset_path;
+  const std::string& fabric_name = p.fabric_name;
+  const std::vector<SceneSpec>& specs = p.scenes;
+  auto it = std::find_if(fabrics.begin(), fabrics.end(),
+                         [&](const FabricSpec& fs_) { return fs_.name == fabric_name; });
+  if (it == fabrics.end()) {
+    FabricSpec fsp;
+    fsp.name = fabric_name;
+    fsp.fabric_path = p.fabric_path;
+    fsp.scenes = specs;
+    fabrics.push_back(fsp);
+    first_preset_of[fabric_name] = path;
+    it = fabrics.end() - 1;
+  } else {
+    bool same = it->scenes.size() == specs.size();
+    for (size_t i = 0; same && i < specs.size(); ++i)
+      same = it->scenes[i].name == specs[i].name && it->scenes[i].reference == specs[i].reference;
+    if (!same)
+      throw ReportError(path + ": its scenes or references differ from " +
+                        first_preset_of[fabric_name] + " (same fabric \"" + fabric_name + "\")");
+    for (const ModelSpec& other : it->models)
+      if (other.model == p.model.model)
+        throw ReportError(path + ": model \"" + p.model.model + "\" of fabric \"" + fabric_name +
+                          "\" given twice (also " + other.preset_path + ")");
+  }
+  it->models.push_back(std::move(p.model));
+}
+
+}  // namespace
+
 std::vector<FabricSpec> FabricsFromPresets(const std::vector<std::string>& preset_paths) {
   if (preset_paths.empty()) throw ReportError("report: no fit presets given");
   std::vector<FabricSpec> fabrics;
   std::map<std::string, std::string> first_preset_of;  // fabric -> preset path (for errors)
-  for (const std::string& path : preset_paths) {
-    if (!fs::exists(path)) throw ReportError(path + ": no such file");
-    std::ifstream f(path, std::ios::binary);
-    if (!f) throw ReportError(path + ": cannot open for reading");
-    nlohmann::json j;
-    try {
-      j = nlohmann::json::parse(f);
-    } catch (const nlohmann::json::exception& e) {
-      throw ReportError(path + ": malformed JSON: " + e.what());
-    }
-    ModelSpec m;
-    m.preset_path = path;
-    m.preset = j;
-    m.model = StringField(j, "model", path);
-    const nlohmann::json& fit =
-        j.is_object() && j.contains("fit")
-            ? j.at("fit")
-            : throw ReportError(path + ": missing field \"fit\" (not written by clothfit fit?)");
-    const nlohmann::json& scenes = Field(fit, "scenes", path + ": fit");
-    if (!scenes.is_array() || scenes.empty())
-      throw ReportError(path + ": fit.scenes must be a non-empty array");
-    std::vector<SceneSpec> specs;
-    for (size_t i = 0; i < scenes.size(); ++i) {
-      const std::string where = path + ": fit.scenes[" + std::to_string(i) + "]";
-      const nlohmann::json& s = scenes[i];
-      SceneSpec sp;
-      sp.scene_path = StringField(s, "scene", where);
-      sp.name = fs::path(sp.scene_path).stem().string();
-      sp.reference = Resolve(StringField(s, "reference", where), path);
-      if (s.contains("reference2") && s.at("reference2").is_string())
-        sp.reference2 = Resolve(s.at("reference2").get<std::string>(), path);
-      const std::string op =
-          StringField(s, "tone_mapping", where, " (re-run clothfit fit with --images)");
-      try {
-        sp.tone_mapping = render::ParseToneMapping(op);
-      } catch (const std::invalid_argument& e) {
-        throw ReportError(where + ": " + e.what());
-      }
-      const nlohmann::json& ex = Field(s, "exposure", where);
-      if (!ex.is_number() || !std::isfinite(ex.get<double>()) || !(ex.get<double>() > 0))
-        throw ReportError(where + ": exposure must be a finite number > 0");
-      sp.exposure = ex.get<double>();
-      m.previews.push_back(Resolve(
-          StringField(s, "preview", where, " (re-run clothfit fit with --images DIR)"), path));
-      specs.push_back(sp);
-    }
-    std::string fabric_name = fs::path(path).stem().string();
-    std::string fabric_path;
-    if (j.contains("provenance") && j.at("provenance").is_object() &&
-        j.at("provenance").contains("fabric") && j.at("provenance").at("fabric").is_string()) {
-      fabric_path = j.at("provenance").at("fabric").get<std::string>();
-      fabric_name = fs::path(fabric_path).stem().string();
-    }
-    auto it = std::find_if(fabrics.begin(), fabrics.end(),
-                           [&](const FabricSpec& fs_) { return fs_.name == fabric_name; });
-    if (it == fabrics.end()) {
-      FabricSpec fsp;
-      fsp.name = fabric_name;
-      fsp.fabric_path = fabric_path;
-      fsp.scenes = specs;
-      fabrics.push_back(fsp);
-      first_preset_of[fabric_name] = path;
-      it = fabrics.end() - 1;
-    } else {
-      bool same = it->scenes.size() == specs.size();
-      for (size_t i = 0; same && i < specs.size(); ++i)
-        same = it->scenes[i].name == specs[i].name && it->scenes[i].reference == specs[i].reference;
-      if (!same)
-        throw ReportError(path + ": its scenes or references differ from " +
-                          first_preset_of[fabric_name] + " (same fabric \"" + fabric_name + "\")");
-      for (const ModelSpec& other : it->models)
-        if (other.model == m.model)
-          throw ReportError(path + ": model \"" + m.model + "\" of fabric \"" + fabric_name +
-                            "\" given twice (also " + other.preset_path + ")");
-    }
-    it->models.push_back(std::move(m));
-  }
+  for (const std::string& path : preset_paths)
+    AddToFabric(fabrics, first_preset_of, ReadFitPreset(path));
   for (FabricSpec& f : fabrics)
     std::stable_sort(f.models.begin(), f.models.end(), [](const ModelSpec& a, const ModelSpec& b) {
       return ModelRank(a.model) < ModelRank(b.model);
