@@ -227,13 +227,14 @@ struct BenchArgs {
   std::string catalogue;
   int count = 200;
   int jobs = 0;
+  BenchReferenceArgs reference;  // `bench reference` (bin/cmd_bench_reference.cpp)
 };
 
 void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
   BenchFitArgs& fa = a.fit;
-  cmd->add_option("what", a.what, "what to benchmark: brdf | preview | fit | convert")
+  cmd->add_option("what", a.what, "what to benchmark: brdf | preview | fit | convert | reference")
       ->required()
-      ->check(CLI::IsMember({"brdf", "preview", "fit", "convert"}));
+      ->check(CLI::IsMember({"brdf", "preview", "fit", "convert", "reference"}));
   cmd->add_option("--catalogue", a.catalogue,
                   "`bench convert`: catalogue directory (default: generate one in a temporary "
                   "directory with datasets/catalogue/generate.py)");
@@ -248,7 +249,22 @@ void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
       ->check(CLI::Range(16, 65536));
   cmd->add_option("--csv", fa.csv, "`bench fit`: output CSV");
   cmd->add_option("--png", fa.png, "`bench fit`: output plot (error vs time)");
-  cmd->add_option("--scene", a.scene, "scene card for `bench preview`");
+  cmd->add_option("--scene", a.scene, "scene card for `bench preview` and `bench reference`");
+  BenchReferenceArgs& ra = a.reference;
+  ra.fabric = std::string(CLOTHFIT_SOURCE_DATASETS) + "/materials/lambert.json";
+  ra.cycles_script = std::string(CLOTHFIT_SOURCE_DATASETS) + "/../scripts/cycles-reference";
+  cmd->add_option("--fabric", ra.fabric,
+                  "`bench reference`: fabric or simple material (lambert/ggx_conductor: vs Cycles; "
+                  "woven: time to --target-error)");
+  cmd->add_option("--max-depth", ra.max_depth, "`bench reference`: maximum path depth")
+      ->check(CLI::Range(1, 64));
+  cmd->add_option("--seed", ra.seed, "`bench reference`: seed (both renderers)");
+  cmd->add_option("--width", ra.width, "`bench reference`: image width (0: the card's)");
+  cmd->add_option("--threads", ra.threads, "`bench reference`: threads for both renderers (0: all)");
+  cmd->add_option("--target-error", ra.target_error,
+                  "`bench reference`, woven: mean standard error / mean value to reach")
+      ->check(CLI::Range(1e-4, 1.0));
+  cmd->add_option("--cycles-script", ra.cycles_script, "`bench reference`: scripts/cycles-reference");
   cmd->allow_extras();
 }
 
@@ -299,6 +315,17 @@ int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
       return RunBenchConvert(a.catalogue, a.count, a.jobs, g.quiet);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "clothfit bench convert: error: %s\n", e.what());
+      return 1;
+    }
+  }
+  if (a.what == "reference") {
+    BenchReferenceArgs r = a.reference;
+    r.scene = a.scene;
+    if (cmd->count("--spp")) r.spp = a.fit.spp;  // else 64
+    try {
+      return RunBenchReference(r, g.quiet);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "clothfit bench reference: error: %s\n", e.what());
       return 1;
     }
   }
