@@ -57,6 +57,8 @@ PY
     err=$("$BIN" --quiet lut --size 8 --out /nonexistent/dir/x.exr 2>&1) && fail "bad --out accepted"
     echo "$err" | grep -q "/nonexistent/dir" || fail "error does not name the path: $err"
     "$BIN" no-such-command 2>/dev/null && fail "unknown subcommand accepted"
+    err=$("$BIN" --quiet bench reference --fabric /nonexistent/f.json 2>&1) && fail "bench reference: missing fabric accepted"
+    echo "$err" | grep -q "/nonexistent/f.json" || fail "bench reference error does not name the file: $err"
     "$BIN" stress --evals abc 2>/dev/null && fail "non-numeric --evals accepted"
     "$BIN" lut --out "$TMP/y.exr" --frobnicate 2>/dev/null && fail "unknown flag accepted"
     [ ! -e "$TMP/x.exr" ] || fail "output written despite error"
