@@ -115,7 +115,10 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
     return f;
   }
   for (const char* simple : {"albedo", "colour", "roughness"}) {
-    if (j.contains(simple)) Fail(path, std::string("field '") + simple + "' applies to models lambert/ggx_conductor only");
+    if (j.contains(simple)) {
+      Fail(path, std::string("unknown field '") + simple + "' for model '" + f.model +
+                     "' (it applies to models lambert/ggx_conductor only)");
+    }
   }
   f.preset = GetString(j, "preset", path);
   if (!j.contains("uv_repeats")) Fail(path, "missing field 'uv_repeats'");
