@@ -38,24 +38,44 @@ std::vector<Cosines<double>> Configurations() {
   return out;
 }
 
+// The tangent-frame cosines of the same 64 configurations.
+std::vector<TangentCosines<double>> TangentConfigurations() {
+  std::vector<TangentCosines<double>> out;
+  for (int i = 0; i < 64; ++i) {
+    const double tv = 0.05 + 1.4 * ((i * 37) % 64) / 64.0;
+    const double tl = 0.05 + 1.4 * ((i * 11) % 64) / 64.0;
+    const double ph = 6.2831853 * ((i * 23) % 64) / 64.0;
+    const Vec3<double> v(std::sin(tv), 0.0, std::cos(tv));
+    const Vec3<double> l(std::sin(tl) * std::cos(ph), std::sin(tl) * std::sin(ph), std::cos(tl));
+    out.push_back(TangentCosinesFromDirections(v, l));
+  }
+  return out;
+}
+
 template <typename T>
 void BM_Model(benchmark::State& state, ModelId m) {
   const auto configs = Configurations();
   std::vector<Cosines<T>> cs;
   for (const auto& c : configs) cs.push_back({T(c.NoV), T(c.NoL), T(c.NoH), T(c.LoH)});
-  std::array<T, 10> x{};
-  const std::array<double, 10> values{0.6, 0.4, 0.3, 0.8, 0.7, 0.6, 0.55, 0.2, 0.1, 0.05};
+  std::vector<TangentCosines<T>> ts;  // anisotropic models: the same directions' frame
+  for (const auto& t : TangentConfigurations())
+    ts.push_back({T(t.ToV), T(t.BoV), T(t.ToL), T(t.BoL), T(t.ToH), T(t.BoH)});
+  std::array<T, kMaxModelParameters> x{};
+  // Values in [0, 1] for the first 10 (every model's range); woven's last six inside theirs.
+  const std::array<double, kMaxModelParameters> values{0.6, 0.4, 0.3, 0.8,  0.7, 0.6, 0.55, 0.2,
+                                                       0.1, 0.05, 0.05, 2.0, 0.1, 0.1, 0.1, 0.6};
   for (int k = 0; k < ParameterCount(m); ++k) {
     if constexpr (std::is_same_v<T, double>) {
       x[size_t(k)] = values[size_t(k)];
-    } else {
-      x[size_t(k)] = T(values[size_t(k)], k);
+    } else {  // Jet10: the first 10 parameters carry derivatives (the image fit's free set)
+      x[size_t(k)] = k < 10 ? T(values[size_t(k)], k) : T(values[size_t(k)]);
     }
   }
   size_t i = 0;
   for (auto _ : state) {
     Rgb<T> direct, ibl;
-    EvaluateFlat<T>(m, x.data(), cs[i++ & 63], direct, ibl);
+    const size_t j = i++ & 63;
+    EvaluateFlat<T>(m, x.data(), cs[j], direct, ibl, &ts[j]);
     benchmark::DoNotOptimize(direct);
     benchmark::DoNotOptimize(ibl);
   }
@@ -89,10 +109,12 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
   const Def defs[] = {{"full (direct+ibl+subsurface+shadows)", &scene, env.get(), true, true},
                       {"direct+ibl", &scene, env.get(), false, false},
                       {"direct only (no environment)", &scene, nullptr, false, false},
-                      {"ibl only (no lights)", &no_lights, env.get(), false, false}};
+                      {"ibl only (no lights)", &no_lights, env.get(), false, false},
+                      {"woven direct+ibl", &scene, env.get(), false, false}};
   for (const Def& d : defs) {
     render::PreviewOptions o;
-    o.model = render::ModelKind::kCloth;
+    o.model = std::string_view(d.name).starts_with("woven") ? render::ModelKind::kWoven
+                                                              : render::ModelKind::kCloth;
     o.cloth.subsurface = d.sub;
     o.shadows = d.shadows;
     auto cache = render::PreviewCache::Build(*d.s, d.e, o);
@@ -104,13 +126,19 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
 
 template <typename T>
 void BM_Preview(benchmark::State& state, const render::PreviewCache* cache) {
-  const std::array<double, 10> values{0.6, 0.4, 0.3, 0.8, 0.7, 0.6, 0.55, 0.2, 0.1, 0.05};
-  std::array<T, 10> x{};
-  for (int k = 0; k < 10; ++k) {
+  // cloth: 10 parameters; woven: 16 (a canvas-like fit), the first 10 differentiated.
+  const bool woven = cache->options.model == render::ModelKind::kWoven;
+  const std::array<double, 16> cloth_values{0.6, 0.4, 0.3, 0.8, 0.7, 0.6, 0.55, 0.2, 0.1, 0.05};
+  const std::array<double, 16> woven_values{0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75,
+                                            -9.0, 0.54, 0.07, 1.6, 0.0, 0.0, 0.0, 0.6};
+  const auto& values = woven ? woven_values : cloth_values;
+  const int n = woven ? woven::kParameterCount : 10;
+  std::array<T, 16> x{};
+  for (int k = 0; k < n; ++k) {
     if constexpr (std::is_same_v<T, double>) {
       x[size_t(k)] = values[size_t(k)];
     } else {
-      x[size_t(k)] = T(values[size_t(k)], k);
+      x[size_t(k)] = k < 10 ? T(values[size_t(k)], k) : T(values[size_t(k)]);
     }
   }
   std::vector<Rgb<T>> out;

@@ -14,6 +14,7 @@
 #include "bin/commands.h"
 #include "bin/progress.h"
 #include "fit/image_fit.h"
+#include "fit/woven_fit.h"
 #include "render/reference/fabric.h"
 #include "render/scene/image_io.h"
 #include "render/reference/path_tracer.h"
@@ -368,7 +369,9 @@ int RunFit(const FitArgs& a, const Globals& g) {
     inputs.push_back({&l.sc[i], l.envs[i].get(), &l.rr[i], l.rr2.empty() ? nullptr : &l.rr2[i],
                       files.scenes[i]});
   o.level = a.level == "auto" ? fit::AutoLevel(inputs, weave_period) : fixed_level;
-  const fit::FitResult res = fit::FitImages(inputs, o);
+  const fit::FitResult res = o.start.model == render::ModelKind::kWoven
+                                   ? fit::FitWovenImages(inputs, o)
+                                   : fit::FitImages(inputs, o);
   if (!res.usable) {
     std::fprintf(stderr, "clothfit fit: error: the fit failed (%s); no preset written\n",
                  res.message.c_str());

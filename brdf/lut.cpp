@@ -133,6 +133,18 @@ double IntegrateSheenAlbedo(double NoV, double r, const Settings& s) {
       })[0];
 }
 
+std::array<double, 9> IntegrateWovenPhase(double NoV, double r, const Settings& s) {
+  const double alpha = std::max(r * r, kMinAlpha);
+  auto D = [alpha](double ch) { return D_GGX(alpha, ch); };
+  return HalfVectorIntegral(NoV, alpha, false, s, D, [&](double NoL, double VoH, double) {
+    const double w = V_SmithGGXCorrelated(alpha, NoV, NoL) * NoL * 4.0 * VoH;
+    std::array<double, 9> out{};
+    for (size_t k = 0; k < out.size(); ++k)
+      out[k] = w * std::exp(-2.0 * kWovenPhaseBetas[k] * VoH * VoH);
+    return out;
+  });
+}
+
 namespace {
 template <typename RowFn>
 void ParallelRows(int rows, const Progress& progress, RowFn fn) {
@@ -160,6 +172,12 @@ void DfgTexel(int i, int j, const Settings& s, float* out) {
 
 void SheenTexel(int i, int j, const Settings& s, float* out) {
   out[0] = float(IntegrateSheenAlbedo(Table2D::Centre(i, s.size), Table2D::Centre(j, s.size), s));
+}
+
+void WovenPhaseTexel(int i, int j, const Settings& s, float* out) {
+  const std::array<double, 9> p =
+      IntegrateWovenPhase(Table2D::Centre(i, s.size), Table2D::Centre(j, s.size), s);
+  for (size_t k = 0; k < p.size(); ++k) out[k] = float(p[k]);
 }
 
 using TexelFn = void (*)(int, int, const Settings&, float*);
@@ -210,7 +228,7 @@ bool SpotCheck(const Table2D& t, const Settings& s, TexelFn texel) {
     // Deterministic spread over the table, corners included.
     const int i = k == 0 ? 0 : k == 1 ? s.size - 1 : int((uint32_t(k) * 2654435761u) % uint32_t(s.size));
     const int j = k == 0 ? 0 : k == 1 ? s.size - 1 : int((uint32_t(k) * 40503u + 7u) % uint32_t(s.size));
-    float v[4] = {0, 0, 0, 0};
+    float v[16] = {};
     texel(i, j, s, v);
     for (int c = 0; c < t.channels; ++c)
       if (std::memcmp(&v[c], &t.data[(size_t(j) * size_t(t.width) + size_t(i)) * size_t(t.channels) + size_t(c)],
@@ -274,6 +292,8 @@ Table2D LoadOrCompute(const std::string& name, const Settings& s, int channels, 
 
 constexpr const char* kNoVAxis = "NoV = (i + 0.5) / N";
 constexpr const char* kDfgVAxis = "perceptual roughness r = (j + 0.5) / N; alpha = r^2";
+constexpr const char* kWovenPhaseVAxis =
+    "perceptual roughness r = (j + 0.5) / N; alpha = r^2; channel k: beta = kWovenPhaseBetas[k]";
 constexpr const char* kSheenVAxis = "sheen roughness r_s = (j + 0.5) / N; alpha = r_s^2";
 
 }  // namespace
@@ -292,6 +312,17 @@ Table2D ComputeSheenAlbedo(const Settings& s, const Progress& progress) {
   return t;
 }
 
+Table2D ComputeWovenPhase(const Settings& s, const Progress& progress) {
+  Table2D t = Compute(s, 9, WovenPhaseTexel, progress);
+  t.u_axis = kNoVAxis;
+  t.v_axis = kWovenPhaseVAxis;
+  return t;
+}
+
+Table2D CachedWovenPhase(const Settings& s) {
+  return LoadOrCompute("woven-phase", s, 9, WovenPhaseTexel, kNoVAxis, kWovenPhaseVAxis);
+}
+
 Table2D CachedDfg(const Settings& s) {
   return LoadOrCompute("dfg", s, 3, DfgTexel, kNoVAxis, kDfgVAxis);
 }
@@ -302,6 +333,11 @@ Table2D CachedSheenAlbedo(const Settings& s) {
 
 const Table2D& DefaultDfg() {
   static const Table2D table = CachedDfg(Settings{128});
+  return table;
+}
+
+const Table2D& DefaultWovenPhase() {
+  static const Table2D table = CachedWovenPhase(Settings{32});
   return table;
 }
 

@@ -11,6 +11,12 @@
 // Sheen albedo table (clothfit lut --sheen-out), size M x M, 1 channel, u = NoV, v = r_s:
 //   E = int D_Charlie(alpha = r_s^2) V_Charlie(alpha) cos dl (glTF KHR_materials_sheen).
 //
+// Woven phase table (brdf/woven.h; clothfit lut --woven-phase-out), size P x P, 9 channels,
+// u = NoV, v = perceptual r (alpha = r^2), channel k = beta_k of kWovenPhaseBetas:
+//   P_k = int D_GGX(alpha) V_SmithGGXCorrelated(alpha) exp(-2 beta_k (l.h)^2) NoL dl
+//   (the directional albedo of an isotropic GGX lobe under the phase Fresnel with f0 = 0;
+//   channel 0 (beta = 0) equals A + B of the DFG LUT.)
+//
 // Integrator (deterministic quadrature in the half vector h, l = reflect(v, h),
 // dl = 4 (v.h) dh): Gauss-Legendre panels in theta_h (order 8 by default; breakpoints every
 // pi/8 plus 8 clustered at the distribution's own scale: tan(theta) = alpha s for GGX,
@@ -21,6 +27,7 @@
 // (Stratified importance sampling with 4096 samples per texel had 5e-3 errors at low r.)
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <functional>
 #include <vector>
@@ -59,6 +66,9 @@ struct GaussLegendre {
   }
 };
 
+// beta nodes of the woven phase table (channel k holds beta = kWovenPhaseBetas[k]).
+inline constexpr std::array<double, 9> kWovenPhaseBetas{0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0};
+
 // Progress callback: called with (rows done, rows total); may be empty.
 using Progress = std::function<void(int, int)>;
 
@@ -69,6 +79,8 @@ Table2D ComputeSheenAlbedo(const Settings& s, const Progress& progress = {});
 void IntegrateGgx(double NoV, double r, const Settings& s, double& A, double& B);
 double IntegrateClothDg(double NoV, double r, const Settings& s = {});
 double IntegrateSheenAlbedo(double NoV, double r, const Settings& s = {});
+std::array<double, 9> IntegrateWovenPhase(double NoV, double r, const Settings& s = {});
+Table2D ComputeWovenPhase(const Settings& s, const Progress& progress = {});
 
 // The same tables through an on-disk cache ($CLOTHFIT_TABLE_CACHE, default
 // ~/.cache/clothfit/tables; "off" disables): a cached file is used only when its header,
@@ -76,10 +88,12 @@ double IntegrateSheenAlbedo(double NoV, double r, const Settings& s = {});
 // rewritten atomically. Bit-identical to ComputeDfg / ComputeSheenAlbedo.
 Table2D CachedDfg(const Settings& s);
 Table2D CachedSheenAlbedo(const Settings& s);
+Table2D CachedWovenPhase(const Settings& s);
 
 // Process-wide default tables (DFG 128 x 128, sheen albedo 32 x 32, default quadrature),
 // loaded through the cache above on first use (thread-safe) and kept.
 const Table2D& DefaultDfg();
 const Table2D& DefaultSheenAlbedo();
+const Table2D& DefaultWovenPhase();  // 32 x 32 x 9
 
 }  // namespace clothfit::lut

@@ -11,6 +11,7 @@
 #include "brdf/lut.h"
 #include "brdf/physical_sheen.h"
 #include "brdf/standard.h"
+#include "brdf/woven.h"
 
 namespace clothfit {
 
@@ -23,13 +24,18 @@ enum class ModelId {
   kStandard,                 // three.js r187 MeshStandardMaterial
   kPhysicalSheen,            // three.js r187 MeshPhysicalMaterial sheen
   kGltfSheen,                // glTF KHR_materials_sheen
+  kWoven,                    // clothfit woven (yarn lobes + sheen + Lambert), uniform
 };
 
-inline constexpr std::array<ModelId, 8> kAllModels{
+inline constexpr std::array<ModelId, 9> kAllModels{
     ModelId::kClothFilament,       ModelId::kClothFilamentSubsurface,
     ModelId::kClothFilamentMobile, ModelId::kClothSeed,
     ModelId::kClothSeedSubsurface, ModelId::kStandard,
-    ModelId::kPhysicalSheen,       ModelId::kGltfSheen};
+    ModelId::kPhysicalSheen,       ModelId::kGltfSheen,
+    ModelId::kWoven};
+
+// Largest ParameterCount over kAllModels (array sizes of flat-vector callers).
+inline constexpr int kMaxModelParameters = woven::kParameterCount;
 
 inline std::string_view ModelName(ModelId m) {
   switch (m) {
@@ -41,6 +47,7 @@ inline std::string_view ModelName(ModelId m) {
     case ModelId::kStandard: return "standard";
     case ModelId::kPhysicalSheen: return "physical-sheen";
     case ModelId::kGltfSheen: return "gltf-sheen";
+    case ModelId::kWoven: return "woven";
   }
   return "?";
 }
@@ -70,6 +77,7 @@ inline int ParameterCount(ModelId m) {
     case ModelId::kStandard: return 5;
     case ModelId::kPhysicalSheen:
     case ModelId::kGltfSheen: return 9;
+    case ModelId::kWoven: return woven::kParameterCount;
     default: return 10;
   }
 }
@@ -77,9 +85,11 @@ inline int ParameterCount(ModelId m) {
 // Evaluate a model from a flat parameter vector x (layout = the model's parameter table
 // order). Writes the direct reflectance (per unit light, cosine included) and the IBL
 // response to a uniform white environment (spec + diffuse + sheen weights: L = E_d = 1).
+// `tc`: tangent-frame cosines for anisotropic models (woven); null = derived from `c` with v
+// in the tangent-normal plane (woven::TangentCosinesInPlane).
 template <typename T>
 inline void EvaluateFlat(ModelId m, const T* x, const Cosines<T>& c, Rgb<T>& direct,
-                         Rgb<T>& ibl_uniform) {
+                         Rgb<T>& ibl_uniform, const TangentCosines<T>* tc = nullptr) {
   const Table2D& dfg = lut::DefaultDfg();
   auto rgb = [&](int k) { return Rgb<T>(x[k], x[k + 1], x[k + 2]); };
   auto sum = [](const IblWeights<T>& w) { return w.specular + w.diffuse + w.sheen; };
@@ -101,6 +111,16 @@ inline void EvaluateFlat(ModelId m, const T* x, const Cosines<T>& c, Rgb<T>& dir
       gltf_sheen::Params<T> p{rgb(0), x[3], x[4], rgb(5), x[8]};
       direct = gltf_sheen::EvalDirect(p, {}, c, e);
       ibl_uniform = sum(gltf_sheen::EvalIbl(p, {}, c.NoV, dfg, e));
+      return;
+    }
+    case ModelId::kWoven: {
+      const Table2D& phase = lut::DefaultWovenPhase();
+      const woven::Params<T> p = woven::FromFlat(x);
+      const woven::Lobes<T> lb = woven::PrepareLobes(p);
+      const TangentCosines<T> t = tc ? *tc : woven::TangentCosinesInPlane(c);
+      direct = woven::EvalDirect(p, {}, lb, c, t, {}, dfg, phase);
+      const woven::WovenIblWeights<T> w = woven::EvalIbl(p, {}, lb, c.NoV, {}, dfg, phase);
+      ibl_uniform = w.warp + w.weft + w.diffuse + w.sheen;
       return;
     }
     default: {
@@ -127,6 +147,7 @@ inline void FlatBounds(ModelId m, double* lo, double* hi) {
     case ModelId::kStandard: fill(standard::kParameterTable); return;
     case ModelId::kPhysicalSheen: fill(physical_sheen::kParameterTable); return;
     case ModelId::kGltfSheen: fill(gltf_sheen::kParameterTable); return;
+    case ModelId::kWoven: fill(woven::kParameterTable); return;
     default:
       fill(cloth::kParameterTable);
       lo[6] = cloth::MinRoughness(ClothOptionsFor(m));

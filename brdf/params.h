@@ -49,6 +49,26 @@ inline Cosines<T> SwapViewLight(const Cosines<T>& c) {
   return {c.NoL, c.NoV, c.NoH, c.LoH};
 }
 
+// Raw cosines against the mesh tangent frame, for anisotropic models (brdf/woven.h):
+// t = the mesh tangent (+u, the warp direction), b = tangent_sign (n x t) (+v, the weft), as
+// the reference renderer builds them (render/reference/path_tracer.cpp) and after the
+// two-sided flip of n towards the viewer. Like Cosines they are passed raw.
+template <typename T>
+struct TangentCosines {
+  T ToV, BoV;  // per pixel
+  T ToL, BoL;  // per light
+  T ToH, BoH;  // per light
+};
+
+// Tangent cosines from directions in the shading frame (t = +x, b = +y, n = +z).
+template <typename T>
+inline TangentCosines<T> TangentCosinesFromDirections(const Vec3<T>& v_in, const Vec3<T>& l_in) {
+  const Vec3<T> v = Normalize(v_in);
+  const Vec3<T> l = Normalize(l_in);
+  const Vec3<T> h = Normalize(v + l);
+  return {v.x, v.y, l.x, l.y, h.x, h.y};
+}
+
 // Image-based lighting as split-sum weights; the renderer multiplies them with its
 // environment lookups and sums:  out = specular * L_ggx + diffuse * E_d + sheen * L_charlie.
 //   L_ggx     : GGX-prefiltered radiance at the model's dominant direction and LOD

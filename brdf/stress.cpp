@@ -14,7 +14,7 @@
 namespace clothfit::stress {
 namespace {
 
-constexpr int kMaxParams = 10;
+constexpr int kMaxParams = kMaxModelParameters;  // Jet slots: one per parameter
 using Jet = ceres::Jet<double, kMaxParams>;
 
 constexpr std::array<double, 8> kAdversarialCos{0.0, 1e-8,       1e-4,  1.0 - 1e-7,
@@ -36,6 +36,7 @@ struct SplitMix {
 struct Input {
   std::array<double, kMaxParams> x{};
   Cosines<double> c{};
+  TangentCosines<double> t{};  // raw tangent-frame cosines (read by anisotropic models only)
 };
 
 // Which flat parameters are roughness-like (clamped by the engine).
@@ -50,6 +51,7 @@ std::vector<bool> ClampedFlags(ModelId m) {
     case ModelId::kStandard: fill(standard::kParameterTable); break;
     case ModelId::kPhysicalSheen: fill(physical_sheen::kParameterTable); break;
     case ModelId::kGltfSheen: fill(gltf_sheen::kParameterTable); break;
+    case ModelId::kWoven: fill(woven::kParameterTable); break;
     default: fill(cloth::kParameterTable); break;
   }
   return out;
@@ -87,13 +89,23 @@ Input Draw(ModelId m, SplitMix& rng) {
       const double s = std::sqrt(std::max(0.0, 1.0 - z * z));
       return Vec3<double>(s * std::cos(phi), s * std::sin(phi), z);
     };
-    in.c = CosinesFromDirections(dir(), dir());
+    const Vec3<double> v = dir(), l = dir();
+    in.c = CosinesFromDirections(v, l);
+    in.t = TangentCosinesFromDirections(v, l);
   } else if (cmode == 1) {  // independent raw cosines
     auto u = [&]() { return -0.25 + 1.5 * rng.Uniform(); };
     in.c = {u(), u(), u(), u()};
+    auto w = [&]() { return -1.25 + 2.5 * rng.Uniform(); };
+    in.t = {w(), w(), w(), w(), w(), w()};
   } else {  // adversarial cosines
     auto a = [&]() { return kAdversarialCos[size_t(rng.Index(int(kAdversarialCos.size())))]; };
     in.c = {a(), a(), a(), a()};
+    // tangent cosines: 0, +-1 (h along t or b) and the adversarial set
+    auto b = [&]() {
+      const int k = rng.Index(int(kAdversarialCos.size()) + 2);
+      return k < int(kAdversarialCos.size()) ? kAdversarialCos[size_t(k)] : (k % 2 ? -1.0 : 1.0);
+    };
+    in.t = {b(), b(), b(), b(), b(), b()};
   }
   return in;
 }
@@ -111,7 +123,8 @@ std::string Describe(ModelId m, const Input& in, const char* what) {
   std::ostringstream os;
   os.precision(9);
   os << what << " at NoV=" << in.c.NoV << " NoL=" << in.c.NoL << " NoH=" << in.c.NoH
-     << " LoH=" << in.c.LoH << " params=[";
+     << " LoH=" << in.c.LoH << " ToV,BoV,ToL,BoL,ToH,BoH=" << in.t.ToV << "," << in.t.BoV << ","
+     << in.t.ToL << "," << in.t.BoL << "," << in.t.ToH << "," << in.t.BoH << " params=[";
   for (int k = 0; k < ParameterCount(m); ++k) os << (k ? "," : "") << in.x[size_t(k)];
   os << "]";
   return os.str();
@@ -131,19 +144,23 @@ void EvaluateOne(ModelId m, const Input& in, Tally& t) {
   const int n = ParameterCount(m);
   // double
   Rgb<double> dd, di;
-  EvaluateFlat<double>(m, in.x.data(), in.c, dd, di);
+  EvaluateFlat<double>(m, in.x.data(), in.c, dd, di, &in.t);
   // float
   std::array<float, kMaxParams> xf{};
   for (int k = 0; k < n; ++k) xf[size_t(k)] = float(in.x[size_t(k)]);
   const Cosines<float> cf{float(in.c.NoV), float(in.c.NoL), float(in.c.NoH), float(in.c.LoH)};
   Rgb<float> fd, fi;
-  EvaluateFlat<float>(m, xf.data(), cf, fd, fi);
+  const TangentCosines<float> tf{float(in.t.ToV), float(in.t.BoV), float(in.t.ToL),
+                                 float(in.t.BoL), float(in.t.ToH), float(in.t.BoH)};
+  EvaluateFlat<float>(m, xf.data(), cf, fd, fi, &tf);
   // Jet: one derivative slot per parameter
   std::array<Jet, kMaxParams> xj{};
   for (int k = 0; k < n; ++k) xj[size_t(k)] = Jet(in.x[size_t(k)], k);
   const Cosines<Jet> cj{Jet(in.c.NoV), Jet(in.c.NoL), Jet(in.c.NoH), Jet(in.c.LoH)};
   Rgb<Jet> jd, ji;
-  EvaluateFlat<Jet>(m, xj.data(), cj, jd, ji);
+  const TangentCosines<Jet> tj{Jet(in.t.ToV), Jet(in.t.BoV), Jet(in.t.ToL),
+                               Jet(in.t.BoL), Jet(in.t.ToH), Jet(in.t.BoH)};
+  EvaluateFlat<Jet>(m, xj.data(), cj, jd, ji, &tj);
 
   ++t.evaluations;
   bool bad_finite = false, bad_negative = false;
@@ -179,6 +196,7 @@ Report Run(int64_t evals, uint64_t seed, const std::function<void(int64_t, int64
   // Build the shared tables before the parallel section (and outside any timing).
   (void)lut::DefaultDfg();
   (void)lut::DefaultSheenAlbedo();
+  (void)lut::DefaultWovenPhase();
 
   const int num_models = int(kAllModels.size());
   const int64_t per_model = (evals + num_models - 1) / num_models;

@@ -147,6 +147,50 @@ inline Rgb<T> F_Schlick(const Rgb<T>& f0, const T& f90, const T& VoH, FresnelFor
   return f0 * (Const<T>(1.0) - w) + Rgb<T>::Splat(f90 * w);
 }
 
+// D_GGX_Anisotropic: Burley 2012 ("Physically-Based Shading at Disney", appendix B) / Walter
+// et al. 2007, written as three.js r187 D_GGX_Anisotropic (bsdfs, lights_physical_pars):
+//   D = (1/pi) a2 (a2 / |q|^2)^2,  a2 = alpha_t alpha_b,
+//   q = (alpha_b (t.h), alpha_t (b.h), a2 (n.h))
+// alpha_t is the roughness along the axis t, alpha_b along b (raw cosines t.h, b.h, n.h).
+// Guard: |q|^2 is floored at 1e-12 (it is >= a2^2 NoH^2 + ... > 0 except for alpha -> 0 with
+// h in the tangent plane, where D -> 0 anyway); alphas are floored at kMinAlpha.
+template <typename T>
+inline T D_GGX_Anisotropic(const T& alpha_t_in, const T& alpha_b_in, const T& NoH, const T& ToH,
+                           const T& BoH) {
+  const T alpha_t = Max(alpha_t_in, Const<T>(kMinAlpha));
+  const T alpha_b = Max(alpha_b_in, Const<T>(kMinAlpha));
+  const T a2 = alpha_t * alpha_b;
+  const T q2 = Max(Sq(alpha_b * ToH) + Sq(alpha_t * BoH) + Sq(a2 * NoH), Const<T>(1e-12));
+  return Const<T>(kInvPi) * a2 * Sq(a2 / q2);
+}
+
+// V_SmithGGXCorrelated_Anisotropic: Heitz 2014 (height-correlated Smith, anisotropic Lambda),
+// three.js r187 V_GGX_SmithCorrelated_Anisotropic without its final saturate (the isotropic
+// V_SmithGGXCorrelated above is unsaturated too):
+//   V = 0.5 / (NoL |(alpha_t t.v, alpha_b b.v, NoV)| + NoV |(alpha_t t.l, alpha_b b.l, NoL)|)
+// Guard: the denominator is floored at 1e-6 (three.js EPSILON), which only acts when both
+// NoV and NoL are ~0 (grazing), where the NoL factor of the caller makes the product vanish.
+template <typename T>
+inline T V_SmithGGXCorrelated_Anisotropic(const T& alpha_t, const T& alpha_b, const T& NoV,
+                                          const T& NoL, const T& ToV, const T& BoV,
+                                          const T& ToL, const T& BoL) {
+  using std::sqrt;
+  const T lv = sqrt(Sq(alpha_t * ToV) + Sq(alpha_b * BoV) + Sq(NoV) + Const<T>(1e-20));
+  const T ll = sqrt(Sq(alpha_t * ToL) + Sq(alpha_b * BoL) + Sq(NoL) + Const<T>(1e-20));
+  return Const<T>(0.5) / Max(NoL * lv + NoV * ll, Const<T>(1e-6));
+}
+
+// Fp: the "phase Fresnel" of the woven model: Irawan & Marschner 2012 (the von Mises forward
+// scattering of their yarn model, exp(beta (-l.v)) / normalisation), rewritten in the half
+// vector with -l.v = 1 - 2 (l.h)^2 and blended with a floor f0:
+//   Fp(LoH) = f0 + (1 - f0) exp(-2 beta LoH^2)     (Fp(0) = 1, Fp(1) = f0 + (1 - f0) e^(-2 beta))
+// beta >= 0 keeps exp() in (0, 1]; no guard needed.
+template <typename T>
+inline T F_Phase(const T& f0, const T& beta, const T& LoH) {
+  using std::exp;
+  return f0 + (Const<T>(1.0) - f0) * exp(Const<T>(-2.0) * beta * Sq(LoH));
+}
+
 // Fd_Lambert: 1 / pi.
 template <typename T>
 inline T Fd_Lambert() {

@@ -81,6 +81,13 @@ Rgb<T> EvalDirectFlat(render::ModelKind m, const cloth::Options& co, const T* x,
     case render::ModelKind::kGltfSheen:
       return gltf_sheen::EvalDirect(gltf_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]}, {}, c,
                                     lut::DefaultSheenAlbedo());
+    case render::ModelKind::kWoven:
+      // The canonical set is isotropic (relative azimuth only): the woven lobes are evaluated
+      // with v in the tangent-normal plane (woven::TangentCosinesInPlane), one azimuth of an
+      // anisotropic model, not its azimuthal average.
+      return woven::EvalDirect(woven::FromFlat(x), {}, c, woven::TangentCosinesInPlane(c),
+                               woven::WeaveSample<T>{}, lut::DefaultDfg(),
+                               lut::DefaultWovenPhase());
   }
   return Rgb<T>(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
 }

@@ -62,6 +62,7 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
   c->features = full.features;
   c->dfg = full.dfg;
   c->sheen_albedo = full.sheen_albedo;
+  c->woven_phase = full.woven_phase;
   const size_t K3 = size_t(full.options.roughness_nodes) * 3;
   c->light_begin.push_back(0);
   for (int i : keep) {
@@ -71,6 +72,13 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
     for (int s = full.light_begin[ui]; s < full.light_begin[ui + 1]; ++s)
       c->light_samples.push_back(full.light_samples[size_t(s)]);
     c->light_begin.push_back(int(c->light_samples.size()));
+    if (!full.tangent_v.empty()) {  // woven: per pixel t.v, b.v; per light sample 4 cosines
+      c->tangent_v.insert(c->tangent_v.end(), full.tangent_v.begin() + long(ui * 2),
+                          full.tangent_v.begin() + long(ui * 2 + 2));
+      c->light_tangent.insert(c->light_tangent.end(),
+                              full.light_tangent.begin() + long(full.light_begin[ui]) * 4,
+                              full.light_tangent.begin() + long(full.light_begin[ui + 1]) * 4);
+    }
     for (size_t k = 0; k < 3; ++k)
       if (!full.irradiance.empty()) c->irradiance.push_back(full.irradiance[ui * 3 + k]);
     if (!full.radiance.empty())
@@ -97,18 +105,30 @@ class PreviewCost final : public ceres::CostFunction {
     for (size_t b = 0; b < sizes_.size(); ++b)
       for (int k = 0; k < sizes_[b]; ++k) x.push_back(parameters[b][k]);
     if (!jacobians) return Residuals<double>(x.data(), residuals, nullptr);
+    // Dual indices only for the blocks Ceres wants a Jacobian of (the free ones; constant
+    // blocks get jacobians[b] == nullptr), packed in order: at most 10 free scalars.
     std::vector<Jet> xj(x.size());
-    for (size_t k = 0; k < x.size(); ++k) xj[k] = Jet(x[k], int(k));
+    std::vector<int> slot(sizes_.size(), -1);
+    {
+      int next = 0;
+      size_t k = 0;
+      for (size_t b = 0; b < sizes_.size(); ++b) {
+        const bool free_block = jacobians[b] != nullptr && next + sizes_[b] <= 10;
+        if (jacobians[b] != nullptr && !free_block) return false;  // FitImages checks this
+        if (free_block) slot[b] = next;
+        for (int j = 0; j < sizes_[b]; ++j, ++k)
+          xj[k] = free_block ? Jet(x[k], next + j) : Jet(x[k]);
+        if (free_block) next += sizes_[b];
+      }
+    }
     std::vector<Jet> r(static_cast<size_t>(num_residuals()));
     if (!Residuals<Jet>(xj.data(), residuals, r.data())) return false;
-    int offset = 0;
     for (size_t b = 0; b < sizes_.size(); ++b) {
       if (jacobians[b]) {
         for (int row = 0; row < num_residuals(); ++row)
           for (int k = 0; k < sizes_[b]; ++k)
-            jacobians[b][row * sizes_[b] + k] = r[size_t(row)].v[offset + k];
+            jacobians[b][row * sizes_[b] + k] = r[size_t(row)].v[slot[b] + k];
       }
-      offset += sizes_[b];
     }
     return true;
   }
@@ -628,10 +648,15 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
   if (inputs.empty()) throw FitError("fit: no (scene, reference) pairs");
   const render::ModelKind model = opt.start.model;
   const auto table = render::ParameterTable(model);
-  if (render::DefaultPreset(model).values.size() > 10)
-    throw FitError("fit: model has more than 10 parameters");
   const std::vector<int> sizes = BlockSizes(table);
   CheckLockedNames(table, opt);
+  // The Jacobian carries at most 10 free scalars (ceres::Jet<double, 10>).
+  int free_scalars = 0;
+  for (const ParamInfo& p : table)
+    if (!IsLocked(opt, p.name)) free_scalars += p.size;
+  if (free_scalars > 10)
+    throw FitError("fit: model " + render::ToString(model) + " has " + std::to_string(free_scalars) +
+                   " free parameters; at most 10 (lock some with --lock)");
 
   // Per scene: cache, blocks, transformed reference, weights.
   const SceneList data = BuildScenes(inputs, opt);

@@ -48,8 +48,8 @@ sys.exit(1 if bad else 0)
 PY
     ;;
   stress)
-    out=$("$BIN" --quiet stress --evals 40000 --seed 11) || fail "stress exited non-zero: $out"
-    echo "$out" | tail -1 | grep -q "^stress: 40000 evaluations, 0 non-finite, 0 negative$" \
+    out=$("$BIN" --quiet stress --evals 45000 --seed 11) || fail "stress exited non-zero: $out"
+    echo "$out" | tail -1 | grep -q "^stress: 45000 evaluations, 0 non-finite, 0 negative$" \
       || fail "unexpected last line: $(echo "$out" | tail -1)"
     ;;
   badargs)

@@ -33,7 +33,8 @@ int ModelRank(const std::string& model) {
   if (model == "physical-sheen") return 1;
   if (model == "standard") return 2;
   if (model == "gltf-sheen") return 3;
-  return 4;
+  if (model == "woven") return 4;
+  return 5;
 }
 
 std::string ModelTitle(const std::string& model) {
@@ -41,6 +42,7 @@ std::string ModelTitle(const std::string& model) {
   if (model == "physical-sheen") return "MeshPhysicalMaterial (sheen)";
   if (model == "standard") return "MeshStandardMaterial";
   if (model == "gltf-sheen") return "glTF KHR_materials_sheen";
+  if (model == "woven") return "woven (clothfit, web/)";
   return model;
 }
 

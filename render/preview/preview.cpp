@@ -13,6 +13,7 @@
 #include "brdf/lut.h"
 #include "brdf/physical_sheen.h"
 #include "brdf/standard.h"
+#include "brdf/woven.h"
 #include "render/scene/embree_scene.h"
 #include "render/scene/lights.h"
 #include "render/preview/prefilter.h"
@@ -94,6 +95,8 @@ struct PixelData {
   std::vector<PreviewLightSample> lights;
   std::array<float, 3> irr{};
   std::vector<float> rad, srad;
+  std::array<float, 2> tv{};  // woven: t.v, b.v
+  std::vector<float> lt;      // woven: t.l, b.l, t.h, b.h per light sample
 };
 
 // What the per-pixel work of a cache build reads.
@@ -111,14 +114,18 @@ struct PixelContext {
 // side, view direction, and its mesh.
 struct PrimaryHit {
   Vec3d p, n, v;
+  Vec3d t, b;  // the reference renderer's tangent frame (path_tracer.cpp): t = mesh tangent
+               // Gram-Schmidt'd against n, b = tangent_sign n x t
   double NoV;
   const Mesh* mesh;
 };
 
 // The punctual lights reaching a point (with the terminator wrap of Filament's subsurface
 // cloth on the fabric), each with its cosines and irradiance.
+// `light_tangent` (woven only, else null) receives t.l, b.l, t.h, b.h per kept light.
 std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const PreviewCache& c,
-                                             const PrimaryHit& hit) {
+                                             const PrimaryHit& hit,
+                                             std::vector<float>* light_tangent = nullptr) {
   const Vec3d& p = hit.p;
   const Vec3d& n = hit.n;
   const Vec3d& v = hit.v;
@@ -139,6 +146,10 @@ std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const Previe
     q.LoH = float(Dot(s.wi, hv));
     for (int k = 0; k < 3; ++k) q.irradiance[k] = float(s.scale * light.color[size_t(k)]);
     ls.push_back(q);
+    if (light_tangent)
+      light_tangent->insert(light_tangent->end(),
+                            {float(Dot(hit.t, s.wi)), float(Dot(hit.b, s.wi)),
+                             float(Dot(hit.t, hv)), float(Dot(hit.b, hv))});
   }
   return ls;
 }
@@ -212,7 +223,12 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     hit.p = V(a.position) + V(h.ng) * (Dot(V(h.ng), hit.v) > 0 ? x.eps : -x.eps);
     hit.NoV = Dot(hit.n, hit.v);
     hit.mesh = &x.scene.meshes[size_t(h.mesh)];
-    std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit);
+    hit.t = V(a.tangent);
+    hit.t = Normalize(hit.t - hit.n * Dot(hit.t, hit.n));
+    hit.b = Cross(hit.n, hit.t) * a.tangent_sign;
+    const bool woven_frame = x.opt.model == ModelKind::kWoven && hit.mesh->is_fabric;
+    std::vector<float> lt;
+    std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit, woven_frame ? &lt : nullptr);
     Rgb<double> Ed(0, 0, 0);
     if (x.env) Ed = IrradianceOverPi(x.e.sh, hit.n);
     const Vec3d R = hit.n * (2.0 * hit.NoV) - hit.v;
@@ -225,6 +241,8 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     pd.index = int(pix);
     pd.nov = float(hit.NoV);
     pd.lights = std::move(ls);
+    pd.tv = {float(Dot(hit.t, hit.v)), float(Dot(hit.b, hit.v))};
+    pd.lt = std::move(lt);
     for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
     if (x.env) FillRadianceTables(x, hit.n, R, &pd);
     row->push_back(std::move(pd));
@@ -244,6 +262,10 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       c->irradiance.insert(c->irradiance.end(), pd.irr.begin(), pd.irr.end());
       c->radiance.insert(c->radiance.end(), pd.rad.begin(), pd.rad.end());
       c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
+      if (c->options.model == ModelKind::kWoven) {
+        c->tangent_v.insert(c->tangent_v.end(), pd.tv.begin(), pd.tv.end());
+        c->light_tangent.insert(c->light_tangent.end(), pd.lt.begin(), pd.lt.end());
+      }
     }
   }
 }
@@ -266,6 +288,7 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   c->features.shadows = opt.shadows && c->features.direct;
   c->dfg = &lut::DefaultDfg();
   c->sheen_albedo = &lut::DefaultSheenAlbedo();
+  if (opt.model == ModelKind::kWoven) c->woven_phase = &lut::DefaultWovenPhase();
   const int W = c->width, H = c->height;
   const size_t np = size_t(W) * size_t(H);
   c->background.assign(np * 3, 0.f);
@@ -329,6 +352,14 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   cloth::Options co = c.options.cloth;
   co.subsurface = kSub;  // compile-time constant after inlining: no per-pixel wrap branch
   auto rgb = [&](int k) { return Rgb<T>(x[k], x[k + 1], x[k + 2]); };
+  // Woven: parameter-only work (twist cos/sin, alphas, r_e) once per frame, not per pixel.
+  woven::Params<T> wp;
+  woven::Lobes<T> wl{};
+  if constexpr (M == ModelKind::kWoven) {
+    wp = woven::FromFlat(x);
+    wl = woven::PrepareLobes(wp);
+  }
+  const woven::WeaveSample<T> ws{};
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& br) {
     for (size_t i = br.begin(); i != br.end(); ++i) {
       const T NoV = Const<T>(double(c.NoV[i]));
@@ -339,7 +370,14 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
           const Cosines<T> cs{NoV, Const<T>(double(q.NoL)), Const<T>(double(q.NoH)),
                               Const<T>(double(q.LoH))};
           Rgb<T> f;
-          if constexpr (M == ModelKind::kCloth) {
+          if constexpr (M == ModelKind::kWoven) {
+            const float* tv = &c.tangent_v[i * 2];
+            const float* lt = &c.light_tangent[size_t(s) * 4];
+            const TangentCosines<T> tc{Const<T>(double(tv[0])), Const<T>(double(tv[1])),
+                                       Const<T>(double(lt[0])), Const<T>(double(lt[1])),
+                                       Const<T>(double(lt[2])), Const<T>(double(lt[3]))};
+            f = woven::EvalDirect(wp, c.options.woven, wl, cs, tc, ws, *c.dfg, *c.woven_phase);
+          } else if constexpr (M == ModelKind::kCloth) {
             f = cloth::EvalDirect(cloth::Params<T>{rgb(0), rgb(3), x[6], rgb(7)}, co, cs);
           } else if constexpr (M == ModelKind::kStandard) {
             f = standard::EvalDirect(standard::Params<T>{rgb(0), x[3], x[4]}, {}, cs, *c.dfg);
@@ -356,7 +394,12 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
       if constexpr (kIbl) {
         const Rgb<T> Ed = LoadRgb<T>(&c.irradiance[i * 3]);
         const float* rad = &c.radiance[i * size_t(K) * 3];
-        if constexpr (M == ModelKind::kCloth) {
+        if constexpr (M == ModelKind::kWoven) {
+          const woven::WovenIblWeights<T> w =
+              woven::EvalIbl(wp, c.options.woven, wl, NoV, ws, *c.dfg, *c.woven_phase);
+          L += (w.warp + w.weft) * TableRadiance(rad, K, wl.r_e) +
+               w.sheen * TableRadiance(rad, K, wl.r_s) + w.diffuse * Ed;
+        } else if constexpr (M == ModelKind::kCloth) {
           const cloth::Params<T> p{rgb(0), rgb(3), x[6], rgb(7)};
           const IblWeights<T> w = cloth::EvalIbl(p, co, NoV, *c.dfg);
           L += w.specular * TableRadiance(rad, K, cloth::ClampedRoughness(p.roughness, co)) +
@@ -411,6 +454,7 @@ void EvaluatePreview(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out
     case ModelKind::kPhysicalSheen:
       return DispatchFeatures<T, ModelKind::kPhysicalSheen>(c, x, out);
     case ModelKind::kGltfSheen: return DispatchFeatures<T, ModelKind::kGltfSheen>(c, x, out);
+    case ModelKind::kWoven: return DispatchFeatures<T, ModelKind::kWoven>(c, x, out);
   }
 }
 

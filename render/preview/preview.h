@@ -32,6 +32,7 @@
 
 #include "brdf/math.h"
 #include "brdf/table.h"
+#include "brdf/woven.h"
 #include "render/scene/environment.h"
 #include "render/scene/material.h"
 #include "render/scene/scene.h"
@@ -43,6 +44,7 @@ class PrefilteredEnvironment;
 struct PreviewOptions {
   ModelKind model = ModelKind::kCloth;
   cloth::Options cloth;      // model == kCloth
+  woven::Options woven;      // model == kWoven
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
@@ -83,6 +85,13 @@ class PreviewCache {
   std::vector<float> sheen_radiance;      // K x 3 per fabric pixel: Charlie (gltf-sheen only)
   std::vector<float> background;          // linear RGB of every pixel without fabric
   std::vector<float> fabric_mask;         // 1 where a fabric pixel is shaded
+  // Woven only (empty for the other models): raw cosines against the reference renderer's
+  // tangent frame (t = mesh tangent Gram-Schmidt'd against the viewer-side n, +u = warp;
+  // b = tangent_sign n x t, +v = weft): t.v, b.v per fabric pixel; t.l, b.l, t.h, b.h per
+  // light sample (parallel to light_samples).
+  std::vector<float> tangent_v;
+  std::vector<float> light_tangent;
+  const Table2D* woven_phase = nullptr;   // lut::DefaultWovenPhase() (woven only)
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
   const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table
   double build_seconds = 0.0;

@@ -7,6 +7,7 @@
 #include "brdf/gltf_sheen.h"
 #include "brdf/physical_sheen.h"
 #include "brdf/standard.h"
+#include "brdf/woven.h"
 #include "render/scene/image_io.h"
 
 namespace clothfit::render {
@@ -19,6 +20,7 @@ std::string ToString(ModelKind m) {
     case ModelKind::kStandard: return "standard";
     case ModelKind::kPhysicalSheen: return "physical-sheen";
     case ModelKind::kGltfSheen: return "gltf-sheen";
+    case ModelKind::kWoven: return "woven";
   }
   return "?";
 }
@@ -28,8 +30,9 @@ ModelKind ParseModelKind(const std::string& s) {
   if (s == "standard") return ModelKind::kStandard;
   if (s == "physical-sheen") return ModelKind::kPhysicalSheen;
   if (s == "gltf-sheen") return ModelKind::kGltfSheen;
+  if (s == "woven") return ModelKind::kWoven;
   throw std::invalid_argument("unknown model '" + s +
-                              "' (valid: cloth, standard, physical-sheen, gltf-sheen)");
+                              "' (valid: cloth, standard, physical-sheen, gltf-sheen, woven)");
 }
 
 std::span<const ParamInfo> ParameterTable(ModelKind m) {
@@ -38,6 +41,7 @@ std::span<const ParamInfo> ParameterTable(ModelKind m) {
     case ModelKind::kStandard: return standard::kParameterTable;
     case ModelKind::kPhysicalSheen: return physical_sheen::kParameterTable;
     case ModelKind::kGltfSheen: return gltf_sheen::kParameterTable;
+    case ModelKind::kWoven: return woven::kParameterTable;
   }
   return {};
 }
@@ -48,6 +52,7 @@ std::string EngineOf(ModelKind m) {
     case ModelKind::kStandard: return std::string(standard::kEngine);
     case ModelKind::kPhysicalSheen: return std::string(physical_sheen::kEngine);
     case ModelKind::kGltfSheen: return std::string(gltf_sheen::kEngine);
+    case ModelKind::kWoven: return std::string(woven::kEngine);
   }
   return "?";
 }

@@ -1,0 +1,25 @@
+// fit/woven_fit.h: the image-space fit of the woven model (brdf/woven.h).
+//
+// The woven model has 16 parameters and the image fit differentiates at most 10 at once
+// (ceres::Jet<double, 10>), so it is fitted in two stages over the same references, blocks and
+// weights as every other model (fit/image_fit.h):
+//   1. yarn stage: free = base_color, specular_color, roughness, specular_f0,
+//      forward_scattering, warp_share (10); held = anisotropy, twist (at the start preset's
+//      values: the defaults, which come from the BRDF-space fits of docs/fitting.md), sheen
+//      off. Colours start from the reference's mean colour, roughness from start_roughness.
+//   2. sheen stage, from stage 1's result: free = base_color, specular_color, sheen_color,
+//      sheen_roughness (10); the lobe shape is held. Kept only if it lowers the unweighted
+//      RMSE in the fit space (it cannot raise the cost it minimises: it starts at stage 1's
+//      optimum with the sheen at a small value).
+// Parameters the caller locks stay locked in both stages.
+#pragma once
+
+#include <vector>
+
+#include "fit/image_fit.h"
+
+namespace clothfit::fit {
+
+FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options);
+
+}  // namespace clothfit::fit
