@@ -49,6 +49,10 @@ struct Reference {
   std::string path;
   int width = 0, height = 0;
   std::vector<float> rgb, std_error, fabric;  // 3, 3, 1 per pixel
+  // Coverage weight per pixel (fit/reference.h): the block means are sum(w x) / sum(w) on
+  // both sides. ReadReference(path) fills it as 1 where fabric >= 0.999, else 0.
+  std::vector<float> weight;
+  std::string layout, noise;  // how coverage and noise were read (printed by clothfit fit)
 };
 
 // Reads a reference EXR (channels R, G, B; optional stderr.R/G/B, fabric or A). Throws
