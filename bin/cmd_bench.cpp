@@ -156,7 +156,57 @@ struct BenchFitArgs {
   std::string starts = "1,2,3";
   int spp = 64;
   std::string csv = "out/bench-fit.csv", png = "out/bench-fit.png";
+  std::string models;  // non-empty: every listed model at the fit defaults (RunModelBench)
 };
+
+// `bench fit --models all|m1,m2`: each model fitted at the defaults of `clothfit fit --fabric`
+// (card resolution, auto level and stride, two starts) on the cached references; seconds,
+// iterations and the common error side by side.
+void RunBenchModels(const BenchFitArgs& a, bool quiet) {
+  const char* env_root = std::getenv("CLOTHFIT_DATASETS");
+  const std::string root = env_root ? env_root : CLOTHFIT_SOURCE_DATASETS;
+  std::vector<render::ModelKind> models;
+  if (a.models == "all") {
+    models = {render::ModelKind::kCloth, render::ModelKind::kStandard,
+              render::ModelKind::kPhysicalSheen, render::ModelKind::kGltfSheen};
+  } else {
+    std::stringstream ms(a.models);
+    std::string m;
+    while (std::getline(ms, m, ',')) models.push_back(render::ParseModelKind(m));
+  }
+  const std::vector<std::string> paths = CanonicalScenes();
+  std::vector<fit::ModelRow> all;
+  std::printf("%-8s %-15s %8s %6s %6s %9s %-15s\n", "fabric", "model", "seconds", "iters",
+              "starts", "error", "termination");
+  std::stringstream ss(a.fabrics);
+  std::string name;
+  while (std::getline(ss, name, ',')) {
+    const std::string fabric_path = root + "/fabrics/" + name + ".json";
+    const double weave_period = render::LoadFabric(fabric_path).weave_period_uv;
+    std::vector<render::Scene> scenes;
+    std::vector<fit::Reference> refs;
+    std::vector<std::unique_ptr<render::Environment>> envs;
+    for (const std::string& sp : paths) {
+      scenes.push_back(render::LoadScene(sp));
+      envs.push_back(LoadSceneEnvironment(scenes.back(), true));
+      refs.push_back(fit::ReadReference(CachedReference(sp, fabric_path, a.spp, 1, quiet)));
+    }
+    std::vector<fit::SceneInput> in;
+    for (size_t i = 0; i < paths.size(); ++i)
+      in.push_back({&scenes[i], envs[i].get(), &refs[i], nullptr, paths[i]});
+    const auto rows = fit::RunModelBench(name, in, weave_period, models, [](const fit::ModelRow& r) {
+      std::printf("%-8s %-15s %8.2f %6d %6d %9.5f %-15s%s\n", r.fabric.c_str(), r.model.c_str(),
+                  r.seconds, r.iterations, r.starts, r.error, r.termination.c_str(),
+                  r.usable ? "" : "  (unusable)");
+      std::fflush(stdout);
+    });
+    all.insert(all.end(), rows.begin(), rows.end());
+  }
+  const std::filesystem::path dir = std::filesystem::path(a.csv).parent_path();
+  if (!dir.empty()) std::filesystem::create_directories(dir);
+  fit::WriteModelBench(all, a.csv);
+  std::printf("bench fit --models: %zu fits -> %s\n", all.size(), a.csv.c_str());
+}
 
 std::vector<int> IntList(const std::string& text, const char* flag, int lo, int hi) {
   std::vector<int> out;
@@ -275,6 +325,9 @@ void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
   cmd->add_option("--starts", fa.starts, "`bench fit`: multi-start counts (1-3)");
   cmd->add_option("--spp", fa.spp, "`bench fit`: reference samples per pixel (cached)")
       ->check(CLI::Range(16, 65536));
+  cmd->add_option("--models", fa.models,
+                  "`bench fit`: all | comma-separated models: each at the fit defaults, "
+                  "seconds and error side by side (instead of the settings sweep)");
   cmd->add_option("--csv", fa.csv, "`bench fit`: output CSV");
   cmd->add_option("--png", fa.png, "`bench fit`: output plot (error vs time)");
   cmd->add_option("--scene", a.scene, "scene card for `bench preview` and `bench reference`");
@@ -359,7 +412,10 @@ int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
   }
   if (a.what == "fit") {
     try {
-      RunBenchFit(a.fit, g.quiet);
+      if (!a.fit.models.empty())
+        RunBenchModels(a.fit, g.quiet);
+      else
+        RunBenchFit(a.fit, g.quiet);
       return 0;
     } catch (const std::exception& e) {
       std::fprintf(stderr, "clothfit bench fit: error: %s\n", e.what());

@@ -8,12 +8,14 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <string>
 
 #include "bin/commands.h"
 #include "bin/progress.h"
 #include "fit/image_fit.h"
+#include "fit/reference.h"
 #include "fit/woven_fit.h"
 #include "render/reference/fabric.h"
 #include "render/scene/image_io.h"
@@ -119,10 +121,11 @@ namespace {
 struct FitArgs {
   std::string fabric, references, scenes, model = "cloth", space = "display", lock, out;
   std::string level = "auto", loss = "huber", variant = "filament", sheen_default = "explicit";
-  std::string images;
-  double loss_scale = 1.0;
+  std::string images, references2, alpha = "auto", coverage_channel, noise = "auto";
+  std::string weave_period, starts, start_values;
+  double loss_scale = 1.0, min_coverage = 0.5;
   bool subsurface = false, no_floor = false;
-  int spp = 256, stride = 0, threads = 0;
+  int spp = 256, stride = 0, threads = 0, max_iterations = 50;
 };
 
 void AddFitOptions(CLI::App* cmd, FitArgs& a) {
@@ -149,7 +152,77 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
   cmd->add_flag("--no-noise-floor", a.no_floor, "(--fabric) skip the second-seed references");
   cmd->add_option("--images", a.images, "directory for fitted previews and residual images");
   cmd->add_option("--threads", a.threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
+  cmd->add_option("--references2", a.references2,
+                  "second renders of the references (another seed): the noise floor");
+  cmd->add_option("--alpha", a.alpha,
+                  "reference alpha: auto (default) | premultiplied | straight (docs/references.md)");
+  cmd->add_option("--coverage-channel", a.coverage_channel,
+                  "reference coverage channel (default: fabric, else A; none: all covered)");
+  cmd->add_option("--min-coverage", a.min_coverage,
+                  "keep a block when its reference coverage fraction is at least this")
+      ->check(CLI::Range(0.0, 1.0));
+  cmd->add_option("--noise", a.noise,
+                  "reference noise without stderr.*: auto (default) | image | none");
+  cmd->add_option("--weave-period", a.weave_period,
+                  "weave period for --level auto: metres (0.002, 2mm) via the cards' "
+                  "uv_metres_per_unit, or UV units (0.05uv)");
+  cmd->add_option("--max-iterations", a.max_iterations, "solver iterations per start (default 50)")
+      ->check(CLI::Range(1, 100000));
+  cmd->add_option("--starts", a.starts, "comma-separated start roughness values (default 0.6,0.9)");
+  cmd->add_option("--start", a.start_values,
+                  "start values: name=value,... (colours as r:g:b, e.g. base_color=0.5:0.4:0.3)");
   cmd->add_option("--out", a.out, "output preset JSON")->required();
+}
+
+// A number, or an invalid_argument naming the flag and the text.
+double ParseNumber(const std::string& text, const std::string& flag) {
+  size_t used = 0;
+  double x = 0.0;
+  try {
+    x = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != text.size() || !std::isfinite(x))
+    throw std::invalid_argument(flag + ": '" + text + "' is not a number");
+  return x;
+}
+
+// --starts and --start (exclusive): the multi-start roughness values, or one start from the
+// given values (unnamed parameters at the model's defaults).
+void ApplyStarts(const FitArgs& a, fit::FitOptions* o) {
+  if (!a.starts.empty()) {
+    o->start_roughness.clear();
+    for (const std::string& v : SplitList(a.starts)) {
+      const double r = ParseNumber(v, "--starts");
+      if (!(r >= 0.0 && r <= 1.0))
+        throw std::invalid_argument("--starts: '" + v + "' is not a roughness in [0, 1]");
+      o->start_roughness.push_back(r);
+    }
+  }
+  if (a.start_values.empty()) return;
+  if (!a.starts.empty())
+    throw std::invalid_argument("--start and --starts are exclusive: give the roughness in "
+                                "--start (roughness=0.7)");
+  nlohmann::json params = nlohmann::json::object();
+  for (const std::string& item : SplitList(a.start_values)) {
+    const size_t eq = item.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw std::invalid_argument("--start: '" + item + "' is not name=value");
+    std::vector<double> comps;
+    std::stringstream vs(item.substr(eq + 1));
+    std::string comp;
+    while (std::getline(vs, comp, ':')) comps.push_back(ParseNumber(comp, "--start " + item));
+    params[item.substr(0, eq)] = comps.size() == 1 ? nlohmann::json(comps[0]) : nlohmann::json(comps);
+  }
+  nlohmann::json pj = {{"schema", "clothfit.preset"}, {"version", 1},
+                       {"model", render::ToString(o->start.model)}, {"parameters", params}};
+  if (o->start.model == render::ModelKind::kCloth)
+    pj["cloth"] = {{"variant", a.variant}, {"sheen_default", a.sheen_default},
+                   {"subsurface", a.subsurface}};
+  o->start.values = render::ParsePreset(pj, "--start").values;
+  o->init_from_reference = false;  // exactly these values, one start
+  o->start_roughness = {0.0};
 }
 
 // --level: an integer in [0, 6], or -1 for "auto" (validated before any work).
@@ -188,8 +261,11 @@ FitFiles ResolveFitFiles(const FitArgs& a, const Globals& g) {
   } else {
     f.refs = SplitList(a.references);
     f.scenes = SplitList(a.scenes);
+    f.refs2 = SplitList(a.references2);
     if (f.refs.empty() || f.refs.size() != f.scenes.size())
       throw std::invalid_argument("--references and --scenes need the same number (>= 1) of files");
+    if (!f.refs2.empty() && f.refs2.size() != f.refs.size())
+      throw std::invalid_argument("--references2 needs one file per reference");
   }
   return f;
 }
@@ -225,6 +301,9 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
            : throw std::invalid_argument("--loss: unknown '" + a.loss + "' (huber, cauchy, none)");
   o.loss_scale = a.loss_scale;
   o.pixel_stride = a.stride;
+  o.max_iterations = a.max_iterations;
+  o.min_coverage = a.min_coverage;
+  ApplyStarts(a, &o);
   return o;
 }
 
@@ -235,7 +314,7 @@ struct LoadedScenes {
   std::vector<fit::Reference> rr, rr2;
 };
 
-LoadedScenes LoadFitScenes(const FitFiles& f) {
+LoadedScenes LoadFitScenes(const FitFiles& f, const fit::ReferenceOptions& ro) {
   LoadedScenes l;
   std::map<std::string, std::shared_ptr<render::Environment>> env_by_key;  // load once
   for (size_t i = 0; i < f.scenes.size(); ++i) {
@@ -252,8 +331,8 @@ LoadedScenes LoadFitScenes(const FitFiles& f) {
         it = env_by_key.emplace(key, LoadSceneEnvironment(l.sc.back(), true)).first;
       l.envs.push_back(it->second);
     }
-    l.rr.push_back(fit::ReadReference(f.refs[i]));
-    if (!f.refs2.empty()) l.rr2.push_back(fit::ReadReference(f.refs2[i]));
+    l.rr.push_back(fit::ReadReference(f.refs[i], ro));
+    if (!f.refs2.empty()) l.rr2.push_back(fit::ReadReference(f.refs2[i], ro));
   }
   return l;
 }
@@ -277,12 +356,26 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
   fitj["seconds"] = res.seconds;
   fitj["setup_seconds"] = res.setup_seconds;
   fitj["termination"] = res.termination;
+  fitj["converged"] = res.converged;
+  fitj["max_iterations"] = o.max_iterations;
+  fitj["min_coverage"] = o.min_coverage;
+  nlohmann::json ab = nlohmann::json::array();
+  bool flagged_bound = false;
+  for (const fit::AtBound& b : res.at_bound) {
+    ab.push_back({{"name", b.name}, {"value", b.value}, {"bound", b.upper ? "upper" : "lower"},
+                  {"flagged", b.flagged}});
+    flagged_bound = flagged_bound || b.flagged;
+  }
+  fitj["at_bound"] = ab;
+  fitj["status"] = !res.converged ? "not converged" : flagged_bound ? "at bound" : "ok";
   fitj["solver"] = res.solver_report;
   fitj["rmse"] = res.rmse;
   nlohmann::json sj = nlohmann::json::array();
   for (size_t i = 0; i < res.scenes.size(); ++i) {
     const auto& e = res.scenes[i];
     nlohmann::json x = {{"scene", e.scene}, {"reference", e.reference}, {"blocks", e.blocks},
+                        {"blocks_dropped_preview", e.dropped_preview},
+                        {"blocks_dropped_coverage", e.dropped_coverage},
                         {"rmse", e.rmse}};
     if (e.noise_floor >= 0) x["noise_floor"] = e.noise_floor;
     // What `clothfit report` needs: the second-seed reference (noise floor), the display
@@ -310,7 +403,14 @@ void WriteFitImages(const std::string& dir, const FitFiles& f, const LoadedScene
   fs::create_directories(dir);
   for (size_t i = 0; i < l.sc.size(); ++i) {
     const render::Scene& scene = l.sc[i];
-    const std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset);
+    std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset);
+    // A transparent-film reference (alpha coverage) has no environment behind the geometry:
+    // where it saw nothing, the preview images show nothing either, so side-by-sides and
+    // residuals do not mix in background differences.
+    if (l.rr[i].layout.find("alpha") != std::string::npos)
+      for (size_t p = 0; p < l.rr[i].fabric.size(); ++p)
+        if (l.rr[i].fabric[p] <= 0.f)
+          for (size_t c = 0; c < 3; ++c) frame[p * 3 + c] = 0.f;
     const std::string stem = fs::path(f.scenes[i]).stem().string();
     const auto op = render::ParseToneMapping(scene.card.tone_mapping);
     io::WritePng8((fs::path(dir) / (stem + "_preview.png")).string(), scene.card.width,
@@ -350,6 +450,54 @@ void PrintFitSummary(const FitArgs& a, const fit::FitOptions& o, const fit::FitR
               render::ToString(preset.model).c_str(), res.rmse, fit::ToString(o.space).c_str(),
               nf ? (", noise floor " + std::to_string(floor / nf).substr(0, 6)).c_str() : "",
               res.final_cost, res.iterations, res.starts, res.seconds, a.out.c_str());
+  for (const auto& e : res.scenes)
+    std::printf("fit:   %s: %d blocks kept, %d dropped (%d not all fabric in the preview, %d "
+                "coverage < %.2f)\n",
+                fs::path(e.scene).filename().string().c_str(), e.blocks,
+                e.dropped_preview + e.dropped_coverage, e.dropped_preview, e.dropped_coverage,
+                o.min_coverage);
+}
+
+// Convergence (docs/references.md): 3 when the fit did not converge or stopped at a
+// degenerate bound (the preset is written and flagged), else 0; says why on stdout.
+int ConvergenceStatus(const fit::FitOptions& o, const fit::FitResult& res) {
+  int status = 0;
+  if (!res.converged) {
+    std::printf("fit: WARNING: not converged (%s; --max-iterations %d per start)\n",
+                res.termination.c_str(), o.max_iterations);
+    status = 3;
+  }
+  for (const fit::AtBound& b : res.at_bound) {
+    if (!b.flagged) continue;
+    std::printf("fit: WARNING: %s at its %s bound (%g)\n", b.name.c_str(),
+                b.upper ? "upper" : "lower", b.value);
+    status = 3;
+  }
+  return status;
+}
+
+// The block level: --level; else from the weave period (--weave-period through each card's
+// uv_metres_per_unit, or the fabric's); else 4 (docs/references.md). Printed with the reason.
+int ChooseLevel(const FitArgs& a, int fixed_level, double fabric_period,
+                const std::vector<fit::SceneInput>& inputs, const FitFiles& f) {
+  int level = 4;
+  std::string why = "weave period unknown (--weave-period): default";
+  if (a.level != "auto") {
+    level = fixed_level;
+    why = "--level";
+  } else if (!a.weave_period.empty()) {
+    const fit::WeavePeriod period = fit::ParseWeavePeriod(a.weave_period);
+    level = 1;
+    for (size_t i = 0; i < inputs.size(); ++i)
+      level = std::max(level, fit::AutoLevel(*inputs[i].scene,
+                                             fit::WeavePeriodUv(period, *inputs[i].scene, f.scenes[i])));
+    why = "auto, weave period " + a.weave_period;
+  } else if (fabric_period > 0.0) {
+    level = fit::AutoLevel(inputs, fabric_period);
+    why = "auto, weave period from the fabric";
+  }
+  std::printf("fit: level %d (%d px blocks; %s)\n", level, 1 << level, why.c_str());
+  return level;
 }
 
 // `clothfit fit` after parsing: returns the exit status (throws on bad input).
@@ -363,12 +511,20 @@ int RunFit(const FitArgs& a, const Globals& g) {
   const FitFiles files = ResolveFitFiles(a, g);
   fit::FitOptions o = MakeFitOptions(a, StartPreset(a));
   // Load everything.
-  const LoadedScenes l = LoadFitScenes(files);
+  fit::ReferenceOptions ro;
+  ro.alpha = fit::ParseAlphaMode(a.alpha);
+  ro.coverage_channel = a.coverage_channel;
+  ro.noise = fit::ParseNoiseMode(a.noise);
+  if (!a.weave_period.empty()) (void)fit::ParseWeavePeriod(a.weave_period);  // before any work
+  const LoadedScenes l = LoadFitScenes(files, ro);
   std::vector<fit::SceneInput> inputs;
   for (size_t i = 0; i < l.sc.size(); ++i)
     inputs.push_back({&l.sc[i], l.envs[i].get(), &l.rr[i], l.rr2.empty() ? nullptr : &l.rr2[i],
                       files.scenes[i]});
-  o.level = a.level == "auto" ? fit::AutoLevel(inputs, weave_period) : fixed_level;
+  o.level = ChooseLevel(a, fixed_level, weave_period, inputs, files);
+  for (size_t i = 0; i < l.rr.size(); ++i)
+    std::printf("fit: %s: %s; noise: %s\n", files.refs[i].c_str(), l.rr[i].layout.c_str(),
+                l.rr[i].noise.c_str());
   const fit::FitResult res = o.start.model == render::ModelKind::kWoven
                                    ? fit::FitWovenImages(inputs, o)
                                    : fit::FitImages(inputs, o);
@@ -386,7 +542,7 @@ int RunFit(const FitArgs& a, const Globals& g) {
   if (!a.images.empty()) WriteFitImages(a.images, files, l, preset);
   render::WritePreset(a.out, preset);
   PrintFitSummary(a, o, res, preset);
-  return 0;
+  return ConvergenceStatus(o, res);
 }
 
 }  // namespace

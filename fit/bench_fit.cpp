@@ -104,6 +104,53 @@ std::vector<BenchRow> RunFitBench(const std::string& fabric,
   return rows;
 }
 
+std::vector<ModelRow> RunModelBench(const std::string& fabric,
+                                    const std::vector<SceneInput>& inputs,
+                                    double weave_period_uv,
+                                    const std::vector<render::ModelKind>& models,
+                                    const std::function<void(const ModelRow&)>& log) {
+  std::vector<ModelRow> rows;
+  const int level = AutoLevel(inputs, weave_period_uv);
+  for (render::ModelKind m : models) {
+    FitOptions o;
+    o.start = render::DefaultPreset(m);
+    o.level = level;
+    if (m == render::ModelKind::kStandard || m == render::ModelKind::kPhysicalSheen)
+      o.locked.push_back("metalness");
+    if (m == render::ModelKind::kGltfSheen) o.locked.push_back("metallic");
+    ModelRow row;
+    row.fabric = fabric;
+    row.model = render::ToString(m);
+    const auto t0 = std::chrono::steady_clock::now();
+    FitResult r;
+    try {
+      r = FitImages(inputs, o);
+    } catch (const FitError&) {
+      r.usable = false;
+    }
+    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    row.usable = r.usable;
+    row.iterations = r.iterations;
+    row.starts = r.starts;
+    row.termination = r.termination;
+    row.fit_rmse = r.rmse;
+    row.error = r.usable ? CommonError(inputs, r.preset) : std::numeric_limits<double>::quiet_NaN();
+    if (log) log(row);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+void WriteModelBench(const std::vector<ModelRow>& rows, const std::string& csv_path) {
+  std::ostringstream csv;
+  csv << "fabric,model,seconds,error,fit_rmse,iterations,starts,termination,usable\n";
+  for (const ModelRow& r : rows)
+    csv << r.fabric << "," << r.model << "," << r.seconds << "," << r.error << "," << r.fit_rmse
+        << "," << r.iterations << "," << r.starts << "," << r.termination << ","
+        << (r.usable ? 1 : 0) << "\n";
+  io::WriteTextAtomic(csv_path, csv.str());
+}
+
 namespace {
 
 std::string Fmt(const char* f, double v) {

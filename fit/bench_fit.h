@@ -42,6 +42,25 @@ std::vector<BenchRow> RunFitBench(const std::string& fabric,
                                   const FitOptions& base, const std::vector<BenchSetting>& settings,
                                   const std::function<void(const BenchRow&)>& log = {});
 
+// `clothfit bench fit --models`: every model fitted at the fit defaults (card resolution,
+// auto level and stride, the default starts) on the same inputs, timed and scored with the
+// common measure. The baselines lock metalness to 0, as `clothfit fit` does.
+struct ModelRow {
+  std::string fabric, model;
+  double seconds = 0.0;  // FitImages wall time (preview caches included)
+  double error = 0.0;    // the common measure
+  double fit_rmse = 0.0; // the fit's own error (fit space, its blocks)
+  int iterations = 0, starts = 0;
+  std::string termination;
+  bool usable = false;
+};
+std::vector<ModelRow> RunModelBench(const std::string& fabric,
+                                    const std::vector<SceneInput>& inputs,
+                                    double weave_period_uv,
+                                    const std::vector<render::ModelKind>& models,
+                                    const std::function<void(const ModelRow&)>& log = {});
+void WriteModelBench(const std::vector<ModelRow>& rows, const std::string& csv_path);
+
 // Writes rows as CSV (atomically) and an error-vs-time plot as PNG: x = seconds (log scale),
 // y = error; one polyline per (fabric, stride, starts) across resolutions, with axis ticks and a
 // legend when a TrueType font is installed (DejaVu Sans; without it the plot has no text).

@@ -9,6 +9,7 @@
 #include <span>
 #include <string_view>
 
+#include "fit/reference.h"
 #include "render/scene/embree_scene.h"
 #include "render/scene/image_io.h"
 
@@ -16,12 +17,6 @@ namespace clothfit::fit {
 namespace {
 
 using Jet = ceres::Jet<double, 10>;
-
-int FindChannel(const io::Image& img, const std::string& name) {
-  for (int c = 0; c < img.channels(); ++c)
-    if (img.channel_names[size_t(c)] == name) return c;
-  return -1;
-}
 
 // The space transform, templated so Jets flow through it.
 template <typename T>
@@ -43,9 +38,12 @@ struct SceneData {
   std::string scene_path, reference_path;
   std::unique_ptr<render::PreviewCache> cache;  // only the pixels the blocks use
   std::vector<int> block_begin;                 // CSR over cache pixels
+  std::vector<double> pixel_weight;             // reference coverage weight of each pixel
+  std::vector<double> block_weight;             // sum of pixel_weight per block
   std::vector<Rgb<double>> ref_t;               // transformed reference block means
   std::vector<Rgb<double>> weight;              // per block and channel
   std::vector<Rgb<double>> second_t;            // transformed second-reference block means
+  int dropped_preview = 0, dropped_coverage = 0;
   render::ToneMapping op = render::ToneMapping::kLinear;
   double exposure = 1.0;
   Space space = Space::kDisplay;
@@ -142,8 +140,8 @@ class PreviewCost final : public ceres::CostFunction {
     for (int b = 0; b < nb; ++b) {
       Rgb<T> sum(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
       const int begin = d_.block_begin[size_t(b)], end = d_.block_begin[size_t(b) + 1];
-      for (int i = begin; i < end; ++i) sum += px[size_t(i)];
-      const Rgb<T> mean = sum * Const<T>(1.0 / double(end - begin));
+      for (int i = begin; i < end; ++i) sum += px[size_t(i)] * Const<T>(d_.pixel_weight[size_t(i)]);
+      const Rgb<T> mean = sum * Const<T>(1.0 / d_.block_weight[size_t(b)]);
       const Rgb<T> t = Transform(mean, d_.space, d_.op, d_.exposure);
       for (int c = 0; c < 3; ++c) {
         const T r = (t[c] - Const<T>(d_.ref_t[size_t(b)][c])) * Const<T>(d_.weight[size_t(b)][c]);
@@ -174,8 +172,8 @@ double SquaredError(const SceneData& d, const double* x) {
   for (int b = 0; b < d.blocks(); ++b) {
     const int b0 = d.block_begin[size_t(b)], b1 = d.block_begin[size_t(b) + 1];
     Rgb<double> sum(0, 0, 0);
-    for (int i = b0; i < b1; ++i) sum += px[size_t(i)];
-    const Rgb<double> t = Transform(sum * (1.0 / double(b1 - b0)), d.space, d.op, d.exposure);
+    for (int i = b0; i < b1; ++i) sum += px[size_t(i)] * d.pixel_weight[size_t(i)];
+    const Rgb<double> t = Transform(sum * (1.0 / d.block_weight[size_t(b)]), d.space, d.op, d.exposure);
     for (int c = 0; c < 3; ++c) se += std::pow(t[c] - d.ref_t[size_t(b)][c], 2);
   }
   return se;
@@ -246,24 +244,39 @@ struct BlockGrid {
   int stride = 1;                       // pixel stride inside a block
 };
 
-// Sum of the reference and of its squared standard errors over the block, or false when some
-// pixel of the block is not fabric in the reference or not in the preview cache.
-bool SumFabricBlock(const BlockGrid& g, int bx, int by, Rgb<double>& sum, Rgb<double>& var) {
+// Coverage weight w of a reference pixel (docs/references.md): the reader's, or for
+// references built in memory, 1 where fabric >= 0.999.
+double PixelWeight(const Reference& ref, size_t p) {
+  return ref.weight.empty() ? (ref.fabric[p] >= 0.999f ? 1.0 : 0.0) : double(ref.weight[p]);
+}
+
+// Why a block is not used.
+enum class BlockVerdict { kKept, kNotPreviewFabric, kLowCoverage };
+
+// Coverage-weighted sums over the block: sum(w x), sum(w^2 stderr^2) and sum(w). Not kept when
+// some pixel is not fabric in the preview, or the coverage fraction sum(w) / B^2 is below
+// min_coverage (uncovered pixels, e.g. gaps between yarns, are excluded from both sides).
+BlockVerdict SumFabricBlock(const BlockGrid& g, int bx, int by, double min_coverage,
+                            Rgb<double>& sum, Rgb<double>& var, double& wsum) {
   const int B = g.B, W = g.width;
+  wsum = 0.0;
   for (int y = by; y < by + B; ++y)
     for (int x = bx; x < bx + B; ++x) {
       const size_t p = size_t(y) * size_t(W) + size_t(x);
-      if (g.cache_index[p] < 0 || g.ref.fabric[p] < 0.999f) return false;
+      if (g.cache_index[p] < 0) return BlockVerdict::kNotPreviewFabric;
+      const double w = PixelWeight(g.ref, p);
+      wsum += w;
       for (int c = 0; c < 3; ++c) {
-        sum[c] += double(g.ref.rgb[p * 3 + size_t(c)]);
-        var[c] += std::pow(double(g.ref.std_error[p * 3 + size_t(c)]), 2);
+        sum[c] += w * double(g.ref.rgb[p * 3 + size_t(c)]);
+        var[c] += std::pow(w * double(g.ref.std_error[p * 3 + size_t(c)]), 2);
       }
     }
-  return true;
+  if (wsum <= 0.0 || wsum < min_coverage * double(B) * double(B)) return BlockVerdict::kLowCoverage;
+  return BlockVerdict::kKept;
 }
 
 // Appends a block's transformed reference mean and its per-channel weights (see image_fit.h:
-// the standard error through the transform, floored).
+// the standard error through the transform, floored). n = sum of the coverage weights.
 void AddBlockTarget(SceneData& d, const Rgb<double>& sum, const Rgb<double>& var, double n,
                     double floor_lin) {
   const Rgb<double> mean = sum * (1.0 / n);
@@ -282,29 +295,52 @@ void AddBlockTarget(SceneData& d, const Rgb<double>& sum, const Rgb<double>& var
   d.weight.push_back(w);
 }
 
-// Transformed block mean of the second reference (the noise floor).
-Rgb<double> SecondBlockMean(const SceneData& d, const Reference& second, int width, int bx,
-                            int by, int B, double n) {
+// Transformed block mean of the second reference (the noise floor), with the first
+// reference's coverage weights (sum wsum).
+Rgb<double> SecondBlockMean(const SceneData& d, const BlockGrid& g, const Reference& second,
+                            int bx, int by, double wsum) {
   Rgb<double> s2(0, 0, 0);
-  for (int y = by; y < by + B; ++y)
-    for (int x = bx; x < bx + B; ++x)
+  for (int y = by; y < by + g.B; ++y)
+    for (int x = bx; x < bx + g.B; ++x) {
+      const size_t p = size_t(y) * size_t(g.width) + size_t(x);
       for (int c = 0; c < 3; ++c)
-        s2[c] += double(second.rgb[(size_t(y) * size_t(width) + size_t(x)) * 3 + size_t(c)]);
-  return Transform(s2 * (1.0 / n), d.space, d.op, d.exposure);
+        s2[c] += PixelWeight(g.ref, p) * double(second.rgb[p * 3 + size_t(c)]);
+    }
+  return Transform(s2 * (1.0 / wsum), d.space, d.op, d.exposure);
 }
 
-// Centre of each stride x stride cell (its first pixel would shift every block's
-// sample mean by (stride - 1) / 2 pixels against the full-block reference mean).
-void KeepBlockSamples(const BlockGrid& g, int bx, int by, std::vector<int>& keep) {
-  for (int y = by + g.stride / 2; y < by + g.B; y += g.stride)
-    for (int x = bx + g.stride / 2; x < bx + g.B; x += g.stride)
-      keep.push_back(g.cache_index[size_t(y) * size_t(g.width) + size_t(x)]);
+// Centre of each stride x stride cell (its first pixel would shift every block's sample mean
+// by (stride - 1) / 2 pixels against the full-block reference mean), weighted by the
+// reference coverage of its whole cell (the centre pixel alone would move the samples'
+// weighted centroid when gaps line up with the stride); if no cell is covered, the samples
+// weigh alike.
+void KeepBlockSamples(const BlockGrid& g, int bx, int by, std::vector<int>& keep,
+                      SceneData& d) {
+  const size_t first = keep.size();
+  double sampled = 0.0;
+  for (int y0 = by; y0 < by + g.B; y0 += g.stride)
+    for (int x0 = bx; x0 < bx + g.B; x0 += g.stride) {
+      double cell = 0.0;
+      for (int y = y0; y < std::min(y0 + g.stride, by + g.B); ++y)
+        for (int x = x0; x < std::min(x0 + g.stride, bx + g.B); ++x)
+          cell += PixelWeight(g.ref, size_t(y) * size_t(g.width) + size_t(x));
+      const int cx = std::min(x0 + g.stride / 2, bx + g.B - 1);
+      const int cy = std::min(y0 + g.stride / 2, by + g.B - 1);
+      keep.push_back(g.cache_index[size_t(cy) * size_t(g.width) + size_t(cx)]);
+      d.pixel_weight.push_back(cell);
+      sampled += cell;
+    }
+  if (sampled <= 0.0) {
+    for (size_t k = first; k < keep.size(); ++k) d.pixel_weight[k] = 1.0;
+    sampled = double(keep.size() - first);
+  }
+  d.block_weight.push_back(sampled);
 }
 
-// The blocks of one scene whose pixels are all fabric (reference and preview), their
-// targets and weights, and the cache pixels they sample (returned, in block order).
+// The usable blocks of one scene (docs/references.md, "The coverage rule"), their targets and
+// weights, and the cache pixels they sample (returned, in block order); counts the dropped.
 std::vector<int> CollectBlocks(const SceneInput& in, const BlockGrid& g, int height,
-                               SceneData& d) {
+                               double min_coverage, SceneData& d) {
   const Reference& ref = *in.reference;
   const double ref_mean = Mean3(ref.rgb, ref.fabric);
   const double floor_lin = 0.01 * std::max(ref_mean, 1e-6);
@@ -314,11 +350,14 @@ std::vector<int> CollectBlocks(const SceneInput& in, const BlockGrid& g, int hei
   for (int by = 0; by + B <= H; by += B) {
     for (int bx = 0; bx + B <= W; bx += B) {
       Rgb<double> sum(0, 0, 0), var(0, 0, 0);
-      if (!SumFabricBlock(g, bx, by, sum, var)) continue;
-      const double n = double(B) * double(B);
-      AddBlockTarget(d, sum, var, n, floor_lin);
-      if (in.second) d.second_t.push_back(SecondBlockMean(d, *in.second, W, bx, by, B, n));
-      KeepBlockSamples(g, bx, by, keep);
+      double wsum = 0.0;
+      const BlockVerdict v = SumFabricBlock(g, bx, by, min_coverage, sum, var, wsum);
+      if (v == BlockVerdict::kNotPreviewFabric) ++d.dropped_preview;
+      if (v == BlockVerdict::kLowCoverage) ++d.dropped_coverage;
+      if (v != BlockVerdict::kKept) continue;
+      AddBlockTarget(d, sum, var, wsum, floor_lin);
+      if (in.second) d.second_t.push_back(SecondBlockMean(d, g, *in.second, bx, by, wsum));
+      KeepBlockSamples(g, bx, by, keep, d);
       d.block_begin.push_back(int(keep.size()));
     }
   }
@@ -344,11 +383,14 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
   for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
   const BlockGrid grid{ref, cache_index, scene.card.width, B, stride};
-  const std::vector<int> keep = CollectBlocks(in, grid, scene.card.height, *d);
+  const std::vector<int> keep = CollectBlocks(in, grid, scene.card.height, opt.min_coverage, *d);
   if (d->blocks() == 0) {
     throw FitError(in.scene_path + " / " + ref.path + ": no " + std::to_string(B) + "x" +
-                   std::to_string(B) + " block is fabric in both the reference and the preview "
-                   "(wrong scene for this reference, or --level too large)");
+                   std::to_string(B) + " block is usable (" + std::to_string(d->dropped_preview) +
+                   " not all fabric in the preview: --level too large, or the wrong scene; " +
+                   std::to_string(d->dropped_coverage) + " with reference coverage below " +
+                   std::to_string(opt.min_coverage) +
+                   ": check --alpha / --coverage-channel, or lower --min-coverage)");
   }
   d->cache = Subset(*full, keep);
   return d;
@@ -370,7 +412,7 @@ Rgb<double> StartColour(const Reference& r) {
   double s[3] = {0, 0, 0};
   double n = 0;
   for (size_t p = 0; p < r.fabric.size(); ++p)
-    if (r.fabric[p] > 0.999f) {
+    if (r.weight.empty() ? r.fabric[p] > 0.999f : r.weight[p] > 0.5f) {
       for (int c = 0; c < 3; ++c) s[c] += double(r.rgb[p * 3 + size_t(c)]);
       n += 1;
     }
@@ -504,6 +546,7 @@ void TakeStart(FitResult& best, const ceres::Solver::Summary& summary, const Fit
   best.final_cost = summary.final_cost;
   best.initial_cost = summary.initial_cost;
   best.termination = ceres::TerminationTypeToString(summary.termination_type);
+  best.converged = summary.termination_type == ceres::CONVERGENCE;
   best.solver_report = summary.BriefReport();
   best.preset = opt.start;
   best.preset.values.clear();
@@ -520,6 +563,8 @@ void AddSceneErrors(const SceneList& data, FitResult& best) {
     e.scene = d->scene_path;
     e.reference = d->reference_path;
     e.blocks = d->blocks();
+    e.dropped_preview = d->dropped_preview;
+    e.dropped_coverage = d->dropped_coverage;
     e.rmse = std::sqrt(se / (3.0 * d->blocks()));
     if (!d->second_t.empty()) {
       double s2 = 0.0;
@@ -553,44 +598,7 @@ Space ParseSpace(const std::string& s) {
   throw std::invalid_argument("unknown space '" + s + "' (valid: display, linear, log)");
 }
 
-Reference ReadReference(const std::string& path) {
-  const io::Image img = io::ReadImage(path);
-  Reference r;
-  r.path = path;
-  r.width = img.width;
-  r.height = img.height;
-  const int R = FindChannel(img, "R"), G = FindChannel(img, "G"), B = FindChannel(img, "B");
-  if (R < 0 || G < 0 || B < 0) throw FitError(path + ": reference needs channels R, G, B");
-  const int SR = FindChannel(img, "stderr.R"), SG = FindChannel(img, "stderr.G"),
-            SB = FindChannel(img, "stderr.B");
-  int F = FindChannel(img, "fabric");
-  if (F < 0) F = FindChannel(img, "A");
-  const size_t np = size_t(img.width) * size_t(img.height);
-  const size_t nc = size_t(img.channels());
-  r.rgb.resize(np * 3);
-  r.std_error.assign(np * 3, 0.f);
-  r.fabric.assign(np, 1.f);
-  size_t bad = 0, first = 0;
-  for (size_t p = 0; p < np; ++p) {
-    const float* px = &img.pixels[p * nc];
-    const int ch[3] = {R, G, B}, se[3] = {SR, SG, SB};
-    for (size_t c = 0; c < 3; ++c) {
-      const float v = px[ch[c]];
-      if (!std::isfinite(v)) {
-        if (bad++ == 0) first = p;
-      }
-      r.rgb[p * 3 + c] = v;
-      if (se[c] >= 0) r.std_error[p * 3 + c] = std::isfinite(px[se[c]]) ? px[se[c]] : 0.f;
-    }
-    if (F >= 0) r.fabric[p] = px[F];
-  }
-  if (bad > 0) {
-    throw FitError(path + ": " + std::to_string(bad) + " non-finite R/G/B values (first at pixel x=" +
-                   std::to_string(first % size_t(img.width)) + ", y=" +
-                   std::to_string(first / size_t(img.width)) + "); refusing to fit to them");
-  }
-  return r;
-}
+Reference ReadReference(const std::string& path) { return ReadReference(path, ReferenceOptions{}); }
 
 int AutoLevel(const render::Scene& scene, double weave_period_uv, int max_level) {
   render::EmbreeScene bvh(scene);
@@ -688,6 +696,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
     best.seconds = SecondsSince(t0);
     return best;
   }
+  best.at_bound = ParametersAtBounds(best.preset, opt.locked);
   AddSceneErrors(data, best);
   best.seconds = SecondsSince(t0);
   return best;

@@ -30,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "fit/convergence.h"
 #include "render/scene/environment.h"
 #include "render/scene/material.h"
 #include "render/preview/preview.h"
@@ -49,10 +50,15 @@ struct Reference {
   std::string path;
   int width = 0, height = 0;
   std::vector<float> rgb, std_error, fabric;  // 3, 3, 1 per pixel
+  // Coverage weight per pixel (fit/reference.h): the block means are sum(w x) / sum(w) on
+  // both sides. ReadReference(path) fills it as 1 where fabric >= 0.999, else 0.
+  std::vector<float> weight;
+  std::string layout, noise;  // how coverage and noise were read (printed by clothfit fit)
 };
 
-// Reads a reference EXR (channels R, G, B; optional stderr.R/G/B, fabric or A). Throws
-// io::IoError naming the file on missing/corrupt files, and FitError on NaN/Inf pixels.
+// Reads a reference with the default ReferenceOptions (fit/reference.h): channels R, G, B;
+// optional stderr.R/G/B, fabric or A. Throws io::IoError naming the file on missing/corrupt
+// files, and FitError on NaN/Inf pixels.
 Reference ReadReference(const std::string& path);
 
 class FitError : public std::runtime_error {
@@ -70,7 +76,8 @@ struct FitOptions {
   int pixel_stride = 0;           // evaluate every stride-th pixel per block axis (speed);
                                   // 0 = auto: max(1, block / 4), i.e. at most 4 x 4 per block
   std::vector<double> start_roughness = {0.6, 0.9};  // multi-start values (bench fit: knee)
-  int max_iterations = 50;
+  int max_iterations = 50;        // per start
+  double min_coverage = 0.5;      // a block is kept when sum(w) / B^2 >= this (docs/references.md)
   double function_tolerance = 1e-7;
   bool verbose = false;
   bool init_from_reference = true;  // start colours from the reference's mean colour
@@ -87,6 +94,8 @@ struct SceneInput {
 struct SceneError {
   std::string scene, reference;
   int blocks = 0;
+  int dropped_preview = 0;   // blocks with a pixel that is not fabric in the preview
+  int dropped_coverage = 0;  // blocks whose reference coverage fraction < min_coverage
   double rmse = 0.0;         // unweighted RMSE in the fit space over the blocks
   double noise_floor = -1.0; // RMSE(reference, second) / sqrt(2) over the same blocks and
                              // space: one reference's own noise, which no fit can beat
@@ -101,6 +110,8 @@ struct FitResult {
   int iterations = 0, starts = 0, residuals = 0;
   double seconds = 0.0, setup_seconds = 0.0;
   std::string termination;
+  bool converged = false;             // the winning start's termination was CONVERGENCE
+  std::vector<AtBound> at_bound;      // free parameters at a bound (fit/convergence.h)
   std::vector<SceneError> scenes;
   double rmse = 0.0;          // over all blocks of all scenes, fit space, unweighted
   std::string solver_report;  // Ceres BriefReport of the winning start

@@ -727,6 +727,27 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
 
 namespace {
 
+// A badge for a fit that did not converge or stopped at a degenerate bound (the preset's
+// fit.status, written by `clothfit fit`; older presets: fit.termination != CONVERGENCE).
+std::string ConvergenceBadge(const nlohmann::json& fit) {
+  std::string status;
+  if (fit.contains("status") && fit.at("status").is_string()) {
+    status = fit.at("status").get<std::string>();
+  } else if (fit.contains("termination") && fit.at("termination").is_string() &&
+             fit.at("termination").get<std::string>() != "CONVERGENCE") {
+    status = "not converged";
+  }
+  if (status.empty() || status == "ok") return "";
+  std::string title = status;
+  if (fit.contains("at_bound") && fit.at("at_bound").is_array())
+    for (const auto& b : fit.at("at_bound"))
+      if (b.is_object() && b.value("flagged", false) && b.contains("name") && b.at("name").is_string())
+        title += "; " + b.at("name").get<std::string>() + " at a bound";
+  return " <span class=\"badge\" style=\"background:#c62828;color:#fff;border-radius:3px;"
+         "padding:0 4px;font-size:80%\" title=\"" + EscapeHtml(title) + "\">" +
+         EscapeHtml(status) + "</span>";
+}
+
 // ---- the pieces of a fabric page (FabricHtml), in page order ----
 
 void FabricPageIntro(std::ostream& h, const FabricSpec& spec) {
@@ -885,7 +906,8 @@ void FabricPageSolver(std::ostream& h, const FabricSpec& spec) {
       << FitValue(fit, "initial_cost", 4) << "</td><td>" << FitValue(fit, "final_cost", 4)
       << "</td><td>" << FitValue(fit, "seconds", 2) << "</td><td>"
       << FitValue(fit, "setup_seconds", 2) << "</td><td class=\"l\">"
-      << FitValue(fit, "termination", 0) << "</td><td class=\"l\">" << FitValue(fit, "space", 0)
+      << FitValue(fit, "termination", 0) << ConvergenceBadge(fit) << "</td><td class=\"l\">"
+      << FitValue(fit, "space", 0)
       << "</td><td class=\"l\">" << FitValue(fit, "loss", 0) << "</td><td>"
       << FitValue(fit, "block_pixels", 0) << "</td><td>" << FitValue(fit, "rmse", 4) << "</td><td>"
       << floor << "</td></tr>\n";
@@ -928,11 +950,12 @@ std::string IndexHtml(const std::vector<FabricReport>& reports) {
     h << "<th class=\"s\" title=\"" << c.help << "\">" << c.title << "</th>";
   h << "<th class=\"s\">fit s</th></tr></thead><tbody>\n";
   auto row = [&](const FabricReport& r, const std::string& model, const Numbers& n, bool floor,
-                 const std::string& seconds, const std::string& seconds_key) {
+                 const std::string& seconds, const std::string& seconds_key,
+                 const std::string& badge = "") {
     h << (floor ? "<tr class=\"floor\">" : "<tr>") << "<td class=\"l\" data-v=\""
       << EscapeHtml(r.spec.name) << "\"><a href=\"" << EscapeHtml(PageName(r.spec.name)) << "\">"
       << EscapeHtml(r.spec.name) << "</a></td><td class=\"l\" data-v=\"" << EscapeHtml(model)
-      << "\">" << EscapeHtml(model) << "</td>";
+      << "\">" << EscapeHtml(model) << badge << "</td>";
     for (const Column& c : Columns())
       h << (n.ok ? "<td" : "<td class=\"na\"") << " data-v=\"" << SortKey(n, c) << "\">"
         << EscapeHtml(Cell(n, c)) << "</td>";
@@ -947,7 +970,8 @@ std::string IndexHtml(const std::vector<FabricReport>& reports) {
         sec = FormatNumber(fit.at("seconds").get<double>(), 2);
         key = Fmt("%.9g", fit.at("seconds").get<double>());
       }
-      row(r, ModelTitle(r.spec.models[mi].model), r.model_means[mi], false, sec, key);
+      row(r, ModelTitle(r.spec.models[mi].model), r.model_means[mi], false, sec, key,
+          ConvergenceBadge(fit));
     }
   }
   h << "</tbody></table>\n<h2>Fabrics</h2>\n<ul>\n";

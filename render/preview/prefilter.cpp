@@ -76,6 +76,7 @@ Level BaseLevel(const Environment& env, int w, int h) {
   Level src = MakeLevel(env.width(), env.height(), 0.0);
   const float s = static_cast<float>(env.intensity());
   for (size_t p = 0; p < src.rgb.size(); ++p) src.rgb[p] = env.pixels()[p] * s;
+  src.SetPoles();
   Level dst = MakeLevel(w, h, 0.0);
   if (src.width >= w && src.height >= h) {
     // Rows: t = 1 - v from the top; solid-angle measure of [t0, t1] is sin E(t0) - sin E(t1).
@@ -115,6 +116,7 @@ Level BaseLevel(const Environment& env, int w, int h) {
       }
     });
   }
+  dst.SetPoles();
   return dst;
 }
 
@@ -129,6 +131,7 @@ Level Downsample2(const Level& src) {
       Store(&dst, i, j, (top * w0 + bottom * w1) * (0.5 / (w0 + w1)));
     }
   }
+  dst.SetPoles();
   return dst;
 }
 
@@ -219,18 +222,39 @@ Rgb<double> PrefilteredEnvironment::Level::Bilinear(const Vec3<double>& map_dir)
   double u = 0.0, v = 0.0;
   Environment::DirectionToUv(map_dir, &u, &v);
   if (!std::isfinite(u) || !std::isfinite(v)) return {};
-  // Texel centres at integers after the -1/2 shift; wrap in u, clamp in v.
+  // Texel centres at integers after the -1/2 shift; wrap in u.
   const double x = u * width - 0.5, y = (1.0 - v) * height - 0.5;
-  const double x0 = std::floor(x), y0 = std::floor(y);
-  const double fx = x - x0, fy = y - y0;
+  const double x0 = std::floor(x);
+  const double fx = x - x0;
   const int i0 = ((static_cast<int>(x0) % width) + width) % width;
   const int i1 = (i0 + 1) % width;
-  const int j0 = std::clamp(static_cast<int>(y0), 0, height - 1);
-  const int j1 = std::clamp(static_cast<int>(y0) + 1, 0, height - 1);
-  const Rgb<double> a = Load(*this, i0, j0), b = Load(*this, i1, j0);
-  const Rgb<double> c = Load(*this, i0, j1), d = Load(*this, i1, j1);
-  const Rgb<double> top = a + (b - a) * fx, bottom = c + (d - c) * fx;
+  const auto row = [&](int j) {
+    const Rgb<double> a = Load(*this, i0, j), b = Load(*this, i1, j);
+    return a + (b - a) * fx;
+  };
+  // Pole caps: y in [-1/2, 0) lies between the pole (y = -1/2) and the first row's centres.
+  if (y < 0.0) {
+    const double t = std::clamp(2.0 * y + 1.0, 0.0, 1.0);
+    return pole_top + (row(0) - pole_top) * t;
+  }
+  if (y > height - 1.0) {
+    const double t = std::clamp(2.0 * (height - 0.5 - y), 0.0, 1.0);
+    return pole_bottom + (row(height - 1) - pole_bottom) * t;
+  }
+  const int j0 = std::max(0, std::min(static_cast<int>(std::floor(y)), height - 2));
+  const double fy = y - j0;
+  const Rgb<double> top = row(j0), bottom = row(std::min(j0 + 1, height - 1));
   return top + (bottom - top) * fy;
+}
+
+void PrefilteredEnvironment::Level::SetPoles() {
+  Rgb<double> top, bottom;
+  for (int i = 0; i < width; ++i) {
+    top += Load(*this, i, 0);
+    bottom += Load(*this, i, height - 1);
+  }
+  pole_top = top * (1.0 / width);
+  pole_bottom = bottom * (1.0 / width);
 }
 
 double PrefilteredEnvironment::RoughnessForLevel(Kernel kernel, int k, int levels) {
@@ -311,6 +335,7 @@ PrefilteredEnvironment PrefilteredEnvironment::Build(const Environment& env, Ker
         }
       }
     });
+    lvl.SetPoles();
     out.levels_.push_back(std::move(lvl));
     if (progress) progress(k + 1, levels);
   }

@@ -42,8 +42,15 @@ class PrefilteredEnvironment {
     int width = 0, height = 0;
     double roughness = 0.0;  // perceptual r this level was prefiltered for
     std::vector<float> rgb;
-    // Bilinear lookup at a MAP-space unit direction (wrap in u, clamp in v).
+    // Radiance at the poles: the mean of the top (bottom) row, whose texels all touch the pole.
+    Rgb<double> pole_top, pole_bottom;
+    // Bilinear lookup at a MAP-space unit direction: wrap in u; in v, between the centre of
+    // the first (last) row and the pole it blends linearly towards pole_top (pole_bottom), so
+    // the lookup is continuous through the pole (a clamp in v would return the top row at the
+    // lookup's own azimuth: two values half a turn apart on either side of the pole).
     Rgb<double> Bilinear(const Vec3<double>& map_dir) const;
+    // Sets pole_top and pole_bottom from rgb (call after writing rgb).
+    void SetPoles();
   };
 
   // Called after each finished level with (levels done, levels total).

@@ -1,0 +1,56 @@
+// fit/reference.h: reading references from any renderer (docs/references.md).
+//
+// A reference gives, per pixel, a radiance x (linear RGB), a coverage weight w in [0, 1] and a
+// standard error of x. Layouts:
+//   clothfit (a `fabric` channel): x = RGB (the whole pixel), w = 1 if fabric >= 0.999 else 0
+//   premultiplied alpha (OpenEXR's rule; Cycles, Mitsuba): x = RGB / A, w = A
+//   straight alpha: x = RGB, w = A
+//   no coverage: x = RGB, w = 1
+// Missing stderr.*: estimated from the image (Immerkaer 1996, relative to the radiance), or
+// zero with NoiseMode::kNone.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "render/scene/scene.h"
+
+namespace clothfit::fit {
+
+struct Reference;
+
+enum class AlphaMode { kAuto, kPremultiplied, kStraight };
+enum class NoiseMode { kAuto, kImage, kNone };
+
+struct ReferenceOptions {
+  AlphaMode alpha = AlphaMode::kAuto;
+  std::string coverage_channel;  // "" = auto (fabric, else A), "none" = every pixel covered
+  NoiseMode noise = NoiseMode::kAuto;  // kAuto: stderr.* if present, else kImage
+};
+
+AlphaMode ParseAlphaMode(const std::string& s);  // throws std::invalid_argument
+NoiseMode ParseNoiseMode(const std::string& s);  // throws std::invalid_argument
+
+// Reads a reference (see above). Throws io::IoError naming the file on missing/corrupt files
+// and FitError on missing R/G/B, a missing named coverage channel, or NaN/Inf radiance.
+Reference ReadReference(const std::string& path, const ReferenceOptions& options);
+
+// Immerkaer's noise estimate (CVIU 64(2), 1996) of one channel of a reference, relative to
+// the radiance: sqrt(pi/2) / 6 x mean |Laplacian-difference response| / mean radiance, over
+// the pixels whose 3 x 3 neighbourhood has weight > 0.5. Returns 0 when no such pixel exists.
+double EstimateRelativeNoise(const Reference& ref, int channel);
+
+// A weave period: a length in metres ("0.002", "2mm", "0.2cm", "0.002m") or in UV units
+// ("0.05uv"). Throws std::invalid_argument naming the flag on anything else or <= 0.
+struct WeavePeriod {
+  double value = 0.0;
+  bool uv = false;
+};
+WeavePeriod ParseWeavePeriod(const std::string& s);
+
+// The period in UV units on one scene: as is for `uv`, else metres / uv_metres_per_unit.
+// Throws std::invalid_argument naming the card when a length needs a card without
+// uv_metres_per_unit.
+double WeavePeriodUv(const WeavePeriod& p, const render::Scene& scene, const std::string& card);
+
+}  // namespace clothfit::fit
