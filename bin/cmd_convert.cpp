@@ -15,6 +15,7 @@
 #include "bin/progress.h"
 #include "fit/convert/convert.h"
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
 namespace {
@@ -88,11 +89,14 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
       const fit::ConvertReport rep = fit::RunConvert(files, o);
       std::printf("%s", fit::SummaryTable(rep).c_str());
       const std::string log = (fs::path(o.out_dir) / fit::LogName(o)).string();
-      io::WriteTextAtomic(log, fit::ReportJson(rep, o).dump(2) + "\n");
+      // DumpJson: paths and reasons may carry bytes from untrusted files; invalid UTF-8 is
+      // replaced rather than throwing, so the log is always written.
+      io::WriteTextAtomic(log, limits::DumpJson(fit::ReportJson(rep, o)) + "\n");
       std::printf("log: %s\n", log.c_str());
       exit_code = rep.failed > 0 ? 2 : 0;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit convert: error: %s\n", e.what());
+      std::fprintf(stderr, "clothfit convert: error: %s\n",
+                   limits::EscapeForMessage(e.what(), 2000).c_str());
       exit_code = 1;
     }
   });

@@ -11,6 +11,7 @@
 #include "render/reference/irawan.h"
 #include "render/reference/sadeghi.h"
 #include "render/reference/weave_pattern.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::render {
 namespace {
@@ -48,16 +49,20 @@ std::string GetString(const nlohmann::json& j, const char* field, const std::str
 Fabric ParseFabric(const std::string& text, const std::string& path) {
   nlohmann::json j;
   try {
+    limits::CheckJsonDepth(text, path);  // before the DOM: nlohmann copies and dumps recurse
     j = nlohmann::json::parse(text);
+  } catch (const limits::InputError& e) {
+    throw FabricError(e.what());
   } catch (const nlohmann::json::parse_error& e) {
-    Fail(path, "JSON syntax error at " + LineColumn(text, e.byte) + ": " + e.what());
+    Fail(path, "JSON syntax error at " + LineColumn(text, e.byte) + ": " +
+                   limits::EscapeForMessage(e.what(), 400));
   }
   if (!j.is_object()) Fail(path, "top level must be a JSON object");
   static const std::set<std::string> known = {"format", "version",    "name",      "model",
                                               "preset", "weave_file", "uv_repeats"};
   for (const auto& item : j.items()) {
     if (!known.count(item.key())) {
-      Fail(path, "unknown field '" + item.key() +
+      Fail(path, "unknown field '" + limits::EscapeForMessage(item.key(), 80) +
                      "' (valid: format, version, name, model, preset, weave_file, uv_repeats)");
     }
   }
@@ -72,6 +77,13 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
   f.name = GetString(j, "name", path);
   f.model = GetString(j, "model", path);
   f.preset = GetString(j, "preset", path);
+  // The preset names a file under ../weaves/ (or a built-in table): a plain name, so that it
+  // cannot walk out of the fabric library ("../../x").
+  if (f.preset == "." || f.preset == ".." ||
+      f.preset.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
+                                 "0123456789_.-") != std::string::npos)
+    Fail(path, "field 'preset' must be a plain name of letters, digits, '_', '.' and '-', got \"" +
+                   limits::EscapeForMessage(f.preset, 80) + "\"");
   if (!j.contains("uv_repeats")) Fail(path, "missing field 'uv_repeats'");
   if (!j.at("uv_repeats").is_number()) Fail(path, "field 'uv_repeats' must be a number");
   f.uv_repeats = j.at("uv_repeats").get<double>();
@@ -101,18 +113,19 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
       Fail(path, std::string("field 'preset': ") + e.what());
     }
   } else {
-    Fail(path, "field 'model' must be \"irawan\" or \"sadeghi\", got \"" + f.model + "\"");
+    Fail(path, "field 'model' must be \"irawan\" or \"sadeghi\", got \"" +
+                   limits::EscapeForMessage(f.model, 80) + "\"");
   }
   return f;
 }
 
 Fabric LoadFabric(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw FabricError(path + ": cannot open fabric file");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  const std::string text = ss.str();
-  if (text.size() > (size_t(1) << 20)) throw FabricError(path + ": file larger than 1 MiB");
+  std::string text;
+  try {  // size checked on the descriptor before reading (/dev/zero is refused, not read)
+    text = limits::ReadFileBounded(path, limits::kMaxSmallTextBytes, "fabric file");
+  } catch (const limits::InputError& e) {
+    throw FabricError(e.what());
+  }
   return ParseFabric(text, path);
 }
 
