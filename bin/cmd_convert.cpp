@@ -53,6 +53,7 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto jobs = std::make_shared<int>(0);
   auto shard = std::make_shared<std::string>("0/1");
   auto variant = std::make_shared<std::string>("filament");
+  auto allow_outside = std::make_shared<bool>(false);
   cmd->add_option("inputs", *inputs,
                   "input files (.json preset/fabric/SurfaceMaterial/TextureStack, .gltf, .glb, "
                   ".binary MERL), directories (searched recursively) or manifests (.txt)")
@@ -64,11 +65,15 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "i/N: convert only the i-th of N deterministic parts (0-based)");
   cmd->add_option("--cloth-variant", *variant, "cloth target: filament or seed-threejs")
       ->check(CLI::IsMember({"filament", "seed-threejs"}));
+  cmd->add_flag("--allow-outside-paths", *allow_outside,
+                "let map and buffer paths inside input files point outside the input directory "
+                "(refused by default; docs/reliability.md)");
   cmd->callback([=, &g, &exit_code]() {
     fit::ConvertOptions o;
     o.targets = SplitList(*to);
     o.out_dir = *out;
     o.jobs = *jobs;
+    o.allow_outside_paths = *allow_outside;
     if (*variant == "seed-threejs") {
       o.cloth.variant = cloth::Variant::kSeedThreejs;
       o.cloth.sheen_default = cloth::SheenDefault::kExplicit;

@@ -323,7 +323,8 @@ std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args,
       if (kInputExt.count(ext)) files.push_back(e.path());
     }
     std::sort(files.begin(), files.end());
-    for (const fs::path& f : files) out.push_back({f.string(), StemOf(fs::relative(f, dir))});
+    for (const fs::path& f : files)
+      out.push_back({f.string(), StemOf(fs::relative(f, dir)), dir.string()});
   };
   for (const std::string& a : args) {
     std::error_code ec;
@@ -346,14 +347,15 @@ std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args,
           add_dir(f);
         } else if (fs::is_regular_file(f, ec)) {
           out.push_back(
-              {f.string(), StemOf(fs::path(entry).is_absolute() ? f.filename() : fs::path(entry))});
+              {f.string(), StemOf(fs::path(entry).is_absolute() ? f.filename() : fs::path(entry)),
+               f.parent_path().string()});
         } else {
           throw ConvertError(a + ":" + std::to_string(n) + ": no such file or directory '" + entry +
                              "'");
         }
       }
     } else if (fs::is_regular_file(p, ec)) {
-      out.push_back({p.string(), StemOf(p.filename())});
+      out.push_back({p.string(), StemOf(p.filename()), p.parent_path().string()});
     } else {
       throw ConvertError(a + ": no such file or directory");
     }

@@ -34,6 +34,7 @@ inline constexpr size_t kMaxGltfBufferBytes = size_t(256) << 20;   // all buffer
 inline constexpr size_t kMaxSceneVertices = size_t(1) << 21;       // per scene
 inline constexpr size_t kMaxSceneIndices = size_t(1) << 23;        // per scene
 inline constexpr double kMaxWorldCoordinate = 1e6;                 // scene units
+inline constexpr size_t kMaxRenderPixels = size_t(1) << 24;        // card width x height
 inline constexpr size_t kMaxImageFileBytes = size_t(512) << 20;    // one image file
 inline constexpr size_t kMaxImageBytes = size_t(512) << 20;        // decoded float W*H*C*4
 inline constexpr size_t kMaxPngExpansion = 1032;                   // deflate's maximum ratio
