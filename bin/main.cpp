@@ -33,7 +33,7 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "clothfit: error: %s\n", 
-                   limits::EscapeForMessage(e.what(), 2000).c_str());
+                   clothfit::limits::EscapeForMessage(e.what(), 2000).c_str());
     return 1;
   }
   return exit_code;
