@@ -234,7 +234,7 @@ void ConvertFile(const InputFile& in, const ConvertOptions& o, std::vector<ItemR
                  const std::function<void(int)>& done) {
   std::vector<SourceMaterial> mats;
   try {
-    mats = ReadMaterials(in.path);
+    mats = ReadMaterials(in.path, limits::PathPolicy{in.root, o.allow_outside_paths});
   } catch (const std::bad_alloc&) {
     ItemResult r;
     r.file = in.path;
