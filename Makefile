@@ -63,7 +63,7 @@ FUZZ ?= all
 SAN_ENV := ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:detect_stack_use_after_return=0 \
            UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \
            LSAN_OPTIONS=suppressions=$(CURDIR)/tests/fuzz/lsan.supp:print_suppressions=0 \
-           CLOTHFIT_REGRESSION_TIMEOUT=20
+           CLOTHFIT_REGRESSION_TIMEOUT=120
 
 $(SAN_DIR)/CMakeCache.txt:
 	@echo "[make] configuring $(SAN_DIR) (clang, ASan+UBSan, libFuzzer)"
