@@ -65,7 +65,7 @@ TEST(DumpJsonTest, InvalidUtf8IsReplacedNotThrown) {
 }
 
 TEST(CheckedArithmetic, DetectsWrap) {
-  const size_t big = (size_t(-1) + size_t(2)) / 3 + 1;  // (2^64+2)/3: x3 wraps to 2
+  const size_t big = size_t(-1) / 3 + 1;  // (2^64+2)/3, the reproducer's count: x3 wraps to 2
   EXPECT_FALSE(CheckedMul(big, 3));
   EXPECT_EQ(*CheckedMul(7, 6), 42u);
   EXPECT_FALSE(CheckedAdd(size_t(-8), 300));
