@@ -9,7 +9,7 @@ JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 CLOTHFIT := $(BUILD_DIR)/bin/clothfit
 GENERATOR := $(shell command -v ninja >/dev/null 2>&1 && echo "-G Ninja")
 
-.PHONY: all deps data configure build test demo bench stress lut format clean
+.PHONY: all deps data configure build test demo bench stress lut format clean san-build sanitize fuzz fuzz-replay regressions
 
 all: build
 
@@ -50,8 +50,45 @@ lut: build
 	@mkdir -p out
 	@$(CLOTHFIT) lut --size 128 --out out/dfg.exr --sheen-out out/sheen_albedo.exr
 
+# Hostile inputs (docs/reliability.md). One clang build in $(SAN_DIR) serves both: every project
+# object has ASan+UBSan and libFuzzer coverage, so it holds the test suite, the executable and
+# the harnesses.
+#   make sanitize                the whole ctest suite under ASan+UBSan (no report allowed)
+#   make fuzz FUZZ_SECONDS=N     every harness for N seconds (FUZZ=name for one)
+#   make fuzz-replay             each corpus file and reproducer once per harness (CI, seconds)
+#   make regressions             the issue-14 reproducers through the Release executable
+SAN_DIR ?= build-san
+FUZZ_SECONDS ?= 60
+FUZZ ?= all
+SAN_ENV := ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:detect_stack_use_after_return=0 \
+           UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \
+           LSAN_OPTIONS=suppressions=$(CURDIR)/tests/fuzz/lsan.supp:print_suppressions=0 \
+           CLOTHFIT_REGRESSION_TIMEOUT=120
+
+$(SAN_DIR)/CMakeCache.txt:
+	@echo "[make] configuring $(SAN_DIR) (clang, ASan+UBSan, libFuzzer)"
+	@cmake -S . -B $(SAN_DIR) $(GENERATOR) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DCMAKE_CXX_COMPILER=clang++ -DCLOTHFIT_FUZZ=ON
+
+san-build: $(SAN_DIR)/CMakeCache.txt
+	@cmake --build $(SAN_DIR) -j $(JOBS)
+
+sanitize: san-build
+	@echo "[make] running the test suite under ASan+UBSan"
+	@start=$$(date +%s); cd $(SAN_DIR) && $(SAN_ENV) ctest --output-on-failure -j $(JOBS); \
+	  rc=$$?; echo "[make] sanitize: ctest exit $$rc in $$(( $$(date +%s) - start )) s"; exit $$rc
+
+fuzz: san-build
+	@tests/fuzz/fuzz.sh run $(SAN_DIR)/fuzz $(FUZZ) $(FUZZ_SECONDS)
+
+fuzz-replay: san-build
+	@tests/fuzz/fuzz.sh replay $(SAN_DIR)/fuzz $(FUZZ)
+
+regressions: build
+	@tests/fuzz/run_regressions.sh $(CLOTHFIT)
+
 format:
 	@clang-format -i $$(git ls-files '*.h' '*.cpp')
 
 clean:
-	@rm -rf $(BUILD_DIR)
+	@rm -rf $(BUILD_DIR) $(SAN_DIR)

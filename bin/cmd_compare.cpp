@@ -15,6 +15,7 @@
 #include "fit/metrics/metrics.h"
 #include "render/scene/image_io.h"
 #include "render/scene/tonemap.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
 
@@ -228,12 +229,13 @@ void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code) {
                        args->maps_dir.c_str());
       }
       if (args->json) {
-        std::printf("%s\n", Json(r, o, args->reference, args->test, args->mask).dump(2).c_str());
+        std::printf("%s\n", limits::DumpJson(Json(r, o, args->reference, args->test, args->mask)).c_str());
       } else {
         std::printf("%s", Table(r, o).c_str());
       }
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit compare: error: %s\n", e.what());
+      std::fprintf(stderr, "clothfit compare: error: %s\n", 
+                   limits::EscapeForMessage(e.what(), 2000).c_str());
       exit_code = 1;
     }
   });

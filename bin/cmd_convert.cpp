@@ -15,6 +15,7 @@
 #include "bin/progress.h"
 #include "fit/convert/convert.h"
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
 namespace {
@@ -52,6 +53,7 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto jobs = std::make_shared<int>(0);
   auto shard = std::make_shared<std::string>("0/1");
   auto variant = std::make_shared<std::string>("filament");
+  auto allow_outside = std::make_shared<bool>(false);
   cmd->add_option("inputs", *inputs,
                   "input files (.json preset/fabric/SurfaceMaterial/TextureStack, .gltf, .glb, "
                   ".binary MERL), directories (searched recursively) or manifests (.txt)")
@@ -63,11 +65,15 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "i/N: convert only the i-th of N deterministic parts (0-based)");
   cmd->add_option("--cloth-variant", *variant, "cloth target: filament or seed-threejs")
       ->check(CLI::IsMember({"filament", "seed-threejs"}));
+  cmd->add_flag("--allow-outside-paths", *allow_outside,
+                "let map and buffer paths inside input files point outside the input directory "
+                "(refused by default; docs/reliability.md)");
   cmd->callback([=, &g, &exit_code]() {
     fit::ConvertOptions o;
     o.targets = SplitList(*to);
     o.out_dir = *out;
     o.jobs = *jobs;
+    o.allow_outside_paths = *allow_outside;
     if (*variant == "seed-threejs") {
       o.cloth.variant = cloth::Variant::kSeedThreejs;
       o.cloth.sheen_default = cloth::SheenDefault::kExplicit;
@@ -88,11 +94,14 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
       const fit::ConvertReport rep = fit::RunConvert(files, o);
       std::printf("%s", fit::SummaryTable(rep).c_str());
       const std::string log = (fs::path(o.out_dir) / fit::LogName(o)).string();
-      io::WriteTextAtomic(log, fit::ReportJson(rep, o).dump(2) + "\n");
+      // DumpJson: paths and reasons may carry bytes from untrusted files; invalid UTF-8 is
+      // replaced rather than throwing, so the log is always written.
+      io::WriteTextAtomic(log, limits::DumpJson(fit::ReportJson(rep, o)) + "\n");
       std::printf("log: %s\n", log.c_str());
       exit_code = rep.failed > 0 ? 2 : 0;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit convert: error: %s\n", e.what());
+      std::fprintf(stderr, "clothfit convert: error: %s\n",
+                   limits::EscapeForMessage(e.what(), 2000).c_str());
       exit_code = 1;
     }
   });

@@ -7,6 +7,7 @@
 #include "bin/progress.h"
 #include "brdf/lut.h"
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
 namespace {
@@ -69,7 +70,8 @@ void AddLutCommand(CLI::App& app, const Globals& g, int& exit_code) {
                     args->sheen_size);
       }
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit lut: error: %s\n", e.what());
+      std::fprintf(stderr, "clothfit lut: error: %s\n", 
+                   limits::EscapeForMessage(e.what(), 2000).c_str());
       exit_code = 1;
     }
   });

@@ -9,6 +9,7 @@
 #include "render/scene/material.h"
 #include "render/preview/preview.h"
 #include "render/scene/tonemap.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
 
@@ -66,7 +67,8 @@ void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
                     ToDisplayImage(lin, render::ParseToneMapping(tm), exposure));
       exit_code = 0;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit tonemap: error: %s\n", e.what());
+      std::fprintf(stderr, "clothfit tonemap: error: %s\n", 
+                   limits::EscapeForMessage(e.what(), 2000).c_str());
       exit_code = 1;
     }
   });
@@ -144,7 +146,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   cache->build_seconds, args->out.c_str());
       exit_code = 0;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit render-preview: error: %s\n", e.what());
+      std::fprintf(stderr, "clothfit render-preview: error: %s\n", 
+                   limits::EscapeForMessage(e.what(), 2000).c_str());
       exit_code = 1;
     }
   });

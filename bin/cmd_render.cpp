@@ -15,6 +15,7 @@
 #include "render/reference/fabric.h"
 #include "render/reference/path_tracer.h"
 #include "render/scene/scene.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
 
@@ -132,7 +133,8 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
           100.0 * r.mean_relative_std_error, args->out.c_str());
       exit_code = 0;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit render-reference: error: %s\n", e.what());
+      std::fprintf(stderr, "clothfit render-reference: error: %s\n", 
+                   limits::EscapeForMessage(e.what(), 2000).c_str());
       exit_code = 1;
     }
   });

@@ -7,6 +7,7 @@
 
 #include "bin/commands.h"
 #include "fit/metrics/report.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
 
@@ -43,7 +44,8 @@ void AddReportCommand(CLI::App& app, const Globals& g, int& exit_code) {
       std::printf("report: %s\n", std::filesystem::absolute(index).lexically_normal().c_str());
       exit_code = 0;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit report: error: %s\n", e.what());
+      std::fprintf(stderr, "clothfit report: error: %s\n", 
+                   limits::EscapeForMessage(e.what(), 2000).c_str());
       exit_code = 1;
     }
   });

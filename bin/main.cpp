@@ -4,6 +4,7 @@
 #include <exception>
 
 #include "bin/commands.h"
+#include "render/scene/input_limits.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"clothfit: fit real-time cloth materials to ray-traced references"};
@@ -31,7 +32,8 @@ int main(int argc, char** argv) {
     // Usage errors print the message and exit 1 (help and --version: 0).
     return app.exit(e) == 0 ? 0 : 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "clothfit: error: %s\n", e.what());
+    std::fprintf(stderr, "clothfit: error: %s\n", 
+                   clothfit::limits::EscapeForMessage(e.what(), 2000).c_str());
     return 1;
   }
   return exit_code;

@@ -16,6 +16,7 @@
 #include "fit/brdf_fit.h"
 #include "fit/convert/convert_io.h"
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::fit {
 namespace {
@@ -37,13 +38,26 @@ struct Fnv {
     Add(s.data(), s.size());
     Add("\0", 1);
   }
+  // Hashes a regular file's bytes, up to the size fstat reports on the open descriptor (a
+  // /proc file or a device would otherwise be read without end).
   void AddFile(const std::string& path) {
+    size_t size = 0;
+    try {
+      size = limits::CheckedFileSize(path, limits::kMaxImageFileBytes, "file (for the content hash)");
+    } catch (const limits::InputError& e) {
+      throw ConvertError(e.what());
+    }
     std::ifstream in(path, std::ios::binary);
-    if (!in) throw ConvertError(path + ": file: cannot open (for the content hash)");
+    if (!in)
+      throw ConvertError(limits::EscapeForMessage(path, 400) +
+                         ": file: cannot open (for the content hash)");
     char buf[1 << 16];
-    while (in) {
-      in.read(buf, sizeof buf);
-      Add(buf, size_t(in.gcount()));
+    size_t left = size;
+    while (in && left > 0) {
+      in.read(buf, std::streamsize(std::min(left, sizeof buf)));
+      const size_t got = size_t(in.gcount());
+      Add(buf, got);
+      left -= std::min(left, got);
     }
     Add(std::string("|eof"));
   }
@@ -115,11 +129,12 @@ std::string RecordPath(const ConvertOptions& o, const std::string& stem) {
 
 bool UpToDate(const ConvertOptions& o, const std::string& stem, const std::string& hash,
               double* error) {
-  std::ifstream in(RecordPath(o, stem));
-  if (!in) return false;
   json r;
   try {
-    in >> r;
+    const std::string text =
+        limits::ReadFileBounded(RecordPath(o, stem), limits::kMaxJsonFileBytes, "resume record");
+    if (limits::FindJsonDepthExcess(text)) return false;
+    r = json::parse(text);
   } catch (const std::exception&) {
     return false;  // an unreadable record means: convert again
   }
@@ -212,20 +227,30 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
                        {"material", m.name},
                        {"error", cr.error},
                        {"outputs", outs}};
-  io::WriteTextAtomic(RecordPath(o, stem), record.dump(2) + "\n");
+  io::WriteTextAtomic(RecordPath(o, stem), limits::DumpJson(record) + "\n");
 }
 
 void ConvertFile(const InputFile& in, const ConvertOptions& o, std::vector<ItemResult>& out,
                  const std::function<void(int)>& done) {
   std::vector<SourceMaterial> mats;
   try {
-    mats = ReadMaterials(in.path);
+    mats = ReadMaterials(in.path, limits::PathPolicy{in.root, o.allow_outside_paths});
+  } catch (const std::bad_alloc&) {
+    ItemResult r;
+    r.file = in.path;
+    r.stem = in.stem;
+    r.status = "failed";
+    r.reason = limits::EscapeForMessage(in.path, 400) +
+               ": out of memory reading this input (limits: docs/reliability.md)";
+    out.push_back(r);
+    done(1);
+    return;
   } catch (const std::exception& e) {
     ItemResult r;
     r.file = in.path;
     r.stem = in.stem;
     r.status = "failed";
-    r.reason = e.what();
+    r.reason = limits::EscapeForMessage(e.what(), 2000);
     out.push_back(r);
     done(1);
     return;
@@ -257,7 +282,7 @@ void ConvertFile(const InputFile& in, const ConvertOptions& o, std::vector<ItemR
       }
     } catch (const std::exception& e) {
       r.status = "failed";
-      r.reason = e.what();
+      r.reason = limits::EscapeForMessage(e.what(), 2000);
     }
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     out.push_back(r);
@@ -298,7 +323,8 @@ std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args,
       if (kInputExt.count(ext)) files.push_back(e.path());
     }
     std::sort(files.begin(), files.end());
-    for (const fs::path& f : files) out.push_back({f.string(), StemOf(fs::relative(f, dir))});
+    for (const fs::path& f : files)
+      out.push_back({f.string(), StemOf(fs::relative(f, dir)), dir.string()});
   };
   for (const std::string& a : args) {
     std::error_code ec;
@@ -321,14 +347,15 @@ std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args,
           add_dir(f);
         } else if (fs::is_regular_file(f, ec)) {
           out.push_back(
-              {f.string(), StemOf(fs::path(entry).is_absolute() ? f.filename() : fs::path(entry))});
+              {f.string(), StemOf(fs::path(entry).is_absolute() ? f.filename() : fs::path(entry)),
+               f.parent_path().string()});
         } else {
           throw ConvertError(a + ":" + std::to_string(n) + ": no such file or directory '" + entry +
                              "'");
         }
       }
     } else if (fs::is_regular_file(p, ec)) {
-      out.push_back({p.string(), StemOf(p.filename())});
+      out.push_back({p.string(), StemOf(p.filename()), p.parent_path().string()});
     } else {
       throw ConvertError(a + ": no such file or directory");
     }
@@ -423,7 +450,9 @@ std::string SummaryTable(const ConvertReport& r) {
     s << "\n| failed input | material | reason |\n|---|---|---|\n";
     for (const ItemResult& i : r.items)
       if (i.status == "failed")
-        s << "| " << i.file << " | " << (i.material.empty() ? "-" : i.material) << " | " << i.reason
+        s << "| " << limits::EscapeForMessage(i.file, 400) << " | "
+          << (i.material.empty() ? "-" : limits::EscapeForMessage(i.material, 200)) << " | "
+          << i.reason
           << " |\n";
   }
   return s.str();

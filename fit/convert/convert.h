@@ -34,6 +34,8 @@ struct ConvertOptions {
   int jobs = 0;  // 0: TBB default
   int shard_index = 0, shard_count = 1;
   cloth::Options cloth;  // target cloth variant
+  // Map and glTF buffer paths may leave the input tree (--allow-outside-paths).
+  bool allow_outside_paths = false;
   // Called with (materials done, materials known so far) from worker threads (serialised).
   std::function<void(long long, long long)> progress;
 };
@@ -59,6 +61,9 @@ struct ConvertReport {
 // Throws ConvertError for a missing argument path or a bad manifest line (file:line).
 struct InputFile {
   std::string path, stem;
+  // The input tree the file came from (a directory argument, a manifest entry's directory, or
+  // the file's own directory): the paths it names must stay inside it (docs/reliability.md).
+  std::string root;
 };
 // Files under `exclude` (the output directory, when it sits inside an input directory) are
 // left out of directory scans.

@@ -13,6 +13,7 @@
 #include "render/scene/gltf_tinygltf.h"
 #include "render/scene/image_io.h"
 #include "render/scene/tonemap.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::fit {
 namespace {
@@ -26,17 +27,20 @@ using render::ModelKind;
 }
 
 json ReadJson(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) Fail(path, "file", "cannot open");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string text = ss.str();
+  std::string text;
+  try {  // bounded read, then the nesting limit before the DOM (docs/reliability.md)
+    text = limits::ReadFileBounded(path, limits::kMaxJsonFileBytes, "JSON file");
+    limits::CheckJsonDepth(text, path);
+  } catch (const limits::InputError& e) {
+    throw ConvertError(e.what());
+  }
   try {
     return json::parse(text);
   } catch (const json::parse_error& e) {
     const size_t at = std::min(size_t(e.byte), text.size());
     const long line = 1 + std::count(text.begin(), text.begin() + long(at), '\n');
-    Fail(path, "line " + std::to_string(line), std::string("malformed JSON: ") + e.what());
+    Fail(path, "line " + std::to_string(line),
+         "malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
   }
 }
 
@@ -66,13 +70,31 @@ std::array<double, 4> ChannelMeans(const std::string& path, bool srgb) {
   return sum;
 }
 
+// The path policy of the ReadMaterials call running on this thread (maps and glTF buffers stay
+// inside the input tree unless --allow-outside-paths); null: the file's own directory.
+thread_local const limits::PathPolicy* t_policy = nullptr;
+
+limits::PathPolicy PolicyFor(const std::string& file) {
+  if (t_policy && !t_policy->root.empty()) return *t_policy;
+  limits::PathPolicy p;
+  p.root = fs::path(file).parent_path();
+  if (p.root.empty()) p.root = ".";
+  p.allow_outside = t_policy && t_policy->allow_outside;
+  return p;
+}
+
 std::string ResolveUri(const std::string& file, const std::string& field, const std::string& uri) {
   if (uri.empty()) Fail(file, field, "empty uri");
   if (uri.rfind("data:", 0) == 0) Fail(file, field, "embedded data URIs are not supported");
   const fs::path p = fs::path(file).parent_path() / uri;
   std::error_code ec;
-  if (!fs::is_regular_file(p, ec)) Fail(file, field, "map file not found: " + p.string());
-  return p.string();
+  if (!fs::exists(p, ec))
+    Fail(file, field, "map file not found: " + limits::EscapeForMessage(p.string(), 400));
+  try {
+    return limits::ResolveConfined(file, field, uri, PolicyFor(file)).string();
+  } catch (const limits::InputError& e) {
+    throw ConvertError(e.what());
+  }
 }
 
 // ---- the seed's shared parametrisation (docs/convert.md) ----
@@ -158,9 +180,12 @@ void ApplySurfaceMap(const std::string& attr, const json& v, ModelKind model,
   if (!v.is_object() || !v.contains("uri") || !v["uri"].is_string())
     Fail(file, field, "expected {\"uri\": \"...\", \"colorSpace\": \"srgb\"|\"linear\"}");
   const bool colour = attr == "color" || attr == "sheenColor";
+  if (v.contains("colorSpace") && !v["colorSpace"].is_string())
+    Fail(file, field + ".colorSpace", "expected \"srgb\" or \"linear\"");
   const std::string cs = v.value("colorSpace", colour ? "srgb" : "linear");
   if (cs != "srgb" && cs != "linear")
-    Fail(file, field + ".colorSpace", "'" + cs + "' is not srgb or linear");
+    Fail(file, field + ".colorSpace",
+         "'" + limits::EscapeForMessage(cs, 40) + "' is not srgb or linear");
   const std::string path = ResolveUri(file, field + ".uri", v["uri"].get<std::string>());
   m.dependencies.push_back(path);
   if (attr == "normal") {
@@ -292,7 +317,8 @@ std::vector<SourceMaterial> ReadPresetFile(const std::string& file) {
 std::vector<SourceMaterial> ReadFabricFile(const std::string& file, const json& j) {
   SourceMaterial m;
   m.file = file;
-  m.name = j.value("name", fs::path(file).stem().string());
+  m.name = j.contains("name") && j["name"].is_string() ? j["name"].get<std::string>()
+                                                       : fs::path(file).stem().string();
   m.kind = "fabric";
   try {
     m.fabric = std::make_shared<render::Fabric>(render::LoadFabric(file));
@@ -300,7 +326,9 @@ std::vector<SourceMaterial> ReadFabricFile(const std::string& file, const json& 
     throw ConvertError(e.what());
   }
   if (m.fabric->model == "irawan") {
-    const std::string weave = j.value("weave_file", "../weaves/" + m.fabric->preset + ".weave");
+    const std::string weave = j.contains("weave_file") && j["weave_file"].is_string()
+                                  ? j["weave_file"].get<std::string>()
+                                  : "../weaves/" + m.fabric->preset + ".weave";
     m.dependencies.push_back((fs::path(file).parent_path() / weave).string());
   }
   m.notes.push_back("woven BSDF averaged over one weave period (4 x 4 points) and 4 azimuths");
@@ -476,7 +504,8 @@ SourceMaterial ReadGltfMaterial(const tinygltf::Model& g, size_t i, const std::s
 std::vector<SourceMaterial> ReadGltf(const std::string& file) {
   tinygltf::Model g;
   std::string err, warn;
-  if (!render::LoadGltfModel(file, &g, &err, &warn)) Fail(file, "glTF", err);
+  const limits::PathPolicy policy = PolicyFor(file);
+  if (!render::LoadGltfModel(file, &g, &err, &warn, &policy)) Fail(file, "glTF", err);
   if (g.materials.empty()) Fail(file, "materials", "the file has no materials");
   std::vector<SourceMaterial> out;
   std::map<std::string, int> seen;
@@ -567,7 +596,13 @@ Rgb<double> MeanTexel(const std::string& path, bool srgb) {
   return {m[0], m[1], m[2]};
 }
 
-std::vector<SourceMaterial> ReadMaterials(const std::string& path) {
+std::vector<SourceMaterial> ReadMaterials(const std::string& path,
+                                          const limits::PathPolicy& policy) {
+  struct Scope {  // the policy holds for this call only, on this thread
+    const limits::PathPolicy* saved;
+    explicit Scope(const limits::PathPolicy* p) : saved(t_policy) { t_policy = p; }
+    ~Scope() { t_policy = saved; }
+  } scope(&policy);
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) Fail(path, "file", "not found or not a regular file");
   const std::string ext = Lower(fs::path(path).extension().string());

@@ -27,6 +27,7 @@
 #include "fit/convert/merl.h"
 #include "render/reference/fabric.h"
 #include "render/scene/material.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::fit {
 
@@ -57,7 +58,10 @@ struct SourceMaterial {
 };
 
 // Every input file kind, chosen by extension and, for .json, by its "schema"/"format" field.
-std::vector<SourceMaterial> ReadMaterials(const std::string& path);
+// `policy`: where map and buffer paths may point (docs/reliability.md, "Paths"). An empty root
+// confines them to the file's own directory.
+std::vector<SourceMaterial> ReadMaterials(const std::string& path,
+                                          const limits::PathPolicy& policy = {});
 // The source's BRDF on the canonical directions.
 BrdfSamples SampleSource(const SourceMaterial& m);
 

@@ -7,6 +7,7 @@
 #include <iterator>
 
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::fit {
 namespace {
@@ -66,9 +67,16 @@ bool MerlCellDirections(const MerlTable& t, int ih, int id, int ip, Vec3<double>
 }
 
 MerlTable ReadMerl(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) Fail(path, "file", "cannot open");
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::string bytes;
+  try {  // size checked on the descriptor first: a 1024^3 header cannot make us read 24 GiB
+    bytes = limits::ReadFileBounded(path, limits::kMaxMerlBytes, "MERL file");
+  } catch (const limits::InputError& e) {
+    Fail(path, "file", e.what());
+  }
+  return ParseMerl(bytes, path);
+}
+
+MerlTable ParseMerl(std::string_view bytes, const std::string& path) {
   if (bytes.size() < 12) Fail(path, "header", "file shorter than the 12-byte header");
   int32_t dims[3];
   std::memcpy(dims, bytes.data(), 12);
@@ -80,7 +88,9 @@ MerlTable ReadMerl(const std::string& path) {
   t.n_theta_h = dims[0];
   t.n_theta_d = dims[1];
   t.n_phi_d = dims[2];
-  const size_t expect = 12 + 3 * t.Cells() * sizeof(double);
+  const auto cells = limits::CheckedProduct({size_t(dims[0]), size_t(dims[1]), size_t(dims[2]),
+                                             3, sizeof(double)});
+  const size_t expect = cells ? 12 + *cells : 0;
   if (bytes.size() != expect)
     Fail(path, "data",
          "file has " + std::to_string(bytes.size()) + " bytes, header " + std::to_string(dims[0]) +

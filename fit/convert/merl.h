@@ -16,6 +16,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "brdf/math.h"
@@ -38,6 +39,9 @@ struct MerlTable {
 // Throws std::runtime_error "<path>: <field>: <reason>" on a missing, short, oversized or
 // malformed file (dimensions non-positive or above 1024, size mismatch, NaN values).
 MerlTable ReadMerl(const std::string& path);
+// The same on bytes in memory (`path` names them in messages). The file must be exactly the
+// header's size; ReadMerl refuses files over kMaxMerlBytes before reading them.
+MerlTable ParseMerl(std::string_view bytes, const std::string& path);
 // Atomic write (render/scene/image_io.h WriteTextAtomic on the binary bytes).
 void WriteMerl(const std::string& path, const MerlTable& t);
 // Fills a table from f(wi, wo) (BRDF, no cosine) at the cell centres.

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -68,10 +69,23 @@ CompareResult Compare(const RgbImage& ref, const RgbImage& test, const CompareOp
   return res;
 }
 
+namespace {
+// The metrics compare linear radiance; an 8/16-bit image holds display-encoded values, and
+// treating them as linear would silently give wrong numbers (docs/metrics.md).
+io::Image ReadLinear(const std::string& path) {
+  io::Image img = io::ReadImage(path);
+  if (!img.float_source)
+    throw std::invalid_argument(path + ": compare needs linear images (float or half EXR/HDR); "
+                                "this is a " + img.source_format + " " + img.file_format +
+                                " with display-encoded (sRGB) values");
+  return img;
+}
+}  // namespace
+
 CompareResult CompareFiles(const std::string& reference_path, const std::string& test_path,
                            const std::string& mask_path, const CompareOptions& options) {
-  const RgbImage ref = ToRgb(io::ReadImage(reference_path), reference_path);
-  const RgbImage test = ToRgb(io::ReadImage(test_path), test_path);
+  const RgbImage ref = ToRgb(ReadLinear(reference_path), reference_path);
+  const RgbImage test = ToRgb(ReadLinear(test_path), test_path);
   if (ref.width != test.width || ref.height != test.height)
     throw std::invalid_argument("size mismatch: " + reference_path + " is " +
                                 SizeText(ref.width, ref.height) + " but " + test_path + " is " +

@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::report {
 namespace fs = std::filesystem;
@@ -494,13 +495,15 @@ namespace {
 
 nlohmann::json ReadPresetJson(const std::string& path) {
   if (!fs::exists(path)) throw ReportError(path + ": no such file");
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw ReportError(path + ": cannot open for reading");
   nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(f);
+  try {  // bounded read and the nesting limit before the DOM (the preset is copied)
+    const std::string text = limits::ReadFileBounded(path, limits::kMaxJsonFileBytes, "fit preset");
+    limits::CheckJsonDepth(text, path);
+    j = nlohmann::json::parse(text);
+  } catch (const limits::InputError& e) {
+    throw ReportError(e.what());
   } catch (const nlohmann::json::exception& e) {
-    throw ReportError(path + ": malformed JSON: " + e.what());
+    throw ReportError(path + ": malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
   }
   return j;
 }

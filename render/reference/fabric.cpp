@@ -12,6 +12,7 @@
 #include "render/reference/sadeghi.h"
 #include "render/reference/simple_bsdf.h"
 #include "render/reference/weave_pattern.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::render {
 namespace {
@@ -67,9 +68,13 @@ Rgbd GetRgb01(const nlohmann::json& j, const char* field, const std::string& pat
 Fabric ParseFabric(const std::string& text, const std::string& path) {
   nlohmann::json j;
   try {
+    limits::CheckJsonDepth(text, path);  // before the DOM: nlohmann copies and dumps recurse
     j = nlohmann::json::parse(text);
+  } catch (const limits::InputError& e) {
+    throw FabricError(e.what());
   } catch (const nlohmann::json::parse_error& e) {
-    Fail(path, "JSON syntax error at " + LineColumn(text, e.byte) + ": " + e.what());
+    Fail(path, "JSON syntax error at " + LineColumn(text, e.byte) + ": " +
+                   limits::EscapeForMessage(e.what(), 400));
   }
   if (!j.is_object()) Fail(path, "top level must be a JSON object");
   static const std::set<std::string> known = {"format", "version",    "name",       "model",
@@ -77,7 +82,7 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
                                               "colour", "roughness"};
   for (const auto& item : j.items()) {
     if (!known.count(item.key())) {
-      Fail(path, "unknown field '" + item.key() +
+      Fail(path, "unknown field '" + limits::EscapeForMessage(item.key(), 80) +
                      "' (valid: format, version, name, model, preset, weave_file, uv_repeats, "
                      "albedo, colour, roughness)");
     }
@@ -121,6 +126,13 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
     }
   }
   f.preset = GetString(j, "preset", path);
+  // The preset names a file under ../weaves/ (or a built-in table): a plain name, so that it
+  // cannot walk out of the fabric library ("../../x").
+  if (f.preset == "." || f.preset == ".." ||
+      f.preset.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
+                                 "0123456789_.-") != std::string::npos)
+    Fail(path, "field 'preset' must be a plain name of letters, digits, '_', '.' and '-', got \"" +
+                   limits::EscapeForMessage(f.preset, 80) + "\"");
   if (!j.contains("uv_repeats")) Fail(path, "missing field 'uv_repeats'");
   if (!j.at("uv_repeats").is_number()) Fail(path, "field 'uv_repeats' must be a number");
   f.uv_repeats = j.at("uv_repeats").get<double>();
@@ -151,18 +163,18 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
     }
   } else {
     Fail(path, "field 'model' must be \"irawan\", \"sadeghi\", \"lambert\" or \"ggx_conductor\", got \"" +
-                   f.model + "\"");
+                   limits::EscapeForMessage(f.model, 80) + "\"");
   }
   return f;
 }
 
 Fabric LoadFabric(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw FabricError(path + ": cannot open fabric file");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  const std::string text = ss.str();
-  if (text.size() > (size_t(1) << 20)) throw FabricError(path + ": file larger than 1 MiB");
+  std::string text;
+  try {  // size checked on the descriptor before reading (/dev/zero is refused, not read)
+    text = limits::ReadFileBounded(path, limits::kMaxSmallTextBytes, "fabric file");
+  } catch (const limits::InputError& e) {
+    throw FabricError(e.what());
+  }
   return ParseFabric(text, path);
 }
 

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <mutex>
 
 #include "render/scene/embree_scene.h"
@@ -130,7 +131,11 @@ struct PixelEstimate {
   // Writes pixel `pix` of r: mean, standard error from K batches, coverage, fabric, AOVs.
   void Store(size_t pix, int K, int spp, const AovSet& aovs, RenderResult& r) const {
     for (int c = 0; c < 3; ++c) {
-      r.rgb[pix * 3 + size_t(c)] = float(mean[c]);
+      // A mean beyond float range would be UB to convert: it becomes Inf, which WriteRenderExr
+      // refuses (the environment and light budgets keep radiance far below it).
+      r.rgb[pix * 3 + size_t(c)] = std::abs(mean[c]) <= double(std::numeric_limits<float>::max())
+                                       ? float(mean[c])
+                                       : std::numeric_limits<float>::infinity();
       const double var = K > 1 ? m2[c] / (K - 1) : 0.0;  // variance of one batch mean
       r.std_error[pix * 3 + size_t(c)] = float(std::sqrt(var / K));
     }
@@ -543,6 +548,11 @@ void WriteRenderExr(const std::string& path, const RenderResult& r,
   }
   if (!r.depth.empty()) planes.push_back({"Z", &r.depth, 1, 0});
   const size_t np = size_t(r.width) * size_t(r.height);
+  size_t nonfinite = 0;
+  for (float v : r.rgb) nonfinite += std::isfinite(v) ? 0 : 1;
+  if (nonfinite > 0)  // never written, so never cached as a reference
+    throw io::IoError(path + ": refusing to write a render with " + std::to_string(nonfinite) +
+                      " non-finite radiance values (kMaxRadiance; docs/reliability.md)");
   img.pixels.resize(np * planes.size());
   for (const Plane& pl : planes) img.channel_names.push_back(pl.name);
   for (size_t p = 0; p < np; ++p)

@@ -2,6 +2,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <atomic>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -11,7 +12,27 @@ namespace clothfit::render {
 struct EmbreeScene::Impl {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
+  mutable std::atomic<long long> invalid_rays{0};
 };
+
+bool EmbreeScene::RayValid(const std::array<double, 3>& org, const std::array<double, 3>& dir,
+                           double tnear, double tfar) {
+  // Embree's RayK::valid(): |org| <= FLT_LARGE (1.844e18), finite direction, tnear >= 0 and
+  // tnear <= tfar; checked here in double before any float conversion (which would be UB).
+  constexpr double kMaxOrigin = 1e18;
+  double d2 = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    if (!(std::abs(org[size_t(k)]) <= kMaxOrigin)) return false;
+    if (!(std::abs(dir[size_t(k)]) <= 1e30)) return false;
+    d2 += dir[size_t(k)] * dir[size_t(k)];
+  }
+  if (!(d2 > 0.0)) return false;
+  if (!(tnear >= 0.0 && tnear <= 1e30)) return false;
+  if (std::isnan(tfar) || tfar < tnear) return false;
+  return true;
+}
+
+long long EmbreeScene::invalid_rays() const { return impl_->invalid_rays.load(); }
 
 namespace {
 void ErrorCallback(void*, RTCError code, const char* message) {
@@ -60,6 +81,10 @@ EmbreeScene::~EmbreeScene() {
 
 Hit EmbreeScene::Intersect(const std::array<double, 3>& org, const std::array<double, 3>& dir,
                            double tnear, double tfar) const {
+  if (!RayValid(org, dir, tnear, tfar)) {
+    impl_->invalid_rays.fetch_add(1, std::memory_order_relaxed);
+    return Hit{};
+  }
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRayHit rh{};
@@ -70,7 +95,7 @@ Hit EmbreeScene::Intersect(const std::array<double, 3>& org, const std::array<do
   rh.ray.dir_y = float(dir[1]);
   rh.ray.dir_z = float(dir[2]);
   rh.ray.tnear = float(tnear);
-  rh.ray.tfar = std::isinf(tfar) ? std::numeric_limits<float>::infinity() : float(tfar);
+  rh.ray.tfar = tfar > 1e30 ? std::numeric_limits<float>::infinity() : float(tfar);
   rh.ray.mask = 0xFFFFFFFFu;
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
@@ -91,6 +116,10 @@ Hit EmbreeScene::Intersect(const std::array<double, 3>& org, const std::array<do
 
 bool EmbreeScene::Occluded(const std::array<double, 3>& org, const std::array<double, 3>& dir,
                            double tnear, double tfar) const {
+  if (!RayValid(org, dir, tnear, tfar)) {
+    impl_->invalid_rays.fetch_add(1, std::memory_order_relaxed);
+    return true;
+  }
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRay r{};
@@ -101,7 +130,7 @@ bool EmbreeScene::Occluded(const std::array<double, 3>& org, const std::array<do
   r.dir_y = float(dir[1]);
   r.dir_z = float(dir[2]);
   r.tnear = float(tnear);
-  r.tfar = std::isinf(tfar) ? std::numeric_limits<float>::infinity() : float(tfar);
+  r.tfar = tfar > 1e30 ? std::numeric_limits<float>::infinity() : float(tfar);
   r.mask = 0xFFFFFFFFu;
   rtcOccluded1(impl_->scene, &ctx, &r);
   return r.tfar < 0.0f;  // Embree sets tfar = -inf on a hit

@@ -41,6 +41,13 @@ class EmbreeScene {
   SurfaceAttributes Attributes(const Hit& hit) const;
   // Scene bounding-sphere radius (for ray offsets).
   double scale() const { return scale_; }
+  // Rays refused because Embree would reject them (origin beyond +-1e18, non-finite or zero
+  // direction, bad tnear/tfar): Intersect reports a miss and Occluded reports "occluded"
+  // instead of letting libembree3 abort on its `ray.valid()` assertion.
+  long long invalid_rays() const;
+  // True when Embree accepts the ray (the checks above).
+  static bool RayValid(const std::array<double, 3>& org, const std::array<double, 3>& dir,
+                       double tnear, double tfar);
 
  private:
   struct Impl;

@@ -1,4 +1,5 @@
 #include "render/scene/environment.h"
+#include "render/scene/input_limits.h"
 
 #include <algorithm>
 #include <bit>
@@ -19,6 +20,11 @@ void CheckIntensityAndRotation(double intensity, double rotation_y, const char* 
   if (!std::isfinite(intensity) || intensity < 0.0) {
     throw std::invalid_argument(std::string(who) + ": intensity must be finite and >= 0, got " +
                                 std::to_string(intensity));
+  }
+  if (intensity > limits::kMaxRadiance) {
+    throw std::invalid_argument(std::string(who) + ": intensity " + std::to_string(intensity) +
+                                " is above the radiance limit 1e+12 " +
+                                limits::LimitRef("kMaxRadiance"));
   }
   if (!std::isfinite(rotation_y)) {
     throw std::invalid_argument(std::string(who) + ": rotation_y must be finite");
@@ -200,6 +206,21 @@ Environment Environment::Load(const std::string& path, double intensity, double 
   const size_t n = size_t(img.width) * size_t(img.height);
   env.rgb_.resize(n * 3);
   float most_negative = 0.0f;
+  // A finite texel may still be huge: 3e38 x intensity overflows float in the renderers (Inf
+  // pixels written and cached). Radiance is bounded at load, naming the texel.
+  for (size_t p = 0; p < n; ++p) {
+    for (int c = 0; c < std::min(nc, 3); ++c) {
+      const double x = double(img.pixels[p * size_t(nc) + size_t(c)]);
+      if (std::isfinite(x) && x * intensity > limits::kMaxRadiance) {
+        std::ostringstream msg;
+        msg << limits::EscapeForMessage(path, 400) << ": texel (" << p % size_t(img.width) << ", "
+            << p / size_t(img.width) << ") channel " << c << " has radiance " << x
+            << " x intensity " << intensity << " = " << x * intensity
+            << ", above the limit 1e+12 " << limits::LimitRef("kMaxRadiance");
+        throw io::IoError(msg.str());
+      }
+    }
+  }
   for (size_t p = 0; p < n; ++p) {
     bool negative = false, nonfinite = false;
     for (int c = 0; c < 3; ++c) {
@@ -275,8 +296,10 @@ Environment Environment::ProceduralSky(double intensity, double rotation_y, int 
 
 Environment Environment::Constant(const std::array<double, 3>& radiance, int width) {
   for (double x : radiance) {
-    if (!std::isfinite(x) || x < 0.0) {
-      throw std::invalid_argument("constant environment: radiance must be finite and >= 0");
+    if (!std::isfinite(x) || x < 0.0 || x > limits::kMaxRadiance) {
+      throw std::invalid_argument(
+          "constant environment: radiance must be finite, >= 0 and <= 1e+12 " +
+          limits::LimitRef("kMaxRadiance"));
     }
   }
   if (width < 2 || width > io::kMaxDimension) {

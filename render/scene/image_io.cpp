@@ -11,8 +11,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <random>
+
+#include "render/scene/input_limits.h"
 
 namespace clothfit::io {
 namespace fs = std::filesystem;
@@ -73,26 +76,71 @@ void WriteExr(const std::string& path, const Image& image) {
 }
 
 Image ReadImage(const std::string& path) {
-  if (!fs::exists(path)) throw IoError(path + ": no such file");
+  const std::string shown = limits::EscapeForMessage(path, 400);
+  // The real file first: a regular, non-empty file within the byte budget (this also refuses
+  // /proc files, FIFOs and devices, which OIIO would read without end).
+  size_t file_bytes = 0;
+  try {
+    file_bytes = limits::CheckedFileSize(path, limits::kMaxImageFileBytes, "image file");
+  } catch (const limits::InputError& e) {
+    throw IoError(e.what());
+  }
   auto in = OIIO::ImageInput::open(path);
-  if (!in) throw IoError(path + ": cannot read image: " + OIIO::geterror());
+  if (!in) throw IoError(shown + ": cannot read image: " + OIIO::geterror());
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxDimension ||
       spec.height > kMaxDimension || spec.nchannels <= 0 || spec.nchannels > kMaxChannels ||
       spec.depth != 1) {
-    throw IoError(path + ": unsupported image size " + std::to_string(spec.width) + "x" +
+    throw IoError(shown + ": unsupported image size " + std::to_string(spec.width) + "x" +
                   std::to_string(spec.height) + "x" + std::to_string(spec.nchannels) + " (limits " +
                   std::to_string(kMaxDimension) + " per side, " + std::to_string(kMaxChannels) +
                   " channels)");
+  }
+  // Validate before allocating: the decoded float image must fit the per-image budget...
+  const size_t w = size_t(spec.width), h = size_t(spec.height), c = size_t(spec.nchannels);
+  const auto bytes = limits::CheckedProduct({w, h, c, sizeof(float)});
+  if (!bytes || *bytes > limits::kMaxImageBytes) {
+    throw IoError(shown + ": image " + std::to_string(w) + "x" + std::to_string(h) + "x" +
+                  std::to_string(c) + " needs " +
+                  std::to_string(bytes ? *bytes >> 20 : std::numeric_limits<size_t>::max() >> 20) +
+                  " MiB as float, over the limit of " +
+                  std::to_string(limits::kMaxImageBytes >> 20) + " MiB per image " +
+                  limits::LimitRef("kMaxImageBytes"));
+  }
+  // ...and a PNG cannot hold more than deflate's maximum expansion of its file: a forged header
+  // on a few bytes of data is refused here instead of costing a zero-filled giant buffer.
+  if (std::string(in->format_name()) == "png") {
+    size_t sample_bytes = 0;
+    for (int k = 0; k < spec.nchannels; ++k) sample_bytes += spec.channelformat(k).size();
+    const auto raw = limits::CheckedMul(h, 1 + w * sample_bytes);  // filter byte per row
+    const size_t can_hold = limits::kMaxPngExpansion * file_bytes + (size_t(64) << 10);
+    if (!raw || *raw > can_hold)
+      throw IoError(shown + ": PNG header claims " + std::to_string(w) + "x" + std::to_string(h) +
+                    "x" + std::to_string(c) + " but the file has only " +
+                    std::to_string(file_bytes) +
+                    " bytes (truncated or forged; deflate expands at most " +
+                    std::to_string(limits::kMaxPngExpansion) + ":1) " +
+                    limits::LimitRef("kMaxPngExpansion"));
   }
   Image img;
   img.width = spec.width;
   img.height = spec.height;
   img.channel_names = spec.channelnames;
+  img.float_source = true;
+  for (int k = 0; k < spec.nchannels; ++k)
+    if (!spec.channelformat(k).is_floating_point()) img.float_source = false;
+  img.source_format = spec.format.c_str();
+  img.file_format = in->format_name();
   for (const auto& p : spec.extra_attribs) img.metadata[p.name().string()] = p.get_string();
-  img.pixels.resize(size_t(img.width) * img.height * spec.nchannels);
-  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data())) {
-    throw IoError(path + ": corrupt or truncated image: " + in->geterror());
+  try {
+    img.pixels.resize(w * h * c);
+    if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))
+      throw IoError(shown + ": corrupt or truncated image: " +
+                    limits::EscapeForMessage(in->geterror(), 400));
+  } catch (const std::bad_alloc&) {
+    throw IoError(shown + ": out of memory decoding a " + std::to_string(w) + "x" +
+                  std::to_string(h) + "x" + std::to_string(c) + " image " +
+                  limits::LimitRef("kMaxImageBytes"));
   }
   in->close();
   return img;

@@ -26,6 +26,11 @@ struct Image {
   std::vector<std::string> channel_names;  // e.g. {"R", "G", "B"}
   std::vector<float> pixels;               // row-major, top row first, interleaved
   std::map<std::string, std::string> metadata;
+  // Set by ReadImage: false when any channel was stored as an integer type (8/16-bit PNG):
+  // such values are display-encoded (sRGB), not linear radiance.
+  bool float_source = true;
+  std::string source_format;  // OIIO type name of the stored data ("half", "uint8")
+  std::string file_format;    // OIIO format name ("openexr", "png", "hdr")
 
   int channels() const { return int(channel_names.size()); }
 };
@@ -38,6 +43,9 @@ inline constexpr int kMaxChannels = 64;
 void WriteExr(const std::string& path, const Image& image);
 
 // Reads any OIIO-readable image as float. Throws IoError naming the file on failure.
+// Before allocating, it checks the file (regular, <= kMaxImageFileBytes), the decoded size
+// (W*H*C*4 <= kMaxImageBytes) and, for PNG, that the file can hold the claimed pixels
+// (docs/reliability.md).
 Image ReadImage(const std::string& path);
 
 // A Table2D as an image: row j of the table (v = (j + 0.5)/H) is image row j from the top;

@@ -9,6 +9,7 @@
 #include "brdf/standard.h"
 #include "brdf/woven.h"
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::render {
 
@@ -31,7 +32,7 @@ ModelKind ParseModelKind(const std::string& s) {
   if (s == "physical-sheen") return ModelKind::kPhysicalSheen;
   if (s == "gltf-sheen") return ModelKind::kGltfSheen;
   if (s == "woven") return ModelKind::kWoven;
-  throw std::invalid_argument("unknown model '" + s +
+  throw std::invalid_argument("unknown model '" + limits::EscapeForMessage(s, 80) +
                               "' (valid: cloth, standard, physical-sheen, gltf-sheen, woven)");
 }
 
@@ -77,7 +78,8 @@ MaterialPreset DefaultPreset(ModelKind m) {
 namespace {
 
 [[noreturn]] void Fail(const std::string& where, const std::string& field, const std::string& msg) {
-  throw MaterialError(where + ": " + field + ": " + msg);
+  // Field names can hold untrusted keys ("parameters.<key>"): escaped, never raw.
+  throw MaterialError(where + ": " + limits::EscapeForMessage(field, 200) + ": " + msg);
 }
 
 double Number(const json& v, const std::string& where, const std::string& field) {
@@ -205,15 +207,20 @@ MaterialPreset ParsePreset(const json& j, const std::string& where) {
 }
 
 MaterialPreset ReadPreset(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw MaterialError(path + ": cannot open material preset");
+  // Bounded read, then the nesting limit before the DOM: unknown keys are kept in `extra` and
+  // copied and dumped recursively (docs/reliability.md).
+  std::string text;
+  try {
+    text = limits::ReadFileBounded(path, limits::kMaxJsonFileBytes, "material preset");
+    limits::CheckJsonDepth(text, path);
+  } catch (const limits::InputError& e) {
+    throw MaterialError(e.what());
+  }
   json j;
   try {
-    j = json::parse(f);
+    j = json::parse(text);
   } catch (const json::parse_error& e) {
     // e.byte is the offset; report line and column.
-    std::ifstream g(path);
-    std::string text((std::istreambuf_iterator<char>(g)), std::istreambuf_iterator<char>());
     size_t line = 1, col = 1;
     for (size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
       if (text[i] == '\n') {
@@ -224,7 +231,7 @@ MaterialPreset ReadPreset(const std::string& path) {
       }
     }
     throw MaterialError(path + ":" + std::to_string(line) + ":" + std::to_string(col) +
-                        ": malformed JSON: " + e.what());
+                        ": malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
   }
   return ParsePreset(j, path);
 }

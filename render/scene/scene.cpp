@@ -34,6 +34,7 @@
 #include <vector>
 
 #include "render/scene/gltf_tinygltf.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::render {
 namespace {
@@ -130,7 +131,20 @@ Mat4 Cofactor3(const Mat4& a) {
   throw SceneError(file + ": " + where + ": " + msg);
 }
 
-std::string Quote(const std::string& s) { return "'" + s + "'"; }
+std::string Quote(const std::string& s) { return "'" + limits::EscapeForMessage(s, 80) + "'"; }
+
+// A world-space point must lie within +-kMaxWorldCoordinate (this also refuses NaN): beyond
+// it float conversion overflows and Embree rejects the rays (docs/reliability.md).
+void CheckWorldPoint(const std::string& file, const std::string& where, const V3& p) {
+  for (double x : p) {
+    if (!(std::abs(x) <= limits::kMaxWorldCoordinate)) {
+      std::ostringstream s;
+      s << "is at (" << p[0] << ", " << p[1] << ", " << p[2]
+        << ") in world space, outside +-1e+06 scene units " << limits::LimitRef("kMaxWorldCoordinate");
+      Fail(file, where, s.str());
+    }
+  }
+}
 
 // ---------------------------------------------------------------------------------------------
 // Scene card.
@@ -139,12 +153,11 @@ std::string ReadText(const std::string& path, const std::string& what) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw SceneError(path + ": " + what + " not found");
   if (!fs::is_regular_file(path, ec)) throw SceneError(path + ": " + what + " is not a file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw SceneError(path + ": cannot open " + what + ": " + std::strerror(errno));
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) throw SceneError(path + ": read error");
-  return ss.str();
+  try {  // size checked on the open descriptor before reading (docs/reliability.md)
+    return limits::ReadFileBounded(path, limits::kMaxJsonFileBytes, what);
+  } catch (const limits::InputError& e) {
+    throw SceneError(e.what());
+  }
 }
 
 // Validates the fields of one JSON object; `prefix` is the dotted path of the object.
@@ -161,10 +174,14 @@ class FieldReader {
     Fail(file_, Name(key), msg);
   }
 
+  // A short description of an untrusted value: never recursive (a deep value would overflow
+  // the stack in dump()), never raw bytes.
   static std::string Show(const Json& v) {
-    std::string s = v.dump();
-    if (s.size() > 40) s = s.substr(0, 37) + "...";
-    return s;
+    if (v.is_object()) return "an object (" + std::to_string(v.size()) + " keys)";
+    if (v.is_array()) return "an array (" + std::to_string(v.size()) + " elements)";
+    if (v.is_string())
+      return "a string \"" + limits::EscapeForMessage(v.get_ref<const std::string&>(), 40) + "\"";
+    return v.dump();  // a number, boolean or null: flat and ASCII
   }
 
   std::string String(const char* key, const std::string& fallback, bool required) const {
@@ -212,7 +229,8 @@ class FieldReader {
 
   // Rejects any key not in `known`, listing the valid ones.
   void RejectUnknown(std::initializer_list<const char*> known) const {
-    for (const auto& [key, value] : object_.items()) {
+    for (const auto& item : object_.items()) {
+      const std::string& key = item.key();
       const bool ok =
           std::any_of(known.begin(), known.end(), [&](const char* k) { return key == k; });
       if (!ok) {
@@ -306,21 +324,40 @@ const unsigned char* AccessorData(const GltfContext& g, const tinygltf::Model& m
                                   const tinygltf::Accessor& acc, size_t elem,
                                   const std::string& where, const std::string& what,
                                   size_t* stride_out) {
-  if (acc.bufferView >= static_cast<int>(model.bufferViews.size())) {
+  if (acc.bufferView < 0 || acc.bufferView >= static_cast<int>(model.bufferViews.size())) {
     Fail(g.file, where, what + ": bufferView index out of range");
   }
+  const std::string vw = "bufferViews[" + std::to_string(acc.bufferView) + "]";
   const tinygltf::BufferView& view = model.bufferViews[static_cast<size_t>(acc.bufferView)];
   if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size())) {
-    Fail(g.file, where, what + ": buffer index out of range");
+    Fail(g.file, vw, "buffer index out of range");
   }
   const std::vector<unsigned char>& data = model.buffers[static_cast<size_t>(view.buffer)].data;
+  // Every sum and product is checked: offsets near 2^64 must not wrap past the tests.
+  const size_t size = data.size();
+  if (view.byteOffset > size || view.byteLength > size - view.byteOffset) {
+    Fail(g.file, vw,
+         "byteOffset " + std::to_string(view.byteOffset) + " + byteLength " +
+             std::to_string(view.byteLength) + " runs past the end of buffers[" +
+             std::to_string(view.buffer) + "] (" + std::to_string(size) + " bytes)");
+  }
   const size_t stride = view.byteStride != 0 ? view.byteStride : elem;
+  if (stride < elem) {
+    Fail(g.file, where, what + ": byteStride " + std::to_string(stride) +
+                            " is smaller than one element (" + std::to_string(elem) + " bytes)");
+  }
   if (acc.count > 0) {
-    const size_t need = acc.byteOffset + stride * (acc.count - 1) + elem;
-    if (stride < elem || need > view.byteLength ||
-        view.byteOffset + view.byteLength > data.size()) {
-      Fail(g.file, where, what + ": data runs past the end of its bufferView or buffer");
+    auto need = limits::CheckedMul(stride, acc.count - 1);
+    if (need) need = limits::CheckedAdd(*need, elem);
+    if (need) need = limits::CheckedAdd(*need, acc.byteOffset);
+    if (!need || *need > view.byteLength) {
+      Fail(g.file, where,
+           what + ": count " + std::to_string(acc.count) + " x stride " + std::to_string(stride) +
+               " from byteOffset " + std::to_string(acc.byteOffset) + " runs past the end of " +
+               vw + " (" + std::to_string(view.byteLength) + " bytes)");
     }
+  } else if (acc.byteOffset > view.byteLength) {
+    Fail(g.file, where, what + ": byteOffset past the end of " + vw);
   }
   *stride_out = stride;
   return data.data() + view.byteOffset + acc.byteOffset;
@@ -334,8 +371,11 @@ std::string MeshWhere(const tinygltf::Model& model, int mesh, int prim) {
 
 // Reads accessor `index` as floats, `comps` per element. FLOAT data always; with
 // `allow_normalized`, also normalized (U)BYTE/(U)SHORT (glTF allows them for TEXCOORD_n).
+// `max_count`: the element budget (the vertex limit for POSITION); with `exact`, the count must
+// equal it (NORMAL, TEXCOORD_0, TANGENT against POSITION). Checked before allocating.
 std::vector<float> ReadFloats(const GltfContext& g, const std::string& where, const char* attr,
-                              int index, int comps, bool allow_normalized) {
+                              int index, int comps, bool allow_normalized, size_t max_count,
+                              bool exact) {
   const auto& model = g.model;
   const std::string what = std::string(attr) + " (accessors[" + std::to_string(index) + "])";
   if (index < 0 || index >= static_cast<int>(model.accessors.size())) {
@@ -361,10 +401,23 @@ std::vector<float> ReadFloats(const GltfContext& g, const std::string& where, co
   const size_t csize =
       static_cast<size_t>(tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(ct)));
   const size_t elem = csize * static_cast<size_t>(comps);
-  std::vector<float> out(acc.count * static_cast<size_t>(comps), 0.0f);
-  if (acc.bufferView < 0) return out;  // glTF: no bufferView means all zeros
+  if (exact && acc.count != max_count) {
+    Fail(g.file, where,
+         what + ": count " + std::to_string(acc.count) + " differs from POSITION's " +
+             std::to_string(max_count));
+  }
+  if (acc.count > max_count) {
+    Fail(g.file, where,
+         what + ": count " + std::to_string(acc.count) + " exceeds the limit of " +
+             std::to_string(max_count) + " vertices per scene " +
+             limits::LimitRef("kMaxSceneVertices"));
+  }
+  if (acc.bufferView < -1) Fail(g.file, where, what + ": bufferView index out of range");
+  const unsigned char* base = nullptr;
   size_t stride = 0;
-  const unsigned char* base = AccessorData(g, model, acc, elem, where, what, &stride);
+  if (acc.bufferView >= 0) base = AccessorData(g, model, acc, elem, where, what, &stride);
+  std::vector<float> out(acc.count * static_cast<size_t>(comps), 0.0f);  // count bounded above
+  if (base == nullptr) return out;  // glTF: no bufferView means all zeros
   for (size_t i = 0; i < acc.count; ++i) {
     const unsigned char* src = base + i * stride;
     for (int c = 0; c < comps; ++c) {
@@ -402,7 +455,7 @@ std::vector<float> ReadFloats(const GltfContext& g, const std::string& where, co
 std::vector<uint32_t> ReadIndices(const GltfContext& g, const std::string& where, int index) {
   const auto& model = g.model;
   const std::string what = "indices (accessors[" + std::to_string(index) + "])";
-  if (index >= static_cast<int>(model.accessors.size())) {
+  if (index < 0 || index >= static_cast<int>(model.accessors.size())) {
     Fail(g.file, where, what + ": accessor index out of range");
   }
   const tinygltf::Accessor& acc = model.accessors[index];
@@ -414,10 +467,22 @@ std::vector<uint32_t> ReadIndices(const GltfContext& g, const std::string& where
   if (ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) csize = 2;
   if (ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT) csize = 4;
   if (csize == 0) Fail(g.file, where, what + ": component type must be an unsigned integer");
-  std::vector<uint32_t> out(acc.count, 0);
-  if (acc.bufferView < 0) return out;
+  if (acc.count > limits::kMaxSceneIndices) {
+    Fail(g.file, where,
+         what + ": count " + std::to_string(acc.count) + " exceeds the limit of " +
+             std::to_string(limits::kMaxSceneIndices) + " indices per scene " +
+             limits::LimitRef("kMaxSceneIndices"));
+  }
+  if (acc.count % 3 != 0) {
+    Fail(g.file, where,
+         "index count " + std::to_string(acc.count) + " is not a multiple of 3");
+  }
+  if (acc.bufferView < -1) Fail(g.file, where, what + ": bufferView index out of range");
+  const unsigned char* base = nullptr;
   size_t stride = 0;
-  const unsigned char* base = AccessorData(g, model, acc, csize, where, what, &stride);
+  if (acc.bufferView >= 0) base = AccessorData(g, model, acc, csize, where, what, &stride);
+  std::vector<uint32_t> out(acc.count, 0);  // count bounded above
+  if (base == nullptr) return out;
   for (size_t i = 0; i < acc.count; ++i) {
     const unsigned char* p = base + i * stride;
     if (csize == 1) {
@@ -566,7 +631,7 @@ void ReadNormals(const PrimitiveInput& in, Mesh* mesh, std::vector<std::string>&
   std::vector<std::array<float, 3>> smooth;  // computed on demand
   if (AttributeIndex(in.prim, "NORMAL") >= 0) {
     const std::vector<float> nrm =
-        ReadFloats(g, in.where, "NORMAL", AttributeIndex(in.prim, "NORMAL"), 3, false);
+        ReadFloats(g, in.where, "NORMAL", AttributeIndex(in.prim, "NORMAL"), 3, false, in.n, true);
     CheckCount(in, "NORMAL", nrm.size() / 3);
     const Mat4 cof = Cofactor3(in.world);
     const double sign = in.mirrored ? -1.0 : 1.0;
@@ -597,7 +662,8 @@ void ReadNormals(const PrimitiveInput& in, Mesh* mesh, std::vector<std::string>&
 void ReadUvs(const PrimitiveInput& in, const SceneCard& card, Mesh* mesh) {
   if (AttributeIndex(in.prim, "TEXCOORD_0") >= 0) {
     const std::vector<float> uv =
-        ReadFloats(in.g, in.where, "TEXCOORD_0", AttributeIndex(in.prim, "TEXCOORD_0"), 2, true);
+        ReadFloats(in.g, in.where, "TEXCOORD_0", AttributeIndex(in.prim, "TEXCOORD_0"), 2, true,
+                   in.n, true);
     CheckCount(in, "TEXCOORD_0", uv.size() / 2);
     mesh->uvs.resize(in.n);
     for (size_t i = 0; i < in.n; ++i) mesh->uvs[i] = {uv[2 * i], uv[2 * i + 1]};
@@ -618,7 +684,7 @@ void ReadTangents(const PrimitiveInput& in, Mesh* mesh, std::vector<std::string>
   const size_t n = in.n;
   if (AttributeIndex(in.prim, "TANGENT") >= 0) {
     const std::vector<float> tan =
-        ReadFloats(g, in.where, "TANGENT", AttributeIndex(in.prim, "TANGENT"), 4, false);
+        ReadFloats(g, in.where, "TANGENT", AttributeIndex(in.prim, "TANGENT"), 4, false, in.n, true);
     CheckCount(in, "TANGENT", tan.size() / 4);
     std::vector<std::array<float, 4>> generated;
     size_t repaired = 0;
@@ -666,7 +732,8 @@ Mesh BuildMesh(const GltfContext& g, const SceneCard& card, int mesh_index, int 
 
   if (AttributeIndex(prim, "POSITION") < 0) Fail(g.file, where, "no POSITION attribute");
   const std::vector<float> pos =
-      ReadFloats(g, where, "POSITION", AttributeIndex(prim, "POSITION"), 3, false);
+      ReadFloats(g, where, "POSITION", AttributeIndex(prim, "POSITION"), 3, false,
+                 limits::kMaxSceneVertices, false);
   const size_t n = pos.size() / 3;
   if (n == 0) Fail(g.file, where, "POSITION is empty");
   if (n > std::numeric_limits<uint32_t>::max()) Fail(g.file, where, "too many vertices");
@@ -686,8 +753,9 @@ Mesh BuildMesh(const GltfContext& g, const SceneCard& card, int mesh_index, int 
 
   mesh.positions.resize(n);
   for (size_t i = 0; i < n; ++i) {
-    mesh.positions[i] =
-        ToFloat(TransformPoint(world, {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]}));
+    const V3 p = TransformPoint(world, {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]});
+    CheckWorldPoint(g.file, where + ": POSITION[" + std::to_string(i) + "]", p);
+    mesh.positions[i] = ToFloat(p);
   }
 
   // In this order: the repairs of each read the attributes before it.
@@ -762,6 +830,9 @@ void Visit(const std::string& file, const tinygltf::Model& model, int index, con
   const tinygltf::Node& node = model.nodes[index];
   const Mat4 world = Mul(parent, NodeTransform(file, node, index));
   const std::string where = "nodes[" + std::to_string(index) + "]";
+  for (double v : world.m) {
+    if (!std::isfinite(v)) Fail(file, where, "world transform overflows (not finite)");
+  }
   if (node.mesh >= 0) {
     if (node.mesh >= static_cast<int>(model.meshes.size())) {
       Fail(file, where, "mesh index " + std::to_string(node.mesh) + " out of range");
@@ -817,6 +888,11 @@ Light BuildLight(const std::string& file, const SceneCard& card, const tinygltf:
     Fail(file, where + ".intensity", "must be finite and >= 0");
   }
   light.intensity = src.intensity * card.light_scale;
+  if (!(light.intensity <= limits::kMaxRadiance)) {
+    Fail(file, where + ".intensity",
+         "intensity x the card's light_scale is above the limit 1e+12 " +
+             limits::LimitRef("kMaxRadiance"));
+  }
   if (!std::isfinite(src.range) || src.range < 0) {
     Fail(file, where + ".range", "must be finite and > 0 when present");
   }
@@ -833,6 +909,7 @@ Light BuildLight(const std::string& file, const SceneCard& card, const tinygltf:
     light.outer_cone = outer;
   }
   light.position = TransformPoint(placed.world, {0, 0, 0});
+  if (light.type != Light::Type::kDirectional) CheckWorldPoint(file, where, light.position);
   const V3 d = TransformVector(placed.world, {0, 0, -1});
   if (!(Length(d) > 1e-12)) Fail(file, where, "its node transform collapses the -Z axis");
   light.direction = Scale(d, 1.0 / Length(d));
@@ -862,6 +939,7 @@ Camera BuildCamera(const std::string& file, const SceneCard& card, const tinyglt
   Camera cam;
   cam.yfov = yfov;
   cam.position = TransformPoint(it->world, {0, 0, 0});
+  CheckWorldPoint(file, where + " (placed by its node)", cam.position);
   const V3 f = TransformVector(it->world, {0, 0, -1});
   const V3 u = TransformVector(it->world, {0, 1, 0});
   cam.forward = NormalizeOr(f, {0, 0, 0});
@@ -879,6 +957,11 @@ Camera BuildCamera(const std::string& file, const SceneCard& card, const tinyglt
 
 // The card's JSON; a syntax error names the card's line and column.
 Json ParseCardJson(const std::string& text, const std::string& card_path) {
+  try {  // the nesting limit first: FieldReader copies and compares values recursively
+    limits::CheckJsonDepth(text, card_path);
+  } catch (const limits::InputError& e) {
+    throw SceneError(e.what());
+  }
   try {
     return Json::parse(text);
   } catch (const Json::parse_error& e) {
@@ -890,7 +973,7 @@ Json ParseCardJson(const std::string& text, const std::string& card_path) {
       msg = msg.substr(colon + 2);
     }
     throw SceneError(card_path + ":" + std::to_string(line) + ":" + std::to_string(column) +
-                     ": malformed JSON: " + msg);
+                     ": malformed JSON: " + limits::EscapeForMessage(msg, 400));
   }
 }
 
@@ -976,6 +1059,11 @@ SceneCard LoadSceneCard(const std::string& card_path) {
 
   card.width = r.Int("width", card.width, 1, kMaxImageSize);
   card.height = r.Int("height", card.height, 1, kMaxImageSize);
+  if (size_t(card.width) * size_t(card.height) > limits::kMaxRenderPixels) {
+    r.Bad("height", std::to_string(card.width) + " x " + std::to_string(card.height) +
+                        " pixels is over the limit of " + std::to_string(limits::kMaxRenderPixels) +
+                        " per render " + limits::LimitRef("kMaxRenderPixels"));
+  }
   if (r.Has("environment")) card.environment = ReadCardEnvironment(r, dir);
   ReadCardLook(r, &card);
   card.uv_metres_per_unit =
@@ -1029,11 +1117,19 @@ Scene LoadScene(const std::string& card_path) {
              std::to_string(n_materials) + " material" + (n_materials == 1 ? "" : "s"));
   }
 
+  size_t total_vertices = 0, total_indices = 0;
   for (const auto& [mesh_index, world] : flat.mesh_nodes) {
     const auto& prims = model.meshes[mesh_index].primitives;
     for (size_t p = 0; p < prims.size(); ++p) {
       scene.meshes.push_back(
           BuildMesh(g, card, mesh_index, static_cast<int>(p), world, scene.warnings));
+      total_vertices += scene.meshes.back().positions.size();
+      total_indices += scene.meshes.back().indices.size();
+      if (total_vertices > limits::kMaxSceneVertices || total_indices > limits::kMaxSceneIndices)
+        Fail(file, "meshes",
+             "the scene holds more than " + std::to_string(limits::kMaxSceneVertices) +
+                 " vertices or " + std::to_string(limits::kMaxSceneIndices) + " indices " +
+                 limits::LimitRef("kMaxSceneVertices"));
     }
   }
   if (scene.meshes.empty()) Fail(file, "meshes", "the scene has no triangle meshes");
