@@ -412,6 +412,22 @@ export function environmentUrl(path, cardUrl, options = {}) {
 }
 
 const envCache = new Map();
+const pmremCache = new WeakMap();  // renderer -> Map(url -> PMREM render target)
+
+// One PMREM per renderer and map (PMREMGenerator.fromEquirectangular), shared by every card.
+async function pmremFor(renderer, url) {
+  if (!pmremCache.has(renderer)) pmremCache.set(renderer, new Map());
+  const m = pmremCache.get(renderer);
+  if (!m.has(url)) {
+    m.set(url, loadEquirect(url).then((eq) => {
+      const gen = new THREE.PMREMGenerator(renderer);
+      const target = gen.fromEquirectangular(eq);
+      gen.dispose();
+      return target;
+    }));
+  }
+  return m.get(url);
+}
 
 async function loadEquirect(url) {
   if (!envCache.has(url)) {
@@ -482,7 +498,7 @@ export async function loadSceneCard(url, options = {}) {
       }
     },
     async setEnvironment(path, { intensity = 1, rotationYDegrees = 0 } = {}) {
-      if (this.environment) { this.environment.dispose(); this.environment = null; }
+      this.environment = null;
       if (!path) {
         scene.environment = null;
         scene.background = new THREE.Color(bg[0], bg[1], bg[2]);
@@ -491,10 +507,9 @@ export async function loadSceneCard(url, options = {}) {
       if (path === 'procedural-sky') throw new Error('procedural-sky is not available in the browser');
       const renderer = options.renderer;
       if (!renderer) throw new Error('loadSceneCard: options.renderer is needed for the environment PMREM');
-      const eq = await loadEquirect(environmentUrl(path, cardUrl, options));
-      const pmrem = new THREE.PMREMGenerator(renderer);
-      const target = pmrem.fromEquirectangular(eq);
-      pmrem.dispose();
+      const url = environmentUrl(path, cardUrl, options);
+      const eq = await loadEquirect(url);
+      const target = await pmremFor(renderer, url);
       this.environment = target;
       const rot = THREE.MathUtils.degToRad(rotationYDegrees);
       scene.environment = target.texture;
