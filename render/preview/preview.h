@@ -40,8 +40,16 @@ namespace clothfit::render {
 
 class PrefilteredEnvironment;
 
+// Whose image-based lighting the preview reproduces: Filament's (SH9 irradiance, its GGX
+// prefilter chain and LOD mapping, the 128 x 128 DFG LUT) or three.js r187's
+// (render/preview/threejs_ibl.h: PMREM cube, irradiance from its top level, 16 x 16 DFG).
+// kAuto: three.js for standard and physical-sheen and the seed cloth variant, Filament for the
+// Filament cloth variant and gltf-sheen.
+enum class IblEngine { kAuto, kFilament, kThreejs };
+
 struct PreviewOptions {
   ModelKind model = ModelKind::kCloth;
+  IblEngine ibl_engine = IblEngine::kAuto;
   cloth::Options cloth;      // model == kCloth
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
@@ -49,6 +57,9 @@ struct PreviewOptions {
   int prefilter_base_width = 256;
   int prefilter_samples = 128;
 };
+
+// Whether the preview uses three.js r187's IBL for these options (see IblEngine).
+bool UsesThreejsIbl(const PreviewOptions& o);
 
 // Which code paths a scene needs (decided once when the cache is built).
 struct PreviewFeatures {
@@ -78,6 +89,7 @@ class PreviewCache {
   std::vector<float> NoV;        // per fabric pixel
   std::vector<int> light_begin;  // CSR: samples of pixel i in [begin[i], begin[i+1])
   std::vector<PreviewLightSample> light_samples;
+  std::vector<float> geometry_roughness;  // three.js geometryRoughness per fabric pixel (empty: 0)
   std::vector<float> irradiance;          // E_d(n), 3 per fabric pixel
   std::vector<float> radiance;            // K x 3 per fabric pixel: GGX-prefiltered, node k
   std::vector<float> sheen_radiance;      // K x 3 per fabric pixel: Charlie (gltf-sheen only)

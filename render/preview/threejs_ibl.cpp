@@ -4,16 +4,22 @@
 #include "render/preview/threejs_ibl.h"
 
 #include <tbb/parallel_for.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <mutex>
 #include <string>
 #include <tuple>
 
 #include "brdf/lut.h"
+#include "render/preview/preview.h"
 
 namespace clothfit::render {
 namespace {
@@ -200,10 +206,14 @@ void ThreejsPmrem::Trilinear(const std::vector<Level>& chain, const V3& d, doubl
   }
 }
 
-ThreejsPmrem::ThreejsPmrem(const Environment& env) {
+void ThreejsPmrem::SetLookup(const Environment& env) {
   intensity_ = env.intensity();
   cos_rot_ = std::cos(env.rotation_y());
   sin_rot_ = std::sin(env.rotation_y());
+}
+
+ThreejsPmrem::ThreejsPmrem(const Environment& env) {
+  SetLookup(env);
   int fp2 = 1;
   while (fp2 * 2 <= env.width() / 4) fp2 *= 2;
   size_ = std::max(256, fp2);
@@ -321,6 +331,29 @@ Rgb<double> ThreejsPmrem::Sample(const V3& d, double mip) const {
   return {double(c[0]) * intensity_, double(c[1]) * intensity_, double(c[2]) * intensity_};
 }
 
+namespace {
+
+// Bump when the PMREM computation changes: old cache files then no longer match.
+constexpr const char* kPmremVersion = "clothfit-threejs-pmrem v1";
+
+uint64_t Fnv1a(const void* data, size_t n, uint64_t h = 0xcbf29ce484222325ull) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (size_t i = 0; i < n; ++i) {
+    h ^= p[i];
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+std::string PmremCacheDir() {
+  if (const char* d = std::getenv("CLOTHFIT_TABLE_CACHE")) return d;
+  if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::string(x) + "/clothfit/tables";
+  if (const char* h = std::getenv("HOME"); h && *h) return std::string(h) + "/.cache/clothfit/tables";
+  return "";
+}
+
+}  // namespace
+
 std::shared_ptr<const ThreejsPmrem> SharedThreejsPmrem(const Environment& env) {
   using Key = std::tuple<const float*, int, int, double, double, std::string>;
   static std::mutex mu;
@@ -331,9 +364,113 @@ std::shared_ptr<const ThreejsPmrem> SharedThreejsPmrem(const Environment& env) {
     std::lock_guard<std::mutex> lock(mu);
     if (auto it = cache.find(key); it != cache.end()) return it->second;
   }
-  auto p = std::make_shared<const ThreejsPmrem>(env);
+  // On-disk cache of the PMREM levels.
+  const std::string dir = PmremCacheDir();
+  const bool use_disk = !dir.empty() && dir != "off";
+  uint64_t h = Fnv1a(env.pixels().data(), env.pixels().size() * sizeof(float));
+  const int wh[2] = {env.width(), env.height()};
+  h = Fnv1a(wh, sizeof wh, h);
+  h = Fnv1a(kPmremVersion, std::char_traits<char>::length(kPmremVersion), h);
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  const std::string path = use_disk ? dir + "/threejs-pmrem-" + hex + ".bin" : "";
+  std::shared_ptr<ThreejsPmrem> p;
+  if (use_disk) {
+    std::ifstream in(path, std::ios::binary);
+    std::string header;
+    if (in && std::getline(in, header)) {
+      int S = 0, max_lod = 0;
+      char file_key[17] = {};
+      if (std::sscanf(header.c_str(), "clothfit-threejs-pmrem v1 S=%d maxLod=%d key=%16s", &S,
+                      &max_lod, file_key) == 3 &&
+          std::string(file_key) == hex && S >= 8 && max_lod >= 0 && (S >> max_lod) >= 1) {
+        auto q = std::shared_ptr<ThreejsPmrem>(new ThreejsPmrem());
+        q->size_ = S;
+        q->max_lod_ = max_lod;
+        uint64_t sum = 0xcbf29ce484222325ull;
+        bool ok = true;
+        for (int lod = 0; lod <= max_lod && ok; ++lod) {
+          ThreejsPmrem::Level L = MakeLevel(S >> lod);
+          in.read(reinterpret_cast<char*>(L.rgb.data()), std::streamsize(L.rgb.size() * sizeof(float)));
+          ok = bool(in);
+          sum = Fnv1a(L.rgb.data(), L.rgb.size() * sizeof(float), sum);
+          q->pmrem_.push_back(std::move(L));
+        }
+        uint64_t stored = 0;
+        in.read(reinterpret_cast<char*>(&stored), sizeof stored);
+        if (ok && in && stored == sum) p = q;
+      }
+    }
+  }
+  if (!p) {
+    p = std::shared_ptr<ThreejsPmrem>(new ThreejsPmrem(env));
+    p->source_.clear();  // only the PMREM levels are read after the build
+    p->source_.shrink_to_fit();
+    if (use_disk) {
+      std::error_code ec;
+      std::filesystem::create_directories(dir, ec);
+      const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+      std::ofstream out(tmp, std::ios::binary);
+      out << kPmremVersion << " S=" << p->size_ << " maxLod=" << p->max_lod_ << " key=" << hex << "\n";
+      uint64_t sum = 0xcbf29ce484222325ull;
+      for (const ThreejsPmrem::Level& L : p->pmrem_) {
+        out.write(reinterpret_cast<const char*>(L.rgb.data()), std::streamsize(L.rgb.size() * sizeof(float)));
+        sum = Fnv1a(L.rgb.data(), L.rgb.size() * sizeof(float), sum);
+      }
+      out.write(reinterpret_cast<const char*>(&sum), sizeof sum);
+      out.close();
+      if (out) std::filesystem::rename(tmp, path, ec);
+      else std::filesystem::remove(tmp, ec);
+    }
+  }
+  p->SetLookup(env);
   std::lock_guard<std::mutex> lock(mu);
   return cache.emplace(key, p).first->second;
+}
+
+bool UsesThreejsIbl(const PreviewOptions& o) {
+  switch (o.ibl_engine) {
+    case IblEngine::kFilament: return false;
+    case IblEngine::kThreejs: return true;
+    case IblEngine::kAuto: break;
+  }
+  if (o.model == ModelKind::kStandard || o.model == ModelKind::kPhysicalSheen) return true;
+  return o.model == ModelKind::kCloth && o.cloth.variant == cloth::Variant::kSeedThreejs;
+}
+
+double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int x, int y) {
+  const Mesh& m = scene.meshes[size_t(mesh)];
+  const uint32_t* idx = &m.indices[size_t(triangle) * 3];
+  auto v3 = [](const std::array<float, 3>& a) { return V3(a[0], a[1], a[2]); };
+  const V3 P0 = v3(m.positions[idx[0]]), P1 = v3(m.positions[idx[1]]), P2 = v3(m.positions[idx[2]]);
+  const V3 N0 = v3(m.normals[idx[0]]), N1 = v3(m.normals[idx[1]]), N2 = v3(m.normals[idx[2]]);
+  const Camera& cam = scene.camera;
+  const V3 right(cam.right[0], cam.right[1], cam.right[2]), up(cam.up[0], cam.up[1], cam.up[2]),
+      fwd(cam.forward[0], cam.forward[1], cam.forward[2]);
+  // View-space interpolated normal at pixel (px, py) on the triangle's plane (Moller-Trumbore
+  // without the inside test); false when the ray is parallel to the plane.
+  auto normal_at = [&](int px, int py, V3* out) {
+    std::array<double, 3> o, d;
+    scene.CameraRay(px + 0.5, py + 0.5, o, d);
+    const V3 org(o[0], o[1], o[2]), dir(d[0], d[1], d[2]);
+    const V3 e1 = P1 - P0, e2 = P2 - P0, p = Cross(dir, e2);
+    const double det = Dot(e1, p);
+    if (std::abs(det) < 1e-300) return false;
+    const V3 s = org - P0;
+    const double b1 = Dot(s, p) / det;
+    const double b2 = Dot(dir, Cross(s, e1)) / det;
+    const V3 n = Normalize(N0 * (1.0 - b1 - b2) + N1 * b1 + N2 * b2);
+    *out = V3(Dot(n, right), Dot(n, up), Dot(n, fwd));
+    return true;
+  };
+  V3 n, nx, ny;
+  if (!normal_at(x, y, &n)) return 0.0;
+  double g = 0.0;
+  if (normal_at(x ^ 1, y, &nx))
+    g = std::max({g, std::abs(nx.x - n.x), std::abs(nx.y - n.y), std::abs(nx.z - n.z)});
+  if (normal_at(x, y ^ 1, &ny))
+    g = std::max({g, std::abs(ny.x - n.x), std::abs(ny.y - n.y), std::abs(ny.z - n.z)});
+  return g;
 }
 
 const Table2D& ThreejsDfgTable() {

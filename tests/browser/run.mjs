@@ -94,11 +94,14 @@ function runCmd(cmd, argv) {
     p.on('close', (code) => (code === 0 ? resolve() : reject(new Error(`${cmd} ${argv.join(' ')}: exit ${code}\n${err}`))));
   });
 }
+// --ibl-engine threejs: every material here is drawn by three.js in the browser
+// (MeshClothMaterial uses three.js's PMREM too). --cpp-args '' drops it (older binaries).
+const cppExtra = (args['cpp-args'] ?? '--ibl-engine threejs').split(' ').filter(Boolean);
 async function cppAll() {
   const queue = [...cases];
   const worker = async () => {
     for (let c = queue.shift(); c; c = queue.shift()) {
-      await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png]);
+      await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png, ...cppExtra]);
     }
   };
   await Promise.all([worker(), worker()]);
