@@ -219,98 +219,119 @@ void RunBenchFit(const BenchFitArgs& a, bool quiet) {
   std::printf("bench fit: %zu fits -> %s, %s\n", all.size(), csv.c_str(), png.c_str());
 }
 
+// What `clothfit bench` was asked for.
+struct BenchArgs {
+  std::string what;
+  std::string scene = std::string(CLOTHFIT_SOURCE_DATASETS) + "/scenes/sphere.json";
+  BenchFitArgs fit;
+  std::string catalogue;
+  int count = 200;
+  int jobs = 0;
+};
+
+void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
+  BenchFitArgs& fa = a.fit;
+  cmd->add_option("what", a.what, "what to benchmark: brdf | preview | fit | convert")
+      ->required()
+      ->check(CLI::IsMember({"brdf", "preview", "fit", "convert"}));
+  cmd->add_option("--catalogue", a.catalogue,
+                  "`bench convert`: catalogue directory (default: generate one in a temporary "
+                  "directory with datasets/catalogue/generate.py)");
+  cmd->add_option("--count", a.count,
+                  "`bench convert`: materials per input format when generating");
+  cmd->add_option("-j,--jobs", a.jobs, "`bench convert`: worker threads (0: all cores)");
+  cmd->add_option("--fabrics", fa.fabrics, "`bench fit`: comma-separated fabric names");
+  cmd->add_option("--widths", fa.widths, "`bench fit`: fit resolutions (image widths, px)");
+  cmd->add_option("--strides", fa.strides, "`bench fit`: pixel strides (0 = auto)");
+  cmd->add_option("--starts", fa.starts, "`bench fit`: multi-start counts (1-3)");
+  cmd->add_option("--spp", fa.spp, "`bench fit`: reference samples per pixel (cached)")
+      ->check(CLI::Range(16, 65536));
+  cmd->add_option("--csv", fa.csv, "`bench fit`: output CSV");
+  cmd->add_option("--png", fa.png, "`bench fit`: output plot (error vs time)");
+  cmd->add_option("--scene", a.scene, "scene card for `bench preview`");
+  cmd->allow_extras();
+}
+
+void RegisterBrdfBenchmarks() {
+  for (ModelId m : kAllModels) {
+    const std::string name(ModelName(m));
+    benchmark::RegisterBenchmark(("brdf/" + name + "/double").c_str(),
+                                 [m](benchmark::State& s) { BM_Model<double>(s, m); });
+    benchmark::RegisterBenchmark(("brdf/" + name + "/jet10").c_str(),
+                                 [m](benchmark::State& s) { BM_Model<Jet10>(s, m); });
+  }
+}
+
+// Needs BuildPreviewSets first.
+void RegisterPreviewBenchmarks() {
+  for (const PreviewSet& set : PreviewSets()) {
+    const render::PreviewCache* c = set.cache.get();
+    benchmark::RegisterBenchmark(("preview/" + set.name + "/double").c_str(),
+                                 [c](benchmark::State& s) { BM_Preview<double>(s, c); })
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+    benchmark::RegisterBenchmark(("preview/" + set.name + "/jet10").c_str(),
+                                 [c](benchmark::State& s) { BM_Preview<Jet10>(s, c); })
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+  }
+}
+
+// Runs the registered benchmarks with the command's extra arguments; returns the exit status.
+int RunRegisteredBenchmarks(CLI::App* cmd) {
+  std::vector<std::string> extras = cmd->remaining();
+  std::vector<char*> argv{const_cast<char*>("clothfit-bench")};
+  for (auto& e : extras) argv.push_back(e.data());
+  int argc = int(argv.size());
+  benchmark::Initialize(&argc, argv.data());
+  if (benchmark::ReportUnrecognizedArguments(argc, argv.data())) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}
+
+// `clothfit bench` after parsing: returns the exit status.
+int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
+  (void)lut::DefaultDfg();  // tables are built once, outside the timed loops
+  (void)lut::DefaultSheenAlbedo();
+  if (a.what == "convert") {
+    try {
+      return RunBenchConvert(a.catalogue, a.count, a.jobs, g.quiet);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "clothfit bench convert: error: %s\n", e.what());
+      return 1;
+    }
+  }
+  if (a.what == "fit") {
+    try {
+      RunBenchFit(a.fit, g.quiet);
+      return 0;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "clothfit bench fit: error: %s\n", e.what());
+      return 1;
+    }
+  }
+  if (a.what == "brdf") {
+    RegisterBrdfBenchmarks();
+  } else {
+    try {
+      BuildPreviewSets(a.scene, g.quiet);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "clothfit bench preview: error: %s\n", e.what());
+      return 1;
+    }
+    RegisterPreviewBenchmarks();
+  }
+  return RunRegisteredBenchmarks(cmd);
+}
+
 }  // namespace
 
 void AddBenchCommand(CLI::App& app, const Globals& g, int& exit_code) {
-  auto what = std::make_shared<std::string>();
-  auto scene = std::make_shared<std::string>(std::string(CLOTHFIT_SOURCE_DATASETS) +
-                                             "/scenes/sphere.json");
   CLI::App* cmd = app.add_subcommand("bench", "benchmarks (Google Benchmark)");
-  auto fa = std::make_shared<BenchFitArgs>();
-  auto catalogue = std::make_shared<std::string>();
-  auto count = std::make_shared<int>(200);
-  auto jobs = std::make_shared<int>(0);
-  cmd->add_option("what", *what, "what to benchmark: brdf | preview | fit | convert")
-      ->required()
-      ->check(CLI::IsMember({"brdf", "preview", "fit", "convert"}));
-  cmd->add_option("--catalogue", *catalogue,
-                  "`bench convert`: catalogue directory (default: generate one in a temporary "
-                  "directory with datasets/catalogue/generate.py)");
-  cmd->add_option("--count", *count, "`bench convert`: materials per input format when generating");
-  cmd->add_option("-j,--jobs", *jobs, "`bench convert`: worker threads (0: all cores)");
-  cmd->add_option("--fabrics", fa->fabrics, "`bench fit`: comma-separated fabric names");
-  cmd->add_option("--widths", fa->widths, "`bench fit`: fit resolutions (image widths, px)");
-  cmd->add_option("--strides", fa->strides, "`bench fit`: pixel strides (0 = auto)");
-  cmd->add_option("--starts", fa->starts, "`bench fit`: multi-start counts (1-3)");
-  cmd->add_option("--spp", fa->spp, "`bench fit`: reference samples per pixel (cached)")
-      ->check(CLI::Range(16, 65536));
-  cmd->add_option("--csv", fa->csv, "`bench fit`: output CSV");
-  cmd->add_option("--png", fa->png, "`bench fit`: output plot (error vs time)");
-  cmd->add_option("--scene", *scene, "scene card for `bench preview`");
-  cmd->allow_extras();
-  cmd->callback([cmd, what, scene, fa, catalogue, count, jobs, &g, &exit_code]() {
-    (void)lut::DefaultDfg();  // tables are built once, outside the timed loops
-    (void)lut::DefaultSheenAlbedo();
-    if (*what == "convert") {
-      try {
-        exit_code = RunBenchConvert(*catalogue, *count, *jobs, g.quiet);
-      } catch (const std::exception& e) {
-        std::fprintf(stderr, "clothfit bench convert: error: %s\n", e.what());
-        exit_code = 1;
-      }
-      return;
-    }
-    if (*what == "fit") {
-      try {
-        RunBenchFit(*fa, g.quiet);
-        exit_code = 0;
-      } catch (const std::exception& e) {
-        std::fprintf(stderr, "clothfit bench fit: error: %s\n", e.what());
-        exit_code = 1;
-      }
-      return;
-    }
-    if (*what == "brdf") {
-      for (ModelId m : kAllModels) {
-        const std::string name(ModelName(m));
-        benchmark::RegisterBenchmark(("brdf/" + name + "/double").c_str(),
-                                     [m](benchmark::State& s) { BM_Model<double>(s, m); });
-        benchmark::RegisterBenchmark(("brdf/" + name + "/jet10").c_str(),
-                                     [m](benchmark::State& s) { BM_Model<Jet10>(s, m); });
-      }
-    } else {
-      try {
-        BuildPreviewSets(*scene, g.quiet);
-      } catch (const std::exception& e) {
-        std::fprintf(stderr, "clothfit bench preview: error: %s\n", e.what());
-        exit_code = 1;
-        return;
-      }
-      for (const PreviewSet& set : PreviewSets()) {
-        const render::PreviewCache* c = set.cache.get();
-        benchmark::RegisterBenchmark(("preview/" + set.name + "/double").c_str(),
-                                     [c](benchmark::State& s) { BM_Preview<double>(s, c); })
-            ->Unit(benchmark::kMillisecond)
-            ->UseRealTime();
-        benchmark::RegisterBenchmark(("preview/" + set.name + "/jet10").c_str(),
-                                     [c](benchmark::State& s) { BM_Preview<Jet10>(s, c); })
-            ->Unit(benchmark::kMillisecond)
-            ->UseRealTime();
-      }
-    }
-    std::vector<std::string> extras = cmd->remaining();
-    std::vector<char*> argv{const_cast<char*>("clothfit-bench")};
-    for (auto& e : extras) argv.push_back(e.data());
-    int argc = int(argv.size());
-    benchmark::Initialize(&argc, argv.data());
-    if (benchmark::ReportUnrecognizedArguments(argc, argv.data())) {
-      exit_code = 1;
-      return;
-    }
-    benchmark::RunSpecifiedBenchmarks();
-    benchmark::Shutdown();
-    exit_code = 0;
-  });
+  auto a = std::make_shared<BenchArgs>();
+  AddBenchOptions(cmd, *a);
+  cmd->callback([cmd, a, &g, &exit_code]() { exit_code = RunBench(cmd, *a, g); });
 }
 
 }  // namespace clothfit::cli

@@ -113,215 +113,289 @@ std::vector<std::string> CanonicalScenes() {
   return {root + "/scenes/sphere.json", root + "/scenes/drape.json", root + "/scenes/swatch.json"};
 }
 
-void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
-  struct Args {
-    std::string fabric, references, scenes, model = "cloth", space = "display", lock, out;
-    std::string level = "auto", loss = "huber", variant = "filament", sheen_default = "explicit";
-    std::string images;
-    double loss_scale = 1.0;
-    bool subsurface = false, no_floor = false;
-    int spp = 256, stride = 0, threads = 0;
-  };
-  auto a = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand(
-      "fit", "fit a material preset so the real-time preview matches the references");
-  cmd->add_option("--fabric", a->fabric,
+namespace {
+
+struct FitArgs {
+  std::string fabric, references, scenes, model = "cloth", space = "display", lock, out;
+  std::string level = "auto", loss = "huber", variant = "filament", sheen_default = "explicit";
+  std::string images;
+  double loss_scale = 1.0;
+  bool subsurface = false, no_floor = false;
+  int spp = 256, stride = 0, threads = 0;
+};
+
+void AddFitOptions(CLI::App* cmd, FitArgs& a) {
+  cmd->add_option("--fabric", a.fabric,
                   "fabric definition: render (or reuse cached) references on the canonical scenes");
-  cmd->add_option("--references", a->references, "comma-separated reference EXRs");
-  cmd->add_option("--scenes", a->scenes, "comma-separated scene cards, one per reference");
-  cmd->add_option("--model", a->model, "cloth | standard | physical-sheen | gltf-sheen");
-  cmd->add_option("--space", a->space, "residual space: display (default) | linear | log");
-  cmd->add_option("--lock", a->lock, "comma-separated parameters to hold at their defaults");
-  cmd->add_option("--level", a->level,
+  cmd->add_option("--references", a.references, "comma-separated reference EXRs");
+  cmd->add_option("--scenes", a.scenes, "comma-separated scene cards, one per reference");
+  cmd->add_option("--model", a.model, "cloth | standard | physical-sheen | gltf-sheen");
+  cmd->add_option("--space", a.space, "residual space: display (default) | linear | log");
+  cmd->add_option("--lock", a.lock, "comma-separated parameters to hold at their defaults");
+  cmd->add_option("--level", a.level,
                   "block level: residuals on 2^level blocks (auto: from the weave scale)");
-  cmd->add_option("--loss", a->loss, "huber (default) | cauchy | none");
-  cmd->add_option("--loss-scale", a->loss_scale, "robust loss scale, in noise-floor units");
-  cmd->add_option("--variant", a->variant, "cloth variant: filament | seed-threejs");
-  cmd->add_option("--sheen-default", a->sheen_default,
+  cmd->add_option("--loss", a.loss, "huber (default) | cauchy | none");
+  cmd->add_option("--loss-scale", a.loss_scale, "robust loss scale, in noise-floor units");
+  cmd->add_option("--variant", a.variant, "cloth variant: filament | seed-threejs");
+  cmd->add_option("--sheen-default", a.sheen_default,
                   "cloth sheen convention: explicit (fit it) | sqrt-base-color | white");
-  cmd->add_flag("--subsurface", a->subsurface, "cloth: fit a subsurface colour too");
-  cmd->add_option("--spp", a->spp, "reference samples per pixel (--fabric)")->check(CLI::Range(16, 65536));
-  cmd->add_option("--stride", a->stride,
+  cmd->add_flag("--subsurface", a.subsurface, "cloth: fit a subsurface colour too");
+  cmd->add_option("--spp", a.spp, "reference samples per pixel (--fabric)")
+      ->check(CLI::Range(16, 65536));
+  cmd->add_option("--stride", a.stride,
                   "evaluate every n-th pixel per block axis (0 = auto: at most 4 x 4 per block)")
       ->check(CLI::Range(0, 16));
-  cmd->add_flag("--no-noise-floor", a->no_floor, "(--fabric) skip the second-seed references");
-  cmd->add_option("--images", a->images, "directory for fitted previews and residual images");
-  cmd->add_option("--threads", a->threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
-  cmd->add_option("--out", a->out, "output preset JSON")->required();
+  cmd->add_flag("--no-noise-floor", a.no_floor, "(--fabric) skip the second-seed references");
+  cmd->add_option("--images", a.images, "directory for fitted previews and residual images");
+  cmd->add_option("--threads", a.threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
+  cmd->add_option("--out", a.out, "output preset JSON")->required();
+}
+
+// --level: an integer in [0, 6], or -1 for "auto" (validated before any work).
+int ParseFixedLevel(const std::string& level) {
+  int fixed_level = -1;
+  if (level != "auto") {
+    size_t used = 0;
+    try {
+      fixed_level = std::stoi(level, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != level.size() || fixed_level < 0 || fixed_level > 6)
+      throw std::invalid_argument("--level: '" + level + "' is not an integer in [0, 6] or auto");
+  }
+  return fixed_level;
+}
+
+// The files to fit: scene cards, references and second-seed references (may be empty).
+struct FitFiles {
+  std::vector<std::string> refs, refs2, scenes;
+};
+
+// --fabric: references rendered (or reused) on the canonical scenes; else --references and
+// --scenes as given.
+FitFiles ResolveFitFiles(const FitArgs& a, const Globals& g) {
+  FitFiles f;
+  if (!a.fabric.empty()) {
+    if (!a.references.empty() || !a.scenes.empty())
+      throw std::invalid_argument("--fabric and --references/--scenes are exclusive");
+    f.scenes = CanonicalScenes();
+    for (const std::string& s : f.scenes) {
+      f.refs.push_back(CachedReference(s, a.fabric, a.spp, 1, g.quiet));
+      if (!a.no_floor) f.refs2.push_back(CachedReference(s, a.fabric, a.spp, 2, g.quiet));
+    }
+  } else {
+    f.refs = SplitList(a.references);
+    f.scenes = SplitList(a.scenes);
+    if (f.refs.empty() || f.refs.size() != f.scenes.size())
+      throw std::invalid_argument("--references and --scenes need the same number (>= 1) of files");
+  }
+  return f;
+}
+
+// The model's defaults, with the cloth options from the command line.
+render::MaterialPreset StartPreset(const FitArgs& a) {
+  render::MaterialPreset start = render::DefaultPreset(render::ParseModelKind(a.model));
+  if (start.model == render::ModelKind::kCloth) {
+    render::MaterialPreset probe = render::ParsePreset(
+        {{"schema", "clothfit.preset"}, {"version", 1}, {"model", "cloth"},
+         {"cloth", {{"variant", a.variant}, {"sheen_default", a.sheen_default},
+                    {"subsurface", a.subsurface}}},
+         {"parameters", nlohmann::json::object()}},
+        "command line");
+    start.cloth = probe.cloth;
+  }
+  return start;
+}
+
+// Everything but the level (which needs the loaded scenes when it is auto).
+fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& start) {
+  fit::FitOptions o;
+  o.start = start;
+  o.locked = SplitList(a.lock);
+  if (start.model == render::ModelKind::kStandard ||
+      start.model == render::ModelKind::kPhysicalSheen)
+    o.locked.push_back("metalness");
+  if (start.model == render::ModelKind::kGltfSheen) o.locked.push_back("metallic");
+  o.space = fit::ParseSpace(a.space);
+  o.loss = a.loss == "huber" ? fit::Loss::kHuber
+           : a.loss == "cauchy" ? fit::Loss::kCauchy
+           : a.loss == "none" ? fit::Loss::kNone
+           : throw std::invalid_argument("--loss: unknown '" + a.loss + "' (huber, cauchy, none)");
+  o.loss_scale = a.loss_scale;
+  o.pixel_stride = a.stride;
+  return o;
+}
+
+// The scenes, their environments (each distinct one loaded once) and references, by index.
+struct LoadedScenes {
+  std::vector<render::Scene> sc;
+  std::vector<std::shared_ptr<render::Environment>> envs;
+  std::vector<fit::Reference> rr, rr2;
+};
+
+LoadedScenes LoadFitScenes(const FitFiles& f) {
+  LoadedScenes l;
+  std::map<std::string, std::shared_ptr<render::Environment>> env_by_key;  // load once
+  for (size_t i = 0; i < f.scenes.size(); ++i) {
+    l.sc.push_back(render::LoadScene(f.scenes[i]));
+    const auto& spec = l.sc.back().card.environment;
+    const std::string key = spec ? spec->path + "|" + std::to_string(spec->intensity) + "|" +
+                                       std::to_string(spec->rotation_y)
+                                 : std::string();
+    if (key.empty()) {
+      l.envs.push_back(nullptr);
+    } else {
+      auto it = env_by_key.find(key);
+      if (it == env_by_key.end())
+        it = env_by_key.emplace(key, LoadSceneEnvironment(l.sc.back(), true)).first;
+      l.envs.push_back(it->second);
+    }
+    l.rr.push_back(fit::ReadReference(f.refs[i]));
+    if (!f.refs2.empty()) l.rr2.push_back(fit::ReadReference(f.refs2[i]));
+  }
+  return l;
+}
+
+// The "fit" record of the preset: settings, solver outcome and, per scene, what
+// `clothfit report` needs.
+nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::FitResult& res,
+                         const FitFiles& f, const LoadedScenes& l) {
+  nlohmann::json fitj;
+  fitj["space"] = fit::ToString(o.space);
+  fitj["loss"] = a.loss;
+  fitj["loss_scale"] = o.loss_scale;
+  fitj["level"] = o.level;
+  fitj["block_pixels"] = 1 << o.level;
+  fitj["pixel_stride"] = o.pixel_stride > 0 ? o.pixel_stride : std::max(1, (1 << o.level) / 4);
+  fitj["locked"] = o.locked;
+  fitj["final_cost"] = res.final_cost;
+  fitj["initial_cost"] = res.initial_cost;
+  fitj["iterations"] = res.iterations;
+  fitj["starts"] = res.starts;
+  fitj["seconds"] = res.seconds;
+  fitj["setup_seconds"] = res.setup_seconds;
+  fitj["termination"] = res.termination;
+  fitj["solver"] = res.solver_report;
+  fitj["rmse"] = res.rmse;
+  nlohmann::json sj = nlohmann::json::array();
+  for (size_t i = 0; i < res.scenes.size(); ++i) {
+    const auto& e = res.scenes[i];
+    nlohmann::json x = {{"scene", e.scene}, {"reference", e.reference}, {"blocks", e.blocks},
+                        {"rmse", e.rmse}};
+    if (e.noise_floor >= 0) x["noise_floor"] = e.noise_floor;
+    // What `clothfit report` needs: the second-seed reference (noise floor), the display
+    // transform of the scene card, and the linear fitted preview written below.
+    x["reference"] = fs::absolute(e.reference).lexically_normal().string();
+    if (i < f.refs2.size()) x["reference2"] = fs::absolute(f.refs2[i]).lexically_normal().string();
+    if (i < l.sc.size()) {
+      x["tone_mapping"] = l.sc[i].card.tone_mapping;
+      x["exposure"] = l.sc[i].card.exposure;
+      if (!a.images.empty())
+        x["preview"] = fs::absolute(fs::path(a.images) /
+                                    (fs::path(f.scenes[i]).stem().string() + "_preview.exr"))
+                           .lexically_normal()
+                           .string();
+    }
+    sj.push_back(x);
+  }
+  fitj["scenes"] = sj;
+  return fitj;
+}
+
+// Per scene: the fitted preview (display PNG and linear EXR) and the residual EXR.
+void WriteFitImages(const std::string& dir, const FitFiles& f, const LoadedScenes& l,
+                    const render::MaterialPreset& preset) {
+  fs::create_directories(dir);
+  for (size_t i = 0; i < l.sc.size(); ++i) {
+    const render::Scene& scene = l.sc[i];
+    const std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset);
+    const std::string stem = fs::path(f.scenes[i]).stem().string();
+    const auto op = render::ParseToneMapping(scene.card.tone_mapping);
+    io::WritePng8((fs::path(dir) / (stem + "_preview.png")).string(), scene.card.width,
+                  scene.card.height, ToDisplayImage(frame, op, scene.card.exposure));
+    io::Image prev_img;
+    prev_img.width = scene.card.width;
+    prev_img.height = scene.card.height;
+    prev_img.channel_names = {"R", "G", "B"};
+    prev_img.pixels = frame;
+    prev_img.metadata["clothfit:preview"] = "fitted preview, linear radiance (un-tonemapped)";
+    prev_img.metadata["clothfit:scene"] = f.scenes[i];
+    io::WriteExr((fs::path(dir) / (stem + "_preview.exr")).string(), prev_img);
+    io::Image res_img;
+    res_img.width = scene.card.width;
+    res_img.height = scene.card.height;
+    res_img.channel_names = {"R", "G", "B"};
+    res_img.pixels.resize(frame.size());
+    for (size_t k = 0; k < frame.size(); ++k) res_img.pixels[k] = frame[k] - l.rr[i].rgb[k];
+    res_img.metadata["clothfit:residual"] = "preview - reference, linear radiance";
+    io::WriteExr((fs::path(dir) / (stem + "_residual.exr")).string(), res_img);
+  }
+}
+
+// The one-line result on stdout.
+void PrintFitSummary(const FitArgs& a, const fit::FitOptions& o, const fit::FitResult& res,
+                     const render::MaterialPreset& preset) {
+  double floor = 0.0;
+  int nf = 0;
+  for (const auto& e : res.scenes)
+    if (e.noise_floor >= 0) {
+      floor += e.noise_floor;
+      ++nf;
+    }
+  std::printf("fit: %s %s: rmse %.4f (%s)%s, cost %.4g, %d iterations over %d starts, "
+              "%.2f s -> %s\n",
+              a.fabric.empty() ? a.references.c_str() : a.fabric.c_str(),
+              render::ToString(preset.model).c_str(), res.rmse, fit::ToString(o.space).c_str(),
+              nf ? (", noise floor " + std::to_string(floor / nf).substr(0, 6)).c_str() : "",
+              res.final_cost, res.iterations, res.starts, res.seconds, a.out.c_str());
+}
+
+// `clothfit fit` after parsing: returns the exit status (throws on bad input).
+int RunFit(const FitArgs& a, const Globals& g) {
+  std::unique_ptr<tbb::global_control> limit;
+  if (a.threads > 0)
+    limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                  size_t(a.threads));
+  const int fixed_level = ParseFixedLevel(a.level);
+  const double weave_period = a.fabric.empty() ? 0.0 : render::LoadFabric(a.fabric).weave_period_uv;
+  const FitFiles files = ResolveFitFiles(a, g);
+  fit::FitOptions o = MakeFitOptions(a, StartPreset(a));
+  // Load everything.
+  const LoadedScenes l = LoadFitScenes(files);
+  std::vector<fit::SceneInput> inputs;
+  for (size_t i = 0; i < l.sc.size(); ++i)
+    inputs.push_back({&l.sc[i], l.envs[i].get(), &l.rr[i], l.rr2.empty() ? nullptr : &l.rr2[i],
+                      files.scenes[i]});
+  o.level = a.level == "auto" ? fit::AutoLevel(inputs, weave_period) : fixed_level;
+  const fit::FitResult res = fit::FitImages(inputs, o);
+  if (!res.usable) {
+    std::fprintf(stderr, "clothfit fit: error: the fit failed (%s); no preset written\n",
+                 res.message.c_str());
+    return 2;
+  }
+  render::MaterialPreset preset = res.preset;
+  preset.extra["fit"] = FitRecord(a, o, res, files, l);
+  preset.extra["provenance"] = {{"tool", "clothfit 0.1.0"},
+                                {"fabric", a.fabric.empty() ? nlohmann::json(nullptr)
+                                                            : nlohmann::json(a.fabric)}};
+  // Images first, the preset last: a preset on disk means its images are complete.
+  if (!a.images.empty()) WriteFitImages(a.images, files, l, preset);
+  render::WritePreset(a.out, preset);
+  PrintFitSummary(a, o, res, preset);
+  return 0;
+}
+
+}  // namespace
+
+void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
+  auto a = std::make_shared<FitArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "fit", "fit a material preset so the real-time preview matches the references");
+  AddFitOptions(cmd, *a);
   cmd->callback([a, &g, &exit_code]() {
     try {
-      std::unique_ptr<tbb::global_control> limit;
-      if (a->threads > 0)
-        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
-                                                      size_t(a->threads));
-      int fixed_level = -1;  // validated before any work
-      if (a->level != "auto") {
-        size_t used = 0;
-        try {
-          fixed_level = std::stoi(a->level, &used);
-        } catch (const std::exception&) {
-          used = 0;
-        }
-        if (used == 0 || used != a->level.size() || fixed_level < 0 || fixed_level > 6)
-          throw std::invalid_argument("--level: '" + a->level + "' is not an integer in [0, 6] or auto");
-      }
-      std::vector<std::string> refs, refs2, scenes;
-      const double weave_period = a->fabric.empty() ? 0.0 : render::LoadFabric(a->fabric).weave_period_uv;
-      if (!a->fabric.empty()) {
-        if (!a->references.empty() || !a->scenes.empty())
-          throw std::invalid_argument("--fabric and --references/--scenes are exclusive");
-        scenes = CanonicalScenes();
-        for (const std::string& s : scenes) {
-          refs.push_back(CachedReference(s, a->fabric, a->spp, 1, g.quiet));
-          if (!a->no_floor) refs2.push_back(CachedReference(s, a->fabric, a->spp, 2, g.quiet));
-        }
-      } else {
-        refs = SplitList(a->references);
-        scenes = SplitList(a->scenes);
-        if (refs.empty() || refs.size() != scenes.size())
-          throw std::invalid_argument("--references and --scenes need the same number (>= 1) of files");
-      }
-      render::MaterialPreset start = render::DefaultPreset(render::ParseModelKind(a->model));
-      if (start.model == render::ModelKind::kCloth) {
-        render::MaterialPreset probe = render::ParsePreset(
-            {{"schema", "clothfit.preset"}, {"version", 1}, {"model", "cloth"},
-             {"cloth", {{"variant", a->variant}, {"sheen_default", a->sheen_default},
-                        {"subsurface", a->subsurface}}},
-             {"parameters", nlohmann::json::object()}},
-            "command line");
-        start.cloth = probe.cloth;
-      }
-      fit::FitOptions o;
-      o.start = start;
-      o.locked = SplitList(a->lock);
-      if (start.model == render::ModelKind::kStandard || start.model == render::ModelKind::kPhysicalSheen)
-        o.locked.push_back("metalness");
-      if (start.model == render::ModelKind::kGltfSheen) o.locked.push_back("metallic");
-      o.space = fit::ParseSpace(a->space);
-      o.loss = a->loss == "huber" ? fit::Loss::kHuber
-               : a->loss == "cauchy" ? fit::Loss::kCauchy
-               : a->loss == "none" ? fit::Loss::kNone
-               : throw std::invalid_argument("--loss: unknown '" + a->loss + "' (huber, cauchy, none)");
-      o.loss_scale = a->loss_scale;
-      o.pixel_stride = a->stride;
-      // Load everything.
-      std::vector<render::Scene> sc;
-      std::vector<std::shared_ptr<render::Environment>> envs;
-      std::map<std::string, std::shared_ptr<render::Environment>> env_by_key;  // load once
-      std::vector<fit::Reference> rr, rr2;
-      for (size_t i = 0; i < scenes.size(); ++i) {
-        sc.push_back(render::LoadScene(scenes[i]));
-        const auto& spec = sc.back().card.environment;
-        const std::string key = spec ? spec->path + "|" + std::to_string(spec->intensity) + "|" +
-                                           std::to_string(spec->rotation_y)
-                                     : std::string();
-        if (key.empty()) {
-          envs.push_back(nullptr);
-        } else {
-          auto it = env_by_key.find(key);
-          if (it == env_by_key.end())
-            it = env_by_key.emplace(key, LoadSceneEnvironment(sc.back(), true)).first;
-          envs.push_back(it->second);
-        }
-        rr.push_back(fit::ReadReference(refs[i]));
-        if (!refs2.empty()) rr2.push_back(fit::ReadReference(refs2[i]));
-      }
-      std::vector<fit::SceneInput> inputs;
-      for (size_t i = 0; i < sc.size(); ++i)
-        inputs.push_back({&sc[i], envs[i].get(), &rr[i], rr2.empty() ? nullptr : &rr2[i], scenes[i]});
-      o.level = a->level == "auto" ? fit::AutoLevel(inputs, weave_period) : fixed_level;
-      const fit::FitResult res = fit::FitImages(inputs, o);
-      if (!res.usable) {
-        std::fprintf(stderr, "clothfit fit: error: the fit failed (%s); no preset written\n",
-                     res.message.c_str());
-        exit_code = 2;
-        return;
-      }
-      render::MaterialPreset preset = res.preset;
-      nlohmann::json fitj;
-      fitj["space"] = fit::ToString(o.space);
-      fitj["loss"] = a->loss;
-      fitj["loss_scale"] = o.loss_scale;
-      fitj["level"] = o.level;
-      fitj["block_pixels"] = 1 << o.level;
-      fitj["pixel_stride"] = o.pixel_stride > 0 ? o.pixel_stride : std::max(1, (1 << o.level) / 4);
-      fitj["locked"] = o.locked;
-      fitj["final_cost"] = res.final_cost;
-      fitj["initial_cost"] = res.initial_cost;
-      fitj["iterations"] = res.iterations;
-      fitj["starts"] = res.starts;
-      fitj["seconds"] = res.seconds;
-      fitj["setup_seconds"] = res.setup_seconds;
-      fitj["termination"] = res.termination;
-      fitj["solver"] = res.solver_report;
-      fitj["rmse"] = res.rmse;
-      nlohmann::json sj = nlohmann::json::array();
-      for (size_t i = 0; i < res.scenes.size(); ++i) {
-        const auto& e = res.scenes[i];
-        nlohmann::json x = {{"scene", e.scene}, {"reference", e.reference}, {"blocks", e.blocks},
-                            {"rmse", e.rmse}};
-        if (e.noise_floor >= 0) x["noise_floor"] = e.noise_floor;
-        // What `clothfit report` needs: the second-seed reference (noise floor), the display
-        // transform of the scene card, and the linear fitted preview written below.
-        x["reference"] = fs::absolute(e.reference).lexically_normal().string();
-        if (i < refs2.size()) x["reference2"] = fs::absolute(refs2[i]).lexically_normal().string();
-        if (i < sc.size()) {
-          x["tone_mapping"] = sc[i].card.tone_mapping;
-          x["exposure"] = sc[i].card.exposure;
-          if (!a->images.empty())
-            x["preview"] = fs::absolute(fs::path(a->images) /
-                                        (fs::path(scenes[i]).stem().string() + "_preview.exr"))
-                               .lexically_normal()
-                               .string();
-        }
-        sj.push_back(x);
-      }
-      fitj["scenes"] = sj;
-      preset.extra["fit"] = fitj;
-      preset.extra["provenance"] = {{"tool", "clothfit 0.1.0"},
-                                    {"fabric", a->fabric.empty() ? nlohmann::json(nullptr)
-                                                                 : nlohmann::json(a->fabric)}};
-      // Images first, the preset last: a preset on disk means its images are complete.
-      if (!a->images.empty()) {
-        fs::create_directories(a->images);
-        for (size_t i = 0; i < sc.size(); ++i) {
-          const std::vector<float> frame = fit::RenderPreviewFrame(sc[i], envs[i].get(), preset);
-          const std::string stem = fs::path(scenes[i]).stem().string();
-          const auto op = render::ParseToneMapping(sc[i].card.tone_mapping);
-          io::WritePng8((fs::path(a->images) / (stem + "_preview.png")).string(), sc[i].card.width,
-                        sc[i].card.height, ToDisplayImage(frame, op, sc[i].card.exposure));
-          io::Image prev_img;
-          prev_img.width = sc[i].card.width;
-          prev_img.height = sc[i].card.height;
-          prev_img.channel_names = {"R", "G", "B"};
-          prev_img.pixels = frame;
-          prev_img.metadata["clothfit:preview"] = "fitted preview, linear radiance (un-tonemapped)";
-          prev_img.metadata["clothfit:scene"] = scenes[i];
-          io::WriteExr((fs::path(a->images) / (stem + "_preview.exr")).string(), prev_img);
-          io::Image res_img;
-          res_img.width = sc[i].card.width;
-          res_img.height = sc[i].card.height;
-          res_img.channel_names = {"R", "G", "B"};
-          res_img.pixels.resize(frame.size());
-          for (size_t k = 0; k < frame.size(); ++k) res_img.pixels[k] = frame[k] - rr[i].rgb[k];
-          res_img.metadata["clothfit:residual"] = "preview - reference, linear radiance";
-          io::WriteExr((fs::path(a->images) / (stem + "_residual.exr")).string(), res_img);
-        }
-      }
-      render::WritePreset(a->out, preset);
-      double floor = 0.0;
-      int nf = 0;
-      for (const auto& e : res.scenes)
-        if (e.noise_floor >= 0) {
-          floor += e.noise_floor;
-          ++nf;
-        }
-      std::printf("fit: %s %s: rmse %.4f (%s)%s, cost %.4g, %d iterations over %d starts, %.2f s -> %s\n",
-                  a->fabric.empty() ? a->references.c_str() : a->fabric.c_str(),
-                  render::ToString(preset.model).c_str(), res.rmse, fit::ToString(o.space).c_str(),
-                  nf ? (", noise floor " + std::to_string(floor / nf).substr(0, 6)).c_str() : "",
-                  res.final_cost, res.iterations, res.starts, res.seconds, a->out.c_str());
-      exit_code = 0;
+      exit_code = RunFit(*a, g);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "clothfit fit: error: %s\n", e.what());
       exit_code = 1;

@@ -148,6 +148,129 @@ void ClosedFormClothColours(const Target& t, const cloth::Options& co, std::vect
   }
 }
 
+// Mean albedo-like colour of the source: pi f over the weighted set (f = value / n.l).
+Rgb<double> SourceAlbedo(const Target& target) {
+  Rgb<double> albedo(0, 0, 0);
+  for (size_t k = 0; k < target.cos.size(); ++k) {
+    const double w = target.sw[k] * target.sw[k];
+    for (int ch = 0; ch < 3; ++ch) {
+      const double v = std::pow(target.t[k][ch], 3.0) - kCbrtEps;
+      albedo[ch] += w * kPi * std::max(v, 0.0) / std::max(target.cos[k].NoL, 1e-3);
+    }
+  }
+  for (int ch = 0; ch < 3; ++ch) albedo[ch] = std::clamp(albedo[ch], 0.02, 0.95);
+  return albedo;
+}
+
+// Which flat entries the solver may move, and their bounds.
+struct FlatBounds {
+  std::vector<int> constant;  // flat indices held fixed (locked or ignored blocks)
+  std::vector<double> lo, hi;
+
+  void ClampToBounds(std::vector<double>& x) const {
+    for (size_t i = 0; i < x.size(); ++i) x[i] = std::clamp(x[i], lo[i], hi[i]);
+  }
+};
+
+FlatBounds MakeBounds(const ParameterLayout& layout, const BrdfFitOptions& opt) {
+  const render::ModelKind model = opt.model;
+  FlatBounds fb;
+  fb.lo.resize(size_t(layout.flat_size));
+  fb.hi.resize(size_t(layout.flat_size));
+  for (const Block& b : layout.blocks) {
+    const bool ignored =
+        model == render::ModelKind::kCloth &&
+        ((b.name == "sheen_color" && opt.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
+         (b.name == "subsurface_color" && !opt.cloth.subsurface));
+    double lower = b.lower;
+    if (model == render::ModelKind::kCloth && b.name == "roughness")
+      lower = cloth::MinRoughness(opt.cloth);
+    for (int c = 0; c < b.size; ++c) {
+      fb.lo[size_t(b.offset + c)] = lower;
+      fb.hi[size_t(b.offset + c)] = b.upper;
+      if (b.locked || ignored) fb.constant.push_back(b.offset + c);
+    }
+  }
+  return fb;
+}
+
+// Candidate starts: the source itself (same model), then one per roughness start with
+// colours from the source's albedo (cloth: closed-form colours, ClosedFormClothColours).
+// Screening: only the candidate with the lowest error is solved (each solve costs ~15
+// iterations); the source's own parameters, when given, are solved first and end the search
+// if they already reproduce the samples.
+std::vector<std::vector<double>> CandidateStarts(const Target& target,
+                                                 const ParameterLayout& layout,
+                                                 const FlatBounds& fb,
+                                                 const render::MaterialPreset& base,
+                                                 const BrdfFitOptions& opt) {
+  const render::ModelKind model = opt.model;
+  const Rgb<double> albedo = SourceAlbedo(target);
+  std::vector<std::vector<double>> starts;
+  for (double r0 : opt.start_roughness) {
+    std::vector<double> x = base.values;
+    for (const Block& b : layout.blocks) {
+      if (b.locked) continue;
+      double* p = &x[size_t(b.offset)];
+      if (b.name == "roughness" || b.name == "sheen_roughness") p[0] = r0;
+      if (b.name == "base_color")
+        for (int c = 0; c < 3; ++c) p[c] = albedo[c];
+      if (b.name == "sheen_color")
+        for (int c = 0; c < 3; ++c) p[c] = 0.5;
+      if (b.name == "subsurface_color")
+        for (int c = 0; c < 3; ++c) p[c] = 0.1;
+    }
+    fb.ClampToBounds(x);
+    const bool linear_colours = model == render::ModelKind::kCloth && !opt.cloth.subsurface &&
+                                opt.cloth.sheen_default == cloth::SheenDefault::kExplicit &&
+                                !layout.Find("base_color").locked &&
+                                !layout.Find("sheen_color").locked;
+    if (linear_colours) ClosedFormClothColours(target, opt.cloth, x);
+    starts.push_back(x);
+  }
+  std::stable_sort(starts.begin(), starts.end(), [&](const auto& a, const auto& b) {
+    return ErrorOf(target, model, opt.cloth, a.data()) <
+           ErrorOf(target, model, opt.cloth, b.data());
+  });
+  starts.resize(std::min<size_t>(starts.size(), size_t(std::max(opt.solved_starts, 1))));
+  if (opt.source_preset && opt.source_preset->model == model)
+    starts.insert(starts.begin(), opt.source_preset->values);
+  return starts;
+}
+
+// Solves from x in place (x holds the start on entry, the solution on return).
+ceres::Solver::Summary SolveFrom(const Target& target, const ParameterLayout& layout,
+                                 const FlatBounds& fb, const BrdfFitOptions& opt,
+                                 std::vector<double>& x) {
+  auto* cost = new ceres::DynamicAutoDiffCostFunction<BrdfResidual, 10>(
+      new BrdfResidual{&target, opt.model, opt.cloth});
+  cost->AddParameterBlock(layout.flat_size);
+  cost->SetNumResiduals(int(3 * target.cos.size()));
+  ceres::Problem problem;
+  problem.AddResidualBlock(cost, nullptr, x.data());
+  const std::vector<int>& constant = fb.constant;
+  if (int(constant.size()) == layout.flat_size) {
+    problem.SetParameterBlockConstant(x.data());
+  } else {
+    if (!constant.empty())
+      problem.SetManifold(x.data(), new ceres::SubsetManifold(layout.flat_size, constant));
+    for (int i = 0; i < layout.flat_size; ++i) {
+      if (std::find(constant.begin(), constant.end(), i) != constant.end()) continue;
+      problem.SetParameterLowerBound(x.data(), i, fb.lo[size_t(i)]);
+      problem.SetParameterUpperBound(x.data(), i, fb.hi[size_t(i)]);
+    }
+  }
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = opt.max_iterations;
+  so.function_tolerance = 1e-8;
+  so.parameter_tolerance = 1e-8;
+  so.num_threads = 1;  // materials run in parallel, one fit per thread
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+  return summary;
+}
+
 }  // namespace
 
 const std::vector<DirectionPair>& CanonicalDirections() {
@@ -202,101 +325,16 @@ BrdfFitResult FitBrdf(const BrdfSamples& source, const BrdfFitOptions& opt) {
   render::MaterialPreset base = render::DefaultPreset(model);
   if (model == render::ModelKind::kCloth) base.cloth = opt.cloth;
 
-  // Mean albedo-like colour of the source: pi f over the weighted set (f = value / n.l).
-  Rgb<double> albedo(0, 0, 0);
-  for (size_t k = 0; k < target.cos.size(); ++k) {
-    const double w = target.sw[k] * target.sw[k];
-    for (int ch = 0; ch < 3; ++ch) {
-      const double v = std::pow(target.t[k][ch], 3.0) - kCbrtEps;
-      albedo[ch] += w * kPi * std::max(v, 0.0) / std::max(target.cos[k].NoL, 1e-3);
-    }
-  }
-  for (int ch = 0; ch < 3; ++ch) albedo[ch] = std::clamp(albedo[ch], 0.02, 0.95);
-
-  // Which flat entries the solver may move, and their bounds.
-  std::vector<int> constant;
-  std::vector<double> lo(size_t(layout.flat_size)), hi(size_t(layout.flat_size));
-  for (const Block& b : layout.blocks) {
-    const bool ignored =
-        model == render::ModelKind::kCloth &&
-        ((b.name == "sheen_color" && opt.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
-         (b.name == "subsurface_color" && !opt.cloth.subsurface));
-    double lower = b.lower;
-    if (model == render::ModelKind::kCloth && b.name == "roughness")
-      lower = cloth::MinRoughness(opt.cloth);
-    for (int c = 0; c < b.size; ++c) {
-      lo[size_t(b.offset + c)] = lower;
-      hi[size_t(b.offset + c)] = b.upper;
-      if (b.locked || ignored) constant.push_back(b.offset + c);
-    }
-  }
-
-  // Candidate starts: the source itself (same model), then one per roughness start with
-  // colours from the source's albedo (cloth: closed-form colours, ClosedFormClothColours).
-  std::vector<std::vector<double>> starts;
-  for (double r0 : opt.start_roughness) {
-    std::vector<double> x = base.values;
-    for (const Block& b : layout.blocks) {
-      if (b.locked) continue;
-      double* p = &x[size_t(b.offset)];
-      if (b.name == "roughness" || b.name == "sheen_roughness") p[0] = r0;
-      if (b.name == "base_color")
-        for (int c = 0; c < 3; ++c) p[c] = albedo[c];
-      if (b.name == "sheen_color")
-        for (int c = 0; c < 3; ++c) p[c] = 0.5;
-      if (b.name == "subsurface_color")
-        for (int c = 0; c < 3; ++c) p[c] = 0.1;
-    }
-    for (size_t i = 0; i < x.size(); ++i) x[i] = std::clamp(x[i], lo[i], hi[i]);
-    const bool linear_colours = model == render::ModelKind::kCloth && !opt.cloth.subsurface &&
-                                opt.cloth.sheen_default == cloth::SheenDefault::kExplicit &&
-                                !layout.Find("base_color").locked &&
-                                !layout.Find("sheen_color").locked;
-    if (linear_colours) ClosedFormClothColours(target, opt.cloth, x);
-    starts.push_back(x);
-  }
-  // Screening: only the candidate with the lowest error is solved (each solve costs ~15
-  // iterations); the source's own parameters, when given, are solved first and end the search
-  // if they already reproduce the samples.
-  std::stable_sort(starts.begin(), starts.end(), [&](const auto& a, const auto& b) {
-    return ErrorOf(target, model, opt.cloth, a.data()) <
-           ErrorOf(target, model, opt.cloth, b.data());
-  });
-  starts.resize(std::min<size_t>(starts.size(), size_t(std::max(opt.solved_starts, 1))));
-  if (opt.source_preset && opt.source_preset->model == model)
-    starts.insert(starts.begin(), opt.source_preset->values);
+  const FlatBounds fb = MakeBounds(layout, opt);
+  const std::vector<std::vector<double>> starts = CandidateStarts(target, layout, fb, base, opt);
 
   BrdfFitResult best;
   best.message = "no start converged to a usable solution";
   double best_error = std::numeric_limits<double>::infinity();
   for (std::vector<double> x : starts) {
     if (best.usable && best.error < 1e-6) break;  // exact already (the source start)
-    for (size_t i = 0; i < x.size(); ++i) x[i] = std::clamp(x[i], lo[i], hi[i]);
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<BrdfResidual, 10>(
-        new BrdfResidual{&target, model, opt.cloth});
-    cost->AddParameterBlock(layout.flat_size);
-    cost->SetNumResiduals(int(3 * target.cos.size()));
-    ceres::Problem problem;
-    problem.AddResidualBlock(cost, nullptr, x.data());
-    if (int(constant.size()) == layout.flat_size) {
-      problem.SetParameterBlockConstant(x.data());
-    } else {
-      if (!constant.empty())
-        problem.SetManifold(x.data(), new ceres::SubsetManifold(layout.flat_size, constant));
-      for (int i = 0; i < layout.flat_size; ++i) {
-        if (std::find(constant.begin(), constant.end(), i) != constant.end()) continue;
-        problem.SetParameterLowerBound(x.data(), i, lo[size_t(i)]);
-        problem.SetParameterUpperBound(x.data(), i, hi[size_t(i)]);
-      }
-    }
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = opt.max_iterations;
-    so.function_tolerance = 1e-8;
-    so.parameter_tolerance = 1e-8;
-    so.num_threads = 1;  // materials run in parallel, one fit per thread
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem, &summary);
+    fb.ClampToBounds(x);
+    const ceres::Solver::Summary summary = SolveFrom(target, layout, fb, opt, x);
     ++best.starts;
     best.iterations += int(summary.iterations.size());
     bool finite = true;

@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <span>
+#include <string_view>
 
 #include "render/scene/embree_scene.h"
 #include "render/scene/image_io.h"
@@ -170,6 +172,349 @@ double Mean3(const std::vector<float>& rgb, const std::vector<float>& mask) {
   return n ? s / double(n) : 0.0;
 }
 
+using ParamTable = std::span<const ParamInfo>;
+using SceneList = std::vector<std::unique_ptr<SceneData>>;
+using ParamBlocks = std::vector<std::vector<double>>;
+
+double SecondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+bool IsLocked(const FitOptions& opt, std::string_view name) {
+  return std::find(opt.locked.begin(), opt.locked.end(), std::string(name)) != opt.locked.end();
+}
+
+// The Ceres parameter block sizes: one block per table entry.
+std::vector<int> BlockSizes(ParamTable table) {
+  std::vector<int> sizes;
+  for (const ParamInfo& p : table) sizes.push_back(p.size);
+  return sizes;
+}
+
+// Every --lock name must be a parameter of the model.
+void CheckLockedNames(ParamTable table, const FitOptions& opt) {
+  for (const std::string& name : opt.locked) {
+    bool found = false;
+    for (const ParamInfo& p : table) found = found || p.name == name;
+    if (!found)
+      throw FitError("--lock: model " + render::ToString(opt.start.model) + " has no parameter '" +
+                     name + "'");
+  }
+}
+
+// ---- per-scene setup: cache, blocks, transformed reference, weights ----
+
+// The reference, the second reference and the scene card must all have the same size.
+void CheckSceneSizes(const SceneInput& in) {
+  const render::Scene& scene = *in.scene;
+  const Reference& ref = *in.reference;
+  if (in.second && (in.second->width != ref.width || in.second->height != ref.height))
+    throw FitError(in.second->path + ": size differs from " + ref.path);
+  if (ref.width != scene.card.width || ref.height != scene.card.height) {
+    throw FitError(ref.path + ": reference is " + std::to_string(ref.width) + "x" +
+                   std::to_string(ref.height) + " but " + in.scene_path + " renders " +
+                   std::to_string(scene.card.width) + "x" + std::to_string(scene.card.height));
+  }
+}
+
+// One B x B block of a scene at (bx, by), and what the block loop needs to judge it.
+struct BlockGrid {
+  const Reference& ref;
+  const std::vector<int>& cache_index;  // image pixel -> cache pixel, -1 when not cached
+  int width = 0;                        // image width
+  int B = 1;                            // block size
+  int stride = 1;                       // pixel stride inside a block
+};
+
+// Sum of the reference and of its squared standard errors over the block, or false when some
+// pixel of the block is not fabric in the reference or not in the preview cache.
+bool SumFabricBlock(const BlockGrid& g, int bx, int by, Rgb<double>& sum, Rgb<double>& var) {
+  const int B = g.B, W = g.width;
+  for (int y = by; y < by + B; ++y)
+    for (int x = bx; x < bx + B; ++x) {
+      const size_t p = size_t(y) * size_t(W) + size_t(x);
+      if (g.cache_index[p] < 0 || g.ref.fabric[p] < 0.999f) return false;
+      for (int c = 0; c < 3; ++c) {
+        sum[c] += double(g.ref.rgb[p * 3 + size_t(c)]);
+        var[c] += std::pow(double(g.ref.std_error[p * 3 + size_t(c)]), 2);
+      }
+    }
+  return true;
+}
+
+// Appends a block's transformed reference mean and its per-channel weights (see image_fit.h:
+// the standard error through the transform, floored).
+void AddBlockTarget(SceneData& d, const Rgb<double>& sum, const Rgb<double>& var, double n,
+                    double floor_lin) {
+  const Rgb<double> mean = sum * (1.0 / n);
+  Rgb<double> se;
+  for (int c = 0; c < 3; ++c) se[c] = std::sqrt(var[c]) / n;
+  // Weights: sigma propagated through the transform by a one-sided difference.
+  const Rgb<double> t = Transform(mean, d.space, d.op, d.exposure);
+  const Rgb<double> tp = Transform(mean + se, d.space, d.op, d.exposure);
+  Rgb<double> w;
+  for (int c = 0; c < 3; ++c) {
+    const double sigma = std::abs(tp[c] - t[c]);
+    const double fl = d.space == Space::kLinear ? floor_lin : 0.01;
+    w[c] = 1.0 / std::sqrt(sigma * sigma + fl * fl);
+  }
+  d.ref_t.push_back(t);
+  d.weight.push_back(w);
+}
+
+// Transformed block mean of the second reference (the noise floor).
+Rgb<double> SecondBlockMean(const SceneData& d, const Reference& second, int width, int bx,
+                            int by, int B, double n) {
+  Rgb<double> s2(0, 0, 0);
+  for (int y = by; y < by + B; ++y)
+    for (int x = bx; x < bx + B; ++x)
+      for (int c = 0; c < 3; ++c)
+        s2[c] += double(second.rgb[(size_t(y) * size_t(width) + size_t(x)) * 3 + size_t(c)]);
+  return Transform(s2 * (1.0 / n), d.space, d.op, d.exposure);
+}
+
+// Centre of each stride x stride cell (its first pixel would shift every block's
+// sample mean by (stride - 1) / 2 pixels against the full-block reference mean).
+void KeepBlockSamples(const BlockGrid& g, int bx, int by, std::vector<int>& keep) {
+  for (int y = by + g.stride / 2; y < by + g.B; y += g.stride)
+    for (int x = bx + g.stride / 2; x < bx + g.B; x += g.stride)
+      keep.push_back(g.cache_index[size_t(y) * size_t(g.width) + size_t(x)]);
+}
+
+// The blocks of one scene whose pixels are all fabric (reference and preview), their
+// targets and weights, and the cache pixels they sample (returned, in block order).
+std::vector<int> CollectBlocks(const SceneInput& in, const BlockGrid& g, int height,
+                               SceneData& d) {
+  const Reference& ref = *in.reference;
+  const double ref_mean = Mean3(ref.rgb, ref.fabric);
+  const double floor_lin = 0.01 * std::max(ref_mean, 1e-6);
+  std::vector<int> keep;
+  d.block_begin.push_back(0);
+  const int B = g.B, W = g.width, H = height;
+  for (int by = 0; by + B <= H; by += B) {
+    for (int bx = 0; bx + B <= W; bx += B) {
+      Rgb<double> sum(0, 0, 0), var(0, 0, 0);
+      if (!SumFabricBlock(g, bx, by, sum, var)) continue;
+      const double n = double(B) * double(B);
+      AddBlockTarget(d, sum, var, n, floor_lin);
+      if (in.second) d.second_t.push_back(SecondBlockMean(d, *in.second, W, bx, by, B, n));
+      KeepBlockSamples(g, bx, by, keep);
+      d.block_begin.push_back(int(keep.size()));
+    }
+  }
+  return keep;
+}
+
+// One scene's fit data: its preview cache restricted to the sampled pixels of its blocks.
+std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions& opt, int B,
+                                          int stride) {
+  CheckSceneSizes(in);
+  const render::Scene& scene = *in.scene;
+  const Reference& ref = *in.reference;
+  auto d = std::make_unique<SceneData>();
+  d->scene_path = in.scene_path;
+  d->reference_path = ref.path;
+  d->space = opt.space;
+  d->op = render::ParseToneMapping(scene.card.tone_mapping);
+  d->exposure = scene.card.exposure;
+  render::PreviewOptions po;
+  po.model = opt.start.model;
+  po.cloth = opt.start.cloth;
+  const auto full = render::PreviewCache::Build(scene, in.environment, po);
+  std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
+  for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
+  const BlockGrid grid{ref, cache_index, scene.card.width, B, stride};
+  const std::vector<int> keep = CollectBlocks(in, grid, scene.card.height, *d);
+  if (d->blocks() == 0) {
+    throw FitError(in.scene_path + " / " + ref.path + ": no " + std::to_string(B) + "x" +
+                   std::to_string(B) + " block is fabric in both the reference and the preview "
+                   "(wrong scene for this reference, or --level too large)");
+  }
+  d->cache = Subset(*full, keep);
+  return d;
+}
+
+SceneList BuildScenes(const std::vector<SceneInput>& inputs, const FitOptions& opt) {
+  const int B = 1 << std::max(0, opt.level);
+  const int stride = opt.pixel_stride > 0 ? opt.pixel_stride : std::max(1, B / 4);
+  SceneList data;
+  for (const SceneInput& in : inputs) data.push_back(BuildSceneData(in, opt, B, stride));
+  return data;
+}
+
+// ---- one start of the multi-start ----
+
+// Mean reference colour (linear) of a reference's fabric pixels, to start the base colour.
+Rgb<double> StartColour(const Reference& r) {
+  Rgb<double> ref_colour(0.5, 0.5, 0.5);
+  double s[3] = {0, 0, 0};
+  double n = 0;
+  for (size_t p = 0; p < r.fabric.size(); ++p)
+    if (r.fabric[p] > 0.999f) {
+      for (int c = 0; c < 3; ++c) s[c] += double(r.rgb[p * 3 + size_t(c)]);
+      n += 1;
+    }
+  if (n > 0) {
+    const double mx = std::max({s[0], s[1], s[2]}) / n;
+    for (int c = 0; c < 3; ++c)
+      ref_colour[c] = std::clamp(s[c] / n / std::max(mx, 1e-6) * 0.6, 0.02, 0.95);
+  }
+  return ref_colour;
+}
+
+// Parameter blocks, initialised from the start preset; unlocked colours from the reference.
+ParamBlocks StartBlocks(ParamTable table, const FitOptions& opt, double r0,
+                        const Rgb<double>& ref_colour) {
+  ParamBlocks blocks;
+  int off = 0;
+  for (const ParamInfo& p : table) {
+    std::vector<double> v(size_t(p.size));
+    for (int c = 0; c < p.size; ++c) v[size_t(c)] = opt.start.values[size_t(off + c)];
+    if (!IsLocked(opt, p.name) && opt.init_from_reference) {
+      if (p.name == "roughness" || p.name == "sheen_roughness") v[0] = r0;
+      if (p.name == "base_color")
+        for (int c = 0; c < 3; ++c) v[size_t(c)] = ref_colour[c];
+      if (p.name == "sheen_color")
+        for (int c = 0; c < 3; ++c) v[size_t(c)] = 0.5;
+      if (p.name == "subsurface_color")
+        for (int c = 0; c < 3; ++c) v[size_t(c)] = 0.2;
+    }
+    blocks.push_back(v);
+    off += p.size;
+  }
+  return blocks;
+}
+
+// One residual block per scene, with the chosen robust loss.
+void AddSceneResiduals(ceres::Problem& problem, const SceneList& data,
+                       const std::vector<int>& sizes, const FitOptions& opt,
+                       const std::vector<double*>& ptrs) {
+  for (const auto& d : data) {
+    ceres::LossFunction* loss = nullptr;
+    if (opt.loss == Loss::kHuber) loss = new ceres::HuberLoss(opt.loss_scale);
+    if (opt.loss == Loss::kCauchy) loss = new ceres::CauchyLoss(opt.loss_scale);
+    problem.AddResidualBlock(new PreviewCost(*d, sizes), loss, ptrs);
+  }
+}
+
+// Locked and ignored blocks are constant; the others get the table's bounds (cloth roughness:
+// the variant's minimum). Throws when a start value lies outside its bounds.
+void SetBoundsOrConstant(ceres::Problem& problem, ParamTable table, const FitOptions& opt,
+                         const ParamBlocks& blocks, const std::vector<double*>& ptrs) {
+  const render::ModelKind model = opt.start.model;
+  size_t bi = 0;
+  for (const ParamInfo& p : table) {
+    double lower = p.lower;
+    if (model == render::ModelKind::kCloth && p.name == "roughness")
+      lower = cloth::MinRoughness(opt.start.cloth);
+    const bool locked = IsLocked(opt, p.name);
+    const bool ignored = model == render::ModelKind::kCloth &&
+                         ((p.name == "sheen_color" &&
+                           opt.start.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
+                          (p.name == "subsurface_color" && !opt.start.cloth.subsurface));
+    if (locked || ignored) {
+      problem.SetParameterBlockConstant(ptrs[bi]);
+    } else {
+      for (int c = 0; c < p.size; ++c) {
+        if (blocks[bi][size_t(c)] < lower || blocks[bi][size_t(c)] > p.upper) {
+          throw FitError("fit: start value of " + std::string(p.name) + " (" +
+                         std::to_string(blocks[bi][size_t(c)]) + ") is outside [" +
+                         std::to_string(lower) + ", " + std::to_string(p.upper) + "]");
+        }
+        problem.SetParameterLowerBound(ptrs[bi], c, lower);
+        problem.SetParameterUpperBound(ptrs[bi], c, p.upper);
+      }
+    }
+    ++bi;
+  }
+}
+
+// Solves one start in place (blocks hold the start on entry, the solution on return).
+ceres::Solver::Summary SolveStart(const SceneList& data, ParamTable table,
+                                  const std::vector<int>& sizes, const FitOptions& opt,
+                                  ParamBlocks& blocks) {
+  ceres::Problem problem;
+  std::vector<double*> ptrs;
+  for (auto& b : blocks) ptrs.push_back(b.data());
+  AddSceneResiduals(problem, data, sizes, opt, ptrs);
+  SetBoundsOrConstant(problem, table, opt, blocks, ptrs);
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = opt.max_iterations;
+  so.function_tolerance = opt.function_tolerance;
+  so.minimizer_progress_to_stdout = opt.verbose;
+  so.num_threads = 1;  // the residual evaluation is parallel inside (TBB)
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+  return summary;
+}
+
+bool AllFinite(const ParamBlocks& blocks) {
+  bool finite = true;
+  for (auto& b : blocks)
+    for (double v : b) finite = finite && std::isfinite(v);
+  return finite;
+}
+
+std::vector<double> Flatten(const ParamBlocks& blocks) {
+  std::vector<double> flat;
+  for (auto& b : blocks) flat.insert(flat.end(), b.begin(), b.end());
+  return flat;
+}
+
+// Unweighted RMSE over the blocks of all scenes, in the fit space, at flat parameters x.
+double RmseOverScenes(const SceneList& data, const double* x) {
+  double se = 0.0;
+  int count = 0;
+  for (const auto& d : data) {
+    se += SquaredError(*d, x);
+    count += 3 * d->blocks();
+  }
+  return std::sqrt(se / std::max(count, 1));
+}
+
+// Makes `best` the result of this start (keeping the start and iteration counts).
+void TakeStart(FitResult& best, const ceres::Solver::Summary& summary, const FitOptions& opt,
+               const ParamBlocks& blocks) {
+  const int starts = best.starts, iterations = best.iterations;
+  best = FitResult{};
+  best.starts = starts;
+  best.iterations = iterations;
+  best.usable = true;
+  best.final_cost = summary.final_cost;
+  best.initial_cost = summary.initial_cost;
+  best.termination = ceres::TerminationTypeToString(summary.termination_type);
+  best.solver_report = summary.BriefReport();
+  best.preset = opt.start;
+  best.preset.values.clear();
+  for (auto& b : blocks) best.preset.values.insert(best.preset.values.end(), b.begin(), b.end());
+}
+
+// Unweighted per-scene errors in the fit space at the fitted parameters, and their total.
+void AddSceneErrors(const SceneList& data, FitResult& best) {
+  double total_se = 0.0;
+  int total_n = 0;
+  for (const auto& d : data) {
+    const double se = SquaredError(*d, best.preset.values.data());
+    SceneError e;
+    e.scene = d->scene_path;
+    e.reference = d->reference_path;
+    e.blocks = d->blocks();
+    e.rmse = std::sqrt(se / (3.0 * d->blocks()));
+    if (!d->second_t.empty()) {
+      double s2 = 0.0;
+      for (size_t b = 0; b < d->second_t.size(); ++b)
+        for (int c = 0; c < 3; ++c) s2 += std::pow(d->second_t[b][c] - d->ref_t[b][c], 2);
+      e.noise_floor = std::sqrt(s2 / (3.0 * double(d->second_t.size()))) / std::sqrt(2.0);
+    }
+    best.scenes.push_back(e);
+    total_se += se;
+    total_n += 3 * d->blocks();
+    best.residuals += 3 * d->blocks();
+  }
+  best.rmse = std::sqrt(total_se / std::max(total_n, 1));
+}
+
 }  // namespace
 
 std::string ToString(Space s) {
@@ -285,251 +630,41 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
   const auto table = render::ParameterTable(model);
   if (render::DefaultPreset(model).values.size() > 10)
     throw FitError("fit: model has more than 10 parameters");
-  std::vector<int> sizes;
-  for (const ParamInfo& p : table) sizes.push_back(p.size);
-  for (const std::string& name : opt.locked) {
-    bool found = false;
-    for (const ParamInfo& p : table) found = found || p.name == name;
-    if (!found) throw FitError("--lock: model " + render::ToString(model) + " has no parameter '" + name + "'");
-  }
+  const std::vector<int> sizes = BlockSizes(table);
+  CheckLockedNames(table, opt);
 
   // Per scene: cache, blocks, transformed reference, weights.
-  const int B = 1 << std::max(0, opt.level);
-  const int stride = opt.pixel_stride > 0 ? opt.pixel_stride : std::max(1, B / 4);
-  std::vector<std::unique_ptr<SceneData>> data;
-  for (const SceneInput& in : inputs) {
-    const render::Scene& scene = *in.scene;
-    const Reference& ref = *in.reference;
-    if (in.second && (in.second->width != ref.width || in.second->height != ref.height))
-      throw FitError(in.second->path + ": size differs from " + ref.path);
-    if (ref.width != scene.card.width || ref.height != scene.card.height) {
-      throw FitError(ref.path + ": reference is " + std::to_string(ref.width) + "x" +
-                     std::to_string(ref.height) + " but " + in.scene_path + " renders " +
-                     std::to_string(scene.card.width) + "x" + std::to_string(scene.card.height));
-    }
-    auto d = std::make_unique<SceneData>();
-    d->scene_path = in.scene_path;
-    d->reference_path = ref.path;
-    d->space = opt.space;
-    d->op = render::ParseToneMapping(scene.card.tone_mapping);
-    d->exposure = scene.card.exposure;
-    render::PreviewOptions po;
-    po.model = model;
-    po.cloth = opt.start.cloth;
-    const auto full = render::PreviewCache::Build(scene, in.environment, po);
-    std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
-    for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
-    const double ref_mean = Mean3(ref.rgb, ref.fabric);
-    const double floor_lin = 0.01 * std::max(ref_mean, 1e-6);
-    std::vector<int> keep;
-    d->block_begin.push_back(0);
-    const int W = scene.card.width, H = scene.card.height;
-    for (int by = 0; by + B <= H; by += B) {
-      for (int bx = 0; bx + B <= W; bx += B) {
-        bool full_block = true;
-        Rgb<double> sum(0, 0, 0), var(0, 0, 0);
-        for (int y = by; y < by + B && full_block; ++y)
-          for (int x = bx; x < bx + B; ++x) {
-            const size_t p = size_t(y) * size_t(W) + size_t(x);
-            if (cache_index[p] < 0 || ref.fabric[p] < 0.999f) {
-              full_block = false;
-              break;
-            }
-            for (int c = 0; c < 3; ++c) {
-              sum[c] += double(ref.rgb[p * 3 + size_t(c)]);
-              var[c] += std::pow(double(ref.std_error[p * 3 + size_t(c)]), 2);
-            }
-          }
-        if (!full_block) continue;
-        const double n = double(B) * double(B);
-        const Rgb<double> mean = sum * (1.0 / n);
-        Rgb<double> se;
-        for (int c = 0; c < 3; ++c) se[c] = std::sqrt(var[c]) / n;
-        // Weights: sigma propagated through the transform by a one-sided difference.
-        const Rgb<double> t = Transform(mean, opt.space, d->op, d->exposure);
-        const Rgb<double> tp = Transform(mean + se, opt.space, d->op, d->exposure);
-        Rgb<double> w;
-        for (int c = 0; c < 3; ++c) {
-          const double sigma = std::abs(tp[c] - t[c]);
-          const double fl = opt.space == Space::kLinear ? floor_lin : 0.01;
-          w[c] = 1.0 / std::sqrt(sigma * sigma + fl * fl);
-        }
-        d->ref_t.push_back(t);
-        d->weight.push_back(w);
-        if (in.second) {
-          Rgb<double> s2(0, 0, 0);
-          for (int y = by; y < by + B; ++y)
-            for (int x = bx; x < bx + B; ++x)
-              for (int c = 0; c < 3; ++c)
-                s2[c] += double(in.second->rgb[(size_t(y) * size_t(W) + size_t(x)) * 3 + size_t(c)]);
-          d->second_t.push_back(Transform(s2 * (1.0 / n), opt.space, d->op, d->exposure));
-        }
-        // Centre of each stride x stride cell (its first pixel would shift every block's
-        // sample mean by (stride - 1) / 2 pixels against the full-block reference mean).
-        for (int y = by + stride / 2; y < by + B; y += stride)
-          for (int x = bx + stride / 2; x < bx + B; x += stride)
-            keep.push_back(cache_index[size_t(y) * size_t(W) + size_t(x)]);
-        d->block_begin.push_back(int(keep.size()));
-      }
-    }
-    if (d->blocks() == 0) {
-      throw FitError(in.scene_path + " / " + ref.path + ": no " + std::to_string(B) + "x" +
-                     std::to_string(B) + " block is fabric in both the reference and the preview "
-                     "(wrong scene for this reference, or --level too large)");
-    }
-    d->cache = Subset(*full, keep);
-    data.push_back(std::move(d));
-  }
+  const SceneList data = BuildScenes(inputs, opt);
 
   FitResult best;
   best.usable = false;
   best.message = "no start converged to a usable solution";
-  const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double setup = SecondsSince(t0);
 
-  // Mean reference colour (linear) of the first scene, to start the base colour.
-  Rgb<double> ref_colour(0.5, 0.5, 0.5);
-  {
-    const Reference& r = *inputs[0].reference;
-    double s[3] = {0, 0, 0};
-    double n = 0;
-    for (size_t p = 0; p < r.fabric.size(); ++p)
-      if (r.fabric[p] > 0.999f) {
-        for (int c = 0; c < 3; ++c) s[c] += double(r.rgb[p * 3 + size_t(c)]);
-        n += 1;
-      }
-    if (n > 0) {
-      const double mx = std::max({s[0], s[1], s[2]}) / n;
-      for (int c = 0; c < 3; ++c) ref_colour[c] = std::clamp(s[c] / n / std::max(mx, 1e-6) * 0.6, 0.02, 0.95);
-    }
-  }
-
+  const Rgb<double> ref_colour = StartColour(*inputs[0].reference);
   double best_start_rmse = std::numeric_limits<double>::infinity();
   for (double r0 : opt.start_roughness) {
-    // Parameter blocks, initialised from the start preset; unlocked colours from the reference.
-    std::vector<std::vector<double>> blocks;
-    int off = 0;
-    for (const ParamInfo& p : table) {
-      std::vector<double> v(size_t(p.size));
-      for (int c = 0; c < p.size; ++c) v[size_t(c)] = opt.start.values[size_t(off + c)];
-      const bool locked = std::find(opt.locked.begin(), opt.locked.end(), std::string(p.name)) !=
-                          opt.locked.end();
- if (!locked && opt.init_from_reference) {
-        if (p.name == "roughness" || p.name == "sheen_roughness") v[0] = r0;
-        if (p.name == "base_color")
-          for (int c = 0; c < 3; ++c) v[size_t(c)] = ref_colour[c];
-        if (p.name == "sheen_color")
-          for (int c = 0; c < 3; ++c) v[size_t(c)] = 0.5;
-        if (p.name == "subsurface_color")
-          for (int c = 0; c < 3; ++c) v[size_t(c)] = 0.2;
-      }
-      blocks.push_back(v);
-      off += p.size;
-    }
-    ceres::Problem problem;
-    std::vector<double*> ptrs;
-    for (auto& b : blocks) ptrs.push_back(b.data());
-    for (const auto& d : data) {
-      ceres::LossFunction* loss = nullptr;
-      if (opt.loss == Loss::kHuber) loss = new ceres::HuberLoss(opt.loss_scale);
-      if (opt.loss == Loss::kCauchy) loss = new ceres::CauchyLoss(opt.loss_scale);
-      problem.AddResidualBlock(new PreviewCost(*d, sizes), loss, ptrs);
-    }
-    size_t bi = 0;
-    for (const ParamInfo& p : table) {
-      double lower = p.lower;
-      if (model == render::ModelKind::kCloth && p.name == "roughness")
-        lower = cloth::MinRoughness(opt.start.cloth);
-      const bool locked = std::find(opt.locked.begin(), opt.locked.end(), std::string(p.name)) !=
-                          opt.locked.end();
-      const bool ignored = model == render::ModelKind::kCloth &&
-                           ((p.name == "sheen_color" &&
-                             opt.start.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
-                            (p.name == "subsurface_color" && !opt.start.cloth.subsurface));
-      if (locked || ignored) {
-        problem.SetParameterBlockConstant(ptrs[bi]);
-      } else {
-        for (int c = 0; c < p.size; ++c) {
-          if (blocks[bi][size_t(c)] < lower || blocks[bi][size_t(c)] > p.upper) {
-            throw FitError("fit: start value of " + std::string(p.name) + " (" +
-                           std::to_string(blocks[bi][size_t(c)]) + ") is outside [" +
-                           std::to_string(lower) + ", " + std::to_string(p.upper) + "]");
-          }
-          problem.SetParameterLowerBound(ptrs[bi], c, lower);
-          problem.SetParameterUpperBound(ptrs[bi], c, p.upper);
-        }
-      }
-      ++bi;
-    }
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = opt.max_iterations;
-    so.function_tolerance = opt.function_tolerance;
-    so.minimizer_progress_to_stdout = opt.verbose;
-    so.num_threads = 1;  // the residual evaluation is parallel inside (TBB)
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem, &summary);
+    ParamBlocks blocks = StartBlocks(table, opt, r0, ref_colour);
+    const ceres::Solver::Summary summary = SolveStart(data, table, sizes, opt, blocks);
     ++best.starts;
     best.iterations += int(summary.iterations.size());
-    bool finite = true;
-    for (auto& b : blocks)
-      for (double v : b) finite = finite && std::isfinite(v);
-    if (!summary.IsSolutionUsable() || !finite) continue;
+    if (!summary.IsSolutionUsable() || !AllFinite(blocks)) continue;
     // Starts are compared by the unweighted RMSE in the fit space (the error reported to the
     // user), not by the robust weighted cost each start minimised: the two can disagree when
     // the loss discounts different blocks in different solutions.
-    std::vector<double> flat;
-    for (auto& b : blocks) flat.insert(flat.end(), b.begin(), b.end());
-    double se = 0.0;
-    int count = 0;
-    for (const auto& d : data) {
-      se += SquaredError(*d, flat.data());
-      count += 3 * d->blocks();
-    }
-    const double start_rmse = std::sqrt(se / std::max(count, 1));
+    const double start_rmse = RmseOverScenes(data, Flatten(blocks).data());
     if (!best.usable || start_rmse < best_start_rmse) {
       best_start_rmse = start_rmse;
-      const int starts = best.starts, iterations = best.iterations;
-      best = FitResult{};
-      best.starts = starts;
-      best.iterations = iterations;
-      best.usable = true;
-      best.final_cost = summary.final_cost;
-      best.initial_cost = summary.initial_cost;
-      best.termination = ceres::TerminationTypeToString(summary.termination_type);
-      best.solver_report = summary.BriefReport();
-      best.preset = opt.start;
-      best.preset.values.clear();
-      for (auto& b : blocks) best.preset.values.insert(best.preset.values.end(), b.begin(), b.end());
+      TakeStart(best, summary, opt, blocks);
     }
   }
   best.setup_seconds = setup;
   if (!best.usable) {
-    best.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    best.seconds = SecondsSince(t0);
     return best;
   }
-  // Unweighted per-scene errors in the fit space at the fitted parameters.
-  double total_se = 0.0;
-  int total_n = 0;
-  for (const auto& d : data) {
-    const double se = SquaredError(*d, best.preset.values.data());
-    SceneError e;
-    e.scene = d->scene_path;
-    e.reference = d->reference_path;
-    e.blocks = d->blocks();
-    e.rmse = std::sqrt(se / (3.0 * d->blocks()));
-    if (!d->second_t.empty()) {
-      double s2 = 0.0;
-      for (size_t b = 0; b < d->second_t.size(); ++b)
-        for (int c = 0; c < 3; ++c) s2 += std::pow(d->second_t[b][c] - d->ref_t[b][c], 2);
-      e.noise_floor = std::sqrt(s2 / (3.0 * double(d->second_t.size()))) / std::sqrt(2.0);
-    }
-    best.scenes.push_back(e);
-    total_se += se;
-    total_n += 3 * d->blocks();
-    best.residuals += 3 * d->blocks();
-  }
-  best.rmse = std::sqrt(total_se / std::max(total_n, 1));
-  best.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  AddSceneErrors(data, best);
+  best.seconds = SecondsSince(t0);
   return best;
 }
 

@@ -120,22 +120,9 @@ bool HasParam(ModelKind m, std::string name) {
   return false;
 }
 
-// One SurfaceMaterial-like body: brdf + parameters + maps, at JSON path `at`.
-SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string& file,
-                            const std::string& at, const std::string& name,
-                            const std::string& kind) {
-  SourceMaterial m;
-  m.file = file;
-  m.name = name;
-  m.kind = kind;
-  render::MaterialPreset p = render::DefaultPreset(model);
-  if (model == ModelKind::kGltfSheen || model == ModelKind::kPhysicalSheen) {
-    // Absent sheen means no sheen.
-    const int off = p.Offset("sheen_color");
-    for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] = 0.0;
-  }
-  const json params = body.value("parameters", json::object());
-  if (!params.is_object()) Fail(file, at + "parameters", "expected an object");
+// The "parameters" object of a surface body, into the preset p (unused ones: a note in m).
+void ApplySurfaceParameters(const json& params, ModelKind model, const std::string& file,
+                            const std::string& at, render::MaterialPreset& p, SourceMaterial& m) {
   for (const auto& [key, v] : params.items()) {
     const SharedName* s = nullptr;
     for (const SharedName& n : kShared)
@@ -157,61 +144,86 @@ SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string
     if (model == ModelKind::kCloth && key == "subsurfaceColor") p.cloth.subsurface = true;
     SetParam(p, s->param, x, s->size);
   }
+}
+
+// One entry of the "maps" object at JSON path `field`: a colour map scales its colour by the
+// map's mean, a scalar map is reduced to its mean, a normal map is carried as is.
+void ApplySurfaceMap(const std::string& attr, const json& v, ModelKind model,
+                     const std::string& file, const std::string& field, render::MaterialPreset& p,
+                     SourceMaterial& m) {
+  static const std::vector<std::string> kMaps = {
+      "color", "normal", "roughness", "metalness", "sheenColor", "sheenRoughness", "specular"};
+  if (std::find(kMaps.begin(), kMaps.end(), attr) == kMaps.end())
+    Fail(file, field, std::string("unknown map attribute (valid: ") + kMapList + ")");
+  if (!v.is_object() || !v.contains("uri") || !v["uri"].is_string())
+    Fail(file, field, "expected {\"uri\": \"...\", \"colorSpace\": \"srgb\"|\"linear\"}");
+  const bool colour = attr == "color" || attr == "sheenColor";
+  const std::string cs = v.value("colorSpace", colour ? "srgb" : "linear");
+  if (cs != "srgb" && cs != "linear")
+    Fail(file, field + ".colorSpace", "'" + cs + "' is not srgb or linear");
+  const std::string path = ResolveUri(file, field + ".uri", v["uri"].get<std::string>());
+  m.dependencies.push_back(path);
+  if (attr == "normal") {
+    m.maps.push_back({"normal", path, cs, {1, 1, 1}});
+    return;
+  }
+  std::array<double, 4> mean;
+  try {
+    mean = ChannelMeans(path, cs == "srgb");
+  } catch (const std::exception& e) {
+    Fail(file, field + ".uri", e.what());
+  }
+  if (colour) {
+    const std::string param = attr == "color" ? "base_color" : "sheen_color";
+    if (!HasParam(model, param)) {
+      m.notes.push_back(field + " not used by brdf " + render::ToString(model));
+      return;
+    }
+    const int off = p.Offset(param);
+    for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] *= mean[size_t(c)];
+    m.maps.push_back({param, path, cs, {mean[0], mean[1], mean[2]}});
+  } else if (attr == "specular") {
+    m.notes.push_back(field + ": specular map read (mean " + std::to_string(mean[0]) +
+                      ") but not modelled (F0 fixed at 0.04)");
+  } else {
+    const std::string param = attr == "roughness"   ? "roughness"
+                              : attr == "metalness" ? "metalness"
+                                                    : "sheen_roughness";
+    if (!HasParam(model, param)) {
+      m.notes.push_back(field + " not used by brdf " + render::ToString(model));
+      return;
+    }
+    double x =
+        p.values[size_t(p.Offset(
+            param == "metalness" && model == ModelKind::kGltfSheen ? "metallic" : param))] *
+        mean[0];
+    SetParam(p, param, &x, 1);
+    m.notes.push_back(field + ": reduced to its mean over texels (" + std::to_string(mean[0]) +
+                      "), not carried over");
+  }
+}
+
+// One SurfaceMaterial-like body: brdf + parameters + maps, at JSON path `at`.
+SourceMaterial ParseSurface(const json& body, ModelKind model, const std::string& file,
+                            const std::string& at, const std::string& name,
+                            const std::string& kind) {
+  SourceMaterial m;
+  m.file = file;
+  m.name = name;
+  m.kind = kind;
+  render::MaterialPreset p = render::DefaultPreset(model);
+  if (model == ModelKind::kGltfSheen || model == ModelKind::kPhysicalSheen) {
+    // Absent sheen means no sheen.
+    const int off = p.Offset("sheen_color");
+    for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] = 0.0;
+  }
+  const json params = body.value("parameters", json::object());
+  if (!params.is_object()) Fail(file, at + "parameters", "expected an object");
+  ApplySurfaceParameters(params, model, file, at, p, m);
   const json maps = body.value("maps", json::object());
   if (!maps.is_object()) Fail(file, at + "maps", "expected an object");
-  for (const auto& [attr, v] : maps.items()) {
-    const std::string field = at + "maps." + attr;
-    static const std::vector<std::string> kMaps = {
-        "color", "normal", "roughness", "metalness", "sheenColor", "sheenRoughness", "specular"};
-    if (std::find(kMaps.begin(), kMaps.end(), attr) == kMaps.end())
-      Fail(file, field, std::string("unknown map attribute (valid: ") + kMapList + ")");
-    if (!v.is_object() || !v.contains("uri") || !v["uri"].is_string())
-      Fail(file, field, "expected {\"uri\": \"...\", \"colorSpace\": \"srgb\"|\"linear\"}");
-    const bool colour = attr == "color" || attr == "sheenColor";
-    const std::string cs = v.value("colorSpace", colour ? "srgb" : "linear");
-    if (cs != "srgb" && cs != "linear")
-      Fail(file, field + ".colorSpace", "'" + cs + "' is not srgb or linear");
-    const std::string path = ResolveUri(file, field + ".uri", v["uri"].get<std::string>());
-    m.dependencies.push_back(path);
-    if (attr == "normal") {
-      m.maps.push_back({"normal", path, cs, {1, 1, 1}});
-      continue;
-    }
-    std::array<double, 4> mean;
-    try {
-      mean = ChannelMeans(path, cs == "srgb");
-    } catch (const std::exception& e) {
-      Fail(file, field + ".uri", e.what());
-    }
-    if (colour) {
-      const std::string param = attr == "color" ? "base_color" : "sheen_color";
-      if (!HasParam(model, param)) {
-        m.notes.push_back(field + " not used by brdf " + render::ToString(model));
-        continue;
-      }
-      const int off = p.Offset(param);
-      for (int c = 0; c < 3; ++c) p.values[size_t(off + c)] *= mean[size_t(c)];
-      m.maps.push_back({param, path, cs, {mean[0], mean[1], mean[2]}});
-    } else if (attr == "specular") {
-      m.notes.push_back(field + ": specular map read (mean " + std::to_string(mean[0]) +
-                        ") but not modelled (F0 fixed at 0.04)");
-    } else {
-      const std::string param = attr == "roughness"   ? "roughness"
-                                : attr == "metalness" ? "metalness"
-                                                      : "sheen_roughness";
-      if (!HasParam(model, param)) {
-        m.notes.push_back(field + " not used by brdf " + render::ToString(model));
-        continue;
-      }
-      double x =
-          p.values[size_t(p.Offset(
-              param == "metalness" && model == ModelKind::kGltfSheen ? "metallic" : param))] *
-          mean[0];
-      SetParam(p, param, &x, 1);
-      m.notes.push_back(field + ": reduced to its mean over texels (" + std::to_string(mean[0]) +
-                        "), not carried over");
-    }
-  }
+  for (const auto& [attr, v] : maps.items())
+    ApplySurfaceMap(attr, v, model, file, at + "maps." + attr, p, m);
   m.analytic = p;
   return m;
 }
@@ -328,6 +340,139 @@ std::string GltfTexturePath(const tinygltf::Model& g, int index, const std::stri
   return ResolveUri(file, "images[" + std::to_string(src) + "].uri", uri);
 }
 
+// pbrMetallicRoughness: the factors, then the base colour and metallic-roughness textures
+// reduced to their means (the base colour map is carried over).
+void ReadGltfPbr(const tinygltf::Model& g, const tinygltf::Material& gm, const std::string& file,
+                 const std::string& at, render::MaterialPreset& p, SourceMaterial& m) {
+  const auto& pbr = gm.pbrMetallicRoughness;
+  if (pbr.baseColorFactor.size() != 4)
+    Fail(file, at + ".pbrMetallicRoughness.baseColorFactor", "expected 4 numbers");
+  for (int c = 0; c < 3; ++c) {
+    CheckRange(pbr.baseColorFactor[size_t(c)], file,
+               at + ".pbrMetallicRoughness.baseColorFactor[" + std::to_string(c) + "]");
+    p.values[size_t(c)] = pbr.baseColorFactor[size_t(c)];
+  }
+  CheckRange(pbr.roughnessFactor, file, at + ".pbrMetallicRoughness.roughnessFactor");
+  CheckRange(pbr.metallicFactor, file, at + ".pbrMetallicRoughness.metallicFactor");
+  p.values[3] = pbr.roughnessFactor;
+  p.values[4] = pbr.metallicFactor;
+  for (int c = 0; c < 3; ++c) p.values[size_t(5 + c)] = 0.0;  // no sheen unless extended
+  p.values[8] = 0.0;
+  if (pbr.baseColorTexture.index >= 0) {
+    const std::string f = at + ".pbrMetallicRoughness.baseColorTexture";
+    const std::string path = GltfTexturePath(g, pbr.baseColorTexture.index, file, f, m);
+    if (!path.empty()) {
+      const auto mean = ChannelMeans(path, true);  // glTF: baseColor textures are sRGB
+      for (int c = 0; c < 3; ++c) p.values[size_t(c)] *= mean[size_t(c)];
+      m.maps.push_back({"base_color", path, "srgb", {mean[0], mean[1], mean[2]}});
+      m.dependencies.push_back(path);
+    }
+  }
+  if (pbr.metallicRoughnessTexture.index >= 0) {
+    const std::string f = at + ".pbrMetallicRoughness.metallicRoughnessTexture";
+    const std::string path = GltfTexturePath(g, pbr.metallicRoughnessTexture.index, file, f, m);
+    if (!path.empty()) {
+      const auto mean = ChannelMeans(path, false);  // G = roughness, B = metalness (linear)
+      p.values[3] *= mean[1];
+      p.values[4] *= mean[2];
+      m.dependencies.push_back(path);
+      m.notes.push_back(f + ": reduced to its mean over texels (roughness " +
+                        std::to_string(mean[1]) + ", metalness " + std::to_string(mean[2]) +
+                        "), not carried over");
+    }
+  }
+}
+
+// The texture path behind an extension's texture-info object (index -1 when absent).
+std::string GltfExtensionTexturePath(const tinygltf::Model& g, const tinygltf::Value& t,
+                                     const std::string& file, const std::string& field,
+                                     SourceMaterial& m) {
+  return GltfTexturePath(g, t.Has("index") ? t.Get("index").GetNumberAsInt() : -1, file, field,
+                         m);
+}
+
+// KHR_materials_sheen (object `s` at JSON path `f`): factors, colour map (carried over) and
+// roughness map (reduced to its mean).
+void ReadGltfSheen(const tinygltf::Model& g, const tinygltf::Value& s, const std::string& file,
+                   const std::string& f, render::MaterialPreset& p, SourceMaterial& m) {
+  if (s.Has("sheenColorFactor")) {
+    const tinygltf::Value& c = s.Get("sheenColorFactor");
+    if (!c.IsArray() || c.ArrayLen() != 3)
+      Fail(file, f + ".sheenColorFactor", "expected 3 numbers");
+    for (int k = 0; k < 3; ++k)
+      p.values[size_t(5 + k)] =
+          GltfNumber(c.Get(k), file, f + ".sheenColorFactor[" + std::to_string(k) + "]", 0, 1);
+  }
+  if (s.Has("sheenRoughnessFactor"))
+    p.values[8] =
+        GltfNumber(s.Get("sheenRoughnessFactor"), file, f + ".sheenRoughnessFactor", 0, 1);
+  if (s.Has("sheenColorTexture")) {
+    const std::string path =
+        GltfExtensionTexturePath(g, s.Get("sheenColorTexture"), file, f + ".sheenColorTexture", m);
+    if (!path.empty()) {
+      const auto mean = ChannelMeans(path, true);
+      for (int c = 0; c < 3; ++c) p.values[size_t(5 + c)] *= mean[size_t(c)];
+      m.maps.push_back({"sheen_color", path, "srgb", {mean[0], mean[1], mean[2]}});
+      m.dependencies.push_back(path);
+    }
+  }
+  if (s.Has("sheenRoughnessTexture")) {
+    const std::string path = GltfExtensionTexturePath(g, s.Get("sheenRoughnessTexture"), file,
+                                                      f + ".sheenRoughnessTexture", m);
+    if (!path.empty()) {
+      const auto mean = ChannelMeans(path, false);  // spec: the alpha channel
+      p.values[8] *= mean[3];
+      m.dependencies.push_back(path);
+      m.notes.push_back(f + ".sheenRoughnessTexture: reduced to its mean over texels");
+    }
+  }
+}
+
+// KHR_materials_specular (object `s` at JSON path `f`): validated, then only noted.
+void ReadGltfSpecular(const tinygltf::Value& s, const std::string& file, const std::string& f,
+                      SourceMaterial& m) {
+  double factor = 1.0;
+  if (s.Has("specularFactor"))
+    factor = GltfNumber(s.Get("specularFactor"), file, f + ".specularFactor", 0, 1);
+  if (s.Has("specularColorFactor")) {
+    const tinygltf::Value& c = s.Get("specularColorFactor");
+    if (!c.IsArray() || c.ArrayLen() != 3)
+      Fail(file, f + ".specularColorFactor", "expected 3 numbers");
+    for (int k = 0; k < 3; ++k)
+      GltfNumber(c.Get(k), file, f + ".specularColorFactor[" + std::to_string(k) + "]", 0, 1e6);
+  }
+  m.notes.push_back(f + ": read (specularFactor " + std::to_string(factor) +
+                    ") but not modelled: the glTF sheen model keeps F0 = 0.04");
+}
+
+// Material i of the glTF as a gltf-sheen source; `seen` counts names to make them unique.
+SourceMaterial ReadGltfMaterial(const tinygltf::Model& g, size_t i, const std::string& file,
+                                std::map<std::string, int>& seen) {
+  const tinygltf::Material& gm = g.materials[i];
+  const std::string at = "materials[" + std::to_string(i) + "]";
+  SourceMaterial m;
+  m.file = file;
+  m.kind = "gltf";
+  m.name = gm.name.empty() ? "material" + std::to_string(i) : gm.name;
+  if (seen[m.name]++ > 0) m.name += "-" + std::to_string(i);
+  render::MaterialPreset p = render::DefaultPreset(ModelKind::kGltfSheen);
+  ReadGltfPbr(g, gm, file, at, p, m);
+  if (gm.normalTexture.index >= 0) {
+    const std::string path =
+        GltfTexturePath(g, gm.normalTexture.index, file, at + ".normalTexture", m);
+    if (!path.empty()) {
+      m.maps.push_back({"normal", path, "linear", {1, 1, 1}});
+      m.dependencies.push_back(path);
+    }
+  }
+  if (auto it = gm.extensions.find("KHR_materials_sheen"); it != gm.extensions.end())
+    ReadGltfSheen(g, it->second, file, at + ".extensions.KHR_materials_sheen", p, m);
+  if (auto it = gm.extensions.find("KHR_materials_specular"); it != gm.extensions.end())
+    ReadGltfSpecular(it->second, file, at + ".extensions.KHR_materials_specular", m);
+  m.analytic = p;
+  return m;
+}
+
 std::vector<SourceMaterial> ReadGltf(const std::string& file) {
   tinygltf::Model g;
   std::string err, warn;
@@ -335,118 +480,8 @@ std::vector<SourceMaterial> ReadGltf(const std::string& file) {
   if (g.materials.empty()) Fail(file, "materials", "the file has no materials");
   std::vector<SourceMaterial> out;
   std::map<std::string, int> seen;
-  for (size_t i = 0; i < g.materials.size(); ++i) {
-    const tinygltf::Material& gm = g.materials[i];
-    const std::string at = "materials[" + std::to_string(i) + "]";
-    SourceMaterial m;
-    m.file = file;
-    m.kind = "gltf";
-    m.name = gm.name.empty() ? "material" + std::to_string(i) : gm.name;
-    if (seen[m.name]++ > 0) m.name += "-" + std::to_string(i);
-    render::MaterialPreset p = render::DefaultPreset(ModelKind::kGltfSheen);
-    const auto& pbr = gm.pbrMetallicRoughness;
-    if (pbr.baseColorFactor.size() != 4)
-      Fail(file, at + ".pbrMetallicRoughness.baseColorFactor", "expected 4 numbers");
-    for (int c = 0; c < 3; ++c) {
-      CheckRange(pbr.baseColorFactor[size_t(c)], file,
-                 at + ".pbrMetallicRoughness.baseColorFactor[" + std::to_string(c) + "]");
-      p.values[size_t(c)] = pbr.baseColorFactor[size_t(c)];
-    }
-    CheckRange(pbr.roughnessFactor, file, at + ".pbrMetallicRoughness.roughnessFactor");
-    CheckRange(pbr.metallicFactor, file, at + ".pbrMetallicRoughness.metallicFactor");
-    p.values[3] = pbr.roughnessFactor;
-    p.values[4] = pbr.metallicFactor;
-    for (int c = 0; c < 3; ++c) p.values[size_t(5 + c)] = 0.0;  // no sheen unless extended
-    p.values[8] = 0.0;
-    if (pbr.baseColorTexture.index >= 0) {
-      const std::string f = at + ".pbrMetallicRoughness.baseColorTexture";
-      const std::string path = GltfTexturePath(g, pbr.baseColorTexture.index, file, f, m);
-      if (!path.empty()) {
-        const auto mean = ChannelMeans(path, true);  // glTF: baseColor textures are sRGB
-        for (int c = 0; c < 3; ++c) p.values[size_t(c)] *= mean[size_t(c)];
-        m.maps.push_back({"base_color", path, "srgb", {mean[0], mean[1], mean[2]}});
-        m.dependencies.push_back(path);
-      }
-    }
-    if (pbr.metallicRoughnessTexture.index >= 0) {
-      const std::string f = at + ".pbrMetallicRoughness.metallicRoughnessTexture";
-      const std::string path = GltfTexturePath(g, pbr.metallicRoughnessTexture.index, file, f, m);
-      if (!path.empty()) {
-        const auto mean = ChannelMeans(path, false);  // G = roughness, B = metalness (linear)
-        p.values[3] *= mean[1];
-        p.values[4] *= mean[2];
-        m.dependencies.push_back(path);
-        m.notes.push_back(f + ": reduced to its mean over texels (roughness " +
-                          std::to_string(mean[1]) + ", metalness " + std::to_string(mean[2]) +
-                          "), not carried over");
-      }
-    }
-    if (gm.normalTexture.index >= 0) {
-      const std::string path =
-          GltfTexturePath(g, gm.normalTexture.index, file, at + ".normalTexture", m);
-      if (!path.empty()) {
-        m.maps.push_back({"normal", path, "linear", {1, 1, 1}});
-        m.dependencies.push_back(path);
-      }
-    }
-    if (auto it = gm.extensions.find("KHR_materials_sheen"); it != gm.extensions.end()) {
-      const tinygltf::Value& s = it->second;
-      const std::string f = at + ".extensions.KHR_materials_sheen";
-      if (s.Has("sheenColorFactor")) {
-        const tinygltf::Value& c = s.Get("sheenColorFactor");
-        if (!c.IsArray() || c.ArrayLen() != 3)
-          Fail(file, f + ".sheenColorFactor", "expected 3 numbers");
-        for (int k = 0; k < 3; ++k)
-          p.values[size_t(5 + k)] =
-              GltfNumber(c.Get(k), file, f + ".sheenColorFactor[" + std::to_string(k) + "]", 0, 1);
-      }
-      if (s.Has("sheenRoughnessFactor"))
-        p.values[8] =
-            GltfNumber(s.Get("sheenRoughnessFactor"), file, f + ".sheenRoughnessFactor", 0, 1);
-      if (s.Has("sheenColorTexture")) {
-        const tinygltf::Value& t = s.Get("sheenColorTexture");
-        const std::string path =
-            GltfTexturePath(g, t.Has("index") ? t.Get("index").GetNumberAsInt() : -1, file,
-                            f + ".sheenColorTexture", m);
-        if (!path.empty()) {
-          const auto mean = ChannelMeans(path, true);
-          for (int c = 0; c < 3; ++c) p.values[size_t(5 + c)] *= mean[size_t(c)];
-          m.maps.push_back({"sheen_color", path, "srgb", {mean[0], mean[1], mean[2]}});
-          m.dependencies.push_back(path);
-        }
-      }
-      if (s.Has("sheenRoughnessTexture")) {
-        const tinygltf::Value& t = s.Get("sheenRoughnessTexture");
-        const std::string path =
-            GltfTexturePath(g, t.Has("index") ? t.Get("index").GetNumberAsInt() : -1, file,
-                            f + ".sheenRoughnessTexture", m);
-        if (!path.empty()) {
-          const auto mean = ChannelMeans(path, false);  // spec: the alpha channel
-          p.values[8] *= mean[3];
-          m.dependencies.push_back(path);
-          m.notes.push_back(f + ".sheenRoughnessTexture: reduced to its mean over texels");
-        }
-      }
-    }
-    if (auto it = gm.extensions.find("KHR_materials_specular"); it != gm.extensions.end()) {
-      const tinygltf::Value& s = it->second;
-      const std::string f = at + ".extensions.KHR_materials_specular";
-      double factor = 1.0;
-      if (s.Has("specularFactor"))
-        factor = GltfNumber(s.Get("specularFactor"), file, f + ".specularFactor", 0, 1);
-      if (s.Has("specularColorFactor")) {
-        const tinygltf::Value& c = s.Get("specularColorFactor");
-        if (!c.IsArray() || c.ArrayLen() != 3)
-          Fail(file, f + ".specularColorFactor", "expected 3 numbers");
-        for (int k = 0; k < 3; ++k)
-          GltfNumber(c.Get(k), file, f + ".specularColorFactor[" + std::to_string(k) + "]", 0, 1e6);
-      }
-      m.notes.push_back(f + ": read (specularFactor " + std::to_string(factor) +
-                        ") but not modelled: the glTF sheen model keeps F0 = 0.04");
-    }
-    m.analytic = p;
-    out.push_back(std::move(m));
-  }
+  for (size_t i = 0; i < g.materials.size(); ++i)
+    out.push_back(ReadGltfMaterial(g, i, file, seen));
   return out;
 }
 

@@ -486,87 +486,123 @@ std::string PageName(const std::string& fabric_name) {
 
 // ---- inputs --------------------------------------------------------------------------------
 
+namespace {
+
+// ---- inputs: the pieces of FabricsFromPresets ----
+
+nlohmann::json ReadPresetJson(const std::string& path) {
+  if (!fs::exists(path)) throw ReportError(path + ": no such file");
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw ReportError(path + ": cannot open for reading");
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(f);
+  } catch (const nlohmann::json::exception& e) {
+    throw ReportError(path + ": malformed JSON: " + e.what());
+  }
+  return j;
+}
+
+// fit.scenes[i] of the preset at `path` (`where` names the entry): the scene, and the path of
+// the model's preview of it (appended to `previews`).
+SceneSpec ParseFitScene(const nlohmann::json& s, const std::string& where, const std::string& path,
+                        std::vector<std::string>& previews) {
+  SceneSpec sp;
+  sp.scene_path = StringField(s, "scene", where);
+  sp.name = fs::path(sp.scene_path).stem().string();
+  sp.reference = Resolve(StringField(s, "reference", where), path);
+  if (s.contains("reference2") && s.at("reference2").is_string())
+    sp.reference2 = Resolve(s.at("reference2").get<std::string>(), path);
+  const std::string op =
+      StringField(s, "tone_mapping", where, " (re-run clothfit fit with --images)");
+  try {
+    sp.tone_mapping = render::ParseToneMapping(op);
+  } catch (const std::invalid_argument& e) {
+    throw ReportError(where + ": " + e.what());
+  }
+  const nlohmann::json& ex = Field(s, "exposure", where);
+  if (!ex.is_number() || !std::isfinite(ex.get<double>()) || !(ex.get<double>() > 0))
+    throw ReportError(where + ": exposure must be a finite number > 0");
+  sp.exposure = ex.get<double>();
+  previews.push_back(Resolve(
+      StringField(s, "preview", where, " (re-run clothfit fit with --images DIR)"), path));
+  return sp;
+}
+
+// One fit preset: the model it holds, the scenes it was fitted on and the fabric it belongs to.
+struct FitPreset {
+  ModelSpec model;
+  std::vector<SceneSpec> scenes;
+  std::string fabric_name, fabric_path;
+};
+
+FitPreset ReadFitPreset(const std::string& path) {
+  const nlohmann::json j = ReadPresetJson(path);
+  FitPreset p;
+  ModelSpec& m = p.model;
+  m.preset_path = path;
+  m.preset = j;
+  m.model = StringField(j, "model", path);
+  const nlohmann::json& fit =
+      j.is_object() && j.contains("fit")
+          ? j.at("fit")
+          : throw ReportError(path + ": missing field \"fit\" (not written by clothfit fit?)");
+  const nlohmann::json& scenes = Field(fit, "scenes", path + ": fit");
+  if (!scenes.is_array() || scenes.empty())
+    throw ReportError(path + ": fit.scenes must be a non-empty array");
+  for (size_t i = 0; i < scenes.size(); ++i) {
+    const std::string where = path + ": fit.scenes[" + std::to_string(i) + "]";
+    p.scenes.push_back(ParseFitScene(scenes[i], where, path, m.previews));
+  }
+  p.fabric_name = fs::path(path).stem().string();
+  if (j.contains("provenance") && j.at("provenance").is_object() &&
+      j.at("provenance").contains("fabric") && j.at("provenance").at("fabric").is_string()) {
+    p.fabric_path = j.at("provenance").at("fabric").get<std::string>();
+    p.fabric_name = fs::path(p.fabric_path).stem().string();
+  }
+  return p;
+}
+
+// Adds a preset to its fabric (a new one when first seen). Throws when the fabric's scenes
+// differ from its first preset's or the fabric already has this model.
+void AddToFabric(std::vector<FabricSpec>& fabrics,
+                 std::map<std::string, std::string>& first_preset_of, FitPreset&& p) {
+  const std::string& path = p.model.preset_path;
+  const std::string& fabric_name = p.fabric_name;
+  const std::vector<SceneSpec>& specs = p.scenes;
+  auto it = std::find_if(fabrics.begin(), fabrics.end(),
+                         [&](const FabricSpec& fs_) { return fs_.name == fabric_name; });
+  if (it == fabrics.end()) {
+    FabricSpec fsp;
+    fsp.name = fabric_name;
+    fsp.fabric_path = p.fabric_path;
+    fsp.scenes = specs;
+    fabrics.push_back(fsp);
+    first_preset_of[fabric_name] = path;
+    it = fabrics.end() - 1;
+  } else {
+    bool same = it->scenes.size() == specs.size();
+    for (size_t i = 0; same && i < specs.size(); ++i)
+      same = it->scenes[i].name == specs[i].name && it->scenes[i].reference == specs[i].reference;
+    if (!same)
+      throw ReportError(path + ": its scenes or references differ from " +
+                        first_preset_of[fabric_name] + " (same fabric \"" + fabric_name + "\")");
+    for (const ModelSpec& other : it->models)
+      if (other.model == p.model.model)
+        throw ReportError(path + ": model \"" + p.model.model + "\" of fabric \"" + fabric_name +
+                          "\" given twice (also " + other.preset_path + ")");
+  }
+  it->models.push_back(std::move(p.model));
+}
+
+}  // namespace
+
 std::vector<FabricSpec> FabricsFromPresets(const std::vector<std::string>& preset_paths) {
   if (preset_paths.empty()) throw ReportError("report: no fit presets given");
   std::vector<FabricSpec> fabrics;
   std::map<std::string, std::string> first_preset_of;  // fabric -> preset path (for errors)
-  for (const std::string& path : preset_paths) {
-    if (!fs::exists(path)) throw ReportError(path + ": no such file");
-    std::ifstream f(path, std::ios::binary);
-    if (!f) throw ReportError(path + ": cannot open for reading");
-    nlohmann::json j;
-    try {
-      j = nlohmann::json::parse(f);
-    } catch (const nlohmann::json::exception& e) {
-      throw ReportError(path + ": malformed JSON: " + e.what());
-    }
-    ModelSpec m;
-    m.preset_path = path;
-    m.preset = j;
-    m.model = StringField(j, "model", path);
-    const nlohmann::json& fit =
-        j.is_object() && j.contains("fit")
-            ? j.at("fit")
-            : throw ReportError(path + ": missing field \"fit\" (not written by clothfit fit?)");
-    const nlohmann::json& scenes = Field(fit, "scenes", path + ": fit");
-    if (!scenes.is_array() || scenes.empty())
-      throw ReportError(path + ": fit.scenes must be a non-empty array");
-    std::vector<SceneSpec> specs;
-    for (size_t i = 0; i < scenes.size(); ++i) {
-      const std::string where = path + ": fit.scenes[" + std::to_string(i) + "]";
-      const nlohmann::json& s = scenes[i];
-      SceneSpec sp;
-      sp.scene_path = StringField(s, "scene", where);
-      sp.name = fs::path(sp.scene_path).stem().string();
-      sp.reference = Resolve(StringField(s, "reference", where), path);
-      if (s.contains("reference2") && s.at("reference2").is_string())
-        sp.reference2 = Resolve(s.at("reference2").get<std::string>(), path);
-      const std::string op =
-          StringField(s, "tone_mapping", where, " (re-run clothfit fit with --images)");
-      try {
-        sp.tone_mapping = render::ParseToneMapping(op);
-      } catch (const std::invalid_argument& e) {
-        throw ReportError(where + ": " + e.what());
-      }
-      const nlohmann::json& ex = Field(s, "exposure", where);
-      if (!ex.is_number() || !std::isfinite(ex.get<double>()) || !(ex.get<double>() > 0))
-        throw ReportError(where + ": exposure must be a finite number > 0");
-      sp.exposure = ex.get<double>();
-      m.previews.push_back(Resolve(
-          StringField(s, "preview", where, " (re-run clothfit fit with --images DIR)"), path));
-      specs.push_back(sp);
-    }
-    std::string fabric_name = fs::path(path).stem().string();
-    std::string fabric_path;
-    if (j.contains("provenance") && j.at("provenance").is_object() &&
-        j.at("provenance").contains("fabric") && j.at("provenance").at("fabric").is_string()) {
-      fabric_path = j.at("provenance").at("fabric").get<std::string>();
-      fabric_name = fs::path(fabric_path).stem().string();
-    }
-    auto it = std::find_if(fabrics.begin(), fabrics.end(),
-                           [&](const FabricSpec& fs_) { return fs_.name == fabric_name; });
-    if (it == fabrics.end()) {
-      FabricSpec fsp;
-      fsp.name = fabric_name;
-      fsp.fabric_path = fabric_path;
-      fsp.scenes = specs;
-      fabrics.push_back(fsp);
-      first_preset_of[fabric_name] = path;
-      it = fabrics.end() - 1;
-    } else {
-      bool same = it->scenes.size() == specs.size();
-      for (size_t i = 0; same && i < specs.size(); ++i)
-        same = it->scenes[i].name == specs[i].name && it->scenes[i].reference == specs[i].reference;
-      if (!same)
-        throw ReportError(path + ": its scenes or references differ from " +
-                          first_preset_of[fabric_name] + " (same fabric \"" + fabric_name + "\")");
-      for (const ModelSpec& other : it->models)
-        if (other.model == m.model)
-          throw ReportError(path + ": model \"" + m.model + "\" of fabric \"" + fabric_name +
-                            "\" given twice (also " + other.preset_path + ")");
-    }
-    it->models.push_back(std::move(m));
-  }
+  for (const std::string& path : preset_paths)
+    AddToFabric(fabrics, first_preset_of, ReadFitPreset(path));
   for (FabricSpec& f : fabrics)
     std::stable_sort(f.models.begin(), f.models.end(), [](const ModelSpec& a, const ModelSpec& b) {
       return ModelRank(a.model) < ModelRank(b.model);
@@ -687,9 +723,11 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
 
 // ---- pages ---------------------------------------------------------------------------------
 
-std::string FabricHtml(const FabricReport& rep) {
-  const FabricSpec& spec = rep.spec;
-  std::ostringstream h;
+namespace {
+
+// ---- the pieces of a fabric page (FabricHtml), in page order ----
+
+void FabricPageIntro(std::ostream& h, const FabricSpec& spec) {
   h << Header(spec.name + " - clothfit report");
   h << "<p class=\"meta\"><a href=\"index.html\">&larr; all fabrics</a></p>\n";
   h << "<h1>" << EscapeHtml(spec.name) << "</h1>\n";
@@ -701,67 +739,81 @@ std::string FabricHtml(const FabricReport& rep) {
        "path-traced reference over the fabric pixels only; the noise floor compares the "
        "reference with a second reference rendered with another seed (no fit can be expected "
        "to beat it). Lower is better except PSNR and SSIM. See docs/report.md.</p>\n";
+}
 
-  // Summary: means over scenes.
-  {
-    std::vector<MetricsRowSpec> rows;
-    if (rep.noise_floor_mean)
-      rows.push_back({"noise floor", &*rep.noise_floor_mean, true, "second reference"});
-    for (size_t mi = 0; mi < spec.models.size(); ++mi)
-      rows.push_back({ModelTitle(spec.models[mi].model), &rep.model_means[mi], false, "preview"});
-    h << "<h2>Metrics, mean over " << spec.scenes.size() << " scenes</h2>\n" << MetricsTable(rows);
+// Summary: means over scenes.
+void FabricPageSummary(std::ostream& h, const FabricReport& rep) {
+  const FabricSpec& spec = rep.spec;
+  std::vector<MetricsRowSpec> rows;
+  if (rep.noise_floor_mean)
+    rows.push_back({"noise floor", &*rep.noise_floor_mean, true, "second reference"});
+  for (size_t mi = 0; mi < spec.models.size(); ++mi)
+    rows.push_back({ModelTitle(spec.models[mi].model), &rep.model_means[mi], false, "preview"});
+  h << "<h2>Metrics, mean over " << spec.scenes.size() << " scenes</h2>\n" << MetricsTable(rows);
+}
+
+// One scene's heading and the line describing its display transform, mask and FLIP range.
+void SceneHeading(std::ostream& h, const SceneResult& s) {
+  const SceneSpec& sc = s.spec;
+  h << "<h2 id=\"scene-" << EscapeHtml(sc.name) << "\">Scene: " << EscapeHtml(sc.name)
+    << "</h2>\n<p class=\"meta\"><code>" << EscapeHtml(sc.scene_path) << "</code>; " << s.width
+    << "&times;" << s.height << " px; display " << render::ToneMappingName(sc.tone_mapping)
+    << ", exposure " << FormatNumber(sc.exposure, 2) << "; " << s.fabric_pixels
+    << (s.mask_from_coverage ? " fabric pixels (reference coverage)"
+                             : " pixels (no coverage channel: all)")
+    << "; HDR-FLIP range [" << FormatNumber(s.hdr_range.start, 2) << ", "
+    << FormatNumber(s.hdr_range.stop, 2) << "] stops ("
+    << (s.hdr_range_automatic ? "automatic from the reference"
+                              : "fallback: automatic range not finite")
+    << ")</p>\n";
+}
+
+// One scene's picture grid: reference and previews on the first row, FLIP maps on the second.
+void ScenePictures(std::ostream& h, const FabricSpec& spec, const SceneResult& s) {
+  const SceneSpec& sc = s.spec;
+  const size_t cols = 1 + spec.models.size();
+  h << "<div class=\"grid\" style=\"--cols:" << cols << "\">\n";
+  h << "<figure>" << Img(s.reference_png, "reference " + sc.name)
+    << "<figcaption>reference<br><code>" << EscapeHtml(fs::path(sc.reference).filename().string())
+    << "</code></figcaption></figure>\n";
+  for (size_t mi = 0; mi < spec.models.size(); ++mi) {
+    const Numbers& n = s.models[mi].numbers;
+    h << "<figure>"
+      << Img(s.models[mi].preview_png, spec.models[mi].model + " preview " + sc.name)
+      << "<figcaption>" << EscapeHtml(ModelTitle(spec.models[mi].model)) << " preview<br>RMSE "
+      << EscapeHtml(Cell(n, Columns()[0])) << "</figcaption></figure>\n";
   }
-
-  // Per scene: pictures and a table.
-  for (const SceneResult& s : rep.scenes) {
-    const SceneSpec& sc = s.spec;
-    h << "<h2 id=\"scene-" << EscapeHtml(sc.name) << "\">Scene: " << EscapeHtml(sc.name)
-      << "</h2>\n<p class=\"meta\"><code>" << EscapeHtml(sc.scene_path) << "</code>; " << s.width
-      << "&times;" << s.height << " px; display " << render::ToneMappingName(sc.tone_mapping)
-      << ", exposure " << FormatNumber(sc.exposure, 2) << "; " << s.fabric_pixels
-      << (s.mask_from_coverage ? " fabric pixels (reference coverage)"
-                               : " pixels (no coverage channel: all)")
-      << "; HDR-FLIP range [" << FormatNumber(s.hdr_range.start, 2) << ", "
-      << FormatNumber(s.hdr_range.stop, 2) << "] stops ("
-      << (s.hdr_range_automatic ? "automatic from the reference"
-                                : "fallback: automatic range not finite")
-      << ")</p>\n";
-    const size_t cols = 1 + spec.models.size();
-    h << "<div class=\"grid\" style=\"--cols:" << cols << "\">\n";
-    h << "<figure>" << Img(s.reference_png, "reference " + sc.name)
-      << "<figcaption>reference<br><code>" << EscapeHtml(fs::path(sc.reference).filename().string())
-      << "</code></figcaption></figure>\n";
-    for (size_t mi = 0; mi < spec.models.size(); ++mi) {
-      const Numbers& n = s.models[mi].numbers;
-      h << "<figure>"
-        << Img(s.models[mi].preview_png, spec.models[mi].model + " preview " + sc.name)
-        << "<figcaption>" << EscapeHtml(ModelTitle(spec.models[mi].model)) << " preview<br>RMSE "
-        << EscapeHtml(Cell(n, Columns()[0])) << "</figcaption></figure>\n";
-    }
-    if (s.noise_floor)
-      h << "<figure>" << Img(s.noise_flip_png, "FLIP noise floor " + sc.name)
-        << "<figcaption>FLIP: reference vs second seed<br>mean "
-        << EscapeHtml(Cell(*s.noise_floor, Columns()[3])) << "</figcaption></figure>\n";
-    else
-      h << "<figure><figcaption>no second reference: no noise floor</figcaption></figure>\n";
-    for (size_t mi = 0; mi < spec.models.size(); ++mi) {
-      const Numbers& n = s.models[mi].numbers;
-      h << "<figure>" << Img(s.models[mi].flip_png, spec.models[mi].model + " FLIP " + sc.name)
-        << "<figcaption>FLIP: " << EscapeHtml(ModelTitle(spec.models[mi].model)) << "<br>mean "
-        << EscapeHtml(Cell(n, Columns()[3])) << "</figcaption></figure>\n";
-    }
-    h << "</div>\n<p class=\"meta\">FLIP error maps (LDR-FLIP of the display images): 0 "
-         "<span class=\"bar\"></span> 1"
-      << (s.mask_from_coverage ? "; outside the fabric (not in the numbers) dimmed to 35 %" : "")
-      << "</p>\n";
-    std::vector<MetricsRowSpec> rows;
-    if (s.noise_floor) rows.push_back({"noise floor", &*s.noise_floor, true, "second reference"});
-    for (size_t mi = 0; mi < spec.models.size(); ++mi)
-      rows.push_back({ModelTitle(spec.models[mi].model), &s.models[mi].numbers, false, "preview"});
-    h << MetricsTable(rows);
+  if (s.noise_floor)
+    h << "<figure>" << Img(s.noise_flip_png, "FLIP noise floor " + sc.name)
+      << "<figcaption>FLIP: reference vs second seed<br>mean "
+      << EscapeHtml(Cell(*s.noise_floor, Columns()[3])) << "</figcaption></figure>\n";
+  else
+    h << "<figure><figcaption>no second reference: no noise floor</figcaption></figure>\n";
+  for (size_t mi = 0; mi < spec.models.size(); ++mi) {
+    const Numbers& n = s.models[mi].numbers;
+    h << "<figure>" << Img(s.models[mi].flip_png, spec.models[mi].model + " FLIP " + sc.name)
+      << "<figcaption>FLIP: " << EscapeHtml(ModelTitle(spec.models[mi].model)) << "<br>mean "
+      << EscapeHtml(Cell(n, Columns()[3])) << "</figcaption></figure>\n";
   }
+  h << "</div>\n<p class=\"meta\">FLIP error maps (LDR-FLIP of the display images): 0 "
+       "<span class=\"bar\"></span> 1"
+    << (s.mask_from_coverage ? "; outside the fabric (not in the numbers) dimmed to 35 %" : "")
+    << "</p>\n";
+}
 
-  // Fitted parameters.
+// Per scene: pictures and a table.
+void FabricPageScene(std::ostream& h, const FabricSpec& spec, const SceneResult& s) {
+  SceneHeading(h, s);
+  ScenePictures(h, spec, s);
+  std::vector<MetricsRowSpec> rows;
+  if (s.noise_floor) rows.push_back({"noise floor", &*s.noise_floor, true, "second reference"});
+  for (size_t mi = 0; mi < spec.models.size(); ++mi)
+    rows.push_back({ModelTitle(spec.models[mi].model), &s.models[mi].numbers, false, "preview"});
+  h << MetricsTable(rows);
+}
+
+// Fitted parameters: one card per model.
+void FabricPageParameters(std::ostream& h, const FabricSpec& spec) {
   h << "<h2>Fitted parameters</h2>\n<p class=\"meta\">Parameter values are <b>linear</b> sRGB "
        "(Rec.709 primaries) as the engines take them (a three.js <code>Color</code> after "
        "<code>convertSRGBToLinear</code>, a Filament <code>baseColor</code>); swatches show the "
@@ -788,8 +840,34 @@ std::string FabricHtml(const FabricReport& rep) {
     h << "</table></div>\n";
   }
   h << "</div>\n";
+}
 
-  // Solver summary.
+// The fit's noise floor cell: the mean of fit.scenes[].noise_floor.
+std::string FitNoiseFloorText(const nlohmann::json& fit) {
+  std::string floor = "n/a (no second reference)";
+  if (fit.contains("scenes") && fit.at("scenes").is_array()) {
+    double sum = 0.0;
+    int n = 0;
+    bool bad = false;
+    for (const auto& s : fit.at("scenes"))
+      if (s.is_object() && s.contains("noise_floor")) {
+        if (!s.at("noise_floor").is_number())
+          bad = true;
+        else {
+          sum += s.at("noise_floor").get<double>();
+          ++n;
+        }
+      }
+    if (bad)
+      floor = "n/a (not finite in input)";
+    else if (n)
+      floor = FormatNumber(sum / n, 4);
+  }
+  return floor;
+}
+
+// Solver summary: one row per model, then each model's Ceres report.
+void FabricPageSolver(std::ostream& h, const FabricSpec& spec) {
   h << "<h2>Solver</h2>\n<p class=\"meta\">Ceres Levenberg-Marquardt with bounds, multi-start; "
        "cost and RMSE in the fit space over block means (docs/fitting.md); fit noise floor = "
        "RMSE between the two references / &radic;2 over the same blocks.</p>\n"
@@ -799,25 +877,7 @@ std::string FabricHtml(const FabricReport& rep) {
        "<th>block px</th><th>fit RMSE</th><th>fit noise floor</th></tr>\n";
   for (const ModelSpec& m : spec.models) {
     const nlohmann::json fit = m.preset.value("fit", nlohmann::json::object());
-    std::string floor = "n/a (no second reference)";
-    if (fit.contains("scenes") && fit.at("scenes").is_array()) {
-      double sum = 0.0;
-      int n = 0;
-      bool bad = false;
-      for (const auto& s : fit.at("scenes"))
-        if (s.is_object() && s.contains("noise_floor")) {
-          if (!s.at("noise_floor").is_number())
-            bad = true;
-          else {
-            sum += s.at("noise_floor").get<double>();
-            ++n;
-          }
-        }
-      if (bad)
-        floor = "n/a (not finite in input)";
-      else if (n)
-        floor = FormatNumber(sum / n, 4);
-    }
+    const std::string floor = FitNoiseFloorText(fit);
     h << "<tr><td class=\"l\">" << EscapeHtml(ModelTitle(m.model)) << "</td><td>"
       << FitValue(fit, "iterations", 0) << "</td><td>" << FitValue(fit, "starts", 0) << "</td><td>"
       << FitValue(fit, "initial_cost", 4) << "</td><td>" << FitValue(fit, "final_cost", 4)
@@ -836,6 +896,18 @@ std::string FabricHtml(const FabricReport& rep) {
         << ": Ceres report</summary><pre>" << EscapeHtml(fit.at("solver").get<std::string>())
         << "</pre></details>\n";
   }
+}
+
+}  // namespace
+
+std::string FabricHtml(const FabricReport& rep) {
+  const FabricSpec& spec = rep.spec;
+  std::ostringstream h;
+  FabricPageIntro(h, spec);
+  FabricPageSummary(h, rep);
+  for (const SceneResult& s : rep.scenes) FabricPageScene(h, spec, s);
+  FabricPageParameters(h, spec);
+  FabricPageSolver(h, spec);
   h << "</body></html>\n";
   return h.str();
 }

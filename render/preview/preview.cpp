@@ -67,6 +67,187 @@ std::shared_ptr<const PrefilteredEnvironment> SharedPrefilter(const Environment&
   return built;
 }
 
+// What the environment contributes to a cache: SH irradiance and the prefiltered chains
+// (Charlie for gltf-sheen only). Empty without an environment.
+struct EnvironmentData {
+  Sh9 sh{};
+  std::shared_ptr<const PrefilteredEnvironment> ggx, charlie;
+};
+
+EnvironmentData PrepareEnvironment(const Environment* env, const PreviewOptions& opt,
+                                   const std::function<void(const std::string&)>& log) {
+  EnvironmentData e;
+  if (env) {
+    if (log) log("preview: projecting the environment on SH and prefiltering");
+    e.sh = ProjectEnvironment(*env);
+    e.ggx = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kGgx, opt);
+    if (opt.model == ModelKind::kGltfSheen)
+      e.charlie = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kCharlie, opt);
+  }
+  return e;
+}
+
+// One fabric pixel's cache entries, gathered per row and then appended in pixel order.
+struct PixelData {
+  int index;
+  float nov;
+  std::vector<PreviewLightSample> lights;
+  std::array<float, 3> irr{};
+  std::vector<float> rad, srad;
+};
+
+// What the per-pixel work of a cache build reads.
+struct PixelContext {
+  const Scene& scene;
+  const Environment* env;
+  const PreviewOptions& opt;
+  const EmbreeScene& bvh;
+  const EnvironmentData& e;
+  double eps;
+  bool wrap_past_terminator;
+};
+
+// A visible surface point: position (offset off the surface), shading normal on the viewer's
+// side, view direction, and its mesh.
+struct PrimaryHit {
+  Vec3d p, n, v;
+  double NoV;
+  const Mesh* mesh;
+};
+
+// The punctual lights reaching a point (with the terminator wrap of Filament's subsurface
+// cloth on the fabric), each with its cosines and irradiance.
+std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const PreviewCache& c,
+                                             const PrimaryHit& hit) {
+  const Vec3d& p = hit.p;
+  const Vec3d& n = hit.n;
+  const Vec3d& v = hit.v;
+  std::vector<PreviewLightSample> ls;
+  for (const Light& light : x.scene.lights) {
+    const LightSample s = EvaluateLight(light, p);
+    if (s.scale <= 0.0) continue;
+    const double NoL = Dot(n, s.wi);
+    if (NoL <= 0.0 && !(x.wrap_past_terminator && hit.mesh->is_fabric && NoL > -0.5)) continue;
+    if (c.features.shadows &&
+        x.bvh.Occluded({p.x, p.y, p.z}, {s.wi.x, s.wi.y, s.wi.z}, 0.0,
+                       std::isinf(s.distance) ? s.distance : s.distance * (1 - 1e-6)))
+      continue;
+    const Vec3d hv = Normalize(v + s.wi);
+    PreviewLightSample q;
+    q.NoL = float(NoL);
+    q.NoH = float(Dot(n, hv));
+    q.LoH = float(Dot(s.wi, hv));
+    for (int k = 0; k < 3; ++k) q.irradiance[k] = float(s.scale * light.color[size_t(k)]);
+    ls.push_back(q);
+  }
+  return ls;
+}
+
+// Constant layer: MeshStandardMaterial, glTF base colour, roughness 1.
+Rgb<double> ShadeNonFabric(const PixelContext& x, const PreviewCache& c, const PrimaryHit& hit,
+                           const std::vector<PreviewLightSample>& ls, const Vec3d& R,
+                           const Rgb<double>& Ed) {
+  const double NoV = hit.NoV;
+  standard::Params<double> sp;
+  sp.base_color = {hit.mesh->base_color[0], hit.mesh->base_color[1], hit.mesh->base_color[2]};
+  Rgb<double> out(0, 0, 0);
+  for (const PreviewLightSample& q : ls) {
+    if (q.NoL <= 0.f) continue;
+    const Cosines<double> cs{NoV, double(q.NoL), double(q.NoH), double(q.LoH)};
+    const Rgb<double> f = standard::EvalDirect(sp, {}, cs, *c.dfg);
+    out += f * Rgb<double>(q.irradiance[0], q.irradiance[1], q.irradiance[2]);
+  }
+  if (x.env) {
+    const IblWeights<double> w = standard::EvalIbl(sp, {}, NoV, *c.dfg);
+    const Vec3d dd = DominantDirection(ModelKind::kStandard, hit.n, R, 1.0);
+    out += w.specular * x.e.ggx->Sample(dd, x.e.ggx->LodForRoughness(1.0)) + w.diffuse * Ed;
+  }
+  return out;
+}
+
+// The K-node radiance tables of a fabric pixel (GGX; Charlie for gltf-sheen).
+void FillRadianceTables(const PixelContext& x, const Vec3d& n, const Vec3d& R, PixelData* pd) {
+  const int K = x.opt.roughness_nodes;
+  pd->rad.resize(size_t(K) * 3);
+  for (int k = 0; k < K; ++k) {
+    const double r = double(k) / double(K - 1);
+    const Vec3d dd = DominantDirection(x.opt.model, n, R, r);
+    const Rgb<double> L =
+        x.e.ggx->Sample(dd, LodFor(x.opt.model, *x.e.ggx, r, x.opt.prefilter_levels));
+    for (int ch = 0; ch < 3; ++ch) pd->rad[size_t(k) * 3 + size_t(ch)] = float(L[ch]);
+  }
+  if (x.e.charlie) {
+    pd->srad.resize(size_t(K) * 3);
+    for (int k = 0; k < K; ++k) {
+      const double r = double(k) / double(K - 1);
+      const Rgb<double> L = x.e.charlie->Sample(R, r * double(x.opt.prefilter_levels - 1));
+      for (int ch = 0; ch < 3; ++ch) pd->srad[size_t(k) * 3 + size_t(ch)] = float(L[ch]);
+    }
+  }
+}
+
+// Primary visibility at the centres of row y: background and non-fabric pixels go straight
+// into c->background, fabric pixels into *row.
+void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelData>* row) {
+  const int W = c->width;
+  for (int px = 0; px < W; ++px) {
+    const size_t pix = size_t(y) * size_t(W) + size_t(px);
+    std::array<double, 3> org, dir;
+    x.scene.CameraRay(px + 0.5, y + 0.5, org, dir);
+    const Hit h = x.bvh.Intersect(org, dir);
+    const Vec3d d = V(dir);
+    if (!h.valid) {
+      const Rgb<double> bg =
+          x.env ? x.env->Eval(d)
+                : Rgb<double>(x.scene.card.background[0], x.scene.card.background[1],
+                              x.scene.card.background[2]);
+      for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(bg[k]);
+      continue;
+    }
+    const SurfaceAttributes a = x.bvh.Attributes(h);
+    PrimaryHit hit;
+    hit.v = d * -1.0;
+    hit.n = V(a.normal);
+    if (Dot(hit.n, hit.v) < 0.0) hit.n = hit.n * -1.0;  // two-sided, as the reference renderer
+    hit.p = V(a.position) + V(h.ng) * (Dot(V(h.ng), hit.v) > 0 ? x.eps : -x.eps);
+    hit.NoV = Dot(hit.n, hit.v);
+    hit.mesh = &x.scene.meshes[size_t(h.mesh)];
+    std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit);
+    Rgb<double> Ed(0, 0, 0);
+    if (x.env) Ed = IrradianceOverPi(x.e.sh, hit.n);
+    const Vec3d R = hit.n * (2.0 * hit.NoV) - hit.v;
+    if (!hit.mesh->is_fabric) {
+      const Rgb<double> out = ShadeNonFabric(x, *c, hit, ls, R, Ed);
+      for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(out[k]);
+      continue;
+    }
+    PixelData pd;
+    pd.index = int(pix);
+    pd.nov = float(hit.NoV);
+    pd.lights = std::move(ls);
+    for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
+    if (x.env) FillRadianceTables(x, hit.n, R, &pd);
+    row->push_back(std::move(pd));
+  }
+}
+
+// Appends the fabric pixels in image order (rows were built in parallel).
+void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCache* c) {
+  c->light_begin.push_back(0);
+  for (auto& row : rows) {
+    for (PixelData& pd : row) {
+      c->pixels.push_back(pd.index);
+      c->fabric_mask[size_t(pd.index)] = 1.f;
+      c->NoV.push_back(pd.nov);
+      c->light_samples.insert(c->light_samples.end(), pd.lights.begin(), pd.lights.end());
+      c->light_begin.push_back(int(c->light_samples.size()));
+      c->irradiance.insert(c->irradiance.end(), pd.irr.begin(), pd.irr.end());
+      c->radiance.insert(c->radiance.end(), pd.rad.begin(), pd.rad.end());
+      c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
+    }
+  }
+}
+
 }  // namespace
 
 PreviewCache::~PreviewCache() = default;
@@ -85,136 +266,24 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   c->features.shadows = opt.shadows && c->features.direct;
   c->dfg = &lut::DefaultDfg();
   c->sheen_albedo = &lut::DefaultSheenAlbedo();
-  const int W = c->width, H = c->height, K = opt.roughness_nodes;
+  const int W = c->width, H = c->height;
   const size_t np = size_t(W) * size_t(H);
   c->background.assign(np * 3, 0.f);
   c->fabric_mask.assign(np, 0.f);
 
   EmbreeScene bvh(scene);
   const double eps = 1e-5 * bvh.scale();
-
   // Environment-derived data (only when the scene has an environment).
-  Sh9 sh{};
-  std::shared_ptr<const PrefilteredEnvironment> ggx, charlie;
-  if (env) {
-    if (log) log("preview: projecting the environment on SH and prefiltering");
-    sh = ProjectEnvironment(*env);
-    ggx = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kGgx, opt);
-    if (opt.model == ModelKind::kGltfSheen)
-      charlie = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kCharlie, opt);
-  }
+  const EnvironmentData e = PrepareEnvironment(env, opt, log);
 
   // Primary visibility at pixel centres. Per-pixel work is independent; gather per row.
-  struct PixelData {
-    int index;
-    float nov;
-    std::vector<PreviewLightSample> lights;
-    std::array<float, 3> irr{};
-    std::vector<float> rad, srad;
-  };
   std::vector<std::vector<PixelData>> rows(static_cast<size_t>(H));
   const bool wrap_past_terminator = c->features.subsurface &&
                                     opt.cloth.variant == cloth::Variant::kFilament;
-  tbb::parallel_for(0, H, [&](int y) {
-    for (int x = 0; x < W; ++x) {
-      const size_t pix = size_t(y) * size_t(W) + size_t(x);
-      std::array<double, 3> org, dir;
-      scene.CameraRay(x + 0.5, y + 0.5, org, dir);
-      const Hit h = bvh.Intersect(org, dir);
-      const Vec3d d = V(dir);
-      if (!h.valid) {
-        const Rgb<double> bg = env ? env->Eval(d)
-                                   : Rgb<double>(scene.card.background[0], scene.card.background[1],
-                                                 scene.card.background[2]);
-        for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(bg[k]);
-        continue;
-      }
-      const SurfaceAttributes a = bvh.Attributes(h);
-      const Vec3d v = d * -1.0;
-      Vec3d n = V(a.normal);
-      if (Dot(n, v) < 0.0) n = n * -1.0;  // two-sided, as the reference renderer
-      const Vec3d p = V(a.position) + V(h.ng) * (Dot(V(h.ng), v) > 0 ? eps : -eps);
-      const double NoV = Dot(n, v);
-      const Mesh& mesh = scene.meshes[size_t(h.mesh)];
-      std::vector<PreviewLightSample> ls;
-      for (const Light& light : scene.lights) {
-        const LightSample s = EvaluateLight(light, p);
-        if (s.scale <= 0.0) continue;
-        const double NoL = Dot(n, s.wi);
-        if (NoL <= 0.0 && !(wrap_past_terminator && mesh.is_fabric && NoL > -0.5)) continue;
-        if (c->features.shadows &&
-            bvh.Occluded({p.x, p.y, p.z}, {s.wi.x, s.wi.y, s.wi.z}, 0.0,
-                         std::isinf(s.distance) ? s.distance : s.distance * (1 - 1e-6)))
-          continue;
-        const Vec3d hv = Normalize(v + s.wi);
-        PreviewLightSample q;
-        q.NoL = float(NoL);
-        q.NoH = float(Dot(n, hv));
-        q.LoH = float(Dot(s.wi, hv));
-        for (int k = 0; k < 3; ++k) q.irradiance[k] = float(s.scale * light.color[size_t(k)]);
-        ls.push_back(q);
-      }
-      Rgb<double> Ed(0, 0, 0);
-      if (env) Ed = IrradianceOverPi(sh, n);
-      const Vec3d R = n * (2.0 * NoV) - v;
-      if (!mesh.is_fabric) {
-        // Constant layer: MeshStandardMaterial, glTF base colour, roughness 1.
-        standard::Params<double> sp;
-        sp.base_color = {mesh.base_color[0], mesh.base_color[1], mesh.base_color[2]};
-        Rgb<double> out(0, 0, 0);
-        for (const PreviewLightSample& q : ls) {
-          if (q.NoL <= 0.f) continue;
-          const Cosines<double> cs{NoV, double(q.NoL), double(q.NoH), double(q.LoH)};
-          const Rgb<double> f = standard::EvalDirect(sp, {}, cs, *c->dfg);
-          out += f * Rgb<double>(q.irradiance[0], q.irradiance[1], q.irradiance[2]);
-        }
-        if (env) {
-          const IblWeights<double> w = standard::EvalIbl(sp, {}, NoV, *c->dfg);
-          const Vec3d dd = DominantDirection(ModelKind::kStandard, n, R, 1.0);
-          out += w.specular * ggx->Sample(dd, ggx->LodForRoughness(1.0)) + w.diffuse * Ed;
-        }
-        for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(out[k]);
-        continue;
-      }
-      PixelData pd;
-      pd.index = int(pix);
-      pd.nov = float(NoV);
-      pd.lights = std::move(ls);
-      for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
-      if (env) {
-        pd.rad.resize(size_t(K) * 3);
-        for (int k = 0; k < K; ++k) {
-          const double r = double(k) / double(K - 1);
-          const Vec3d dd = DominantDirection(opt.model, n, R, r);
-          const Rgb<double> L = ggx->Sample(dd, LodFor(opt.model, *ggx, r, opt.prefilter_levels));
-          for (int ch = 0; ch < 3; ++ch) pd.rad[size_t(k) * 3 + size_t(ch)] = float(L[ch]);
-        }
-        if (charlie) {
-          pd.srad.resize(size_t(K) * 3);
-          for (int k = 0; k < K; ++k) {
-            const double r = double(k) / double(K - 1);
-            const Rgb<double> L = charlie->Sample(R, r * double(opt.prefilter_levels - 1));
-            for (int ch = 0; ch < 3; ++ch) pd.srad[size_t(k) * 3 + size_t(ch)] = float(L[ch]);
-          }
-        }
-      }
-      rows[size_t(y)].push_back(std::move(pd));
-    }
-  });
+  const PixelContext x{scene, env, opt, bvh, e, eps, wrap_past_terminator};
+  tbb::parallel_for(0, H, [&](int y) { BuildRow(x, y, c.get(), &rows[size_t(y)]); });
 
-  c->light_begin.push_back(0);
-  for (auto& row : rows) {
-    for (PixelData& pd : row) {
-      c->pixels.push_back(pd.index);
-      c->fabric_mask[size_t(pd.index)] = 1.f;
-      c->NoV.push_back(pd.nov);
-      c->light_samples.insert(c->light_samples.end(), pd.lights.begin(), pd.lights.end());
-      c->light_begin.push_back(int(c->light_samples.size()));
-      c->irradiance.insert(c->irradiance.end(), pd.irr.begin(), pd.irr.end());
-      c->radiance.insert(c->radiance.end(), pd.rad.begin(), pd.rad.end());
-      c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
-    }
-  }
+  AssembleFabricPixels(rows, c.get());
   c->build_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return c;

@@ -45,6 +45,154 @@ double PowerHeuristic(double a, double b) {
   return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
 }
 
+// What one camera sample returns: its radiance and the camera ray's first hit (for the AOVs).
+struct SampleOut {
+  Rgbd L{0, 0, 0};
+  bool hit = false, fabric = false;
+  SurfaceAttributes first;
+  double depth = 0.0;
+};
+
+// Random numbers of the first vertex (the camera ray's hit), drawn stratified per batch:
+// the BSDF sample (u.x, u.y, uc) and env_samples environment samples (2 each).
+constexpr int kMaxFirstEnvSamples = 16;
+struct FirstVertexU {
+  double bsdf[3];
+  double env[2 * kMaxFirstEnvSamples];
+};
+
+// One path vertex: the hit seen from the incoming ray, in a two-sided shading frame.
+struct Vertex {
+  Vec3d p;         // position
+  Vec3d ng;        // geometric normal, on the viewer's side
+  Frame fr;        // shading frame, its normal on the side of ng
+  Vec3d wo_local;  // towards the viewer, in fr
+  const Bsdf* bsdf;
+  ShadingPoint sp;
+};
+
+// The state a path carries from vertex to vertex.
+struct PathState {
+  Rgbd T{1, 1, 1};  // throughput
+  double prev_bsdf_pdf = 0.0, prev_light_count = 1.0;
+  bool specular_bounce = true;  // camera ray: env seen directly with weight 1
+};
+
+// Batches for the standard-error estimate (see PathTracer::Render).
+struct SamplingPlan {
+  int K;            // batches
+  int M;            // samples per batch, K x M = spp
+  int env_samples;  // environment samples at the first vertex
+};
+
+// Running estimates of one pixel: Welford over the K batch means of the colour (the standard
+// error is estimated from their spread), plain sums of the first-hit attributes for the AOVs.
+struct PixelEstimate {
+  double mean[3] = {0, 0, 0}, m2[3] = {0, 0, 0};
+  double batch_sum[3] = {0, 0, 0};
+  int batch_count = 0;
+  int hits = 0, fabric_hits = 0;
+  double aov_n[3] = {0, 0, 0}, aov_p[3] = {0, 0, 0}, aov_t[3] = {0, 0, 0}, aov_uv[2] = {0, 0};
+  double aov_z = 0.0;
+
+  // Sample m (0-based) of its batch of M.
+  void Add(const SampleOut& so, int m, int M, double max_sample_value) {
+    double v[3] = {so.L.r, so.L.g, so.L.b};
+    for (int c = 0; c < 3; ++c) {
+      if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel
+      if (max_sample_value > 0.0) v[c] = std::min(v[c], max_sample_value);
+      batch_sum[c] += v[c];
+    }
+    if (m == M - 1) {  // batch complete: Welford over batch means
+      ++batch_count;
+      for (int c = 0; c < 3; ++c) {
+        const double bm = batch_sum[c] / M;
+        const double delta = bm - mean[c];
+        mean[c] += delta / batch_count;
+        m2[c] += delta * (bm - mean[c]);
+        batch_sum[c] = 0.0;
+      }
+    }
+    if (so.hit) {
+      ++hits;
+      if (so.fabric) ++fabric_hits;
+      for (int c = 0; c < 3; ++c) {
+        aov_n[c] += so.first.normal[size_t(c)];
+        aov_p[c] += so.first.position[size_t(c)];
+        aov_t[c] += so.first.tangent[size_t(c)];
+      }
+      aov_uv[0] += so.first.uv[0];
+      aov_uv[1] += so.first.uv[1];
+      aov_z += so.depth;
+    }
+  }
+
+  // Writes pixel `pix` of r: mean, standard error from K batches, coverage, fabric, AOVs.
+  void Store(size_t pix, int K, int spp, const AovSet& aovs, RenderResult& r) const {
+    for (int c = 0; c < 3; ++c) {
+      r.rgb[pix * 3 + size_t(c)] = float(mean[c]);
+      const double var = K > 1 ? m2[c] / (K - 1) : 0.0;  // variance of one batch mean
+      r.std_error[pix * 3 + size_t(c)] = float(std::sqrt(var / K));
+    }
+    r.coverage[pix] = float(hits) / float(spp);
+    r.fabric[pix] = float(fabric_hits) / float(spp);
+    if (hits > 0) {
+      const double inv = 1.0 / hits;
+      for (int c = 0; c < 3; ++c) {
+        if (aovs.normal) r.normal[pix * 3 + size_t(c)] = float(aov_n[c] * inv);
+        if (aovs.position) r.position[pix * 3 + size_t(c)] = float(aov_p[c] * inv);
+        if (aovs.tangent) r.tangent[pix * 3 + size_t(c)] = float(aov_t[c] * inv);
+      }
+      if (aovs.uv) {
+        r.uv[pix * 2] = float(aov_uv[0] * inv);
+        r.uv[pix * 2 + 1] = float(aov_uv[1] * inv);
+      }
+      if (aovs.depth) r.depth[pix] = float(aov_z * inv);
+    }
+  }
+};
+
+// A zeroed result of W x H pixels with the requested AOV buffers.
+RenderResult AllocateResult(int W, int H, const AovSet& aovs) {
+  RenderResult r;
+  r.width = W;
+  r.height = H;
+  const size_t np = size_t(W) * size_t(H);
+  r.rgb.assign(np * 3, 0.f);
+  r.std_error.assign(np * 3, 0.f);
+  r.coverage.assign(np, 0.f);
+  r.fabric.assign(np, 0.f);
+  if (aovs.normal) r.normal.assign(np * 3, 0.f);
+  if (aovs.position) r.position.assign(np * 3, 0.f);
+  if (aovs.tangent) r.tangent.assign(np * 3, 0.f);
+  if (aovs.uv) r.uv.assign(np * 2, 0.f);
+  if (aovs.depth) r.depth.assign(np, 0.f);
+  return r;
+}
+
+// Image-wide statistics: mean standard error, mean value, mean relative standard error.
+void Summarize(RenderResult* r) {
+  const size_t np = size_t(r->width) * size_t(r->height);
+  double se_sum = 0.0, v_sum = 0.0, rel_sum = 0.0;
+  size_t rel_n = 0;
+  for (size_t p = 0; p < np; ++p) {
+    double v = 0.0, se = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      v += double(r->rgb[p * 3 + size_t(c)]);
+      se += double(r->std_error[p * 3 + size_t(c)]);
+    }
+    se_sum += se;
+    v_sum += v;
+    if (r->coverage[p] > 0.0f && v > 1e-6) {
+      rel_sum += se / v;
+      ++rel_n;
+    }
+  }
+  r->mean_std_error = se_sum / double(np * 3);
+  r->mean_value = v_sum / double(np * 3);
+  r->mean_relative_std_error = rel_n ? rel_sum / double(rel_n) : 0.0;
+}
+
 }  // namespace
 
 struct PathTracer::Impl {
@@ -123,20 +271,99 @@ struct PathTracer::Impl {
     return sum;
   }
 
-  struct SampleOut {
-    Rgbd L{0, 0, 0};
-    bool hit = false, fabric = false;
-    SurfaceAttributes first;
-    double depth = 0.0;
-  };
+  // A ray that left the scene: the environment, MIS-weighted against the previous vertex's
+  // environment samples after a BSDF bounce; without one, the card's background for a camera
+  // ray and nothing for a bounce.
+  void AddEscaped(const Vec3d& dir, int depth, const PathState& ps, Rgbd& L) const {
+    if (has_env) {
+      const Rgbd Le = env->Eval(dir);
+      const double w = ps.specular_bounce
+                           ? 1.0
+                           : PowerHeuristic(ps.prev_bsdf_pdf, ps.prev_light_count * env->Pdf(dir));
+      L += ps.T * Le * w;
+    } else if (depth == 0) {
+      L += Rgbd(scene.card.background[0], scene.card.background[1], scene.card.background[2]);
+    }
+  }
 
-  // Random numbers of the first vertex (the camera ray's hit), drawn stratified per batch:
-  // the BSDF sample (u.x, u.y, uc) and env_samples environment samples (2 each).
-  static constexpr int kMaxFirstEnvSamples = 16;
-  struct FirstVertexU {
-    double bsdf[3];
-    double env[2 * kMaxFirstEnvSamples];
-  };
+  // The vertex at hit h of a ray along dir; false when the shading normal faces away from
+  // the viewer (no contribution).
+  bool MakeVertex(const Hit& h, const SurfaceAttributes& a, const Vec3d& dir, Vertex* vx) const {
+    // Two-sided: put the frame on the viewer's side of the geometric normal.
+    Vec3d ng = V(h.ng), n = V(a.normal);
+    const Vec3d wo = dir * -1.0;
+    if (Dot(ng, wo) < 0.0) ng = ng * -1.0;
+    if (Dot(n, ng) < 0.0) n = n * -1.0;
+    Vec3d t = V(a.tangent);
+    t = Normalize(t - n * Dot(t, n));
+    const Vec3d b = Cross(n, t) * a.tangent_sign;
+    vx->fr = Frame{t, b, n};
+    vx->wo_local = vx->fr.ToLocal(wo);
+    if (vx->wo_local.z <= 0.0) return false;
+    vx->ng = ng;
+    vx->bsdf = &BsdfOf(h.mesh);
+    vx->sp = ShadingPoint{{a.uv[0], a.uv[1]}};
+    vx->p = V(a.position);
+    return true;
+  }
+
+  // Environment next-event estimation at a vertex: n_l samples, their numbers from
+  // first_u (the first vertex's strata) or else drawn from rng, each weighted by the power
+  // heuristic against the BSDF and counting 1 / n_l; adds T x contribution to L.
+  void AddEnvironmentLight(const Vertex& vx, const Rgbd& T, int n_l, const FirstVertexU* first_u,
+                           Pcg32& rng, double eps, Rgbd& L, uint64_t& rays) const {
+    for (int k = 0; k < n_l; ++k) {
+      double pdf_l = 0.0, u1, u2;
+      if (first_u) {
+        u1 = first_u->env[2 * k];
+        u2 = first_u->env[2 * k + 1];
+      } else {
+        u1 = rng.Uniform();
+        u2 = rng.Uniform();
+      }
+      // Radiance looked up only for a sample that contributes (below).
+      const Vec3d wi = env->Sample(u1, u2, &pdf_l, nullptr);
+      const Vec3d wi_local = vx.fr.ToLocal(wi);
+      if (!(pdf_l > 0.0 && wi_local.z > 0.0 && Dot(wi, vx.ng) > 0.0)) continue;
+      const Rgbd f = vx.bsdf->Eval(vx.wo_local, wi_local, vx.sp);
+      if (!(f.r > 0.0 || f.g > 0.0 || f.b > 0.0)) continue;
+      ++rays;
+      if (bvh.Occluded(A(vx.p + vx.ng * eps), A(wi), 0.0,
+                       std::numeric_limits<double>::infinity())) {
+        continue;
+      }
+      const Rgbd Le = env->Eval(wi);
+      const double pdf_b = vx.bsdf->Pdf(vx.wo_local, wi_local, vx.sp);
+      const double w = PowerHeuristic(n_l * pdf_l, pdf_b);
+      L += T * f * Le * (wi_local.z * w / (n_l * pdf_l));
+    }
+  }
+
+  // BSDF sampling continues the path (numbers from first_u at the first vertex, else from
+  // rng): false when the path ends here; else *wi is the new direction and ps is updated.
+  bool SampleBsdf(const Vertex& vx, const FirstVertexU* first_u, int n_l, Pcg32& rng, PathState& ps,
+                  Vec3d* wi) const {
+    BsdfSample bs;
+    Point2d u;
+    double uc;
+    if (first_u) {
+      u = {first_u->bsdf[0], first_u->bsdf[1]};
+      uc = first_u->bsdf[2];
+    } else {
+      u.x = rng.Uniform();
+      u.y = rng.Uniform();
+      uc = rng.Uniform();
+    }
+    if (!vx.bsdf->Sample(vx.wo_local, u, uc, vx.sp, &bs) || bs.pdf <= 0.0) return false;
+    if (bs.wi.z <= 0.0) return false;
+    *wi = vx.fr.ToWorld(bs.wi);
+    if (Dot(*wi, vx.ng) <= 0.0) return false;
+    ps.T = ps.T * bs.f * (bs.wi.z / bs.pdf);
+    ps.prev_bsdf_pdf = bs.pdf;
+    ps.prev_light_count = n_l;
+    ps.specular_bounce = false;
+    return true;
+  }
 
   // first: stratified numbers for the first vertex, or null to draw them from rng (then one
   // environment sample). env_samples: environment samples at the first vertex (Veach's
@@ -146,24 +373,13 @@ struct PathTracer::Impl {
                       int env_samples, const RenderSettings& st, uint64_t& rays) const {
     SampleOut out;
     Vec3d org = org0, dir = dir0;
-    Rgbd T(1, 1, 1);
-    double prev_bsdf_pdf = 0.0, prev_light_count = 1.0;
-    bool specular_bounce = true;  // camera ray: env seen directly with weight 1
+    PathState ps;
     const double eps = 1e-5 * bvh.scale();
     for (int depth = 0;; ++depth) {
       ++rays;
       const Hit h = bvh.Intersect(A(org), A(dir), depth == 0 ? 0.0 : eps);
       if (!h.valid) {
-        if (has_env) {
-          const Rgbd Le = env->Eval(dir);
-          const double w = specular_bounce
-                               ? 1.0
-                               : PowerHeuristic(prev_bsdf_pdf, prev_light_count * env->Pdf(dir));
-          out.L += T * Le * w;
-        } else if (depth == 0) {
-          out.L += Rgbd(scene.card.background[0], scene.card.background[1],
-                        scene.card.background[2]);
-        }
+        AddEscaped(dir, depth, ps, out.L);
         break;
       }
       SurfaceAttributes a = bvh.Attributes(h);
@@ -174,82 +390,88 @@ struct PathTracer::Impl {
         out.depth = h.t;
       }
       if (depth >= st.max_depth) break;
-      // Two-sided: put the frame on the viewer's side of the geometric normal.
-      Vec3d ng = V(h.ng), n = V(a.normal);
-      const Vec3d wo = dir * -1.0;
-      if (Dot(ng, wo) < 0.0) ng = ng * -1.0;
-      if (Dot(n, ng) < 0.0) n = n * -1.0;
-      Vec3d t = V(a.tangent);
-      t = Normalize(t - n * Dot(t, n));
-      const Vec3d b = Cross(n, t) * a.tangent_sign;
-      const Frame fr{t, b, n};
-      const Vec3d wo_local = fr.ToLocal(wo);
-      if (wo_local.z <= 0.0) break;  // shading normal facing away: no contribution
-      const Bsdf& bsdf = BsdfOf(h.mesh);
-      const ShadingPoint sp{{a.uv[0], a.uv[1]}};
-      const Vec3d p = V(a.position);
+      Vertex vx;
+      if (!MakeVertex(h, a, dir, &vx)) break;  // shading normal facing away: no contribution
+      const FirstVertexU* first_u = depth == 0 ? first : nullptr;
 
       // Next-event estimation: punctual lights, then the environment (MIS).
-      out.L += T * PunctualLights(p, ng, fr, wo_local, bsdf, sp, eps, rays);
-      const int n_l = depth == 0 && first ? env_samples : 1;
-      if (has_env) {
-        for (int k = 0; k < n_l; ++k) {
-          double pdf_l = 0.0, u1, u2;
-          if (depth == 0 && first) {
-            u1 = first->env[2 * k];
-            u2 = first->env[2 * k + 1];
-          } else {
-            u1 = rng.Uniform();
-            u2 = rng.Uniform();
-          }
-          // Radiance looked up only for a sample that contributes (below).
-          const Vec3d wi = env->Sample(u1, u2, &pdf_l, nullptr);
-          const Vec3d wi_local = fr.ToLocal(wi);
-          if (!(pdf_l > 0.0 && wi_local.z > 0.0 && Dot(wi, ng) > 0.0)) continue;
-          const Rgbd f = bsdf.Eval(wo_local, wi_local, sp);
-          if (!(f.r > 0.0 || f.g > 0.0 || f.b > 0.0)) continue;
-          ++rays;
-          if (bvh.Occluded(A(p + ng * eps), A(wi), 0.0, std::numeric_limits<double>::infinity())) {
-            continue;
-          }
-          const Rgbd Le = env->Eval(wi);
-          const double pdf_b = bsdf.Pdf(wo_local, wi_local, sp);
-          const double w = PowerHeuristic(n_l * pdf_l, pdf_b);
-          out.L += T * f * Le * (wi_local.z * w / (n_l * pdf_l));
-        }
-      }
+      out.L += ps.T * PunctualLights(vx.p, vx.ng, vx.fr, vx.wo_local, *vx.bsdf, vx.sp, eps, rays);
+      const int n_l = first_u ? env_samples : 1;
+      if (has_env) AddEnvironmentLight(vx, ps.T, n_l, first_u, rng, eps, out.L, rays);
 
       // BSDF sampling continues the path.
-      BsdfSample bs;
-      Point2d u;
-      double uc;
-      if (depth == 0 && first) {
-        u = {first->bsdf[0], first->bsdf[1]};
-        uc = first->bsdf[2];
-      } else {
-        u.x = rng.Uniform();
-        u.y = rng.Uniform();
-        uc = rng.Uniform();
-      }
-      if (!bsdf.Sample(wo_local, u, uc, sp, &bs) || bs.pdf <= 0.0) break;
-      if (bs.wi.z <= 0.0) break;
-      const Vec3d wi = fr.ToWorld(bs.wi);
-      if (Dot(wi, ng) <= 0.0) break;
-      T = T * bs.f * (bs.wi.z / bs.pdf);
-      prev_bsdf_pdf = bs.pdf;
-      prev_light_count = n_l;
-      specular_bounce = false;
+      Vec3d wi;
+      if (!SampleBsdf(vx, first_u, n_l, rng, ps, &wi)) break;
       // Without an environment, an escaping bounce ray carries nothing: stop early.
-      org = p + ng * eps;
+      org = vx.p + vx.ng * eps;
       dir = wi;
       if (has_env) PrefetchEnvironment(dir);
       if (depth + 1 >= st.rr_start_depth) {
-        const double q = std::max(0.05, 1.0 - std::max({T.r, T.g, T.b}));
+        const double q = std::max(0.05, 1.0 - std::max({ps.T.r, ps.T.g, ps.T.b}));
         if (rng.Uniform() < q) break;
-        T = T * (1.0 / (1.0 - q));
+        ps.T = ps.T * (1.0 / (1.0 - q));
       }
     }
     return out;
+  }
+
+  // All samples of pixel (x, y), stored into r. strata: the tile's, reused pixel to pixel.
+  void RenderPixel(const RenderSettings& st, const SamplingPlan& plan, int x, int y,
+                   BatchStrata& strata, uint64_t& rays, RenderResult& r) const {
+    const int M = plan.M, env_samples = plan.env_samples;
+    const size_t pix = size_t(y) * size_t(scene.card.width) + size_t(x);
+    // Pixel positions: K independently shifted copies (Cranley-Patterson rotations) of
+    // an M-point stratified set (Hammersley), K x M = spp. Each batch's mean is an
+    // unbiased estimate and the K batch means are i.i.d., so the standard error is
+    // estimated from their spread: stratification lowers the error (the weave's
+    // sub-pixel structure is antialiased far better than by i.i.d. jitter) and the
+    // estimate of it stays honest.
+    PixelEstimate est;
+    Pcg32 shift_rng = PixelSampler(st.seed ^ 0xA5A5A5A5DEADBEEFull, pix, 0);
+    double shift_u = 0.0, shift_v = 0.0;
+    for (int s = 0; s < st.spp; ++s) {
+      const int m = s % M;  // sample m of batch s / M
+      if (m == 0) {
+        shift_u = shift_rng.Uniform();
+        shift_v = shift_rng.Uniform();
+        if (M > 1) strata.Reset(M, shift_rng);
+      }
+      FirstVertexU first;
+      if (M > 1) {
+        strata.Get(0, m, 0, first.bsdf);
+        strata.Get(1, m, 0, first.bsdf + 2);
+        for (int k = 0; k < env_samples; ++k) strata.Get(2, m, k, first.env + 2 * k);
+      }
+      Pcg32 rng = PixelSampler(st.seed, pix, uint64_t(s));
+      double ju = (m + 0.5) / M + shift_u, jv = RadicalInverse2(uint32_t(m)) + shift_v;
+      ju -= std::floor(ju);
+      jv -= std::floor(jv);
+      if (M == 1) {
+        ju = rng.Uniform();
+        jv = rng.Uniform();
+      }
+      A3 org, dir;
+      scene.CameraRay(x + ju, y + jv, org, dir);
+      const SampleOut so =
+          TracePath(V(org), V(dir), rng, M > 1 ? &first : nullptr, env_samples, st, rays);
+      est.Add(so, m, M, st.max_sample_value);
+    }
+    est.Store(pix, plan.K, st.spp, st.aovs, r);
+  }
+
+  // The pixels of tile `tile` (row-major, tiles_x per row); returns the rays traced.
+  uint64_t RenderTile(const RenderSettings& st, const SamplingPlan& plan, int tile, int tiles_x,
+                      RenderResult& r) const {
+    const int W = scene.card.width, H = scene.card.height;
+    const int tx = tile % tiles_x, ty = tile / tiles_x;
+    uint64_t rays = 0;
+    BatchStrata strata({{2, 1}, {1, 1}, {2, plan.env_samples}});
+    for (int y = ty * st.tile_size; y < std::min(H, (ty + 1) * st.tile_size); ++y) {
+      for (int x = tx * st.tile_size; x < std::min(W, (tx + 1) * st.tile_size); ++x) {
+        RenderPixel(st, plan, x, y, strata, rays, r);
+      }
+    }
+    return rays;
   }
 };
 
@@ -262,26 +484,15 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   const auto t0 = std::chrono::steady_clock::now();
   const Scene& scene = impl_->scene;
   const int W = scene.card.width, H = scene.card.height;
-  RenderResult r;
-  r.width = W;
-  r.height = H;
-  const size_t np = size_t(W) * size_t(H);
-  r.rgb.assign(np * 3, 0.f);
-  r.std_error.assign(np * 3, 0.f);
-  r.coverage.assign(np, 0.f);
-  r.fabric.assign(np, 0.f);
-  if (st.aovs.normal) r.normal.assign(np * 3, 0.f);
-  if (st.aovs.position) r.position.assign(np * 3, 0.f);
-  if (st.aovs.tangent) r.tangent.assign(np * 3, 0.f);
-  if (st.aovs.uv) r.uv.assign(np * 2, 0.f);
-  if (st.aovs.depth) r.depth.assign(np, 0.f);
+  RenderResult r = AllocateResult(W, H, st.aovs);
 
   // Batches for the standard-error estimate: K = 16 batches of M = spp / 16 stratified
   // samples when spp is a multiple of 16 (>= 32), else K = spp batches of one i.i.d. sample.
-  const int K = (st.spp >= 32 && st.spp % 16 == 0) ? 16 : st.spp;
-  const int M = st.spp / K;
-  r.batches = K;
-  const int env_samples = std::clamp(st.first_env_samples, 1, Impl::kMaxFirstEnvSamples);
+  SamplingPlan plan;
+  plan.K = (st.spp >= 32 && st.spp % 16 == 0) ? 16 : st.spp;
+  plan.M = st.spp / plan.K;
+  r.batches = plan.K;
+  plan.env_samples = std::clamp(st.first_env_samples, 1, kMaxFirstEnvSamples);
   const int tiles_x = (W + st.tile_size - 1) / st.tile_size;
   const int tiles_y = (H + st.tile_size - 1) / st.tile_size;
   const int tiles = tiles_x * tiles_y;
@@ -290,104 +501,7 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   std::mutex progress_mutex;
 
   tbb::parallel_for(0, tiles, [&](int tile) {
-    const int tx = tile % tiles_x, ty = tile / tiles_x;
-    uint64_t rays = 0;
-    BatchStrata strata({{2, 1}, {1, 1}, {2, env_samples}});
-    for (int y = ty * st.tile_size; y < std::min(H, (ty + 1) * st.tile_size); ++y) {
-      for (int x = tx * st.tile_size; x < std::min(W, (tx + 1) * st.tile_size); ++x) {
-        const size_t pix = size_t(y) * size_t(W) + size_t(x);
-        double mean[3] = {0, 0, 0}, m2[3] = {0, 0, 0};
-        int hits = 0, fabric_hits = 0;
-        double aov_n[3] = {0, 0, 0}, aov_p[3] = {0, 0, 0}, aov_t[3] = {0, 0, 0}, aov_uv[2] = {0, 0};
-        double aov_z = 0.0;
-        // Pixel positions: K independently shifted copies (Cranley-Patterson rotations) of
-        // an M-point stratified set (Hammersley), K x M = spp. Each batch's mean is an
-        // unbiased estimate and the K batch means are i.i.d., so the standard error is
-        // estimated from their spread: stratification lowers the error (the weave's
-        // sub-pixel structure is antialiased far better than by i.i.d. jitter) and the
-        // estimate of it stays honest.
-        double batch_sum[3] = {0, 0, 0};
-        int batch_count = 0;
-        Pcg32 shift_rng = PixelSampler(st.seed ^ 0xA5A5A5A5DEADBEEFull, pix, 0);
-        double shift_u = 0.0, shift_v = 0.0;
-        for (int s = 0; s < st.spp; ++s) {
-          const int m = s % M, b = s / M;  // sample m of batch b
-          if (m == 0) {
-            shift_u = shift_rng.Uniform();
-            shift_v = shift_rng.Uniform();
-            if (M > 1) strata.Reset(M, shift_rng);
-          }
-          Impl::FirstVertexU first;
-          if (M > 1) {
-            strata.Get(0, m, 0, first.bsdf);
-            strata.Get(1, m, 0, first.bsdf + 2);
-            for (int k = 0; k < env_samples; ++k) strata.Get(2, m, k, first.env + 2 * k);
-          }
-          Pcg32 rng = PixelSampler(st.seed, pix, uint64_t(s));
-          double ju = (m + 0.5) / M + shift_u, jv = RadicalInverse2(uint32_t(m)) + shift_v;
-          ju -= std::floor(ju);
-          jv -= std::floor(jv);
-          if (M == 1) {
-            ju = rng.Uniform();
-            jv = rng.Uniform();
-          }
-          A3 org, dir;
-          scene.CameraRay(x + ju, y + jv, org, dir);
-          Impl::SampleOut so = impl_->TracePath(V(org), V(dir), rng, M > 1 ? &first : nullptr,
-                                                env_samples, st, rays);
-          double v[3] = {so.L.r, so.L.g, so.L.b};
-          for (int c = 0; c < 3; ++c) {
-            if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel
-            if (st.max_sample_value > 0.0) v[c] = std::min(v[c], st.max_sample_value);
-            batch_sum[c] += v[c];
-          }
-          if (m == M - 1) {  // batch complete: Welford over batch means
-            ++batch_count;
-            for (int c = 0; c < 3; ++c) {
-              const double bm = batch_sum[c] / M;
-              const double delta = bm - mean[c];
-              mean[c] += delta / batch_count;
-              m2[c] += delta * (bm - mean[c]);
-              batch_sum[c] = 0.0;
-            }
-          }
-          (void)b;
-          if (so.hit) {
-            ++hits;
-            if (so.fabric) ++fabric_hits;
-            for (int c = 0; c < 3; ++c) {
-              aov_n[c] += so.first.normal[size_t(c)];
-              aov_p[c] += so.first.position[size_t(c)];
-              aov_t[c] += so.first.tangent[size_t(c)];
-            }
-            aov_uv[0] += so.first.uv[0];
-            aov_uv[1] += so.first.uv[1];
-            aov_z += so.depth;
-          }
-        }
-        for (int c = 0; c < 3; ++c) {
-          r.rgb[pix * 3 + size_t(c)] = float(mean[c]);
-          const double var = K > 1 ? m2[c] / (K - 1) : 0.0;  // variance of one batch mean
-          r.std_error[pix * 3 + size_t(c)] = float(std::sqrt(var / K));
-        }
-        r.coverage[pix] = float(hits) / float(st.spp);
-        r.fabric[pix] = float(fabric_hits) / float(st.spp);
-        if (hits > 0) {
-          const double inv = 1.0 / hits;
-          for (int c = 0; c < 3; ++c) {
-            if (st.aovs.normal) r.normal[pix * 3 + size_t(c)] = float(aov_n[c] * inv);
-            if (st.aovs.position) r.position[pix * 3 + size_t(c)] = float(aov_p[c] * inv);
-            if (st.aovs.tangent) r.tangent[pix * 3 + size_t(c)] = float(aov_t[c] * inv);
-          }
-          if (st.aovs.uv) {
-            r.uv[pix * 2] = float(aov_uv[0] * inv);
-            r.uv[pix * 2 + 1] = float(aov_uv[1] * inv);
-          }
-          if (st.aovs.depth) r.depth[pix] = float(aov_z * inv);
-        }
-      }
-    }
-    total_rays += rays;
+    total_rays += impl_->RenderTile(st, plan, tile, tiles_x, r);
     const int d = ++done;
     if (progress) {
       std::lock_guard<std::mutex> lock(progress_mutex);
@@ -397,24 +511,7 @@ RenderResult PathTracer::Render(const RenderSettings& st,
 
   r.rays = total_rays.load();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  double se_sum = 0.0, v_sum = 0.0, rel_sum = 0.0;
-  size_t rel_n = 0;
-  for (size_t p = 0; p < np; ++p) {
-    double v = 0.0, se = 0.0;
-    for (int c = 0; c < 3; ++c) {
-      v += double(r.rgb[p * 3 + size_t(c)]);
-      se += double(r.std_error[p * 3 + size_t(c)]);
-    }
-    se_sum += se;
-    v_sum += v;
-    if (r.coverage[p] > 0.0f && v > 1e-6) {
-      rel_sum += se / v;
-      ++rel_n;
-    }
-  }
-  r.mean_std_error = se_sum / double(np * 3);
-  r.mean_value = v_sum / double(np * 3);
-  r.mean_relative_std_error = rel_n ? rel_sum / double(rel_n) : 0.0;
+  Summarize(&r);
   return r;
 }
 

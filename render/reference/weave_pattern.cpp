@@ -165,8 +165,12 @@ void ValidateWeave(const WeavePattern& p, const std::string& context) {
   DeriveSegmentCentres(&copy, context);
 }
 
-WeavePattern ParseWeave(std::string_view text, const std::string& source) {
-  WeavePattern p;
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// ParseWeave's steps: one function per keyword, then the checks after the last line.
+
+std::vector<std::string_view> SplitLines(std::string_view text) {
   std::vector<std::string_view> lines;
   for (size_t start = 0; start <= text.size();) {
     size_t end = text.find('\n', start);
@@ -174,175 +178,193 @@ WeavePattern ParseWeave(std::string_view text, const std::string& source) {
     lines.push_back(text.substr(start, end - start));
     start = end + 1;
   }
+  return lines;
+}
+
+// What ParseWeave has gathered so far, line by line.
+struct WeaveDraft {
+  WeavePattern p;
   std::map<std::string, int> seen;            // keyword -> line
   std::map<int, std::pair<Yarn, int>> yarns;  // id -> (yarn, line)
   std::map<int, std::pair<double, double>> given_centres;
   bool header = false;
   int pattern_line = 0;
-  const auto fields = ScalarFields();
-  for (size_t li = 0; li < lines.size(); ++li) {
-    const int line_no = int(li) + 1;
-    const std::string where = Located(source, line_no);
-    const auto tok = Tokens(lines[li]);
-    if (tok.empty()) continue;
-    const std::string key(tok[0]);
-    if (!header) {
-      if (key != "clothfit-weave" || tok.size() != 2 || tok[1] != "1") {
-        Fail(where, "expected the header 'clothfit-weave 1'");
-      }
-      header = true;
-      continue;
+};
+
+// "name <text>": the rest of the line, blanks trimmed (the name may contain blanks).
+void ParseNameLine(std::string_view line, const std::string& where, WeavePattern* p) {
+  std::string_view rest = line.substr(line.find("name") + 4);
+  while (!rest.empty() && (rest.front() == ' ' || rest.front() == '\t')) rest.remove_prefix(1);
+  while (!rest.empty() && (rest.back() == ' ' || rest.back() == '\r')) rest.remove_suffix(1);
+  p->name = std::string(rest);
+  if (p->name.find('#') != std::string::npos) Fail(where, "name must not contain '#'");
+}
+
+// "tile <width> <height>".
+void ParseTileLine(const std::vector<std::string_view>& tok, const std::string& where,
+                   WeavePattern* p) {
+  if (tok.size() != 3) Fail(where, "expected 'tile <width> <height>'");
+  p->tile_width = ParseInt(tok[1], where, "tile width");
+  p->tile_height = ParseInt(tok[2], where, "tile height");
+  if (p->tile_width < 1 || p->tile_height < 1 || p->tile_width > 256 || p->tile_height > 256) {
+    Fail(where, "tile size must be in [1, 256] x [1, 256]");
+  }
+}
+
+// "pattern" and the tile_height non-blank rows after it; *li ends on the last row read.
+void ParsePatternBlock(const std::vector<std::string_view>& lines, const std::string& source,
+                       const std::vector<std::string_view>& tok, const std::string& where,
+                       size_t* li, WeaveDraft* d) {
+  WeavePattern& p = d->p;
+  if (tok.size() != 1) Fail(where, "'pattern' takes no values; rows follow on the next lines");
+  if (p.tile_width == 0) Fail(where, "'tile' must come before 'pattern'");
+  d->pattern_line = int(*li) + 1;
+  int rows = 0;
+  while (rows < p.tile_height) {
+    ++*li;
+    if (*li >= lines.size()) {
+      Fail(Located(source, int(*li)), "pattern ends after " + std::to_string(rows) +
+                                          " rows; expected " + std::to_string(p.tile_height));
     }
-    if (key != "yarn") {
-      if (seen.count(key)) {
-        Fail(where, "duplicate '" + key + "' (first on line " + std::to_string(seen[key]) + ")");
-      }
-      seen[key] = line_no;
+    const std::string row_where = Located(source, int(*li) + 1);
+    const auto row = Tokens(lines[*li]);
+    if (row.empty()) continue;
+    if (int(row.size()) != p.tile_width) {
+      Fail(row_where, "pattern row has " + std::to_string(row.size()) + " ids; expected " +
+                          std::to_string(p.tile_width));
     }
-    if (key == "name") {
-      std::string_view rest = lines[li].substr(lines[li].find("name") + 4);
-      while (!rest.empty() && (rest.front() == ' ' || rest.front() == '\t')) rest.remove_prefix(1);
-      while (!rest.empty() && (rest.back() == ' ' || rest.back() == '\r')) rest.remove_suffix(1);
-      p.name = std::string(rest);
-      if (p.name.find('#') != std::string::npos) Fail(where, "name must not contain '#'");
-      continue;
+    for (const auto& t : row) {
+      const int id = ParseInt(t, row_where, "a yarn id");
+      if (id < 1) Fail(row_where, "yarn ids are 1-based; got " + std::to_string(id));
+      p.pattern.push_back(id);
     }
-    if (key == "tile") {
-      if (tok.size() != 3) Fail(where, "expected 'tile <width> <height>'");
-      p.tile_width = ParseInt(tok[1], where, "tile width");
-      p.tile_height = ParseInt(tok[2], where, "tile height");
-      if (p.tile_width < 1 || p.tile_height < 1 || p.tile_width > 256 || p.tile_height > 256) {
-        Fail(where, "tile size must be in [1, 256] x [1, 256]");
-      }
-      continue;
+    ++rows;
+  }
+}
+
+// The "<field> <values...>" pairs of a yarn line from token 3 on; a "center" goes to
+// *given_centres (checked against the pattern once it is known).
+void ParseYarnFields(const std::vector<std::string_view>& tok, const std::string& where, int id,
+                     Yarn* y, std::map<int, std::pair<double, double>>* given_centres) {
+  std::map<std::string, bool> got;
+  size_t i = 3;
+  auto need = [&](size_t n_values, const std::string& k) {
+    if (i + n_values >= tok.size()) {
+      Fail(where, "'" + k + "' needs " + std::to_string(n_values) + " value(s)");
     }
-    if (key == "pattern") {
-      if (tok.size() != 1) Fail(where, "'pattern' takes no values; rows follow on the next lines");
-      if (p.tile_width == 0) Fail(where, "'tile' must come before 'pattern'");
-      pattern_line = line_no;
-      int rows = 0;
-      while (rows < p.tile_height) {
-        ++li;
-        if (li >= lines.size()) {
-          Fail(Located(source, int(li)), "pattern ends after " + std::to_string(rows) +
-                                             " rows; expected " + std::to_string(p.tile_height));
-        }
-        const std::string row_where = Located(source, int(li) + 1);
-        const auto row = Tokens(lines[li]);
-        if (row.empty()) continue;
-        if (int(row.size()) != p.tile_width) {
-          Fail(row_where, "pattern row has " + std::to_string(row.size()) + " ids; expected " +
-                              std::to_string(p.tile_width));
-        }
-        for (const auto& t : row) {
-          const int id = ParseInt(t, row_where, "a yarn id");
-          if (id < 1) Fail(row_where, "yarn ids are 1-based; got " + std::to_string(id));
-          p.pattern.push_back(id);
-        }
-        ++rows;
-      }
-      continue;
-    }
-    if (key == "yarn") {
-      if (tok.size() < 3) Fail(where, "expected 'yarn <id> warp|weft ...'");
-      const int id = ParseInt(tok[1], where, "the yarn id");
-      if (id < 1) Fail(where, "yarn ids are 1-based; got " + std::to_string(id));
-      if (yarns.count(id)) {
-        Fail(where, "duplicate yarn " + std::to_string(id) + " (first on line " +
-                        std::to_string(yarns[id].second) + ")");
-      }
-      Yarn y;
-      if (tok[2] == "warp") {
-        y.type = YarnType::kWarp;
-      } else if (tok[2] == "weft") {
-        y.type = YarnType::kWeft;
-      } else {
-        Fail(where, "yarn type must be 'warp' or 'weft', got '" + std::string(tok[2]) + "'");
-      }
-      std::map<std::string, bool> got;
-      size_t i = 3;
-      auto need = [&](size_t n_values, const std::string& k) {
-        if (i + n_values >= tok.size()) {
-          Fail(where, "'" + k + "' needs " + std::to_string(n_values) + " value(s)");
-        }
-      };
-      while (i < tok.size()) {
-        const std::string k(tok[i]);
-        if (got.count(k)) Fail(where, "duplicate yarn field '" + k + "'");
-        got[k] = true;
-        if (k == "psi" || k == "umax" || k == "kappa" || k == "width" || k == "length") {
-          need(1, k);
-          const double v = ParseDouble(tok[i + 1], where, k);
-          if (k == "psi") y.psi = v;
-          if (k == "umax") y.umax = v;
-          if (k == "kappa") y.kappa = v;
-          if (k == "width") y.width = v;
-          if (k == "length") y.length = v;
-          i += 2;
-        } else if (k == "kd" || k == "ks") {
-          need(3, k);
-          Rgb<double> c(ParseDouble(tok[i + 1], where, k), ParseDouble(tok[i + 2], where, k),
-                        ParseDouble(tok[i + 3], where, k));
-          (k == "kd" ? y.kd : y.ks) = c;
-          i += 4;
-        } else if (k == "center") {
-          need(2, k);
-          given_centres[id] = {ParseDouble(tok[i + 1], where, k),
-                               ParseDouble(tok[i + 2], where, k)};
-          i += 3;
-        } else {
-          Fail(where,
-               "unknown yarn field '" + k + "' (valid: psi umax kappa width length kd ks center)");
-        }
-      }
-      for (const char* k : {"psi", "umax", "kappa", "width", "length", "kd", "ks"}) {
-        if (!got.count(k)) Fail(where, std::string("yarn is missing '") + k + "'");
-      }
-      ValidateYarn(y, where);
-      yarns[id] = {y, line_no};
-      continue;
-    }
-    bool found = false;
-    for (const auto& [name, member] : fields) {
-      if (key == name) {
-        if (tok.size() != 2) Fail(where, "expected '" + key + " <value>'");
-        p.*member = ParseDouble(tok[1], where, key);
-        found = true;
-      }
-    }
-    if (!found) {
-      Fail(where, "unknown keyword '" + key +
-                      "' (valid: name, tile, pattern, yarn and the weave constants)");
+  };
+  while (i < tok.size()) {
+    const std::string k(tok[i]);
+    if (got.count(k)) Fail(where, "duplicate yarn field '" + k + "'");
+    got[k] = true;
+    if (k == "psi" || k == "umax" || k == "kappa" || k == "width" || k == "length") {
+      need(1, k);
+      const double v = ParseDouble(tok[i + 1], where, k);
+      if (k == "psi") y->psi = v;
+      if (k == "umax") y->umax = v;
+      if (k == "kappa") y->kappa = v;
+      if (k == "width") y->width = v;
+      if (k == "length") y->length = v;
+      i += 2;
+    } else if (k == "kd" || k == "ks") {
+      need(3, k);
+      Rgb<double> c(ParseDouble(tok[i + 1], where, k), ParseDouble(tok[i + 2], where, k),
+                    ParseDouble(tok[i + 3], where, k));
+      (k == "kd" ? y->kd : y->ks) = c;
+      i += 4;
+    } else if (k == "center") {
+      need(2, k);
+      (*given_centres)[id] = {ParseDouble(tok[i + 1], where, k), ParseDouble(tok[i + 2], where, k)};
+      i += 3;
+    } else {
+      Fail(where,
+           "unknown yarn field '" + k + "' (valid: psi umax kappa width length kd ks center)");
     }
   }
-  if (!header) Fail(Located(source, 1), "empty file; expected the header 'clothfit-weave 1'");
-  const std::string end_where = Located(source, int(lines.size()));
+  for (const char* k : {"psi", "umax", "kappa", "width", "length", "kd", "ks"}) {
+    if (!got.count(k)) Fail(where, std::string("yarn is missing '") + k + "'");
+  }
+}
+
+// "yarn <id> warp|weft <fields...>".
+void ParseYarnLine(const std::vector<std::string_view>& tok, const std::string& where, int line_no,
+                   WeaveDraft* d) {
+  if (tok.size() < 3) Fail(where, "expected 'yarn <id> warp|weft ...'");
+  const int id = ParseInt(tok[1], where, "the yarn id");
+  if (id < 1) Fail(where, "yarn ids are 1-based; got " + std::to_string(id));
+  if (d->yarns.count(id)) {
+    Fail(where, "duplicate yarn " + std::to_string(id) + " (first on line " +
+                    std::to_string(d->yarns[id].second) + ")");
+  }
+  Yarn y;
+  if (tok[2] == "warp") {
+    y.type = YarnType::kWarp;
+  } else if (tok[2] == "weft") {
+    y.type = YarnType::kWeft;
+  } else {
+    Fail(where, "yarn type must be 'warp' or 'weft', got '" + std::string(tok[2]) + "'");
+  }
+  ParseYarnFields(tok, where, id, &y, &d->given_centres);
+  ValidateYarn(y, where);
+  d->yarns[id] = {y, line_no};
+}
+
+// "<constant> <value>" for one of ScalarFields(); any other keyword is an error.
+void ParseScalarLine(const std::vector<std::pair<const char*, double WeavePattern::*>>& fields,
+                     const std::string& key, const std::vector<std::string_view>& tok,
+                     const std::string& where, WeavePattern* p) {
+  bool found = false;
   for (const auto& [name, member] : fields) {
-    if (Required(name) && !seen.count(name)) Fail(end_where, std::string("missing '") + name + "'");
+    if (key == name) {
+      if (tok.size() != 2) Fail(where, "expected '" + key + " <value>'");
+      p->*member = ParseDouble(tok[1], where, key);
+      found = true;
+    }
   }
-  if (!seen.count("tile")) Fail(end_where, "missing 'tile'");
-  if (!seen.count("pattern")) Fail(end_where, "missing 'pattern'");
-  if (yarns.empty()) Fail(end_where, "no 'yarn' lines");
-  for (int id = 1; id <= int(yarns.size()); ++id) {
-    if (!yarns.count(id)) {
-      Fail(end_where, "yarn ids must be 1.." + std::to_string(yarns.size()) + "; " +
+  if (!found) {
+    Fail(where, "unknown keyword '" + key +
+                    "' (valid: name, tile, pattern, yarn and the weave constants)");
+  }
+}
+
+// After the last line: every required keyword given, yarn ids 1..n without gaps; moves the
+// yarns into d->p in id order.
+void CheckAllKeysGiven(const std::vector<std::pair<const char*, double WeavePattern::*>>& fields,
+                       const std::string& end_where, WeaveDraft* d) {
+  for (const auto& [name, member] : fields) {
+    if (Required(name) && !d->seen.count(name)) {
+      Fail(end_where, std::string("missing '") + name + "'");
+    }
+  }
+  if (!d->seen.count("tile")) Fail(end_where, "missing 'tile'");
+  if (!d->seen.count("pattern")) Fail(end_where, "missing 'pattern'");
+  if (d->yarns.empty()) Fail(end_where, "no 'yarn' lines");
+  for (int id = 1; id <= int(d->yarns.size()); ++id) {
+    if (!d->yarns.count(id)) {
+      Fail(end_where, "yarn ids must be 1.." + std::to_string(d->yarns.size()) + "; " +
                           std::to_string(id) + " is missing");
     }
-    p.yarns.push_back(yarns[id].first);
+    d->p.yarns.push_back(d->yarns[id].first);
   }
-  // Whole-weave checks report the pattern's line (ids, rectangles) or the keyword's line.
-  const std::string pat_where = Located(source, pattern_line);
-  DeriveSegmentCentres(&p, pat_where);
-  for (const auto& [id, c] : given_centres) {
-    const Yarn& y = p.yarns[size_t(id - 1)];
+}
+
+// A yarn's optional "center" must agree with the centre derived from the pattern.
+void CheckGivenCentres(const WeaveDraft& d, const std::string& source) {
+  for (const auto& [id, c] : d.given_centres) {
+    const Yarn& y = d.p.yarns[size_t(id - 1)];
     if (std::abs(c.first - y.center_u) > 1e-9 || std::abs(c.second - y.center_v) > 1e-9) {
-      Fail(Located(source, yarns[id].second),
+      Fail(Located(source, d.yarns.at(id).second),
            "center (" + Num(c.first) + ", " + Num(c.second) + ") disagrees with the centre " +
                "derived from the pattern (" + Num(y.center_u) + ", " + Num(y.center_v) + ")");
     }
   }
+}
+
+// Ranges of the weave constants, each reported on its keyword's line (or the last line).
+void CheckWeaveConstants(const WeaveDraft& d, const std::string& source, int n_lines) {
+  const WeavePattern& p = d.p;
   auto line_of = [&](const std::string& k) {
-    return Located(source, seen.count(k) ? seen[k] : int(lines.size()));
+    return Located(source, d.seen.count(k) ? d.seen.at(k) : n_lines);
   };
   if (!(p.alpha >= 0.0)) Fail(line_of("alpha"), "alpha must be >= 0");
   if (std::abs(p.beta) > 100.0) Fail(line_of("beta"), "beta must be in [-100, 100]");
@@ -352,8 +374,53 @@ WeavePattern ParseWeave(std::string_view text, const std::string& source) {
   if (!(p.period >= 0.0)) Fail(line_of("period"), "period must be >= 0");
   if (!(p.warp_area > 0.0)) Fail(line_of("warpArea"), "warpArea must be > 0");
   if (!(p.weft_area > 0.0)) Fail(line_of("weftArea"), "weftArea must be > 0");
-  ValidateWeave(p, Located(source, 1));
-  return p;
+}
+
+}  // namespace
+
+WeavePattern ParseWeave(std::string_view text, const std::string& source) {
+  const std::vector<std::string_view> lines = SplitLines(text);
+  WeaveDraft d;
+  const auto fields = ScalarFields();
+  for (size_t li = 0; li < lines.size(); ++li) {
+    const int line_no = int(li) + 1;
+    const std::string where = Located(source, line_no);
+    const auto tok = Tokens(lines[li]);
+    if (tok.empty()) continue;
+    const std::string key(tok[0]);
+    if (!d.header) {
+      if (key != "clothfit-weave" || tok.size() != 2 || tok[1] != "1") {
+        Fail(where, "expected the header 'clothfit-weave 1'");
+      }
+      d.header = true;
+      continue;
+    }
+    if (key != "yarn") {
+      if (d.seen.count(key)) {
+        Fail(where, "duplicate '" + key + "' (first on line " + std::to_string(d.seen[key]) + ")");
+      }
+      d.seen[key] = line_no;
+    }
+    if (key == "name") {
+      ParseNameLine(lines[li], where, &d.p);
+    } else if (key == "tile") {
+      ParseTileLine(tok, where, &d.p);
+    } else if (key == "pattern") {
+      ParsePatternBlock(lines, source, tok, where, &li, &d);
+    } else if (key == "yarn") {
+      ParseYarnLine(tok, where, line_no, &d);
+    } else {
+      ParseScalarLine(fields, key, tok, where, &d.p);
+    }
+  }
+  if (!d.header) Fail(Located(source, 1), "empty file; expected the header 'clothfit-weave 1'");
+  CheckAllKeysGiven(fields, Located(source, int(lines.size())), &d);
+  // Whole-weave checks report the pattern's line (ids, rectangles) or the keyword's line.
+  DeriveSegmentCentres(&d.p, Located(source, d.pattern_line));
+  CheckGivenCentres(d, source);
+  CheckWeaveConstants(d, source, int(lines.size()));
+  ValidateWeave(d.p, Located(source, 1));
+  return d.p;
 }
 
 WeavePattern LoadWeave(const std::string& path) {

@@ -82,9 +82,8 @@ double Number(const json& v, const std::string& where, const std::string& field)
   return x;
 }
 
-}  // namespace
-
-MaterialPreset ParsePreset(const json& j, const std::string& where) {
+// "schema", "version" and "model": the model's default preset.
+MaterialPreset ParsePresetHeader(const json& j, const std::string& where) {
   if (!j.is_object()) Fail(where, "(top level)", "expected a JSON object");
   if (!j.contains("schema") || j["schema"] != "clothfit.preset")
     Fail(where, "schema", "expected \"clothfit.preset\"");
@@ -92,86 +91,104 @@ MaterialPreset ParsePreset(const json& j, const std::string& where) {
     Fail(where, "version", "missing or not an integer");
   if (j["version"].get<int>() != 1)
     Fail(where, "version", "unsupported version " + j["version"].dump() + " (this build reads 1)");
-  if (!j.contains("model") || !j["model"].is_string()) Fail(where, "model", "missing or not a string");
+  if (!j.contains("model") || !j["model"].is_string())
+    Fail(where, "model", "missing or not a string");
   MaterialPreset p;
   try {
     p = DefaultPreset(ParseModelKind(j["model"].get<std::string>()));
   } catch (const std::invalid_argument& e) {
     Fail(where, "model", e.what());
   }
+  return p;
+}
+
+// The "cloth" object: the cloth model's variant and options.
+void ParseClothOptions(const json& c, const std::string& where, cloth::Options* o) {
+  if (!c.is_object()) Fail(where, "cloth", "expected an object");
+  for (auto it = c.begin(); it != c.end(); ++it) {
+    const std::string k = it.key();
+    const std::string f = "cloth." + k;
+    if (k == "variant") {
+      const std::string v = it->is_string() ? it->get<std::string>() : "";
+      if (v == "filament") o->variant = cloth::Variant::kFilament;
+      else if (v == "seed-threejs") o->variant = cloth::Variant::kSeedThreejs;
+      else Fail(where, f, "expected \"filament\" or \"seed-threejs\"");
+    } else if (k == "sheen_default") {
+      const std::string v = it->is_string() ? it->get<std::string>() : "";
+      if (v == "explicit") o->sheen_default = cloth::SheenDefault::kExplicit;
+      else if (v == "sqrt-base-color") o->sheen_default = cloth::SheenDefault::kSqrtBaseColor;
+      else if (v == "white") o->sheen_default = cloth::SheenDefault::kWhite;
+      else Fail(where, f, "expected \"explicit\", \"sqrt-base-color\" or \"white\"");
+    } else if (k == "subsurface") {
+      if (!it->is_boolean()) Fail(where, f, "expected true or false");
+      o->subsurface = it->get<bool>();
+    } else if (k == "platform") {
+      const std::string v = it->is_string() ? it->get<std::string>() : "";
+      if (v == "desktop") o->platform = Platform::kDesktop;
+      else if (v == "mobile") o->platform = Platform::kMobile;
+      else Fail(where, f, "expected \"desktop\" or \"mobile\"");
+    } else {
+      Fail(where, f, "unknown key (valid: variant, sheen_default, subsurface, platform)");
+    }
+  }
+}
+
+// One entry of "parameters": looked up in the model's table, range-checked, stored in p->values.
+void ParseParameter(const std::string& name, const json& value, const std::string& where,
+                    MaterialPreset* p) {
+  const auto table = ParameterTable(p->model);
+  const std::string f = "parameters." + name;
+  int off = 0;
+  const ParamInfo* info = nullptr;
+  for (const ParamInfo& q : table) {
+    if (q.name == name) {
+      info = &q;
+      break;
+    }
+    off += q.size;
+  }
+  if (!info) {
+    std::string valid;
+    for (const ParamInfo& q : table) valid += (valid.empty() ? "" : ", ") + std::string(q.name);
+    Fail(where, f, "unknown parameter for model " + ToString(p->model) + " (valid: " + valid + ")");
+  }
+  std::vector<double> v;
+  if (info->size == 1) {
+    v.push_back(Number(value, where, f));
+  } else {
+    if (!value.is_array() || value.size() != size_t(info->size))
+      Fail(where, f, "expected an array of " + std::to_string(info->size) + " numbers");
+    for (size_t c = 0; c < value.size(); ++c)
+      v.push_back(Number(value[c], where, f + "[" + std::to_string(c) + "]"));
+  }
+  // Colours and metalness must be in range; roughness values may be given below the
+  // engine clamp (the engine clamps them), but not outside [0, 1].
+  const bool is_roughness = name.find("roughness") != std::string::npos;
+  const double lo = is_roughness ? 0.0 : info->lower;
+  for (size_t c = 0; c < v.size(); ++c) {
+    if (v[c] < lo || v[c] > info->upper) {
+      std::ostringstream os;
+      os << "value " << v[c] << " outside [" << lo << ", " << info->upper << "]";
+      Fail(where, info->size == 1 ? f : f + "[" + std::to_string(c) + "]", os.str());
+    }
+    p->values[size_t(off) + c] = v[c];
+  }
+}
+
+}  // namespace
+
+MaterialPreset ParsePreset(const json& j, const std::string& where) {
+  MaterialPreset p = ParsePresetHeader(j, where);
   if (j.contains("cloth")) {
     if (p.model != ModelKind::kCloth) Fail(where, "cloth", "only allowed with model \"cloth\"");
-    const json& c = j["cloth"];
-    if (!c.is_object()) Fail(where, "cloth", "expected an object");
-    for (auto it = c.begin(); it != c.end(); ++it) {
-      const std::string k = it.key();
-      const std::string f = "cloth." + k;
-      if (k == "variant") {
-        const std::string v = it->is_string() ? it->get<std::string>() : "";
-        if (v == "filament") p.cloth.variant = cloth::Variant::kFilament;
-        else if (v == "seed-threejs") p.cloth.variant = cloth::Variant::kSeedThreejs;
-        else Fail(where, f, "expected \"filament\" or \"seed-threejs\"");
-      } else if (k == "sheen_default") {
-        const std::string v = it->is_string() ? it->get<std::string>() : "";
-        if (v == "explicit") p.cloth.sheen_default = cloth::SheenDefault::kExplicit;
-        else if (v == "sqrt-base-color") p.cloth.sheen_default = cloth::SheenDefault::kSqrtBaseColor;
-        else if (v == "white") p.cloth.sheen_default = cloth::SheenDefault::kWhite;
-        else Fail(where, f, "expected \"explicit\", \"sqrt-base-color\" or \"white\"");
-      } else if (k == "subsurface") {
-        if (!it->is_boolean()) Fail(where, f, "expected true or false");
-        p.cloth.subsurface = it->get<bool>();
-      } else if (k == "platform") {
-        const std::string v = it->is_string() ? it->get<std::string>() : "";
-        if (v == "desktop") p.cloth.platform = Platform::kDesktop;
-        else if (v == "mobile") p.cloth.platform = Platform::kMobile;
-        else Fail(where, f, "expected \"desktop\" or \"mobile\"");
-      } else {
-        Fail(where, f, "unknown key (valid: variant, sheen_default, subsurface, platform)");
-      }
-    }
+    ParseClothOptions(j["cloth"], where, &p.cloth);
   }
   if (!j.contains("parameters") || !j["parameters"].is_object())
     Fail(where, "parameters", "missing or not an object");
-  const auto table = ParameterTable(p.model);
   for (auto it = j["parameters"].begin(); it != j["parameters"].end(); ++it) {
-    const std::string name = it.key();
-    const std::string f = "parameters." + name;
-    int off = 0;
-    const ParamInfo* info = nullptr;
-    for (const ParamInfo& q : table) {
-      if (q.name == name) {
-        info = &q;
-        break;
-      }
-      off += q.size;
-    }
-    if (!info) {
-      std::string valid;
-      for (const ParamInfo& q : table) valid += (valid.empty() ? "" : ", ") + std::string(q.name);
-      Fail(where, f, "unknown parameter for model " + ToString(p.model) + " (valid: " + valid + ")");
-    }
-    std::vector<double> v;
-    if (info->size == 1) {
-      v.push_back(Number(*it, where, f));
-    } else {
-      if (!it->is_array() || it->size() != size_t(info->size))
-        Fail(where, f, "expected an array of " + std::to_string(info->size) + " numbers");
-      for (size_t c = 0; c < it->size(); ++c)
-        v.push_back(Number((*it)[c], where, f + "[" + std::to_string(c) + "]"));
-    }
-    // Colours and metalness must be in range; roughness values may be given below the
-    // engine clamp (the engine clamps them), but not outside [0, 1].
-    const bool is_roughness = name.find("roughness") != std::string::npos;
-    const double lo = is_roughness ? 0.0 : info->lower;
-    for (size_t c = 0; c < v.size(); ++c) {
-      if (v[c] < lo || v[c] > info->upper) {
-        std::ostringstream os;
-        os << "value " << v[c] << " outside [" << lo << ", " << info->upper << "]";
-        Fail(where, info->size == 1 ? f : f + "[" + std::to_string(c) + "]", os.str());
-      }
-      p.values[size_t(off) + c] = v[c];
-    }
+    ParseParameter(it.key(), *it, where, &p);
   }
+  // Keys this build does not interpret are kept and written back (PresetToJson).
   static const char* kKnown[] = {"schema", "version", "model", "engine", "cloth", "conventions",
                                  "parameters"};
   for (auto it = j.begin(); it != j.end(); ++it) {

@@ -226,6 +226,7 @@ class FieldReader {
   }
 
   const Json& object() const { return object_; }
+  const std::string& file() const { return file_; }
 
  private:
   const std::string& file_;
@@ -481,6 +482,175 @@ std::vector<std::array<float, 4>> GenerateTangents(const Mesh& m) {
   return out;
 }
 
+// What the readers of one primitive's attributes share.
+struct PrimitiveInput {
+  const GltfContext& g;
+  const tinygltf::Primitive& prim;
+  const std::string& where;  // MeshWhere(...), for messages
+  size_t n;                  // vertex count (of POSITION)
+  const Mat4& world;
+  bool mirrored;  // det(world) < 0: winding flipped, normals and tangent signs negated
+};
+
+// Accessor index of attribute `name`, or -1.
+int AttributeIndex(const tinygltf::Primitive& prim, const char* name) {
+  const auto it = prim.attributes.find(name);
+  return it == prim.attributes.end() ? -1 : it->second;
+}
+
+void CheckCount(const PrimitiveInput& in, const char* name, size_t count) {
+  if (count != in.n) {
+    Fail(in.g.file, in.where,
+         std::string(name) + " has " + std::to_string(count) + " elements, POSITION has " +
+             std::to_string(in.n));
+  }
+}
+
+// Name, material index, fabric flag and base colour of a primitive's mesh.
+void ReadMeshMaterial(const GltfContext& g, const SceneCard& card, int mesh_index, int prim_index,
+                      const std::string& where, Mesh* mesh) {
+  const tinygltf::Model& model = g.model;
+  const tinygltf::Primitive& prim = model.meshes[mesh_index].primitives[prim_index];
+  const std::string& mesh_name = model.meshes[mesh_index].name;
+  mesh->name = mesh_name.empty() ? "mesh" + std::to_string(mesh_index) : mesh_name;
+  if (model.meshes[mesh_index].primitives.size() > 1)
+    mesh->name += "/" + std::to_string(prim_index);
+  mesh->material = prim.material;
+  if (mesh->material >= static_cast<int>(model.materials.size())) {
+    Fail(g.file, where, "material index " + std::to_string(mesh->material) + " out of range");
+  }
+  mesh->is_fabric = mesh->material >= 0 && mesh->material == card.fabric_material;
+  if (mesh->material >= 0) {
+    const auto& f = model.materials[mesh->material].pbrMetallicRoughness.baseColorFactor;
+    if (f.size() >= 3) {
+      for (int c = 0; c < 3; ++c) {
+        if (!std::isfinite(f[c]) || f[c] < 0) {
+          Fail(g.file, "materials[" + std::to_string(mesh->material) + "]",
+               "baseColorFactor must be finite and >= 0");
+        }
+        mesh->base_color[c] = static_cast<float>(f[c]);
+      }
+    }
+  } else {
+    mesh->base_color = {1.0f, 1.0f, 1.0f};  // glTF default material
+  }
+}
+
+// Indices (non-indexed: 0, 1, 2, ...), checked against the vertex count n.
+std::vector<uint32_t> ReadTriangleIndices(const GltfContext& g, const tinygltf::Primitive& prim,
+                                          const std::string& where, size_t n) {
+  std::vector<uint32_t> indices;
+  if (prim.indices >= 0) {
+    indices = ReadIndices(g, where, prim.indices);
+  } else {
+    indices.resize(n);
+    for (size_t i = 0; i < n; ++i) indices[i] = static_cast<uint32_t>(i);
+  }
+  if (indices.size() % 3 != 0) {
+    Fail(g.file, where,
+         "index count " + std::to_string(indices.size()) + " is not a multiple of 3");
+  }
+  for (uint32_t i : indices) {
+    if (i >= n) {
+      Fail(g.file, where, "index " + std::to_string(i) + " >= vertex count " + std::to_string(n));
+    }
+  }
+  return indices;
+}
+
+// NORMAL through the cofactor matrix; zero-length values, or all when NORMAL is absent,
+// replaced by smooth normals (needs mesh->positions and mesh->indices).
+void ReadNormals(const PrimitiveInput& in, Mesh* mesh, std::vector<std::string>& warnings) {
+  const GltfContext& g = in.g;
+  const size_t n = in.n;
+  std::vector<std::array<float, 3>> smooth;  // computed on demand
+  if (AttributeIndex(in.prim, "NORMAL") >= 0) {
+    const std::vector<float> nrm =
+        ReadFloats(g, in.where, "NORMAL", AttributeIndex(in.prim, "NORMAL"), 3, false);
+    CheckCount(in, "NORMAL", nrm.size() / 3);
+    const Mat4 cof = Cofactor3(in.world);
+    const double sign = in.mirrored ? -1.0 : 1.0;
+    mesh->normals.resize(n);
+    size_t repaired = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const V3 v = Scale(TransformVector(cof, {nrm[3 * i], nrm[3 * i + 1], nrm[3 * i + 2]}), sign);
+      if (Length(v) > 1e-20 && Finite(v)) {
+        mesh->normals[i] = ToFloat(NormalizeOr(v, {0, 1, 0}));
+      } else {
+        if (smooth.empty()) smooth = SmoothNormals(*mesh);
+        mesh->normals[i] = smooth[i];
+        ++repaired;
+      }
+    }
+    if (repaired > 0) {
+      warnings.push_back(g.file + ": " + in.where + ": " + std::to_string(repaired) +
+                         " zero-length NORMAL values replaced by computed smooth normals");
+    }
+  } else {
+    mesh->normals = SmoothNormals(*mesh);
+    warnings.push_back(g.file + ": " + in.where +
+                       ": no NORMAL attribute; computed smooth (area-weighted) normals");
+  }
+}
+
+// TEXCOORD_0; required on the fabric, (0, 0) elsewhere when absent.
+void ReadUvs(const PrimitiveInput& in, const SceneCard& card, Mesh* mesh) {
+  if (AttributeIndex(in.prim, "TEXCOORD_0") >= 0) {
+    const std::vector<float> uv =
+        ReadFloats(in.g, in.where, "TEXCOORD_0", AttributeIndex(in.prim, "TEXCOORD_0"), 2, true);
+    CheckCount(in, "TEXCOORD_0", uv.size() / 2);
+    mesh->uvs.resize(in.n);
+    for (size_t i = 0; i < in.n; ++i) mesh->uvs[i] = {uv[2 * i], uv[2 * i + 1]};
+  } else if (mesh->is_fabric) {
+    Fail(in.g.file, in.where,
+         "no TEXCOORD_0 attribute, but its material " + std::to_string(mesh->material) +
+             " is the fabric (scene card " + card.path +
+             ", field 'fabric_material'); the weave needs UVs");
+  } else {
+    mesh->uvs.assign(in.n, {0.0f, 0.0f});
+  }
+}
+
+// TANGENT, orthogonalised against the normal; degenerate values, or all when TANGENT is
+// absent, replaced by generated tangents (needs the mesh's positions, indices, normals, uvs).
+void ReadTangents(const PrimitiveInput& in, Mesh* mesh, std::vector<std::string>& warnings) {
+  const GltfContext& g = in.g;
+  const size_t n = in.n;
+  if (AttributeIndex(in.prim, "TANGENT") >= 0) {
+    const std::vector<float> tan =
+        ReadFloats(g, in.where, "TANGENT", AttributeIndex(in.prim, "TANGENT"), 4, false);
+    CheckCount(in, "TANGENT", tan.size() / 4);
+    std::vector<std::array<float, 4>> generated;
+    size_t repaired = 0;
+    mesh->tangents.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+      const V3 nn = ToDouble(mesh->normals[i]);
+      V3 t = TransformVector(in.world, {tan[4 * i], tan[4 * i + 1], tan[4 * i + 2]});
+      t = Sub(t, Scale(nn, Dot(nn, t)));
+      if (Length(t) > 1e-12 && Finite(t)) {
+        t = NormalizeOr(t, AnyOrthogonal(nn));
+        const double w = (tan[4 * i + 3] < 0 ? -1.0 : 1.0) * (in.mirrored ? -1.0 : 1.0);
+        mesh->tangents[i] = {static_cast<float>(t[0]), static_cast<float>(t[1]),
+                             static_cast<float>(t[2]), static_cast<float>(w)};
+      } else {
+        if (generated.empty()) generated = GenerateTangents(*mesh);
+        mesh->tangents[i] = generated[i];
+        ++repaired;
+      }
+    }
+    if (repaired > 0) {
+      warnings.push_back(g.file + ": " + in.where + ": " + std::to_string(repaired) +
+                         " degenerate TANGENT values replaced by generated tangents");
+    }
+  } else {
+    mesh->tangents = GenerateTangents(*mesh);
+    if (AttributeIndex(in.prim, "TEXCOORD_0") >= 0) {
+      warnings.push_back(g.file + ": " + in.where +
+                         ": no TANGENT attribute; generated tangents from TEXCOORD_0");
+    }
+  }
+}
+
 Mesh BuildMesh(const GltfContext& g, const SceneCard& card, int mesh_index, int prim_index,
                const Mat4& world, std::vector<std::string>& warnings) {
   const tinygltf::Model& model = g.model;
@@ -492,55 +662,17 @@ Mesh BuildMesh(const GltfContext& g, const SceneCard& card, int mesh_index, int 
          "primitive mode " + std::to_string(mode) + " is not supported (triangles only, mode 4)");
   }
   Mesh mesh;
-  const std::string& mesh_name = model.meshes[mesh_index].name;
-  mesh.name = mesh_name.empty() ? "mesh" + std::to_string(mesh_index) : mesh_name;
-  if (model.meshes[mesh_index].primitives.size() > 1) mesh.name += "/" + std::to_string(prim_index);
-  mesh.material = prim.material;
-  if (mesh.material >= static_cast<int>(model.materials.size())) {
-    Fail(g.file, where, "material index " + std::to_string(mesh.material) + " out of range");
-  }
-  mesh.is_fabric = mesh.material >= 0 && mesh.material == card.fabric_material;
-  if (mesh.material >= 0) {
-    const auto& f = model.materials[mesh.material].pbrMetallicRoughness.baseColorFactor;
-    if (f.size() >= 3) {
-      for (int c = 0; c < 3; ++c) {
-        if (!std::isfinite(f[c]) || f[c] < 0) {
-          Fail(g.file, "materials[" + std::to_string(mesh.material) + "]",
-               "baseColorFactor must be finite and >= 0");
-        }
-        mesh.base_color[c] = static_cast<float>(f[c]);
-      }
-    }
-  } else {
-    mesh.base_color = {1.0f, 1.0f, 1.0f};  // glTF default material
-  }
+  ReadMeshMaterial(g, card, mesh_index, prim_index, where, &mesh);
 
-  const auto attr = [&](const char* name) {
-    const auto it = prim.attributes.find(name);
-    return it == prim.attributes.end() ? -1 : it->second;
-  };
-  if (attr("POSITION") < 0) Fail(g.file, where, "no POSITION attribute");
-  const std::vector<float> pos = ReadFloats(g, where, "POSITION", attr("POSITION"), 3, false);
+  if (AttributeIndex(prim, "POSITION") < 0) Fail(g.file, where, "no POSITION attribute");
+  const std::vector<float> pos =
+      ReadFloats(g, where, "POSITION", AttributeIndex(prim, "POSITION"), 3, false);
   const size_t n = pos.size() / 3;
   if (n == 0) Fail(g.file, where, "POSITION is empty");
   if (n > std::numeric_limits<uint32_t>::max()) Fail(g.file, where, "too many vertices");
 
-  // Indices (non-indexed: 0, 1, 2, ...), winding fixed for mirroring transforms.
-  if (prim.indices >= 0) {
-    mesh.indices = ReadIndices(g, where, prim.indices);
-  } else {
-    mesh.indices.resize(n);
-    for (size_t i = 0; i < n; ++i) mesh.indices[i] = static_cast<uint32_t>(i);
-  }
-  if (mesh.indices.size() % 3 != 0) {
-    Fail(g.file, where,
-         "index count " + std::to_string(mesh.indices.size()) + " is not a multiple of 3");
-  }
-  for (uint32_t i : mesh.indices) {
-    if (i >= n) {
-      Fail(g.file, where, "index " + std::to_string(i) + " >= vertex count " + std::to_string(n));
-    }
-  }
+  // Indices, winding fixed for mirroring transforms.
+  mesh.indices = ReadTriangleIndices(g, prim, where, n);
   const double det = Det3(world);
   if (!std::isfinite(det) || std::abs(det) < 1e-30) {
     Fail(g.file, where, "node transform is singular or not finite");
@@ -558,91 +690,11 @@ Mesh BuildMesh(const GltfContext& g, const SceneCard& card, int mesh_index, int 
         ToFloat(TransformPoint(world, {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]}));
   }
 
-  const auto check_count = [&](const char* name, size_t count) {
-    if (count != n) {
-      Fail(g.file, where,
-           std::string(name) + " has " + std::to_string(count) + " elements, POSITION has " +
-               std::to_string(n));
-    }
-  };
-
-  // Normals.
-  std::vector<std::array<float, 3>> smooth;  // computed on demand
-  if (attr("NORMAL") >= 0) {
-    const std::vector<float> nrm = ReadFloats(g, where, "NORMAL", attr("NORMAL"), 3, false);
-    check_count("NORMAL", nrm.size() / 3);
-    const Mat4 cof = Cofactor3(world);
-    const double sign = mirrored ? -1.0 : 1.0;
-    mesh.normals.resize(n);
-    size_t repaired = 0;
-    for (size_t i = 0; i < n; ++i) {
-      const V3 v = Scale(TransformVector(cof, {nrm[3 * i], nrm[3 * i + 1], nrm[3 * i + 2]}), sign);
-      if (Length(v) > 1e-20 && Finite(v)) {
-        mesh.normals[i] = ToFloat(NormalizeOr(v, {0, 1, 0}));
-      } else {
-        if (smooth.empty()) smooth = SmoothNormals(mesh);
-        mesh.normals[i] = smooth[i];
-        ++repaired;
-      }
-    }
-    if (repaired > 0) {
-      warnings.push_back(g.file + ": " + where + ": " + std::to_string(repaired) +
-                         " zero-length NORMAL values replaced by computed smooth normals");
-    }
-  } else {
-    mesh.normals = SmoothNormals(mesh);
-    warnings.push_back(g.file + ": " + where +
-                       ": no NORMAL attribute; computed smooth (area-weighted) normals");
-  }
-
-  // UVs.
-  if (attr("TEXCOORD_0") >= 0) {
-    const std::vector<float> uv = ReadFloats(g, where, "TEXCOORD_0", attr("TEXCOORD_0"), 2, true);
-    check_count("TEXCOORD_0", uv.size() / 2);
-    mesh.uvs.resize(n);
-    for (size_t i = 0; i < n; ++i) mesh.uvs[i] = {uv[2 * i], uv[2 * i + 1]};
-  } else if (mesh.is_fabric) {
-    Fail(g.file, where,
-         "no TEXCOORD_0 attribute, but its material " + std::to_string(mesh.material) +
-             " is the fabric (scene card " + card.path +
-             ", field 'fabric_material'); the weave needs UVs");
-  } else {
-    mesh.uvs.assign(n, {0.0f, 0.0f});
-  }
-
-  // Tangents.
-  if (attr("TANGENT") >= 0) {
-    const std::vector<float> tan = ReadFloats(g, where, "TANGENT", attr("TANGENT"), 4, false);
-    check_count("TANGENT", tan.size() / 4);
-    std::vector<std::array<float, 4>> generated;
-    size_t repaired = 0;
-    mesh.tangents.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-      const V3 nn = ToDouble(mesh.normals[i]);
-      V3 t = TransformVector(world, {tan[4 * i], tan[4 * i + 1], tan[4 * i + 2]});
-      t = Sub(t, Scale(nn, Dot(nn, t)));
-      if (Length(t) > 1e-12 && Finite(t)) {
-        t = NormalizeOr(t, AnyOrthogonal(nn));
-        const double w = (tan[4 * i + 3] < 0 ? -1.0 : 1.0) * (mirrored ? -1.0 : 1.0);
-        mesh.tangents[i] = {static_cast<float>(t[0]), static_cast<float>(t[1]),
-                            static_cast<float>(t[2]), static_cast<float>(w)};
-      } else {
-        if (generated.empty()) generated = GenerateTangents(mesh);
-        mesh.tangents[i] = generated[i];
-        ++repaired;
-      }
-    }
-    if (repaired > 0) {
-      warnings.push_back(g.file + ": " + where + ": " + std::to_string(repaired) +
-                         " degenerate TANGENT values replaced by generated tangents");
-    }
-  } else {
-    mesh.tangents = GenerateTangents(mesh);
-    if (attr("TEXCOORD_0") >= 0) {
-      warnings.push_back(g.file + ": " + where +
-                         ": no TANGENT attribute; generated tangents from TEXCOORD_0");
-    }
-  }
+  // In this order: the repairs of each read the attributes before it.
+  const PrimitiveInput in{g, prim, where, n, world, mirrored};
+  ReadNormals(in, &mesh, warnings);
+  ReadUvs(in, card, &mesh);
+  ReadTangents(in, &mesh, warnings);
   return mesh;
 }
 
@@ -822,15 +874,13 @@ Camera BuildCamera(const std::string& file, const SceneCard& card, const tinyglt
   return cam;
 }
 
-}  // namespace
+// ---------------------------------------------------------------------------------------------
+// LoadSceneCard's steps.
 
-// -------------------------------------------------------------------------------------------------
-
-SceneCard LoadSceneCard(const std::string& card_path) {
-  const std::string text = ReadText(card_path, "scene card");
-  Json root;
+// The card's JSON; a syntax error names the card's line and column.
+Json ParseCardJson(const std::string& text, const std::string& card_path) {
   try {
-    root = Json::parse(text);
+    return Json::parse(text);
   } catch (const Json::parse_error& e) {
     const size_t offset = e.byte > 0 ? e.byte - 1 : 0;
     const auto [line, column] = LineColumn(text, offset);
@@ -842,6 +892,64 @@ SceneCard LoadSceneCard(const std::string& card_path) {
     throw SceneError(card_path + ":" + std::to_string(line) + ":" + std::to_string(column) +
                      ": malformed JSON: " + msg);
   }
+}
+
+// "environment": {path, intensity, rotation_y_degrees}, its path resolved.
+EnvironmentSpec ReadCardEnvironment(const FieldReader& r, const fs::path& card_dir) {
+  const Json& env_json = r.object()["environment"];
+  if (!env_json.is_object()) {
+    r.Bad("environment",
+          "expected an object {path, intensity, rotation_y_degrees} or null, "
+          "got " +
+              FieldReader::Show(env_json));
+  }
+  const FieldReader e(r.file(), env_json, "environment.");
+  e.RejectUnknown({"path", "intensity", "rotation_y_degrees"});
+  EnvironmentSpec env;
+  env.name = e.String("path", "", true);
+  env.intensity = e.Number("intensity", 1.0, 0.0, 1e30, false, ">= 0");
+  const double degrees =
+      e.Number("rotation_y_degrees", 0.0, -1e6, 1e6, false, "in [-1e6, 1e6] degrees");
+  env.rotation_y = degrees * kPi / 180.0;
+  ResolveEnvironment(r.file(), card_dir, env);
+  return env;
+}
+
+// Tone mapping, exposure, fabric material, light scale, camera and background.
+void ReadCardLook(const FieldReader& r, SceneCard* card) {
+  card->tone_mapping = r.String("tone_mapping", card->tone_mapping, false);
+  if (std::none_of(std::begin(kToneMappings), std::end(kToneMappings),
+                   [&](const char* t) { return card->tone_mapping == t; })) {
+    std::string list;
+    for (const char* t : kToneMappings) list += std::string(list.empty() ? "" : ", ") + t;
+    r.Bad("tone_mapping",
+          "unknown tone mapping " + Quote(card->tone_mapping) + " (valid: " + list + ")");
+  }
+  card->exposure = r.Number("exposure", card->exposure, 0.0, 1e30, true, "> 0");
+  card->fabric_material =
+      r.Int("fabric_material", card->fabric_material, 0, std::numeric_limits<int>::max());
+  card->light_scale = r.Number("light_scale", card->light_scale, 0.0, 1e30, false, ">= 0");
+  card->camera = r.Int("camera", card->camera, 0, std::numeric_limits<int>::max());
+  if (r.Has("background")) {
+    const Json& bg = r.object()["background"];
+    if (!bg.is_array() || bg.size() != 3) {
+      r.Bad("background",
+            "expected an array of 3 numbers (linear RGB), got " + FieldReader::Show(bg));
+    }
+    for (int c = 0; c < 3; ++c) {
+      card->background[c] = r.CheckNumber(bg[static_cast<size_t>(c)], "background", 0.0, 1e30,
+                                          false, ">= 0 in every channel");
+    }
+  }
+}
+
+}  // namespace
+
+// -------------------------------------------------------------------------------------------------
+
+SceneCard LoadSceneCard(const std::string& card_path) {
+  const std::string text = ReadText(card_path, "scene card");
+  const Json root = ParseCardJson(text, card_path);
   if (!root.is_object()) Fail(card_path, "top level", "the scene card must be a JSON object");
 
   SceneCard card;
@@ -868,51 +976,8 @@ SceneCard LoadSceneCard(const std::string& card_path) {
 
   card.width = r.Int("width", card.width, 1, kMaxImageSize);
   card.height = r.Int("height", card.height, 1, kMaxImageSize);
-
-  if (r.Has("environment")) {
-    const Json& env_json = root["environment"];
-    if (!env_json.is_object()) {
-      r.Bad("environment",
-            "expected an object {path, intensity, rotation_y_degrees} or null, "
-            "got " +
-                FieldReader::Show(env_json));
-    }
-    const FieldReader e(card.path, env_json, "environment.");
-    e.RejectUnknown({"path", "intensity", "rotation_y_degrees"});
-    EnvironmentSpec env;
-    env.name = e.String("path", "", true);
-    env.intensity = e.Number("intensity", 1.0, 0.0, 1e30, false, ">= 0");
-    const double degrees =
-        e.Number("rotation_y_degrees", 0.0, -1e6, 1e6, false, "in [-1e6, 1e6] degrees");
-    env.rotation_y = degrees * kPi / 180.0;
-    ResolveEnvironment(card.path, dir, env);
-    card.environment = env;
-  }
-
-  card.tone_mapping = r.String("tone_mapping", card.tone_mapping, false);
-  if (std::none_of(std::begin(kToneMappings), std::end(kToneMappings),
-                   [&](const char* t) { return card.tone_mapping == t; })) {
-    std::string list;
-    for (const char* t : kToneMappings) list += std::string(list.empty() ? "" : ", ") + t;
-    r.Bad("tone_mapping",
-          "unknown tone mapping " + Quote(card.tone_mapping) + " (valid: " + list + ")");
-  }
-  card.exposure = r.Number("exposure", card.exposure, 0.0, 1e30, true, "> 0");
-  card.fabric_material =
-      r.Int("fabric_material", card.fabric_material, 0, std::numeric_limits<int>::max());
-  card.light_scale = r.Number("light_scale", card.light_scale, 0.0, 1e30, false, ">= 0");
-  card.camera = r.Int("camera", card.camera, 0, std::numeric_limits<int>::max());
-  if (r.Has("background")) {
-    const Json& bg = root["background"];
-    if (!bg.is_array() || bg.size() != 3) {
-      r.Bad("background",
-            "expected an array of 3 numbers (linear RGB), got " + FieldReader::Show(bg));
-    }
-    for (int c = 0; c < 3; ++c) {
-      card.background[c] = r.CheckNumber(bg[static_cast<size_t>(c)], "background", 0.0, 1e30, false,
-                                         ">= 0 in every channel");
-    }
-  }
+  if (r.Has("environment")) card.environment = ReadCardEnvironment(r, dir);
+  ReadCardLook(r, &card);
   card.uv_metres_per_unit =
       r.Number("uv_metres_per_unit", card.uv_metres_per_unit, 0.0, 1e6, true, "> 0");
   return card;
