@@ -366,6 +366,7 @@ registerClothfitModel('cloth', {
  */
 export function loadClothfitPreset(json) {
   const preset = typeof json === 'string' ? JSON.parse(json) : json;
+  if (preset?.metadata?.type === 'Material') return fromThreejsJson(preset);
   if (preset?.schema !== 'clothfit.preset') throw new Error('loadClothfitPreset: schema is not "clothfit.preset"');
   if (preset.version !== 1) throw new Error(`loadClothfitPreset: version ${preset.version} not supported (1)`);
   const model = MODELS.get(preset.model);
@@ -379,6 +380,31 @@ export function loadClothfitPreset(json) {
   if (preset.side !== undefined) m.side = typeof preset.side === 'number' ? preset.side : SIDES[preset.side];
   m.name = preset.name ?? preset.provenance?.fabric ?? preset.model;
   m.userData.clothfit = preset;
+  return m;
+}
+
+// `clothfit convert --to threejs` output: three.js MaterialLoader JSON (MeshPhysicalMaterial, read
+// by three.js's own MaterialLoader) or the seed's MeshClothMaterial layout (type
+// "MeshClothMaterial"; color / sheen / subsurfaceColor are sRGB hex, decoded to linear by
+// THREE.Color.setHex as MaterialLoader does; roughness perceptual; the seed variant).
+function fromThreejsJson(j) {
+  let m;
+  if (j.type === 'MeshClothMaterial') {
+    m = new MeshClothMaterial({
+      color: new THREE.Color().setHex(j.color ?? 0xffffff),
+      roughness: j.roughness ?? 1,
+      sheenColor: new THREE.Color().setHex(j.sheen ?? 0xffffff),
+      sheenDefault: SheenDefault.EXPLICIT,
+      subsurface: j.subsurface ?? false,
+      subsurfaceColor: new THREE.Color().setHex(j.subsurfaceColor ?? 0x000000),
+      variant: ClothVariant.SEED,
+    });
+    m.name = j.name ?? '';
+  } else {
+    m = new THREE.MaterialLoader().parse(j);
+  }
+  if (j.side !== undefined) m.side = j.side;
+  m.userData.clothfit = { schema: 'three.js', model: j.type, parameters: {}, source: j };
   return m;
 }
 
