@@ -17,11 +17,13 @@
 // template specialised on (model, direct?, IBL?, subsurface?) chosen once per scene: no
 // environment -> no IBL code path; no lights -> no direct path; no subsurface -> no wrap.
 //
-// Approximations, stated: one prefiltered chain (GGX, Filament's LOD mapping
-// lod = (levels - 1) r (2 - r)) serves the three.js models too (three.js's PMREM uses its
-// own blur schedule); three.js's geometryRoughness term is 0 (flat G-buffer); the seed
-// variant's accumulation of `directDiffuse *= saturate(subsurface + NoL)` across lights is
-// evaluated per light.
+// IBL engines (PreviewOptions::ibl_engine): three.js r187 (render/preview/threejs_ibl.h: PMREM
+// cube, irradiance from its top level, 16 x 16 DFG, per-quad geometryRoughness) or Filament
+// (SH9 irradiance, GGX prefilter chain with lod = (levels - 1) r (2 - r)).
+// Approximations, stated and measured in docs/preview.md against three.js in Chromium: faces
+// are shaded two-sided whatever glTF doubleSided says; radiance is tabulated at K roughness
+// nodes; the seed variant's accumulation of `directDiffuse *= saturate(subsurface + NoL)`
+// across lights is evaluated per light.
 #pragma once
 
 #include <array>
@@ -60,6 +62,10 @@ struct PreviewOptions {
 
 // Whether the preview uses three.js r187's IBL for these options (see IblEngine).
 bool UsesThreejsIbl(const PreviewOptions& o);
+// Whether three.js's geometryRoughness and 16 x 16 DFG table apply (MeshStandardMaterial and
+// MeshPhysicalMaterial on three.js IBL; the cloth keeps clothfit's 128 x 128 table, as
+// web/clothfit.js does).
+bool ThreejsGeometryRoughnessApplies(const PreviewOptions& o);
 
 // Which code paths a scene needs (decided once when the cache is built).
 struct PreviewFeatures {

@@ -473,6 +473,11 @@ double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int 
   return g;
 }
 
+bool ThreejsGeometryRoughnessApplies(const PreviewOptions& o) {
+  return UsesThreejsIbl(o) &&
+         (o.model == ModelKind::kStandard || o.model == ModelKind::kPhysicalSheen);
+}
+
 const Table2D& ThreejsDfgTable() {
   static const Table2D table = [] {
     constexpr int n = 16;
