@@ -74,7 +74,7 @@ void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
 
 void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   struct Args {
-    std::string scene, material, model, out, ibl_engine = "auto";
+    std::string scene, material, model, out, ibl_engine = "filament";
     bool shadows = false;
   };
   auto args = std::make_shared<Args>();
@@ -91,7 +91,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_flag("--shadows", args->shadows, "ray-traced light visibility (off by default)");
   cmd->add_option("--ibl-engine", args->ibl_engine,
                   "whose image-based lighting: threejs (r187 PMREM), filament (SH + prefilter) or "
-                  "auto (three.js for standard, physical-sheen and the seed cloth)")
+                  "auto (three.js for standard, physical-sheen and the seed cloth); default filament")
       ->check(CLI::IsMember({"auto", "threejs", "filament"}));
   cmd->callback([args, &g, &exit_code]() {
     try {

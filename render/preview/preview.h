@@ -51,7 +51,7 @@ enum class IblEngine { kAuto, kFilament, kThreejs };
 
 struct PreviewOptions {
   ModelKind model = ModelKind::kCloth;
-  IblEngine ibl_engine = IblEngine::kAuto;
+  IblEngine ibl_engine = IblEngine::kFilament;  // default: unchanged fits and previews
   cloth::Options cloth;      // model == kCloth
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
