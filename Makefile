@@ -1,6 +1,6 @@
 # clothfit: the two front-door commands.
 #   make demo   install dependencies, build, run the main job
-#   make test   install dependencies, configure, build, run the test suite
+#   make test   install dependencies (incl. web/ and chromium), fetch the HDRIs, build, run the tests
 # Everything else (bench, lut, stress, format) is a convenience on top of the same build.
 
 BUILD_DIR ?= build
@@ -33,7 +33,7 @@ build: configure
 	@echo "[make] building with $(JOBS) jobs"
 	@cmake --build $(BUILD_DIR) -j $(JOBS)
 
-test: build
+test: build data
 	@echo "[make] running the test suite"
 	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS)
 

@@ -76,7 +76,7 @@ void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
 
 void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   struct Args {
-    std::string scene, material, model, out;
+    std::string scene, material, model, out, ibl_engine = "filament";
     bool shadows = false;
   };
   auto args = std::make_shared<Args>();
@@ -91,6 +91,10 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--out", args->out, "output: .png (tone-mapped, sRGB) or .exr (linear)")
       ->required();
   cmd->add_flag("--shadows", args->shadows, "ray-traced light visibility (off by default)");
+  cmd->add_option("--ibl-engine", args->ibl_engine,
+                  "whose image-based lighting: threejs (r187 PMREM), filament (SH + prefilter) or "
+                  "auto (three.js for standard, physical-sheen and the seed cloth); default filament")
+      ->check(CLI::IsMember({"auto", "threejs", "filament"}));
   cmd->callback([args, &g, &exit_code]() {
     try {
       const std::string ext = std::filesystem::path(args->out).extension().string();
@@ -117,6 +121,9 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       o.model = preset.model;
       o.cloth = preset.cloth;
       o.shadows = args->shadows;
+      o.ibl_engine = args->ibl_engine == "threejs"    ? render::IblEngine::kThreejs
+                     : args->ibl_engine == "filament" ? render::IblEngine::kFilament
+                                                      : render::IblEngine::kAuto;
       const auto cache = render::PreviewCache::Build(scene, env.get(), o);
       std::vector<Rgb<double>> fabric;
       render::EvaluatePreview(*cache, preset.values.data(), fabric);

@@ -18,6 +18,7 @@
 #include "render/scene/lights.h"
 #include "render/preview/prefilter.h"
 #include "render/preview/sh.h"
+#include "render/preview/threejs_ibl.h"
 
 namespace clothfit::render {
 namespace {
@@ -73,6 +74,7 @@ std::shared_ptr<const PrefilteredEnvironment> SharedPrefilter(const Environment&
 struct EnvironmentData {
   Sh9 sh{};
   std::shared_ptr<const PrefilteredEnvironment> ggx, charlie;
+  std::shared_ptr<const ThreejsPmrem> pmrem;  // three.js r187's PMREM (UsesThreejsIbl)
 };
 
 EnvironmentData PrepareEnvironment(const Environment* env, const PreviewOptions& opt,
@@ -81,7 +83,8 @@ EnvironmentData PrepareEnvironment(const Environment* env, const PreviewOptions&
   if (env) {
     if (log) log("preview: projecting the environment on SH and prefiltering");
     e.sh = ProjectEnvironment(*env);
-    e.ggx = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kGgx, opt);
+    if (UsesThreejsIbl(opt)) e.pmrem = SharedThreejsPmrem(*env);
+    else e.ggx = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kGgx, opt);
     if (opt.model == ModelKind::kGltfSheen)
       e.charlie = SharedPrefilter(*env, PrefilteredEnvironment::Kernel::kCharlie, opt);
   }
@@ -92,6 +95,7 @@ EnvironmentData PrepareEnvironment(const Environment* env, const PreviewOptions&
 struct PixelData {
   int index;
   float nov;
+  float gr = 0.f;  // three.js geometryRoughness (standard / physical-sheen on three.js IBL)
   std::vector<PreviewLightSample> lights;
   std::array<float, 3> irr{};
   std::vector<float> rad, srad;
@@ -171,7 +175,9 @@ Rgb<double> ShadeNonFabric(const PixelContext& x, const PreviewCache& c, const P
   if (x.env) {
     const IblWeights<double> w = standard::EvalIbl(sp, {}, NoV, *c.dfg);
     const Vec3d dd = DominantDirection(ModelKind::kStandard, hit.n, R, 1.0);
-    out += w.specular * x.e.ggx->Sample(dd, x.e.ggx->LodForRoughness(1.0)) + w.diffuse * Ed;
+    const Rgb<double> Lr = x.e.pmrem ? x.e.pmrem->Sample(dd, x.e.pmrem->MipForRoughness(1.0))
+                                     : x.e.ggx->Sample(dd, x.e.ggx->LodForRoughness(1.0));
+    out += w.specular * Lr + w.diffuse * Ed;
   }
   return out;
 }
@@ -184,7 +190,8 @@ void FillRadianceTables(const PixelContext& x, const Vec3d& n, const Vec3d& R, P
     const double r = double(k) / double(K - 1);
     const Vec3d dd = DominantDirection(x.opt.model, n, R, r);
     const Rgb<double> L =
-        x.e.ggx->Sample(dd, LodFor(x.opt.model, *x.e.ggx, r, x.opt.prefilter_levels));
+        x.e.pmrem ? x.e.pmrem->Sample(dd, x.e.pmrem->MipForRoughness(r))
+                  : x.e.ggx->Sample(dd, LodFor(x.opt.model, *x.e.ggx, r, x.opt.prefilter_levels));
     for (int ch = 0; ch < 3; ++ch) pd->rad[size_t(k) * 3 + size_t(ch)] = float(L[ch]);
   }
   if (x.e.charlie) {
@@ -230,7 +237,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     std::vector<float> lt;
     std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit, woven_frame ? &lt : nullptr);
     Rgb<double> Ed(0, 0, 0);
-    if (x.env) Ed = IrradianceOverPi(x.e.sh, hit.n);
+    if (x.env) Ed = x.e.pmrem ? x.e.pmrem->IrradianceOverPi(hit.n) : IrradianceOverPi(x.e.sh, hit.n);
     const Vec3d R = hit.n * (2.0 * hit.NoV) - hit.v;
     if (!hit.mesh->is_fabric) {
       const Rgb<double> out = ShadeNonFabric(x, *c, hit, ls, R, Ed);
@@ -240,6 +247,8 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     PixelData pd;
     pd.index = int(pix);
     pd.nov = float(hit.NoV);
+    if (ThreejsGeometryRoughnessApplies(x.opt))
+      pd.gr = float(ThreejsGeometryRoughness(x.scene, h.mesh, h.triangle, px, y));
     pd.lights = std::move(ls);
     pd.tv = {float(Dot(hit.t, hit.v)), float(Dot(hit.b, hit.v))};
     pd.lt = std::move(lt);
@@ -257,6 +266,7 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       c->pixels.push_back(pd.index);
       c->fabric_mask[size_t(pd.index)] = 1.f;
       c->NoV.push_back(pd.nov);
+      if (ThreejsGeometryRoughnessApplies(c->options)) c->geometry_roughness.push_back(pd.gr);
       c->light_samples.insert(c->light_samples.end(), pd.lights.begin(), pd.lights.end());
       c->light_begin.push_back(int(c->light_samples.size()));
       c->irradiance.insert(c->irradiance.end(), pd.irr.begin(), pd.irr.end());
@@ -287,6 +297,7 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   c->features.subsurface = opt.model == ModelKind::kCloth && opt.cloth.subsurface;
   c->features.shadows = opt.shadows && c->features.direct;
   c->dfg = &lut::DefaultDfg();
+  if (ThreejsGeometryRoughnessApplies(opt)) c->dfg = &ThreejsDfgTable();  // three.js's 16 x 16
   c->sheen_albedo = &lut::DefaultSheenAlbedo();
   if (opt.model == ModelKind::kWoven) c->woven_phase = &lut::DefaultWovenPhase();
   const int W = c->width, H = c->height;
@@ -363,6 +374,8 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& br) {
     for (size_t i = br.begin(); i != br.end(); ++i) {
       const T NoV = Const<T>(double(c.NoV[i]));
+      standard::Options so;  // three.js geometryRoughness (0 unless the cache has it)
+      if (!c.geometry_roughness.empty()) so.geometry_roughness = double(c.geometry_roughness[i]);
       Rgb<T> L(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
       if constexpr (kDirect) {
         for (int s = c.light_begin[i]; s < c.light_begin[i + 1]; ++s) {
@@ -380,10 +393,10 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
           } else if constexpr (M == ModelKind::kCloth) {
             f = cloth::EvalDirect(cloth::Params<T>{rgb(0), rgb(3), x[6], rgb(7)}, co, cs);
           } else if constexpr (M == ModelKind::kStandard) {
-            f = standard::EvalDirect(standard::Params<T>{rgb(0), x[3], x[4]}, {}, cs, *c.dfg);
+            f = standard::EvalDirect(standard::Params<T>{rgb(0), x[3], x[4]}, so, cs, *c.dfg);
           } else if constexpr (M == ModelKind::kPhysicalSheen) {
             f = physical_sheen::EvalDirect(
-                physical_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]}, {}, cs, *c.dfg);
+                physical_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]}, so, cs, *c.dfg);
           } else {
             f = gltf_sheen::EvalDirect(gltf_sheen::Params<T>{rgb(0), x[3], x[4], rgb(5), x[8]},
                                        {}, cs, *c.sheen_albedo);
@@ -406,13 +419,13 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
                w.diffuse * Ed;
         } else if constexpr (M == ModelKind::kStandard) {
           const standard::Params<T> p{rgb(0), x[3], x[4]};
-          const IblWeights<T> w = standard::EvalIbl(p, {}, NoV, *c.dfg);
-          L += w.specular * TableRadiance(rad, K, standard::ClampedRoughness(p.roughness, {})) +
+          const IblWeights<T> w = standard::EvalIbl(p, so, NoV, *c.dfg);
+          L += w.specular * TableRadiance(rad, K, standard::ClampedRoughness(p.roughness, so)) +
                w.diffuse * Ed;
         } else if constexpr (M == ModelKind::kPhysicalSheen) {
           const physical_sheen::Params<T> p{rgb(0), x[3], x[4], rgb(5), x[8]};
-          const IblWeights<T> w = physical_sheen::EvalIbl(p, {}, NoV, *c.dfg);
-          L += w.specular * TableRadiance(rad, K, standard::ClampedRoughness(p.roughness, {})) +
+          const IblWeights<T> w = physical_sheen::EvalIbl(p, so, NoV, *c.dfg);
+          L += w.specular * TableRadiance(rad, K, standard::ClampedRoughness(p.roughness, so)) +
                w.diffuse * Ed;
         } else {
           const gltf_sheen::Params<T> p{rgb(0), x[3], x[4], rgb(5), x[8]};

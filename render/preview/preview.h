@@ -17,11 +17,13 @@
 // template specialised on (model, direct?, IBL?, subsurface?) chosen once per scene: no
 // environment -> no IBL code path; no lights -> no direct path; no subsurface -> no wrap.
 //
-// Approximations, stated: one prefiltered chain (GGX, Filament's LOD mapping
-// lod = (levels - 1) r (2 - r)) serves the three.js models too (three.js's PMREM uses its
-// own blur schedule); three.js's geometryRoughness term is 0 (flat G-buffer); the seed
-// variant's accumulation of `directDiffuse *= saturate(subsurface + NoL)` across lights is
-// evaluated per light.
+// IBL engines (PreviewOptions::ibl_engine): three.js r187 (render/preview/threejs_ibl.h: PMREM
+// cube, irradiance from its top level, 16 x 16 DFG, per-quad geometryRoughness) or Filament
+// (SH9 irradiance, GGX prefilter chain with lod = (levels - 1) r (2 - r)).
+// Approximations, stated and measured in docs/preview.md against three.js in Chromium: faces
+// are shaded two-sided whatever glTF doubleSided says; radiance is tabulated at K roughness
+// nodes; the seed variant's accumulation of `directDiffuse *= saturate(subsurface + NoL)`
+// across lights is evaluated per light.
 #pragma once
 
 #include <array>
@@ -41,8 +43,16 @@ namespace clothfit::render {
 
 class PrefilteredEnvironment;
 
+// Whose image-based lighting the preview reproduces: Filament's (SH9 irradiance, its GGX
+// prefilter chain and LOD mapping, the 128 x 128 DFG LUT) or three.js r187's
+// (render/preview/threejs_ibl.h: PMREM cube, irradiance from its top level, 16 x 16 DFG).
+// kAuto: three.js for standard and physical-sheen and the seed cloth variant, Filament for the
+// Filament cloth variant and gltf-sheen.
+enum class IblEngine { kAuto, kFilament, kThreejs };
+
 struct PreviewOptions {
   ModelKind model = ModelKind::kCloth;
+  IblEngine ibl_engine = IblEngine::kFilament;  // default: unchanged fits and previews
   cloth::Options cloth;      // model == kCloth
   woven::Options woven;      // model == kWoven
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
@@ -51,6 +61,13 @@ struct PreviewOptions {
   int prefilter_base_width = 256;
   int prefilter_samples = 128;
 };
+
+// Whether the preview uses three.js r187's IBL for these options (see IblEngine).
+bool UsesThreejsIbl(const PreviewOptions& o);
+// Whether three.js's geometryRoughness and 16 x 16 DFG table apply (MeshStandardMaterial and
+// MeshPhysicalMaterial on three.js IBL; the cloth keeps clothfit's 128 x 128 table, as
+// web/clothfit.js does).
+bool ThreejsGeometryRoughnessApplies(const PreviewOptions& o);
 
 // Which code paths a scene needs (decided once when the cache is built).
 struct PreviewFeatures {
@@ -80,6 +97,7 @@ class PreviewCache {
   std::vector<float> NoV;        // per fabric pixel
   std::vector<int> light_begin;  // CSR: samples of pixel i in [begin[i], begin[i+1])
   std::vector<PreviewLightSample> light_samples;
+  std::vector<float> geometry_roughness;  // three.js geometryRoughness per fabric pixel (empty: 0)
   std::vector<float> irradiance;          // E_d(n), 3 per fabric pixel
   std::vector<float> radiance;            // K x 3 per fabric pixel: GGX-prefiltered, node k
   std::vector<float> sheen_radiance;      // K x 3 per fabric pixel: Charlie (gltf-sheen only)

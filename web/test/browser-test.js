@@ -1,0 +1,67 @@
+// Renders the cases of a plan (?plan=<url>) and POSTs each frame to the test server:
+//   POST /result?name=<case>  body: W*H*4 RGBA bytes (top row first, 8-bit sRGB, tone-mapped)
+//                             then W*H mask bytes (255 where the fabric is drawn)
+//   POST /log   text;   POST /done   when finished (or after an error).
+// Paths in the plan and the cards are file-system paths, served by the test server under /fs.
+import * as THREE from 'three';
+import { loadSceneCard, loadClothfitPreset } from '../clothfit.js';
+
+const post = (path, body) => fetch(path, { method: 'POST', body });
+const log = (msg) => post('/log', String(msg));
+const fsUrl = (p) => (p.startsWith('/') ? `/fs${p}` : p);
+
+async function run() {
+  const planUrl = new URLSearchParams(location.search).get('plan');
+  const plan = await (await fetch(planUrl)).json();
+  const canvas = document.getElementById('c');
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true, powerPreference: 'high-performance' });
+  const gl = renderer.getContext();
+  log(`WebGL: ${gl.getParameter(gl.VERSION)} / ${gl.getParameter(gl.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? gl.RENDERER)}`);
+  const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
+  const cards = new Map();
+  for (const c of plan.cases) {
+    const t0 = performance.now();
+    let sc = cards.get(c.card);
+    if (!sc) {
+      sc = await loadSceneCard(fsUrl(c.card), { renderer, resolvePath: (p, base) => {
+        if (!p.includes('/') && !/\.[A-Za-z0-9]+$/.test(p) && base && p !== c.card) return fsUrl(`${plan.hdri_dir}/${p}.exr`);
+        return resolvePath(p, base);
+      } });
+      cards.set(c.card, sc);
+    }
+    const preset = await (await fetch(fsUrl(c.preset))).json();
+    const material = loadClothfitPreset(preset);
+    sc.setMaterial(material);
+    sc.apply(renderer);
+    renderer.setSize(sc.width, sc.height, false);
+    renderer.render(sc.scene, sc.camera);
+    const W = sc.width, H = sc.height;
+    const px = new Uint8Array(W * H * 4);
+    gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    // Mask pass: fabric white, everything else black, no tone mapping, same culling.
+    const saved = [];
+    const white = new THREE.MeshBasicMaterial({ color: 0xffffff });
+    const black = new THREE.MeshBasicMaterial({ color: 0x000000 });
+    sc.scene.traverse((o) => { if (o.isMesh) { saved.push([o, o.material]); const m = (sc.fabricMeshes.includes(o) ? white : black).clone(); m.side = o.material.side; o.material = m; } });
+    const bg = sc.scene.background; sc.scene.background = new THREE.Color(0, 0, 0);
+    const tm = renderer.toneMapping; renderer.toneMapping = THREE.NoToneMapping;
+    renderer.render(sc.scene, sc.camera);
+    const mk = new Uint8Array(W * H * 4);
+    gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, mk);
+    renderer.toneMapping = tm; sc.scene.background = bg;
+    for (const [o, m] of saved) o.material = m;
+    material.dispose();
+    const out = new Uint8Array(W * H * 5);
+    for (let y = 0; y < H; ++y) {
+      const src = (H - 1 - y) * W;  // readPixels rows are bottom-up
+      for (let x = 0; x < W; ++x) {
+        for (let k = 0; k < 4; ++k) out[(y * W + x) * 4 + k] = px[(src + x) * 4 + k];
+        out[W * H * 4 + y * W + x] = mk[(src + x) * 4] > 127 ? 255 : 0;
+      }
+    }
+    await post(`/result?name=${encodeURIComponent(c.name)}&w=${W}&h=${H}&ms=${(performance.now() - t0).toFixed(0)}`, out);
+  }
+  await post('/done', 'ok');
+}
+
+run().catch(async (e) => { await log(`error: ${e?.stack ?? e}`); await post('/done', 'error'); });

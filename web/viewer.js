@@ -1,0 +1,75 @@
+// web/viewer.html: a scene card + a clothfit preset in three.js r187, with orbit controls and
+// environment / preset switching. Query: card, preset, presets (comma list), env, shot (=1:
+// POST the first finished frame as PNG to /shot, for web/tools/screenshot.mjs).
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { loadSceneCard, fetchClothfitPreset } from './clothfit.js';
+
+const q = new URLSearchParams(location.search);
+const CARDS = ['../datasets/scenes/sphere.json', '../datasets/scenes/drape.json', '../datasets/scenes/swatch.json'];
+const cardUrl = q.get('card') ?? CARDS[0];
+const presets = (q.get('presets') ?? q.get('preset') ?? '../docs/presets/twill-handpicked-cloth.json').split(',');
+const presetUrl = q.get('preset') ?? presets[0];
+const info = document.getElementById('info');
+const canvas = document.getElementById('c');
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: q.has('shot') });
+
+function fill(select, values, current, label = (v) => v) {
+  const list = values.includes(current) ? values : [current, ...values];
+  select.innerHTML = list.map((v) => `<option value="${v}"${v === current ? ' selected' : ''}>${label(v)}</option>`).join('');
+}
+const base = (u) => u.split('/').pop().replace(/\.json$/, '');
+
+async function main() {
+  fill(document.getElementById('card'), CARDS, cardUrl, base);
+  fill(document.getElementById('preset'), presets, presetUrl, base);
+  const names = await fetch('/hdri/index.json').then((r) => (r.ok ? r.json() : [])).catch(() => []);
+  fill(document.getElementById('env'), ['card', 'none', ...names], q.get('env') ?? 'card');
+  const sc = await loadSceneCard(cardUrl, { renderer });
+  sc.apply(renderer);
+  renderer.setSize(Math.max(sc.width, 512), Math.max(sc.width, 512) * sc.height / sc.width);
+  sc.camera.aspect = sc.width / sc.height;
+  sc.camera.updateProjectionMatrix();
+  const controls = new OrbitControls(sc.camera, canvas);
+  // Orbit about the fabric's centre.
+  const box = new THREE.Box3();
+  for (const m of sc.fabricMeshes) box.expandByObject(m);
+  box.getCenter(controls.target);
+  controls.update();
+
+  let material = null;
+  const setPreset = (m) => {
+    material?.dispose();
+    material = m;
+    sc.setMaterial(m);
+    const p = m.userData.clothfit;
+    info.textContent = `${sc.card.description ?? ''}\nmodel ${p.model}${p.cloth ? ` (${p.cloth.variant}${p.cloth.subsurface ? ', subsurface' : ''})` : ''}: ${JSON.stringify(p.parameters)}\n` +
+      `tone mapping ${sc.card.tone_mapping ?? 'ACESFilmic'}, exposure ${sc.exposure}, three.js r${THREE.REVISION}`;
+  };
+  setPreset(await fetchClothfitPreset(presetUrl));
+  const setEnv = async (v) => {
+    if (v === 'card') { const e = sc.card.environment; await sc.setEnvironment(e?.path ?? null, { intensity: e?.intensity ?? 1, rotationYDegrees: e?.rotation_y_degrees ?? 0 }); }
+    else if (v === 'none') await sc.setEnvironment(null);
+    else await sc.setEnvironment(v, { intensity: sc.card.environment?.intensity ?? 1 });
+  };
+  if ((q.get('env') ?? 'card') !== 'card') await setEnv(q.get('env'));
+
+  document.getElementById('card').onchange = (e) => { q.set('card', e.target.value); location.search = q.toString(); };
+  document.getElementById('preset').onchange = async (e) => setPreset(await fetchClothfitPreset(e.target.value));
+  document.getElementById('env').onchange = (e) => setEnv(e.target.value);
+  document.getElementById('file').onchange = async (e) => {
+    const { loadClothfitPreset } = await import('./clothfit.js');
+    setPreset(loadClothfitPreset(await e.target.files[0].text()));
+  };
+
+  let shot = q.has('shot');
+  renderer.setAnimationLoop(() => {
+    controls.update();
+    renderer.render(sc.scene, sc.camera);
+    if (shot) {
+      shot = false;
+      canvas.toBlob((b) => fetch('/shot', { method: 'POST', body: b }), 'image/png');
+    }
+  });
+}
+main().catch((e) => { info.textContent = `error: ${e.stack ?? e}`; fetch('/log', { method: 'POST', body: String(e.stack ?? e) }); });
