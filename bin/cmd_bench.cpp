@@ -24,32 +24,32 @@ namespace {
 
 using Jet10 = ceres::Jet<double, 10>;
 
-// A fixed ring of 64 realistic configurations so branch prediction sees variety.
-std::vector<Cosines<double>> Configurations() {
-  std::vector<Cosines<double>> out;
+// A fixed ring of 64 realistic view/light pairs so branch prediction sees variety.
+template <typename Cos, typename FromDirections>
+std::vector<Cos> ConfigurationRing(FromDirections from_directions) {
+  std::vector<Cos> out;
   for (int i = 0; i < 64; ++i) {
     const double tv = 0.05 + 1.4 * ((i * 37) % 64) / 64.0;
     const double tl = 0.05 + 1.4 * ((i * 11) % 64) / 64.0;
     const double ph = 6.2831853 * ((i * 23) % 64) / 64.0;
     const Vec3<double> v(std::sin(tv), 0.0, std::cos(tv));
     const Vec3<double> l(std::sin(tl) * std::cos(ph), std::sin(tl) * std::sin(ph), std::cos(tl));
-    out.push_back(CosinesFromDirections(v, l));
+    out.push_back(from_directions(v, l));
   }
   return out;
 }
 
+// The cosines of the 64 configurations.
+std::vector<Cosines<double>> Configurations() {
+  return ConfigurationRing<Cosines<double>>(
+      [](const Vec3<double>& v, const Vec3<double>& l) { return CosinesFromDirections(v, l); });
+}
+
 // The tangent-frame cosines of the same 64 configurations.
 std::vector<TangentCosines<double>> TangentConfigurations() {
-  std::vector<TangentCosines<double>> out;
-  for (int i = 0; i < 64; ++i) {
-    const double tv = 0.05 + 1.4 * ((i * 37) % 64) / 64.0;
-    const double tl = 0.05 + 1.4 * ((i * 11) % 64) / 64.0;
-    const double ph = 6.2831853 * ((i * 23) % 64) / 64.0;
-    const Vec3<double> v(std::sin(tv), 0.0, std::cos(tv));
-    const Vec3<double> l(std::sin(tl) * std::cos(ph), std::sin(tl) * std::sin(ph), std::cos(tl));
-    out.push_back(TangentCosinesFromDirections(v, l));
-  }
-  return out;
+  return ConfigurationRing<TangentCosines<double>>([](const Vec3<double>& v, const Vec3<double>& l) {
+    return TangentCosinesFromDirections(v, l);
+  });
 }
 
 template <typename T>
