@@ -16,7 +16,12 @@
 namespace clothfit::fit {
 namespace {
 
-using Jet = ceres::Jet<double, 10>;
+// Jacobians come from one dual-number evaluation of the preview with N derivative slots, N the
+// smallest instantiated width (render/preview/preview.cpp) holding the free scalars: the cost
+// of Jet arithmetic grows with N, and most models have fewer than 10 free scalars
+// (standard 4; cloth, physical-sheen, gltf-sheen 7-8; woven stages 10).
+constexpr int kJetWidths[] = {4, 8, 10};
+constexpr int kMaxJetWidth = 10;
 
 // The space transform, templated so Jets flow through it.
 template <typename T>
@@ -90,7 +95,10 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
 }
 
 // Residuals (and the Jacobian) of one scene, with all of a model's parameter blocks.
+template <int N>
 class PreviewCost final : public ceres::CostFunction {
+  using Jet = ceres::Jet<double, N>;
+
  public:
   PreviewCost(const SceneData& d, std::vector<int> block_sizes) : d_(d), sizes_(std::move(block_sizes)) {
     set_num_residuals(3 * d.blocks());
@@ -104,14 +112,14 @@ class PreviewCost final : public ceres::CostFunction {
       for (int k = 0; k < sizes_[b]; ++k) x.push_back(parameters[b][k]);
     if (!jacobians) return Residuals<double>(x.data(), residuals, nullptr);
     // Dual indices only for the blocks Ceres wants a Jacobian of (the free ones; constant
-    // blocks get jacobians[b] == nullptr), packed in order: at most 10 free scalars.
+    // blocks get jacobians[b] == nullptr), packed in order: at most N free scalars.
     std::vector<Jet> xj(x.size());
     std::vector<int> slot(sizes_.size(), -1);
     {
       int next = 0;
       size_t k = 0;
       for (size_t b = 0; b < sizes_.size(); ++b) {
-        const bool free_block = jacobians[b] != nullptr && next + sizes_[b] <= 10;
+        const bool free_block = jacobians[b] != nullptr && next + sizes_[b] <= N;
         if (jacobians[b] != nullptr && !free_block) return false;  // FitImages checks this
         if (free_block) slot[b] = next;
         for (int j = 0; j < sizes_[b]; ++j, ++k)
@@ -239,6 +247,7 @@ void CheckSceneSizes(const SceneInput& in) {
 struct BlockGrid {
   const Reference& ref;
   const std::vector<int>& cache_index;  // image pixel -> cache pixel, -1 when not cached
+  const std::vector<float>& fabric;     // preview fabric mask per image pixel (1 = fabric)
   int width = 0;                        // image width
   int B = 1;                            // block size
   int stride = 1;                       // pixel stride inside a block
@@ -263,7 +272,7 @@ BlockVerdict SumFabricBlock(const BlockGrid& g, int bx, int by, double min_cover
   for (int y = by; y < by + B; ++y)
     for (int x = bx; x < bx + B; ++x) {
       const size_t p = size_t(y) * size_t(W) + size_t(x);
-      if (g.cache_index[p] < 0) return BlockVerdict::kNotPreviewFabric;
+      if (g.fabric[p] < 0.5f) return BlockVerdict::kNotPreviewFabric;
       const double w = PixelWeight(g.ref, p);
       wsum += w;
       for (int c = 0; c < 3; ++c) {
@@ -364,6 +373,20 @@ std::vector<int> CollectBlocks(const SceneInput& in, const BlockGrid& g, int hei
   return keep;
 }
 
+// The pixels KeepBlockSamples can pick (the stride cells' centres of every whole block).
+std::vector<unsigned char> SampleMask(int width, int height, int B, int stride) {
+  std::vector<unsigned char> mask(size_t(width) * size_t(height), 0);
+  for (int by = 0; by + B <= height; by += B)
+    for (int bx = 0; bx + B <= width; bx += B)
+      for (int y0 = by; y0 < by + B; y0 += stride)
+        for (int x0 = bx; x0 < bx + B; x0 += stride) {
+          const int cx = std::min(x0 + stride / 2, bx + B - 1);
+          const int cy = std::min(y0 + stride / 2, by + B - 1);
+          mask[size_t(cy) * size_t(width) + size_t(cx)] = 1;
+        }
+  return mask;
+}
+
 // One scene's fit data: its preview cache restricted to the sampled pixels of its blocks.
 std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions& opt, int B,
                                           int stride) {
@@ -379,10 +402,13 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   render::PreviewOptions po;
   po.model = opt.start.model;
   po.cloth = opt.start.cloth;
+  // Only the pixels a block can sample get preview cache entries (fit speed: the radiance
+  // tables of the other pixels were built and thrown away); every pixel's fabric flag is kept.
+  po.sample_mask = SampleMask(scene.card.width, scene.card.height, B, stride);
   const auto full = render::PreviewCache::Build(scene, in.environment, po);
   std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
   for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
-  const BlockGrid grid{ref, cache_index, scene.card.width, B, stride};
+  const BlockGrid grid{ref, cache_index, full->fabric_mask, scene.card.width, B, stride};
   const std::vector<int> keep = CollectBlocks(in, grid, scene.card.height, opt.min_coverage, *d);
   if (d->blocks() == 0) {
     throw FitError(in.scene_path + " / " + ref.path + ": no " + std::to_string(B) + "x" +
@@ -447,15 +473,49 @@ ParamBlocks StartBlocks(ParamTable table, const FitOptions& opt, double r0,
   return blocks;
 }
 
+// Whether a parameter block is held constant: locked, or ignored by the model's options
+// (cloth: sheen colour unless explicit, subsurface colour without --subsurface).
+bool IsConstantBlock(const ParamInfo& p, const FitOptions& opt) {
+  const bool ignored = opt.start.model == render::ModelKind::kCloth &&
+                       ((p.name == "sheen_color" &&
+                         opt.start.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
+                        (p.name == "subsurface_color" && !opt.start.cloth.subsurface));
+  return ignored || IsLocked(opt, p.name);
+}
+
+// Free scalars of a model under the options (what the Jet must carry).
+int FreeScalars(ParamTable table, const FitOptions& opt) {
+  int n = 0;
+  for (const ParamInfo& p : table)
+    if (!IsConstantBlock(p, opt)) n += p.size;
+  return n;
+}
+
+// The narrowest instantiated Jet width holding `free_scalars` (0 when none does).
+int JetWidthFor(int free_scalars) {
+  for (int w : kJetWidths)
+    if (free_scalars <= w) return w;
+  return 0;
+}
+
+ceres::CostFunction* MakePreviewCost(const SceneData& d, const std::vector<int>& sizes,
+                                     int jet_width) {
+  switch (jet_width) {
+    case 4: return new PreviewCost<4>(d, sizes);
+    case 8: return new PreviewCost<8>(d, sizes);
+    default: return new PreviewCost<kMaxJetWidth>(d, sizes);
+  }
+}
+
 // One residual block per scene, with the chosen robust loss.
 void AddSceneResiduals(ceres::Problem& problem, const SceneList& data,
-                       const std::vector<int>& sizes, const FitOptions& opt,
+                       const std::vector<int>& sizes, const FitOptions& opt, int jet_width,
                        const std::vector<double*>& ptrs) {
   for (const auto& d : data) {
     ceres::LossFunction* loss = nullptr;
     if (opt.loss == Loss::kHuber) loss = new ceres::HuberLoss(opt.loss_scale);
     if (opt.loss == Loss::kCauchy) loss = new ceres::CauchyLoss(opt.loss_scale);
-    problem.AddResidualBlock(new PreviewCost(*d, sizes), loss, ptrs);
+    problem.AddResidualBlock(MakePreviewCost(*d, sizes, jet_width), loss, ptrs);
   }
 }
 
@@ -469,12 +529,7 @@ void SetBoundsOrConstant(ceres::Problem& problem, ParamTable table, const FitOpt
     double lower = p.lower;
     if (model == render::ModelKind::kCloth && p.name == "roughness")
       lower = cloth::MinRoughness(opt.start.cloth);
-    const bool locked = IsLocked(opt, p.name);
-    const bool ignored = model == render::ModelKind::kCloth &&
-                         ((p.name == "sheen_color" &&
-                           opt.start.cloth.sheen_default != cloth::SheenDefault::kExplicit) ||
-                          (p.name == "subsurface_color" && !opt.start.cloth.subsurface));
-    if (locked || ignored) {
+    if (IsConstantBlock(p, opt)) {
       problem.SetParameterBlockConstant(ptrs[bi]);
     } else {
       for (int c = 0; c < p.size; ++c) {
@@ -498,7 +553,7 @@ ceres::Solver::Summary SolveStart(const SceneList& data, ParamTable table,
   ceres::Problem problem;
   std::vector<double*> ptrs;
   for (auto& b : blocks) ptrs.push_back(b.data());
-  AddSceneResiduals(problem, data, sizes, opt, ptrs);
+  AddSceneResiduals(problem, data, sizes, opt, JetWidthFor(FreeScalars(table, opt)), ptrs);
   SetBoundsOrConstant(problem, table, opt, blocks, ptrs);
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
@@ -658,11 +713,9 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
   const auto table = render::ParameterTable(model);
   const std::vector<int> sizes = BlockSizes(table);
   CheckLockedNames(table, opt);
-  // The Jacobian carries at most 10 free scalars (ceres::Jet<double, 10>).
-  int free_scalars = 0;
-  for (const ParamInfo& p : table)
-    if (!IsLocked(opt, p.name)) free_scalars += p.size;
-  if (free_scalars > 10)
+  // The Jacobian carries at most kMaxJetWidth = 10 free scalars (ceres::Jet<double, 10>).
+  const int free_scalars = FreeScalars(table, opt);
+  if (JetWidthFor(free_scalars) == 0)
     throw FitError("fit: model " + render::ToString(model) + " has " + std::to_string(free_scalars) +
                    " free parameters; at most 10 (lock some with --lock)");
 

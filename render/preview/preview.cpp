@@ -6,6 +6,7 @@
 #include <chrono>
 #include <map>
 #include <mutex>
+#include <stdexcept>
 #include <cmath>
 
 #include "brdf/cloth.h"
@@ -222,6 +223,11 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(bg[k]);
       continue;
     }
+    if (!x.opt.sample_mask.empty() && x.scene.meshes[size_t(h.mesh)].is_fabric &&
+        x.opt.sample_mask[pix] == 0) {
+      c->fabric_mask[pix] = 1.f;  // fabric, but not sampled: no cache entries
+      continue;
+    }
     const SurfaceAttributes a = x.bvh.Attributes(h);
     PrimaryHit hit;
     hit.v = d * -1.0;
@@ -304,6 +310,9 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   const size_t np = size_t(W) * size_t(H);
   c->background.assign(np * 3, 0.f);
   c->fabric_mask.assign(np, 0.f);
+  if (!opt.sample_mask.empty() && opt.sample_mask.size() != np)
+    throw std::invalid_argument("preview: sample_mask has " + std::to_string(opt.sample_mask.size()) +
+                                " entries for " + std::to_string(np) + " pixels");
 
   EmbreeScene bvh(scene);
   const double eps = 1e-5 * bvh.scale();
@@ -473,6 +482,14 @@ void EvaluatePreview(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out
 
 template void EvaluatePreview<double>(const PreviewCache&, const double*, std::vector<Rgb<double>>&);
 template void EvaluatePreview<float>(const PreviewCache&, const float*, std::vector<Rgb<float>>&);
+// Dual numbers for the fit's Jacobians: one width per number of free scalars the fit carries
+// (fit/image_fit.cpp, kJetWidths).
+template void EvaluatePreview<ceres::Jet<double, 4>>(const PreviewCache&,
+                                                      const ceres::Jet<double, 4>*,
+                                                      std::vector<Rgb<ceres::Jet<double, 4>>>&);
+template void EvaluatePreview<ceres::Jet<double, 8>>(const PreviewCache&,
+                                                      const ceres::Jet<double, 8>*,
+                                                      std::vector<Rgb<ceres::Jet<double, 8>>>&);
 template void EvaluatePreview<ceres::Jet<double, 10>>(const PreviewCache&,
                                                        const ceres::Jet<double, 10>*,
                                                        std::vector<Rgb<ceres::Jet<double, 10>>>&);

@@ -60,6 +60,10 @@ struct PreviewOptions {
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;
   int prefilter_samples = 128;
+  // Fit speed (fit/image_fit.cpp): when non-empty (one entry per image pixel), only the fabric
+  // pixels with a non-zero entry get cache entries (lights, irradiance, radiance tables); the
+  // other fabric pixels are still marked in fabric_mask but not shaded. Empty: every pixel.
+  std::vector<unsigned char> sample_mask;
 };
 
 // Whether the preview uses three.js r187's IBL for these options (see IblEngine).
