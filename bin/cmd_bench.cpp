@@ -176,8 +176,8 @@ void RunBenchModels(const BenchFitArgs& a, bool quiet) {
   }
   const std::vector<std::string> paths = CanonicalScenes();
   std::vector<fit::ModelRow> all;
-  std::printf("%-8s %-15s %8s %6s %6s %9s %-15s\n", "fabric", "model", "seconds", "iters",
-              "starts", "error", "termination");
+  std::printf("%-8s %-15s %8s %8s %6s %6s %9s %-15s\n", "fabric", "model", "seconds", "cpu s",
+              "iters", "starts", "error", "termination");
   std::stringstream ss(a.fabrics);
   std::string name;
   while (std::getline(ss, name, ',')) {
@@ -195,8 +195,8 @@ void RunBenchModels(const BenchFitArgs& a, bool quiet) {
     for (size_t i = 0; i < paths.size(); ++i)
       in.push_back({&scenes[i], envs[i].get(), &refs[i], nullptr, paths[i]});
     const auto rows = fit::RunModelBench(name, in, weave_period, models, [](const fit::ModelRow& r) {
-      std::printf("%-8s %-15s %8.2f %6d %6d %9.5f %-15s%s\n", r.fabric.c_str(), r.model.c_str(),
-                  r.seconds, r.iterations, r.starts, r.error, r.termination.c_str(),
+      std::printf("%-8s %-15s %8.2f %8.2f %6d %6d %9.5f %-15s%s\n", r.fabric.c_str(),
+                  r.model.c_str(), r.seconds, r.cpu_seconds, r.iterations, r.starts, r.error, r.termination.c_str(),
                   r.usable ? "" : "  (unusable)");
       std::fflush(stdout);
     });

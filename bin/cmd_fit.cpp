@@ -2,6 +2,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -10,6 +11,7 @@
 #include <map>
 #include <optional>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 
 #include "bin/commands.h"
@@ -314,8 +316,29 @@ struct LoadedScenes {
   std::vector<fit::Reference> rr, rr2;
 };
 
+// --scenes takes scene cards; a glTF (the card's `gltf` field) passed in their place is named
+// as such instead of failing on its first field ("unknown field 'accessors'").
+void CheckIsSceneCard(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+  bool gltf = ext == ".gltf" || ext == ".glb";
+  if (!gltf && ext == ".json") {
+    std::ifstream in(path);
+    std::string head(4096, '\0');
+    in.read(head.data(), long(head.size()));
+    head.resize(size_t(in.gcount()));
+    gltf = head.find("\"asset\"") != std::string::npos &&
+           head.find("\"gltf\"") == std::string::npos;
+  }
+  if (gltf)
+    throw std::runtime_error(path + ": this is a glTF file, not a clothfit scene card: --scenes "
+                             "takes scene cards (docs/scene-card.md), which name their glTF in "
+                             "the `gltf` field (e.g. datasets/scenes/sphere.json)");
+}
+
 LoadedScenes LoadFitScenes(const FitFiles& f, const fit::ReferenceOptions& ro) {
   LoadedScenes l;
+  for (const std::string& s : f.scenes) CheckIsSceneCard(s);
   std::map<std::string, std::shared_ptr<render::Environment>> env_by_key;  // load once
   for (size_t i = 0; i < f.scenes.size(); ++i) {
     l.sc.push_back(render::LoadScene(f.scenes[i]));

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <map>
 #include <sstream>
 
@@ -122,6 +123,7 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
     row.fabric = fabric;
     row.model = render::ToString(m);
     const auto t0 = std::chrono::steady_clock::now();
+    const std::clock_t c0 = std::clock();
     FitResult r;
     try {
       r = FitImages(inputs, o);
@@ -129,6 +131,7 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
       r.usable = false;
     }
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    row.cpu_seconds = double(std::clock() - c0) / double(CLOCKS_PER_SEC);
     row.usable = r.usable;
     row.iterations = r.iterations;
     row.starts = r.starts;
@@ -143,9 +146,9 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
 
 void WriteModelBench(const std::vector<ModelRow>& rows, const std::string& csv_path) {
   std::ostringstream csv;
-  csv << "fabric,model,seconds,error,fit_rmse,iterations,starts,termination,usable\n";
+  csv << "fabric,model,seconds,cpu_seconds,error,fit_rmse,iterations,starts,termination,usable\n";
   for (const ModelRow& r : rows)
-    csv << r.fabric << "," << r.model << "," << r.seconds << "," << r.error << "," << r.fit_rmse
+    csv << r.fabric << "," << r.model << "," << r.seconds << "," << r.cpu_seconds << "," << r.error << "," << r.fit_rmse
         << "," << r.iterations << "," << r.starts << "," << r.termination << ","
         << (r.usable ? 1 : 0) << "\n";
   io::WriteTextAtomic(csv_path, csv.str());

@@ -48,6 +48,8 @@ std::vector<BenchRow> RunFitBench(const std::string& fabric,
 struct ModelRow {
   std::string fabric, model;
   double seconds = 0.0;  // FitImages wall time (preview caches included)
+  double cpu_seconds = 0.0;  // process CPU time over the fit, all threads (std::clock): less
+                             // sensitive than wall time to other processes on a shared machine
   double error = 0.0;    // the common measure
   double fit_rmse = 0.0; // the fit's own error (fit space, its blocks)
   int iterations = 0, starts = 0;

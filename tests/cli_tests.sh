@@ -98,6 +98,10 @@ PY
       && fail "missing reference accepted"
     echo "$err" | grep -q "none.exr" || fail "fit error does not name the file: $err"
     [ ! -e "$TMP/f.json" ] || fail "preset written despite error"
+    # A glTF passed as --scenes is named as a glTF, not reported as an unknown card field.
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$(dirname "$0")/../datasets/scenes/sphere.gltf" --out "$TMP/f.json" 2>&1) \
+      && fail "glTF accepted as a scene card"
+    echo "$err" | grep -q "sphere.gltf: this is a glTF file, not a clothfit scene card" || fail "glTF as --scenes: $err"
     ;;
   report)
     # Small EXRs from the lut command stand in for references and previews (16x16, RGB).
@@ -135,6 +139,16 @@ PY
     err=$("$BIN" --quiet report "$TMP/nope.json" --out "$TMP/rep2" 2>&1) && fail "missing preset accepted"
     echo "$err" | grep -q "nope.json" || fail "missing preset error does not name the file: $err"
     [ ! -e "$TMP/rep2" ] || fail "report written despite errors"
+    # Convergence badge (issue 15): a converged fit has none; a capped one (no status field:
+    # termination NO_CONVERGENCE) and one flagged at a bound (status "at bound") each have one.
+    ! grep -q 'class="badge"' "$TMP/rep/demo.html" || fail "badge on a converged fit"
+    sed 's/"termination":"CONVERGENCE"/"termination":"NO_CONVERGENCE"/' "$TMP/c.json" > "$TMP/nc.json"
+    sed 's/"termination":"CONVERGENCE"/"termination":"CONVERGENCE","status":"at bound","at_bound":[{"name":"sheen_roughness","bound":"upper","value":1,"flagged":true}]/' \
+      "$TMP/s.json" > "$TMP/ab.json"
+    "$BIN" --quiet report "$TMP/nc.json" "$TMP/ab.json" --out "$TMP/rep3" >/dev/null || fail "report of flagged fits"
+    grep -q 'class="badge"[^>]*>not converged<' "$TMP/rep3/demo.html" || fail "no 'not converged' badge"
+    grep -q 'class="badge"[^>]*title="at bound; sheen_roughness at a bound"[^>]*>at bound<' "$TMP/rep3/demo.html" \
+      || fail "no 'at bound' badge naming the parameter"
     ;;
   convert)
     GEN="$(dirname "$0")/../datasets/catalogue/generate.py"
