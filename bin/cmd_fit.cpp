@@ -523,6 +523,32 @@ int ChooseLevel(const FitArgs& a, int fixed_level, double fabric_period,
   return level;
 }
 
+// Filament's subsurface cloth (MATERIAL_HAS_SUBSURFACE_COLOR) replaces the Lambert term by a
+// wrapped diffuse, W(n.l, 0.5) sat(subsurface + n.l), rather than adding to it (brdf/cloth.h), so
+// `--subsurface` can fit worse than plain cloth. The same fit without it is run as a check; when
+// it is better, stdout says so (the preset stays the subsurface fit that was asked for) and the
+// preset records both errors in fit.subsurface_check.
+void CheckSubsurfaceAgainstPlain(const std::vector<fit::SceneInput>& inputs,
+                                 const fit::FitOptions& o, const fit::FitResult& res,
+                                 render::MaterialPreset& preset) {
+  fit::FitOptions plain = o;
+  plain.start.cloth.subsurface = false;
+  fit::FitResult p;
+  try {
+    p = fit::FitImages(inputs, plain);
+  } catch (const fit::FitError&) {
+    return;
+  }
+  if (!p.usable) return;
+  preset.extra["fit"]["subsurface_check"] = {{"rmse_with_subsurface", res.rmse},
+                                             {"rmse_without_subsurface", p.rmse},
+                                             {"worse", p.rmse < res.rmse}};
+  if (p.rmse < res.rmse)
+    std::printf("fit: WARNING: --subsurface fits worse than plain cloth (rmse %.4f vs %.4f): "
+                "Filament's subsurface replaces the Lambert term by wrapped diffuse; drop "
+                "--subsurface for the better fit\n", res.rmse, p.rmse);
+}
+
 // `clothfit fit` after parsing: returns the exit status (throws on bad input).
 int RunFit(const FitArgs& a, const Globals& g) {
   std::unique_ptr<tbb::global_control> limit;
@@ -558,6 +584,8 @@ int RunFit(const FitArgs& a, const Globals& g) {
   }
   render::MaterialPreset preset = res.preset;
   preset.extra["fit"] = FitRecord(a, o, res, files, l);
+  if (o.start.model == render::ModelKind::kCloth && o.start.cloth.subsurface)
+    CheckSubsurfaceAgainstPlain(inputs, o, res, preset);
   preset.extra["provenance"] = {{"tool", "clothfit 0.1.0"},
                                 {"fabric", a.fabric.empty() ? nlohmann::json(nullptr)
                                                             : nlohmann::json(a.fabric)}};

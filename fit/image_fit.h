@@ -18,8 +18,10 @@
 // scale 1 in these units: residuals beyond one floor-unit grow linearly) tempers outliers.
 //
 // Solver. Ceres trust region (Levenberg-Marquardt) with the parameter table's bounds; the
-// Jacobian comes from one ceres::Jet<double, 10> evaluation of the preview per scene (all
-// parameters at once). Multi-start over roughness (the colours are started from the
+// Jacobian comes from one ceres::Jet<double, N> evaluation of the preview per scene (all free
+// parameters at once; N = 4, 8 or 10, the narrowest width holding the free scalars). The
+// preview cache of a scene is built only for the pixels the blocks sample
+// (PreviewOptions::sample_mask), with every pixel's fabric flag (docs/fitting.md, "Fit speed"). Multi-start over roughness (the colours are started from the
 // reference's mean colour); the best usable start wins. A fit whose Summary is not usable, or
 // whose parameters are not finite, is reported as failed and never written as a preset.
 #pragma once
