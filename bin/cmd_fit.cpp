@@ -14,6 +14,8 @@
 #include <stdexcept>
 #include <string>
 
+#include <unistd.h>
+
 #include "bin/commands.h"
 #include "bin/progress.h"
 #include "fit/image_fit.h"
@@ -73,7 +75,7 @@ render::Scene LoadSceneAtWidth(const std::string& scene_path, int width) {
 }
 
 std::string CachedReference(const std::string& scene_path, const std::string& fabric_path,
-                            int spp, uint64_t seed, bool quiet, int width) {
+                            int spp, uint64_t seed, bool quiet, int width, double target_error) {
   const render::Scene scene = LoadSceneAtWidth(scene_path, width);
   std::string key_text = "clothfit-reference-v1|renderer=" +
                          std::to_string(render::kReferenceRendererVersion) + "|" + std::to_string(spp) + "|" +
@@ -86,6 +88,14 @@ std::string CachedReference(const std::string& scene_path, const std::string& fa
   const fs::path weave = fs::path(fabric_path).parent_path() / ".." / "weaves" / (fabric.preset + ".weave");
   key_text += "|" + ReadFileOrEmpty(weave.string());
   if (scene.card.environment) key_text += "|" + scene.card.environment->path;
+  // Adaptive references: the target and the allocation's constants (spp is the budget).
+  render::RenderSettings st;
+  if (target_error > 0.0) {
+    char adaptive[160];
+    std::snprintf(adaptive, sizeof adaptive, "|adaptive target=%.17g min=%d pilot=%d calib=%.17g",
+                  target_error, st.min_spp, st.pilot_spp, st.pilot_calibration);
+    key_text += adaptive;
+  }
   char name[64];
   std::snprintf(name, sizeof name, "%016llx.exr", (unsigned long long)Fnv1a(key_text));
   const std::string dir = CacheDir();
@@ -94,20 +104,26 @@ std::string CachedReference(const std::string& scene_path, const std::string& fa
   if (fs::exists(path)) return path;
   const auto env = LoadSceneEnvironment(scene, quiet);
   render::PathTracer tracer(scene, *fabric.bsdf, env.get());
-  render::RenderSettings st;
   st.spp = spp;
   st.seed = seed;
+  st.target_error = target_error;
   ProgressBar bar("reference " + fabric.name + " / " + fs::path(scene_path).stem().string(), quiet);
   const render::RenderResult r = tracer.Render(st, [&](int d, int t) { bar.Update(d, t); });
-  render::WriteRenderExr(path, r,
+  // Written under a temporary name and renamed: shards sharing the cache directory (render-
+  // references --shard, docs/reference-renderer.md) never read a partly written file.
+  const std::string tmp = path.substr(0, path.size() - 4) + ".tmp" + std::to_string(::getpid()) + ".exr";
+  render::WriteRenderExr(tmp, r,
                          {{"clothfit:scene", scene_path},
                           {"clothfit:fabric", fabric_path},
                           {"clothfit:spp", std::to_string(spp)},
                           {"clothfit:seed", std::to_string(seed)},
+                          {"clothfit:target_error", std::to_string(target_error)},
+                          {"clothfit:mean_spp", std::to_string(r.mean_spp)},
                           {"clothfit:renderer_version", std::to_string(render::kReferenceRendererVersion)}});
+  fs::rename(tmp, path);
   if (!quiet)
-    std::fprintf(stderr, "clothfit: rendered %s (%.1f s, mean std error %.2f%% of mean)\n",
-                 path.c_str(), r.seconds,
+    std::fprintf(stderr, "clothfit: rendered %s (%.1f s, %.1f spp, mean std error %.2f%% of mean)\n",
+                 path.c_str(), r.seconds, r.mean_spp,
                  r.mean_value > 0 ? 100.0 * r.mean_std_error / r.mean_value : 0.0);
   return path;
 }
@@ -125,6 +141,7 @@ struct FitArgs {
   std::string level = "auto", loss = "huber", variant = "filament", sheen_default = "explicit";
   std::string images, references2, alpha = "auto", coverage_channel, noise = "auto";
   std::string weave_period, starts, start_values;
+  std::string target_error;  // reference adaptive sampling (TargetErrorFor)
   double loss_scale = 1.0, min_coverage = 0.5;
   bool subsurface = false, no_floor = false;
   int spp = 256, stride = 0, threads = 0, max_iterations = 50;
@@ -148,6 +165,9 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
   cmd->add_flag("--subsurface", a.subsurface, "cloth: fit a subsurface colour too");
   cmd->add_option("--spp", a.spp, "reference samples per pixel (--fabric)")
       ->check(CLI::Range(16, 65536));
+  cmd->add_option("--target-error", a.target_error,
+                  "references (--fabric): adaptive sampling to this mean standard error / mean "
+                  "value, 'E' or per scene 'sphere=E,drape=E,swatch=E'; --spp is the budget");
   cmd->add_option("--stride", a.stride,
                   "evaluate every n-th pixel per block axis (0 = auto: at most 4 x 4 per block)")
       ->check(CLI::Range(0, 16));
@@ -257,8 +277,9 @@ FitFiles ResolveFitFiles(const FitArgs& a, const Globals& g) {
       throw std::invalid_argument("--fabric and --references/--scenes are exclusive");
     f.scenes = CanonicalScenes();
     for (const std::string& s : f.scenes) {
-      f.refs.push_back(CachedReference(s, a.fabric, a.spp, 1, g.quiet));
-      if (!a.no_floor) f.refs2.push_back(CachedReference(s, a.fabric, a.spp, 2, g.quiet));
+      const double te = TargetErrorFor(a.target_error, a.fabric, s);
+      f.refs.push_back(CachedReference(s, a.fabric, a.spp, 1, g.quiet, 0, te));
+      if (!a.no_floor) f.refs2.push_back(CachedReference(s, a.fabric, a.spp, 2, g.quiet, 0, te));
     }
   } else {
     f.refs = SplitList(a.references);

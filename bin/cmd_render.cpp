@@ -1,4 +1,5 @@
 // clothfit render-reference: path-traced reference of a fabric on a scene.
+#include <algorithm>
 #include <tbb/global_control.h>
 
 #include <cstdio>
@@ -68,6 +69,7 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
     std::string scene, fabric, out, aov;
     int spp = 64, threads = 0, max_depth = 8, env_samples = -1;
     uint64_t seed = 1;
+    double target_error = 0.0;
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("render-reference",
@@ -83,6 +85,10 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--env-samples", args->env_samples,
                   "environment samples at each camera ray's hit (default: the renderer's)")
       ->check(CLI::Range(1, 16));
+  cmd->add_option("--target-error", args->target_error,
+                  "adaptive sampling: target mean standard error / mean value (0.02 = 2 %); "
+                  "--spp is then the per-pixel budget (a multiple of 16 >= 32)")
+      ->check(CLI::Range(0.0, 1.0));
   cmd->add_option("--aov", args->aov,
                   "comma-separated AOVs: normal,position,uv,tangent,depth,all");
   cmd->callback([args, &g, &exit_code]() {
@@ -92,6 +98,14 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       st.seed = args->seed;
       st.max_depth = args->max_depth;
       if (args->env_samples > 0) st.first_env_samples = args->env_samples;
+      st.target_error = args->target_error;
+      if (st.target_error > 0.0 && (args->spp < 32 || args->spp % 16 != 0)) {
+        std::fprintf(stderr,
+                     "clothfit render-reference: error: --spp: with --target-error the budget "
+                     "must be a multiple of 16 >= 32, got %d\n", args->spp);
+        exit_code = 1;
+        return;
+      }
       std::string bad;
       if (!ParseAovs(args->aov, st.aovs, bad)) {
         std::fprintf(stderr, "clothfit render-reference: error: --aov: unknown AOV '%s'\n",
@@ -120,6 +134,8 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
            {"clothfit:seed", std::to_string(args->seed)},
            {"clothfit:max_depth", std::to_string(args->max_depth)},
            {"clothfit:env_samples", std::to_string(st.first_env_samples)},
+           {"clothfit:target_error", std::to_string(st.target_error)},
+           {"clothfit:mean_spp", std::to_string(r.mean_spp)},
            {"clothfit:environment", env ? env->source() : std::string("none")},
            {"clothfit:renderer", "clothfit reference path tracer (NEE + env MIS, power heuristic)"},
            {"clothfit:renderer_version", std::to_string(render::kReferenceRendererVersion)}});
@@ -131,6 +147,12 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
           mrays, r.mean_value, r.mean_std_error,
           r.mean_value > 0 ? 100.0 * r.mean_std_error / r.mean_value : 0.0,
           100.0 * r.mean_relative_std_error, args->out.c_str());
+      if (st.target_error > 0.0) {
+        const auto [lo, hi] = std::minmax_element(r.tile_spp.begin(), r.tile_spp.end());
+        std::printf("render-reference: adaptive: target %.2f%%, mean %.1f spp (pilot included; "
+                    "tiles %d..%d spp), pilot %.2f s\n",
+                    100.0 * st.target_error, r.mean_spp, *lo, *hi, r.pilot_seconds);
+      }
       exit_code = 0;
     } catch (const std::exception& e) {
       std::fprintf(stderr, "clothfit render-reference: error: %s\n", 

@@ -23,6 +23,7 @@ void AddStressCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddBenchCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddModelsCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code);
+void AddRenderReferencesCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code);
@@ -50,8 +51,18 @@ int RunBenchReference(const BenchReferenceArgs& args, bool quiet);
 std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& scene, bool quiet);
 // Renders (or reuses from the content-keyed cache) a reference; returns its path. `width` > 0
 // overrides the card's image width (height scaled to keep the aspect ratio; same camera).
+// target_error > 0: adaptive sampling to that relative mean standard error (spp = budget);
+// it is part of the cache key.
 std::string CachedReference(const std::string& scene_path, const std::string& fabric_path,
-                            int spp, uint64_t seed, bool quiet, int width = 0);
+                            int spp, uint64_t seed, bool quiet, int width = 0,
+                            double target_error = 0.0);
+// --target-error of fit / render-references: "E" (every reference) or a list of items
+// "scene=E" or "fabric/scene=E" by file stem ("canvas/sphere=0.0178,drape=0.019"; the
+// fabric/scene item wins); 0 = fixed spp. Throws std::invalid_argument naming the option.
+double TargetErrorFor(const std::string& spec, const std::string& fabric_path,
+                      const std::string& scene_path);
+// "i/N" with 0 <= i < N -> {i, N}; throws std::invalid_argument naming --shard.
+std::pair<int, int> ParseShard(const std::string& spec);
 // The scene card with its image width overridden as above (width <= 0: unchanged).
 render::Scene LoadSceneAtWidth(const std::string& scene_path, int width);
 // "a,b,,c" -> {"a", "b", "c"} (empty items dropped).

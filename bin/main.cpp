@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   clothfit::cli::AddBenchCommand(app, globals, exit_code);
   clothfit::cli::AddModelsCommand(app, globals, exit_code);
   clothfit::cli::AddRenderCommand(app, globals, exit_code);
+  clothfit::cli::AddRenderReferencesCommand(app, globals, exit_code);
   clothfit::cli::AddPreviewCommand(app, globals, exit_code);
   clothfit::cli::AddFitCommand(app, globals, exit_code);
   clothfit::cli::AddCompareCommand(app, globals, exit_code);

@@ -171,6 +171,31 @@ PY
     out=$("$BIN" --quiet bench convert --catalogue "$TMP/cat" -j 1 2>&1) || fail "bench convert: $out"
     echo "$out" | grep -q "materials/s" || fail "bench convert prints no rate: $out"
     ;;
+  shards)
+    # render-references --shard: two shards into one cache directory produce exactly the
+    # cache entries of one unsharded run (each entry once, same pixels), adaptive included.
+    D=$(cd "$(dirname "$0")/.." && pwd)/datasets
+    mat=$D/materials/lambert.json
+    refs() { CLOTHFIT_CACHE="$1" "$BIN" --quiet render-references --fabrics "$mat,$D/fabrics/canvas.json" \
+               --width 16 --spp 64 --target-error "$2" --seeds "$3" --shard "$4"; }
+    refs "$TMP/one" "sphere=0.05,lambert/drape=0.04,drape=0.06,swatch=0.03" 1,2 0/1 > "$TMP/one.txt" || fail "unsharded run exited $?"
+    refs "$TMP/two" "sphere=0.05,lambert/drape=0.04,drape=0.06,swatch=0.03" 1,2 0/2 > "$TMP/a.txt" || fail "shard 0/2 exited $?"
+    refs "$TMP/two" "sphere=0.05,lambert/drape=0.04,drape=0.06,swatch=0.03" 1,2 1/2 > "$TMP/b.txt" || fail "shard 1/2 exited $?"
+    [ "$(wc -l < "$TMP/one.txt")" -eq 12 ] || fail "unsharded run listed $(wc -l < "$TMP/one.txt") references, not 12"
+    [ "$(wc -l < "$TMP/a.txt")" -eq 6 ] && [ "$(wc -l < "$TMP/b.txt")" -eq 6 ] || fail "shards are not 6 + 6"
+    (cd "$TMP/one" && ls) > "$TMP/ls1"; (cd "$TMP/two" && ls) > "$TMP/ls2"
+    [ "$(wc -l < "$TMP/ls1")" -eq 12 ] || fail "cache holds $(wc -l < "$TMP/ls1") files, not 12"
+    diff "$TMP/ls1" "$TMP/ls2" > /dev/null || fail "the shards' cache entries differ from one run's"
+    # Same pixels (the files differ only in OpenImageIO's DateTime).
+    for f in $(cat "$TMP/ls1"); do
+      oiiotool --fail 0 --diff "$TMP/one/$f" "$TMP/two/$f" | grep -q '^PASS' || fail "$f differs between runs"
+    done
+    # A different target is a different cache entry; a missing scene target is an error.
+    refs "$TMP/one" "0.02" 1 0/1 > "$TMP/c.txt" || fail "target 0.02 exited $?"
+    grep -qxFf "$TMP/c.txt" "$TMP/one.txt" && fail "target 0.02 reused an entry of other targets"
+    refs "$TMP/one" "sphere=0.05" 1 0/1 > /dev/null 2>&1 && fail "no target for drape/swatch accepted"
+    "$BIN" render-references --fabrics "$mat" --shard 2/2 --dry-run > /dev/null 2>&1 && fail "--shard 2/2 accepted"
+    ;;
   *) fail "unknown case $CASE" ;;
 esac
 echo "PASS: $CASE"

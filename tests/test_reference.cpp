@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -156,6 +157,81 @@ TEST(Reference, StandardErrorEstimateMatchesObservedSpread) {
             double(b.std_error[i]) * double(b.std_error[i]);
   }
   EXPECT_NEAR(diff2 / pred, 1.0, 0.15);
+}
+
+// Adaptive sampling (RenderSettings::target_error): a pilot with independent streams decides
+// each tile's spp, the image is rendered from fresh streams with those counts.
+TEST(Reference, AdaptiveSamplingMeetsItsTargetDeterministically) {
+  Scene s = LitSphereScene();
+  const Environment env = Environment::ProceduralSky(1.0, 0.3);
+  LambertBsdf fabric(Rgbd(0.6, 0.5, 0.4));
+  PathTracer pt(s, fabric, &env);
+  RenderSettings st;
+  st.tile_size = 8;
+  st.spp = 1024;  // budget
+  st.seed = 5;
+  st.target_error = 0.01;
+  const RenderResult one = RenderWithThreads(pt, st, 1), two = RenderWithThreads(pt, st, 2);
+  EXPECT_EQ(one.rgb, two.rgb);
+  EXPECT_EQ(one.std_error, two.std_error);
+  EXPECT_EQ(one.tile_spp, two.tile_spp);
+  ASSERT_EQ(one.tile_spp.size(), 9u);
+  const double achieved = one.mean_std_error / one.mean_value;
+  std::printf("[reference] adaptive: target 1.00 %%, achieved %.2f %%, mean %.1f spp, tiles",
+              100.0 * achieved, one.mean_spp);
+  for (int n : one.tile_spp) std::printf(" %d", n);
+  std::printf("\n");
+  EXPECT_LE(achieved, 0.0105);
+  EXPECT_GE(achieved, 0.006);  // not wasting samples far beyond the target
+  // The tiles get different counts (the sphere's noisier tiles more than the sky corners).
+  const auto [lo, hi] = std::minmax_element(one.tile_spp.begin(), one.tile_spp.end());
+  EXPECT_GE(*hi, 2 * *lo);
+  for (int n : one.tile_spp) EXPECT_EQ(n % 16, 0);
+  // A looser target takes fewer samples.
+  st.target_error = 0.03;
+  EXPECT_LT(pt.Render(st).mean_spp, one.mean_spp / 4);
+}
+
+TEST(Reference, AdaptiveSamplingIsUnbiasedAndItsStandardErrorHonest) {
+  // Against a fixed-spp render of another seed: per-pixel z = (a - b) / sqrt(se_a^2 + se_b^2)
+  // must look standard normal (mean ~ 0: no bias from the stopping rule; spread ~ 1: the
+  // stored standard error is the real one), and the image means agree within their errors.
+  Scene s = LitSphereScene();
+  const Environment env = Environment::Constant({0.8, 0.8, 0.8});
+  LambertBsdf fabric(Rgbd(0.6, 0.5, 0.4));
+  PathTracer pt(s, fabric, &env);
+  RenderSettings st;
+  st.tile_size = 8;
+  st.spp = 512;
+  st.seed = 11;
+  st.target_error = 0.004;
+  const RenderResult a = pt.Render(st);
+  RenderSettings fixed;
+  fixed.spp = 256;
+  fixed.seed = 12;
+  const RenderResult b = pt.Render(fixed);
+  double zsum = 0.0, z2 = 0.0, ma = 0.0, mb = 0.0, va = 0.0, vb = 0.0;
+  int n = 0;
+  for (size_t i = 0; i < a.rgb.size(); ++i) {
+    ma += double(a.rgb[i]);
+    mb += double(b.rgb[i]);
+    va += double(a.std_error[i]) * double(a.std_error[i]);
+    vb += double(b.std_error[i]) * double(b.std_error[i]);
+    const double se = std::hypot(double(a.std_error[i]), double(b.std_error[i]));
+    if (!(se > 0.0)) continue;
+    const double z = (double(a.rgb[i]) - double(b.rgb[i])) / se;
+    zsum += z;
+    z2 += z * z;
+    ++n;
+  }
+  const double mean_z = zsum / n, sd_z = std::sqrt(z2 / n - mean_z * mean_z);
+  const double zmeans = (ma - mb) / std::sqrt(va + vb);
+  std::printf("[reference] adaptive vs fixed: %d pixel-channels, z mean %.3f sd %.3f, image "
+              "means z %.2f, mean spp %.1f\n", n, mean_z, sd_z, zmeans, a.mean_spp);
+  ASSERT_GT(n, 500);
+  EXPECT_LT(std::abs(mean_z), 0.15);
+  EXPECT_NEAR(sd_z, 1.0, 0.15);
+  EXPECT_LT(std::abs(zmeans), 3.0);
 }
 
 TEST(Reference, NoEnvironmentMeansBackgroundOnlyAndNoEnvSampling) {

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <mutex>
+#include <stdexcept>
 
 #include "render/scene/embree_scene.h"
 #include "render/scene/image_io.h"
@@ -420,10 +421,11 @@ struct PathTracer::Impl {
     return out;
   }
 
-  // All samples of pixel (x, y), stored into r. strata: the tile's, reused pixel to pixel.
-  void RenderPixel(const RenderSettings& st, const SamplingPlan& plan, int x, int y,
-                   BatchStrata& strata, uint64_t& rays, RenderResult& r) const {
-    const int M = plan.M, env_samples = plan.env_samples;
+  // All spp samples of pixel (x, y) from the streams of `seed`, in batches of M.
+  // strata: the tile's, reused pixel to pixel.
+  PixelEstimate EstimatePixel(const RenderSettings& st, uint64_t seed, int spp, int M,
+                              int env_samples, int x, int y, BatchStrata& strata,
+                              uint64_t& rays) const {
     const size_t pix = size_t(y) * size_t(scene.card.width) + size_t(x);
     // Pixel positions: K independently shifted copies (Cranley-Patterson rotations) of
     // an M-point stratified set (Hammersley), K x M = spp. Each batch's mean is an
@@ -432,9 +434,9 @@ struct PathTracer::Impl {
     // sub-pixel structure is antialiased far better than by i.i.d. jitter) and the
     // estimate of it stays honest.
     PixelEstimate est;
-    Pcg32 shift_rng = PixelSampler(st.seed ^ 0xA5A5A5A5DEADBEEFull, pix, 0);
+    Pcg32 shift_rng = PixelSampler(seed ^ 0xA5A5A5A5DEADBEEFull, pix, 0);
     double shift_u = 0.0, shift_v = 0.0;
-    for (int s = 0; s < st.spp; ++s) {
+    for (int s = 0; s < spp; ++s) {
       const int m = s % M;  // sample m of batch s / M
       if (m == 0) {
         shift_u = shift_rng.Uniform();
@@ -447,7 +449,7 @@ struct PathTracer::Impl {
         strata.Get(1, m, 0, first.bsdf + 2);
         for (int k = 0; k < env_samples; ++k) strata.Get(2, m, k, first.env + 2 * k);
       }
-      Pcg32 rng = PixelSampler(st.seed, pix, uint64_t(s));
+      Pcg32 rng = PixelSampler(seed, pix, uint64_t(s));
       double ju = (m + 0.5) / M + shift_u, jv = RadicalInverse2(uint32_t(m)) + shift_v;
       ju -= std::floor(ju);
       jv -= std::floor(jv);
@@ -461,24 +463,122 @@ struct PathTracer::Impl {
           TracePath(V(org), V(dir), rng, M > 1 ? &first : nullptr, env_samples, st, rays);
       est.Add(so, m, M, st.max_sample_value);
     }
-    est.Store(pix, plan.K, st.spp, st.aovs, r);
+    return est;
   }
 
-  // The pixels of tile `tile` (row-major, tiles_x per row); returns the rays traced.
-  uint64_t RenderTile(const RenderSettings& st, const SamplingPlan& plan, int tile, int tiles_x,
-                      RenderResult& r) const {
+  // The tile's pixel range.
+  struct TileRect {
+    int x0, y0, x1, y1;
+  };
+  TileRect Rect(const RenderSettings& st, int tile, int tiles_x) const {
     const int W = scene.card.width, H = scene.card.height;
     const int tx = tile % tiles_x, ty = tile / tiles_x;
+    return {tx * st.tile_size, ty * st.tile_size, std::min(W, (tx + 1) * st.tile_size),
+            std::min(H, (ty + 1) * st.tile_size)};
+  }
+
+  // The pixels of tile `tile` (row-major, tiles_x per row) with spp samples each (the plan's
+  // batches); returns the rays traced.
+  uint64_t RenderTile(const RenderSettings& st, const SamplingPlan& plan, int spp, int tile,
+                      int tiles_x, RenderResult& r) const {
+    const TileRect t = Rect(st, tile, tiles_x);
     uint64_t rays = 0;
     BatchStrata strata({{2, 1}, {1, 1}, {2, plan.env_samples}});
-    for (int y = ty * st.tile_size; y < std::min(H, (ty + 1) * st.tile_size); ++y) {
-      for (int x = tx * st.tile_size; x < std::min(W, (tx + 1) * st.tile_size); ++x) {
-        RenderPixel(st, plan, x, y, strata, rays, r);
+    for (int y = t.y0; y < t.y1; ++y) {
+      for (int x = t.x0; x < t.x1; ++x) {
+        const PixelEstimate est =
+            EstimatePixel(st, st.seed, spp, plan.M, plan.env_samples, x, y, strata, rays);
+        est.Store(size_t(y) * size_t(scene.card.width) + size_t(x), plan.K, spp, st.aovs, r);
       }
     }
     return rays;
   }
+
+  // Pilot of one tile for adaptive sampling: every other pixel in x and y (the tile's corner
+  // always), pilot_spp samples each (16 batches) from streams independent of the image's.
+  struct PilotStats {
+    double se_sum = 0.0, value_sum = 0.0;  // over pilot pixels and channels
+    int pixels = 0;
+    uint64_t rays = 0;
+  };
+  PilotStats PilotTile(const RenderSettings& st, const SamplingPlan& pilot, int tile,
+                       int tiles_x) const {
+    const TileRect t = Rect(st, tile, tiles_x);
+    PilotStats ps;
+    BatchStrata strata({{2, 1}, {1, 1}, {2, pilot.env_samples}});
+    const uint64_t pilot_seed = st.seed ^ 0x5DEECE66D1CE4E5Bull;  // disjoint from st.seed's
+    for (int y = t.y0; y < t.y1; y += 2) {
+      for (int x = t.x0; x < t.x1; x += 2) {
+        const PixelEstimate est = EstimatePixel(st, pilot_seed, pilot.K * pilot.M, pilot.M,
+                                                pilot.env_samples, x, y, strata, ps.rays);
+        for (int c = 0; c < 3; ++c) {
+          const double var = pilot.K > 1 ? est.m2[c] / (pilot.K - 1) : 0.0;
+          ps.se_sum += std::sqrt(var / pilot.K);
+          ps.value_sum += est.mean[c];
+        }
+        ++ps.pixels;
+      }
+    }
+    return ps;
+  }
 };
+
+namespace {
+
+// Batches for a given spp: K = 16 batches of M = spp / 16 stratified samples when spp is a
+// multiple of 16 (>= 32), else K = spp batches of one i.i.d. sample.
+SamplingPlan PlanFor(int spp, int env_samples) {
+  SamplingPlan plan;
+  plan.K = (spp >= 32 && spp % 16 == 0) ? 16 : spp;
+  plan.M = spp / plan.K;
+  plan.env_samples = std::clamp(env_samples, 1, kMaxFirstEnvSamples);
+  return plan;
+}
+
+// Adaptive allocation (docs/reference-renderer.md, "Adaptive sampling"). Tile t has w_t
+// pixels, a per-sample spread s_t (its pilot pixels' mean standard error x sqrt(pilot spp):
+// at n samples the tile's mean standard error is about s_t / sqrt(n)) and a cost c_t (rays
+// per sample). The counts minimise the cost sum w_t c_t n_t subject to the image's mean
+// standard error sum w_t s_t / sqrt(n_t) / sum w_t <= target: n_t = lambda (s_t / c_t)^(2/3)
+// (Lagrange), clamped to [lo, hi], lambda found by bisection, then rounded up to a multiple
+// of 16. Each tile thus stops at its own standard error s_t / sqrt(n_t).
+std::vector<int> AllocateTileSpp(const std::vector<double>& w, const std::vector<double>& s,
+                                 const std::vector<double>& c, double target, int lo, int hi) {
+  const size_t n = w.size();
+  double wsum = 0.0;
+  for (double x : w) wsum += x;
+  auto counts = [&](double lambda, std::vector<double>* out) {
+    double err = 0.0;
+    for (size_t t = 0; t < n; ++t) {
+      const double shape = s[t] > 0.0 ? std::cbrt((s[t] / std::max(c[t], 1e-6)) *
+                                                  (s[t] / std::max(c[t], 1e-6)))
+                                      : 0.0;
+      const double nt = std::clamp(lambda * shape, double(lo), double(hi));
+      if (out) (*out)[t] = nt;
+      err += w[t] * s[t] / std::sqrt(nt);
+    }
+    return err / wsum;
+  };
+  std::vector<double> nt(n, double(hi));
+  if (counts(1e30, nullptr) > target) {
+    counts(1e30, &nt);  // even the budget everywhere misses the target: use the budget
+  } else {
+    double a = -60.0, b = 80.0;  // log lambda
+    for (int it = 0; it < 100; ++it) {
+      const double m = 0.5 * (a + b);
+      (counts(std::exp(m), nullptr) > target ? a : b) = m;
+    }
+    counts(std::exp(b), &nt);
+  }
+  std::vector<int> spp(n);
+  for (size_t t = 0; t < n; ++t) {
+    const int k = int(std::ceil(nt[t] / 16.0 - 1e-9));
+    spp[t] = std::clamp(16 * k, lo, hi);
+  }
+  return spp;
+}
+
+}  // namespace
 
 PathTracer::PathTracer(const Scene& scene, const Bsdf& fabric, const Environment* environment)
     : impl_(std::make_unique<Impl>(scene, fabric, environment)) {}
@@ -491,29 +591,79 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   const int W = scene.card.width, H = scene.card.height;
   RenderResult r = AllocateResult(W, H, st.aovs);
 
-  // Batches for the standard-error estimate: K = 16 batches of M = spp / 16 stratified
-  // samples when spp is a multiple of 16 (>= 32), else K = spp batches of one i.i.d. sample.
-  SamplingPlan plan;
-  plan.K = (st.spp >= 32 && st.spp % 16 == 0) ? 16 : st.spp;
-  plan.M = st.spp / plan.K;
-  r.batches = plan.K;
-  plan.env_samples = std::clamp(st.first_env_samples, 1, kMaxFirstEnvSamples);
   const int tiles_x = (W + st.tile_size - 1) / st.tile_size;
   const int tiles_y = (H + st.tile_size - 1) / st.tile_size;
   const int tiles = tiles_x * tiles_y;
   std::atomic<int> done{0};
   std::atomic<uint64_t> total_rays{0};
   std::mutex progress_mutex;
-
-  tbb::parallel_for(0, tiles, [&](int tile) {
-    total_rays += impl_->RenderTile(st, plan, tile, tiles_x, r);
-    const int d = ++done;
+  const bool adaptive = st.target_error > 0.0;
+  // Progress: the pilot counts as a quarter of the tiles' work.
+  const int pilot_units = adaptive ? (tiles + 3) / 4 : 0;
+  auto tick = [&](int units) {
+    const int d = (done += units);
     if (progress) {
       std::lock_guard<std::mutex> lock(progress_mutex);
-      progress(d, tiles);
+      progress(d, tiles + pilot_units);
     }
+  };
+
+  // Samples per pixel of every tile: st.spp, or the adaptive allocation from a pilot.
+  std::vector<int> tile_spp(static_cast<size_t>(tiles), st.spp);
+  double pilot_samples = 0.0;
+  if (adaptive) {
+    if (!(st.target_error < 1e3) || st.min_spp < 32 || st.min_spp % 16 != 0 ||
+        st.spp < st.min_spp || st.pilot_spp < 32 || st.pilot_spp % 16 != 0)
+      throw std::invalid_argument(
+          "adaptive sampling: need target_error in (0, 1000), min_spp and pilot_spp multiples "
+          "of 16 >= 32, spp >= min_spp");
+    const SamplingPlan pilot = PlanFor(st.pilot_spp, st.first_env_samples);
+    std::vector<Impl::PilotStats> stats(static_cast<size_t>(tiles));
+    tbb::parallel_for(0, tiles, [&](int tile) {
+      stats[size_t(tile)] = impl_->PilotTile(st, pilot, tile, tiles_x);
+      total_rays += stats[size_t(tile)].rays;
+      if (tile % 4 == 0) tick(1);
+    });
+    const size_t nt = static_cast<size_t>(tiles);
+    std::vector<double> w(nt), spread(nt), cost(nt);
+    double value_sum = 0.0, pilot_pixels = 0.0;
+    for (int t = 0; t < tiles; ++t) {
+      const Impl::PilotStats& ps = stats[size_t(t)];
+      const Impl::TileRect rc = impl_->Rect(st, t, tiles_x);
+      w[size_t(t)] = double(rc.x1 - rc.x0) * double(rc.y1 - rc.y0);
+      spread[size_t(t)] = ps.se_sum / (3.0 * ps.pixels) * std::sqrt(double(st.pilot_spp));
+      cost[size_t(t)] = double(ps.rays) / (double(ps.pixels) * st.pilot_spp);
+      value_sum += ps.value_sum;
+      pilot_pixels += ps.pixels;
+    }
+    pilot_samples = pilot_pixels * st.pilot_spp;
+    const double mean_value = value_sum / (3.0 * pilot_pixels);
+    for (double& x : spread) x *= st.pilot_calibration;
+    tile_spp = AllocateTileSpp(w, spread, cost, st.target_error * mean_value, st.min_spp, st.spp);
+    r.pilot_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+
+  // Batches per tile (see PlanFor); r.batches is the count of the first tile (16 whenever
+  // every tile's spp is a multiple of 16 >= 32, as adaptive counts always are).
+  r.batches = PlanFor(tile_spp[0], st.first_env_samples).K;
+  tbb::parallel_for(0, tiles, [&](int tile) {
+    const int spp = tile_spp[size_t(tile)];
+    total_rays +=
+        impl_->RenderTile(st, PlanFor(spp, st.first_env_samples), spp, tile, tiles_x, r);
+    tick(1);
   });
 
+  double samples = pilot_samples;
+  for (int t = 0; t < tiles; ++t) {
+    const Impl::TileRect rc = impl_->Rect(st, t, tiles_x);
+    samples += double(rc.x1 - rc.x0) * double(rc.y1 - rc.y0) * tile_spp[size_t(t)];
+  }
+  r.mean_spp = samples / (double(W) * double(H));
+  if (adaptive) {
+    r.tile_spp = tile_spp;
+    r.tile_size = st.tile_size;
+  }
   r.rays = total_rays.load();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   Summarize(&r);

@@ -2,6 +2,8 @@
 #include "render/reference/sadeghi.h"
 
 #include <algorithm>
+#include <atomic>
+#include <bit>
 #include <cmath>
 #include <stdexcept>
 
@@ -11,6 +13,9 @@ namespace clothfit::render {
 namespace {
 
 constexpr double kDegToRad = kPi / 180.0;
+
+std::atomic<uint64_t> g_next_sadeghi_id{1};
+uint64_t Bits(double x) { return std::bit_cast<uint64_t>(x); }
 
 double Gaussian(double sigma, double x) {
   return std::exp(-x * x / (2.0 * sigma * sigma)) / (sigma * std::sqrt(2.0 * kPi));
@@ -125,6 +130,7 @@ SadeghiBsdf::SadeghiBsdf(SadeghiFabric fabric) : fabric_(std::move(fabric)) {
       Tangent tg;
       tg.t = d * std::cos(o) + n * std::sin(o);
       tg.n = d * -std::sin(o) + n * std::cos(o);
+      tg.b = Cross(tg.t, tg.n);
       tg.thread = j;
       tg.weight = th.a / double(th.offsets.size());
       tangents_.push_back(tg);
@@ -132,36 +138,104 @@ SadeghiBsdf::SadeghiBsdf(SadeghiFabric fabric) : fabric_(std::move(fabric)) {
     scale_s_[j] = 2.0 * th.gamma_s * kDegToRad * std::sqrt(3.0) / kPi;
     scale_v_[j] = 2.0 * th.gamma_v * kDegToRad * std::sqrt(3.0) / kPi;
   }
+  instance_id_ = g_next_sadeghi_id.fetch_add(1, std::memory_order_relaxed);
   if (!(a_sum <= 1.0 + 1e-9)) {
     throw std::invalid_argument("Sadeghi fabric '" + fabric_.name + "': a1 + a2 must be <= 1");
   }
 }
 
+struct SadeghiBsdf::Memo {
+  uint64_t id = 0;  // instance_id_ of the owner; 0: empty
+  uint64_t wo[3] = {0, 0, 0};
+  WoState state;
+};
+
+void SadeghiBsdf::ComputeState(const Vec3d& wo, WoState* s) const {
+  s->q = (1.0 - fabric_.thread[0].a - fabric_.thread[1].a) * wo.z;
+  double total = 0.0;
+  for (size_t k = 0; k < tangents_.size(); ++k) {
+    const Tangent& tg = tangents_[k];
+    WoTangent& w = s->tg[k];
+    w.proj = std::max(0.0, Dot(wo, tg.n));
+    s->q += tg.weight * w.proj;
+    s->prob[k] = 0.0;
+    if (w.proj <= 0.0) continue;
+    w.sin_o = std::clamp(Dot(wo, tg.t), -1.0, 1.0);
+    w.theta_o = std::asin(w.sin_o);
+    w.cos_o = std::sqrt(std::max(0.0, 1.0 - w.sin_o * w.sin_o));  // = cos(asin(sin_o))
+    const double x = Dot(wo, tg.n), y = Dot(wo, tg.b);
+    w.phi_o = std::atan2(y, x);
+    const double r = std::sqrt(x * x + y * y);
+    // cos and sin of atan2(y, x); atan2(0, 0) = 0.
+    w.cos_phi_o = r > 0.0 ? x / r : 1.0;
+    w.sin_phi_o = r > 0.0 ? y / r : 0.0;
+    const int j = tg.thread;
+    w.cone_s = woven::MakeCone(wo, tg.t, scale_s_[j]);
+    w.cone_v = woven::MakeCone(wo, tg.t, scale_v_[j]);
+    // Selection weight: visible weight of the tangent times the fraction of its volume-width
+    // cone that can reach above the surface (woven::ConeMass).
+    woven::TruncatedLogistic full = w.cone_v.theta;
+    full.lo = -0.5 * kPi;
+    full.hi = 0.5 * kPi;
+    const double m = full.Mass();
+    s->prob[k] = tg.weight * w.proj * (m > 0.0 ? w.cone_v.mass / m : 0.0);
+    total += s->prob[k];
+  }
+  s->lobe = total > 0.0;
+  if (s->lobe)
+    for (size_t k = 0; k < tangents_.size(); ++k) s->prob[k] /= total;
+  s->c = s->lobe ? kCosineProbability : 1.0;
+}
+
+const SadeghiBsdf::WoState& SadeghiBsdf::StateFor(const Vec3d& wo) const {
+  thread_local Memo memo;
+  const uint64_t wx = Bits(wo.x), wy = Bits(wo.y), wz = Bits(wo.z);
+  if (memo.id != instance_id_ || memo.wo[0] != wx || memo.wo[1] != wy || memo.wo[2] != wz) {
+    ComputeState(wo, &memo.state);
+    memo.id = instance_id_;
+    memo.wo[0] = wx;
+    memo.wo[1] = wy;
+    memo.wo[2] = wz;
+  }
+  return memo.state;
+}
+
+// Per tangent, only what depends on wi is computed here; the trigonometry of the angles in
+// sadeghi.h is evaluated through identities (exact in real arithmetic):
+//   cos(asin(s)) = sqrt(1 - s^2);  cos(atan2(y, x)) = x / sqrt(x^2 + y^2);
+//   cos(theta_d) = sqrt((1 + cos(theta_i - theta_o)) / 2), theta_d in [-pi/2, pi/2];
+//   cos(phi_d / 2) = sqrt((1 + cos(phi_i - phi_o)) / 2), phi_d in [-pi, pi] (wrapped; the
+//   cosine of the difference does not depend on the wrap).
 Rgbd SadeghiBsdf::Eval(const Vec3d& wo, const Vec3d& wi, const ShadingPoint&) const {
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return Rgbd(0, 0, 0);
+  const WoState& s = StateFor(wo);
   const double sigma_m = kMaskingSigmaDeg * kDegToRad;
-  double q = (1.0 - fabric_.thread[0].a - fabric_.thread[1].a) * wo.z;
   Rgbd sum(0, 0, 0);
-  for (const Tangent& tg : tangents_) {
-    const double proj = std::max(0.0, Dot(wo, tg.n));
-    q += tg.weight * proj;
-    if (proj <= 0.0) continue;
-    const SadeghiThread& th = fabric_.thread[tg.thread];
-    const Vec3d b = Cross(tg.t, tg.n);
-    const double sin_i = std::clamp(Dot(wi, tg.t), -1.0, 1.0);
-    const double sin_o = std::clamp(Dot(wo, tg.t), -1.0, 1.0);
-    const double theta_i = std::asin(sin_i), theta_o = std::asin(sin_o);
-    const double cos_i = std::cos(theta_i), cos_o = std::cos(theta_o);
-    const double phi_i = std::atan2(Dot(wi, b), Dot(wi, tg.n));
-    const double phi_o = std::atan2(Dot(wo, b), Dot(wo, tg.n));
-    const double phi_d = WrapAngle(phi_i - phi_o);
-    // Masking-shadowing (Sadeghi et al. eq. 10): correlated when phi_d is small.
-    const double m_i = std::max(0.0, std::cos(phi_i)), m_o = std::max(0.0, std::cos(phi_o));
+  for (size_t k = 0; k < tangents_.size(); ++k) {
+    const Tangent& tg = tangents_[k];
+    const WoTangent& w = s.tg[k];
+    if (w.proj <= 0.0) continue;
+    const double x = Dot(wi, tg.n), y = Dot(wi, tg.b);
+    const double r = std::sqrt(x * x + y * y);
+    const double cos_phi_i = r > 0.0 ? x / r : 1.0;
+    // Masking-shadowing (Sadeghi et al. eq. 10): correlated when phi_d is small. Both
+    // terms vanish when either factor does (m_o > 0 here, since wo.n_k > 0).
+    const double m_i = std::max(0.0, cos_phi_i), m_o = std::max(0.0, w.cos_phi_o);
+    if (m_i <= 0.0 || m_o <= 0.0) continue;
+    const double phi_d = WrapAngle(std::atan2(y, x) - w.phi_o);
     const double uu = std::exp(-phi_d * phi_d / (2.0 * sigma_m * sigma_m));
     const double mask = (1.0 - uu) * m_i * m_o + uu * std::min(m_i, m_o);
     if (mask <= 0.0) continue;
-    const double theta_h = 0.5 * (theta_i + theta_o), theta_d = 0.5 * (theta_i - theta_o);
-    const double cos_d = std::cos(theta_d), cos_half_phi = std::cos(0.5 * phi_d);
+    const SadeghiThread& th = fabric_.thread[tg.thread];
+    const double sin_i = std::clamp(Dot(wi, tg.t), -1.0, 1.0);
+    const double theta_i = std::asin(sin_i);
+    const double cos_i = std::sqrt(std::max(0.0, 1.0 - sin_i * sin_i));
+    const double theta_h = 0.5 * (theta_i + w.theta_o);
+    const double cos_diff = cos_i * w.cos_o + sin_i * w.sin_o;  // cos(theta_i - theta_o)
+    const double cos_d = std::sqrt(std::clamp(0.5 * (1.0 + cos_diff), 0.0, 1.0));
+    const double sin_phi_i = r > 0.0 ? y / r : 0.0;
+    const double cos_phi_diff = cos_phi_i * w.cos_phi_o + sin_phi_i * w.sin_phi_o;
+    const double cos_half_phi = std::sqrt(std::clamp(0.5 * (1.0 + cos_phi_diff), 0.0, 1.0));
     const double fr = FresnelDielectric(cos_d * cos_half_phi, th.eta);
     const double ft = 1.0 - fr;
     // Surface reflection (eq. 4) and volume scattering (eq. 5).
@@ -170,60 +244,40 @@ Rgbd SadeghiBsdf::Eval(const Vec3d& wo, const Vec3d& wi, const ShadingPoint&) co
     // at 1e-4 (changes nothing elsewhere).
     const double vol = ft * ft *
                        ((1.0 - th.kd) * Gaussian(th.gamma_v * kDegToRad, theta_h) + th.kd) /
-                       std::max(cos_i + cos_o, 1e-4);
+                       std::max(cos_i + w.cos_o, 1e-4);
     // Guard: cos^2(theta_d) floored at 1e-4 (theta_d within 0.6 deg of 90 deg only).
     const double inv_cd2 = 1.0 / std::max(cos_d * cos_d, 1e-4);
-    const double w = tg.weight * proj * mask * cos_i * inv_cd2;
-    sum += Rgbd::Splat(w * f_surface) + th.albedo * (w * vol);
+    const double wt = tg.weight * w.proj * mask * cos_i * inv_cd2;
+    sum += Rgbd::Splat(wt * f_surface) + th.albedo * (wt * vol);
   }
-  if (!(q > 0.0)) return Rgbd(0, 0, 0);
-  return sum * (1.0 / (q * wi.z));
+  if (!(s.q > 0.0)) return Rgbd(0, 0, 0);
+  return sum * (1.0 / (s.q * wi.z));
 }
 
-bool SadeghiBsdf::Selection(const Vec3d& wo, Probabilities* prob) const {
-  prob->fill(0.0);
-  double total = 0.0;
-  for (size_t k = 0; k < tangents_.size(); ++k) {
-    // Visible weight of the tangent times the fraction of its (surface-width) cone that can
-    // reach above the surface.
-    const int j = tangents_[k].thread;
-    (*prob)[k] = tangents_[k].weight * std::max(0.0, Dot(wo, tangents_[k].n)) *
-                 woven::ConeMass(wo, tangents_[k].t, scale_v_[j]);
-    total += (*prob)[k];
-  }
-  if (!(total > 0.0)) return false;
-  for (double& p : *prob) p /= total;
-  return true;
-}
-
-double SadeghiBsdf::LobePdf(const Vec3d& wo, const Vec3d& wi, const Probabilities& prob) const {
-  double pdf = 0.0;
-  for (size_t k = 0; k < tangents_.size(); ++k) {
-    if (prob[k] <= 0.0) continue;
-    const int j = tangents_[k].thread;
-    pdf += prob[k] * 0.5 *
-           (woven::ConePdf(wo, tangents_[k].t, scale_s_[j], wi) +
-            woven::ConePdf(wo, tangents_[k].t, scale_v_[j], wi));
+double SadeghiBsdf::MixturePdf(const WoState& s, const Vec3d& wi) const {
+  double pdf = s.c * CosineHemispherePdf(wi.z);
+  if (s.lobe) {
+    double lobe = 0.0;
+    for (size_t k = 0; k < tangents_.size(); ++k) {
+      if (s.prob[k] <= 0.0) continue;
+      lobe += s.prob[k] * 0.5 *
+              (woven::ConePdf(s.tg[k].cone_s, wi) + woven::ConePdf(s.tg[k].cone_v, wi));
+    }
+    pdf += (1.0 - s.c) * lobe;
   }
   return pdf;
 }
 
 double SadeghiBsdf::Pdf(const Vec3d& wo, const Vec3d& wi, const ShadingPoint&) const {
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return 0.0;
-  Probabilities prob;
-  const bool lobe = Selection(wo, &prob);
-  const double c = lobe ? kCosineProbability : 1.0;
-  double pdf = c * CosineHemispherePdf(wi.z);
-  if (lobe) pdf += (1.0 - c) * LobePdf(wo, wi, prob);
-  return pdf;
+  return MixturePdf(StateFor(wo), wi);
 }
 
 bool SadeghiBsdf::Sample(const Vec3d& wo, const Point2d& u, double uc, const ShadingPoint& sp,
                          BsdfSample* out) const {
   if (!(wo.z > 0.0)) return false;
-  Probabilities prob;
-  const bool lobe = Selection(wo, &prob);
-  const double c = lobe ? kCosineProbability : 1.0;
+  const WoState& s = StateFor(wo);
+  const double c = s.c;
   Vec3d wi;
   if (uc < c) {
     wi = SampleCosineHemisphere(u);
@@ -233,24 +287,22 @@ bool SadeghiBsdf::Sample(const Vec3d& wo, const Point2d& u, double uc, const Sha
     size_t k = 0;
     double acc = 0.0;
     for (k = 0; k < tangents_.size(); ++k) {
-      if (prob[k] <= 0.0) continue;
-      if (r < acc + prob[k]) break;
-      acc += prob[k];
+      if (s.prob[k] <= 0.0) continue;
+      if (r < acc + s.prob[k]) break;
+      acc += s.prob[k];
     }
     if (k == tangents_.size()) {  // rounding: take the last selectable tangent
       for (k = tangents_.size(); k-- > 0;) {
-        if (prob[k] > 0.0) break;
+        if (s.prob[k] > 0.0) break;
       }
-      acc = 1.0 - prob[k];
+      acc = 1.0 - s.prob[k];
     }
-    const double r2 = std::clamp((r - acc) / prob[k], 0.0, 1.0);
-    const int j = tangents_[k].thread;
-    const double scale = r2 < 0.5 ? scale_s_[j] : scale_v_[j];
-    if (!woven::SampleCone(wo, tangents_[k].t, scale, u, &wi)) return false;
+    const double r2 = std::clamp((r - acc) / s.prob[k], 0.0, 1.0);
+    const woven::Cone& cone = r2 < 0.5 ? s.tg[k].cone_s : s.tg[k].cone_v;
+    if (!woven::SampleCone(cone, u, &wi)) return false;
   }
   if (!(wi.z > 0.0)) return false;
-  double pdf = c * CosineHemispherePdf(wi.z);
-  if (lobe) pdf += (1.0 - c) * LobePdf(wo, wi, prob);
+  const double pdf = MixturePdf(s, wi);
   if (!(pdf > 0.0)) return false;
   out->wi = wi;
   out->pdf = pdf;

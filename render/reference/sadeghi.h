@@ -35,10 +35,12 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <string>
 #include <vector>
 
 #include "render/reference/bsdf.h"
+#include "render/reference/woven_sampling.h"
 
 namespace clothfit::render {
 
@@ -84,18 +86,39 @@ class SadeghiBsdf final : public Bsdf {
  private:
   struct Tangent {
     Vec3d t, n;  // fibre tangent and thread surface normal (shading frame)
+    Vec3d b;     // t x n
     int thread = 0;
     double weight = 0;  // a_j / N_j
   };
   static constexpr size_t kMaxTangents = 128;  // 2 threads x 64 offsets
   using Probabilities = std::array<double, kMaxTangents>;
-  // Per-tangent selection probabilities for wo; false if no tangent is visible.
-  bool Selection(const Vec3d& wo, Probabilities* prob) const;
-  double LobePdf(const Vec3d& wo, const Vec3d& wi, const Probabilities& prob) const;
+  // Everything that depends on wo only, per tangent: Eval's outgoing fibre angles and the
+  // sampling strategy's selection probabilities and cones. A path vertex calls Eval and Pdf
+  // for every light and environment sample and Sample once, all with the same wo, so this is
+  // kept in a one-entry thread-local memo keyed by the BSDF instance and the bits of wo (a
+  // pure function of its key: the results are exactly those of recomputing it).
+  struct WoTangent {
+    double proj = 0.0;                                     // max(0, wo.n_k)
+    double sin_o = 0.0, theta_o = 0.0, cos_o = 1.0;        // theta_o = asin(wo.t)
+    double phi_o = 0.0, cos_phi_o = 1.0, sin_phi_o = 0.0;  // phi_o = atan2(wo.b, wo.n_k)
+    woven::Cone cone_s, cone_v;  // the lobe strategy's cones (surface, volume width)
+  };
+  struct WoState {
+    double q = 0.0;     // Q(wo)
+    bool lobe = false;  // some tangent selectable
+    double c = 1.0;     // probability of cosine sampling
+    Probabilities prob{};
+    std::array<WoTangent, kMaxTangents> tg;
+  };
+  struct Memo;
+  const WoState& StateFor(const Vec3d& wo) const;
+  void ComputeState(const Vec3d& wo, WoState* s) const;
+  double MixturePdf(const WoState& s, const Vec3d& wi) const;
 
   SadeghiFabric fabric_;
   std::vector<Tangent> tangents_;
   double scale_s_[2] = {0, 0}, scale_v_[2] = {0, 0};
+  uint64_t instance_id_ = 0;
 };
 
 // Unpolarised Fresnel reflectance of a dielectric (eta = n_fibre / n_air) at incidence cosine
