@@ -245,6 +245,7 @@ for (const c of cases) {
   const ppm = Buffer.alloc(w * h * 3);
   for (let i = 0; i < w * h; ++i) for (let k = 0; k < 3; ++k) ppm[i * 3 + k] = body[i * 4 + k];
   fs.writeFileSync(c.png.replace(/\.png$/, '.browser.ppm'), Buffer.concat([Buffer.from(`P6\n${w} ${h}\n255\n`), ppm]));
+  fs.writeFileSync(c.png.replace(/\.png$/, '.mask.pgm'), Buffer.concat([Buffer.from(`P5\n${w} ${h}\n255\n`), mask]));
 }
 
 const fmt = (x) => (Number.isFinite(x) ? x.toFixed(2) : String(x));
