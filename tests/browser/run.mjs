@@ -48,6 +48,14 @@ for (const e of ['studio', HIGH]) {
 }
 if (!fs.existsSync(clothfit)) { console.error(`no ${clothfit}`); process.exit(1); }
 
+// ---- node-side checks of web/clothfit.js (tests/browser/unit.mjs: side, woven presets) ------
+{
+  const { spawnSync } = await import('node:child_process');
+  const u = spawnSync(process.execPath, [path.join(here, 'unit.mjs'), '--clothfit', clothfit, '--work', work], { encoding: 'utf8' });
+  process.stdout.write(u.stdout);
+  if (u.status !== 0) { console.error(u.stderr); console.error('unit checks failed'); process.exit(1); }
+}
+
 // ---- cases ----------------------------------------------------------------------------------
 const preset = (model, parameters, extra = {}) => ({ schema: 'clothfit.preset', version: 1, model, ...extra, parameters });
 const MATERIALS = {
