@@ -139,6 +139,46 @@ TEST(ConvertReaders, SeedSurfaceMaterialAndErrorsNameFileAndField) {
 
 // glTF sheen material -> cloth preset through the reader: the stated error (docs/convert.md)
 // is 0.02 cube-root units on the canonical directions.
+// Two-sidedness (issue 13): a glTF source's doubleSided goes to the three.js "side" (DoubleSide
+// 2 / FrontSide 0, which culls back faces) and back to glTF; sources without it are two-sided.
+TEST(ConvertRoundTrip, SideFollowsTheSourceTwoSidedness) {
+  const fs::path d = TempDir("side");
+  auto side_of = [&](const fs::path& p) {
+    std::ifstream in(p);
+    nlohmann::json j;
+    in >> j;
+    return j.contains("side") ? j["side"].get<int>() : -1;
+  };
+  for (const bool two : {true, false}) {
+    Converted c = Example();
+    c.double_sided = two;
+    const std::string tag = two ? "double" : "single";
+    WriteThreejsPhysical((d / (tag + ".three.json")).string(), c);
+    WriteThreejsCloth((d / (tag + ".meshcloth.json")).string(), c);
+    EXPECT_EQ(side_of(d / (tag + ".three.json")), two ? 2 : 0) << tag;
+    EXPECT_EQ(side_of(d / (tag + ".meshcloth.json")), two ? 2 : 0) << tag;
+    WriteGltf((d / (tag + ".gltf")).string(), c);
+    const auto back = ReadMaterials((d / (tag + ".gltf")).string());
+    ASSERT_EQ(back.size(), 1u);
+    EXPECT_EQ(back[0].double_sided, two) << tag;
+  }
+  // A glTF material without doubleSided: the glTF default, single-sided.
+  {
+    std::ofstream o(d / "nodefault.gltf");
+    o << R"({"asset": {"version": "2.0"}, "materials": [{"name": "m", "pbrMetallicRoughness": )"
+      << R"({"baseColorFactor": [0.5, 0.5, 0.5, 1], "roughnessFactor": 0.7, "metallicFactor": 0}}]})";
+  }
+  const auto g = ReadMaterials((d / "nodefault.gltf").string());
+  ASSERT_EQ(g.size(), 1u);
+  EXPECT_FALSE(g[0].double_sided);
+  // A clothfit preset source has no two-sidedness: stated default, double-sided.
+  WriteClothPreset((d / "p.preset.json").string(), Example());
+  const auto pre = ReadMaterials((d / "p.preset.json").string());
+  ASSERT_EQ(pre.size(), 1u);
+  EXPECT_TRUE(pre[0].double_sided);
+  fs::remove_all(d);
+}
+
 TEST(ConvertReaders, GltfSheenFileConvertsToClothWithinStatedError) {
   const fs::path d = TempDir("gltfsheen");
   const Converted c = Example();

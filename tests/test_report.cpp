@@ -10,6 +10,7 @@
 #include <fstream>
 #include <limits>
 #include <regex>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -354,6 +355,45 @@ TEST_F(ReportTest, BadInputsNameTheFile) {
   } catch (const ReportError& e) {
     EXPECT_NE(std::string(e.what()).find(standard_[1]), std::string::npos) << e.what();
   }
+}
+
+}  // namespace
+}  // namespace clothfit::report
+
+namespace clothfit::report {
+namespace {
+
+// Issue 13: each fitted preset links to web/viewer.html with its scene card and preset,
+// relative to the page, and every file the link names exists.
+TEST_F(ReportTest, FittedPresetsLinkToTheViewerWithExistingCardAndPreset) {
+  // A repository-like tree: dir_/web/viewer.html, dir_/datasets/scenes/scene{0,1}.json (the
+  // paths the presets name), the presets in dir_, the report in dir_/out.
+  fs::create_directories(dir_ / "web");
+  std::ofstream(dir_ / "web" / "viewer.html") << "<!doctype html>\n";
+  fs::create_directories(dir_ / "datasets" / "scenes");
+  for (int i = 0; i < 2; ++i)
+    std::ofstream(dir_ / "datasets" / "scenes" / ("scene" + std::to_string(i) + ".json")) << "{}";
+  const std::vector<FabricReport> all = {BuildFabricReport(FabricsFromPresets(MakeFit())[0])};
+  WriteReport(all, (dir_ / "out").string());
+  std::ifstream in(dir_ / "out" / "testcloth.html");
+  const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::regex link("<a class=\"viewer\" href=\"([^\"?]*)\\?preset=([^\"&]*)&amp;card=([^\"]*)\">");
+  size_t n = 0;
+  std::set<std::string> presets;
+  for (auto it = std::sregex_iterator(html.begin(), html.end(), link); it != std::sregex_iterator();
+       ++it, ++n) {
+    const fs::path page = dir_ / "out" / (*it)[1].str();
+    EXPECT_EQ((*it)[1].str(), "../web/viewer.html");
+    EXPECT_TRUE(fs::exists(page)) << page;
+    const fs::path web = page.parent_path();
+    EXPECT_TRUE(fs::exists(web / (*it)[2].str())) << (*it)[2].str();
+    EXPECT_TRUE(fs::exists(web / (*it)[3].str())) << (*it)[3].str();
+    EXPECT_NE((*it)[3].str().find("datasets/scenes/scene"), std::string::npos);
+    presets.insert((*it)[2].str());
+  }
+  EXPECT_EQ(n, 4u);  // 2 models x 2 scenes
+  EXPECT_EQ(presets, (std::set<std::string>{"../standard.json", "../cloth.json"}));
+
 }
 
 }  // namespace

@@ -302,6 +302,336 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
 }
 
 // ---------------------------------------------------------------------------------------------
+// MeshWovenMaterial: clothfit's real-time woven-cloth model (brdf/woven.h), the UNIFORM material
+// (no weave maps yet: wovenWeaveSample() below is the hook where per-pixel maps plug in).
+// Written from brdf/woven.h and brdf/terms.h; every clamp and constant is the C++ one:
+//   frame: t = the mesh tangent (TANGENT attribute, +u = WARP) Gram-Schmidt'd against the shading
+//     normal (after three.js's DoubleSide flip), b = tangent.w (n x t) (+v = WEFT);
+//   lobes: warp axes a_w = cos(twist) t + sin(twist) b, c_w = -sin(twist) t + cos(twist) b;
+//     weft a_f = c_w, c_f = -a_w; alpha_a = r^2, alpha_c = r^2 + (1 - r^2) s^2;
+//     D_GGX_Anisotropic(alpha_c along c, alpha_a along a) x V_SmithGGXCorrelated_Anisotropic;
+//   phase Fresnel Fp = f0 + (1 - f0) exp(-2 beta LoH^2); sheen Charlie + Neubelt (no clamp);
+//     Lambert diffuse; sheen layered by albedo scaling S(mu) = sat(1 - max3(sheen) Es(mu)),
+//     Es = the cloth DG table (channel 2 of clothfit's DFG LUT) at (mu, r_s);
+//   IBL (split sum): yarn = S ks glint [f0 PT_0 + (1 - f0) PT_beta](NoV, r_e) x radiance at r_e,
+//     r_e = (alpha_a alpha_c)^(1/4); sheen = sheen Es(NoV) x radiance at r_s; diffuse =
+//     S Y base x E_d (E_d = three.js's iblIrradiance / pi). PT = web/lut/woven_phase_32.f32, the
+//     same table as the C++ lut::DefaultWovenPhase() (web/tools/export-woven-phase.mjs), beta
+//     linear between the nodes kWovenPhaseBetas (the node and weight are computed here on the CPU,
+//     as woven::PhaseAlbedo does).
+// No geometryRoughness (as the C++ preview for this model). A mesh without a TANGENT attribute
+// gets BufferGeometry.computeTangents() (three.js's own, not clothfit's generator: a stated
+// difference for such meshes; the canonical glTFs carry TANGENT).
+
+export const WOVEN_PHASE_BETAS = Object.freeze([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]);
+const WOVEN_MIN_ROUGHNESS = 0.045, WOVEN_MAX_BETA = 8.0;
+
+let wovenPhasePromise = null;
+let wovenPhaseTexture = null;
+export function wovenPhaseTable() {
+  if (!wovenPhasePromise) {
+    wovenPhasePromise = fetch(new URL('lut/woven_phase_32.f32', HERE))
+      .then((r) => {
+        if (!r.ok) throw new Error(`woven phase table: HTTP ${r.status}`);
+        return r.arrayBuffer();
+      })
+      .then((buf) => {
+        const data = new Float32Array(buf);
+        const n = 32, ch = WOVEN_PHASE_BETAS.length;
+        if (data.length !== n * n * ch) throw new Error(`woven phase table: ${data.length} floats, expected ${n * n * ch}`);
+        const t = new THREE.DataTexture(data, n * ch, n, THREE.RedFormat, THREE.FloatType);
+        t.minFilter = THREE.NearestFilter;
+        t.magFilter = THREE.NearestFilter;
+        t.generateMipmaps = false;
+        t.colorSpace = THREE.NoColorSpace;
+        t.needsUpdate = true;
+        wovenPhaseTexture = t;
+        return t;
+      });
+  }
+  return wovenPhasePromise;
+}
+
+const clamp01 = (x) => Math.min(Math.max(x, 0), 1);
+
+// woven::PrepareLobes + the phase node of woven::PhaseAlbedo, on the CPU (per material).
+export function wovenLobes(p) {
+  const r = Math.min(Math.max(p.roughness, WOVEN_MIN_ROUGHNESS), 1);
+  const s = clamp01(p.anisotropy);
+  const alphaA = r * r;
+  const alphaC = alphaA + (1 - alphaA) * s * s;
+  const rho = p.twist * Math.PI / 180;
+  const beta = Math.min(Math.max(p.forward_scattering, 0), WOVEN_MAX_BETA);
+  const b = WOVEN_PHASE_BETAS;
+  let k = 0;
+  while (k + 2 < b.length && !(beta < b[k + 1])) ++k;
+  const t = clamp01((beta - b[k]) / (b[k + 1] - b[k]));
+  return {
+    alphaA, alphaC, rE: Math.sqrt(Math.sqrt(alphaA * alphaC)),
+    rS: Math.min(Math.max(p.sheen_roughness, WOVEN_MIN_ROUGHNESS), 1),
+    cr: Math.cos(rho), sr: Math.sin(rho), f0: clamp01(p.specular_f0), beta, m: clamp01(p.warp_share),
+    phaseK: k, phaseT: t,
+  };
+}
+
+const WOVEN_VERTEX_PARS = /* glsl */ `
+#ifndef USE_TANGENT
+attribute vec4 tangent;
+#endif
+varying vec3 vWovenTangent;
+varying float vWovenTangentSign;
+`;
+const WOVEN_VERTEX = /* glsl */ `
+vWovenTangent = ( modelViewMatrix * vec4( tangent.xyz, 0.0 ) ).xyz;
+vWovenTangentSign = tangent.w < 0.0 ? -1.0 : 1.0;
+`;
+
+const WOVEN_PARS = /* glsl */ `
+uniform vec3 wovenSpecularColor;
+uniform vec3 wovenSheenColor;
+uniform vec3 wovenTintWarp;
+uniform vec3 wovenTintWeft;
+uniform float wovenAlphaA;
+uniform float wovenAlphaC;
+uniform float wovenRS;
+uniform float wovenCr;
+uniform float wovenSr;
+uniform float wovenF0;
+uniform float wovenBeta;
+uniform float wovenM;
+uniform int wovenPhaseK;
+uniform float wovenPhaseT;
+uniform sampler2D wovenPhase;
+uniform sampler2D clothDG;
+varying vec3 vWovenTangent;
+varying float vWovenTangentSign;
+
+// Per-pixel weave sample (woven::WeaveSample): lobe weight ratios, diffuse ratio, glint.
+// HOOK for weave maps: define WOVEN_WEAVE_SAMPLE and a wovenWeaveSample() of your own (e.g.
+// reading weave textures at vMapUv) before this chunk; the uniform material is all ones.
+struct WovenWeave { float warp; float weft; vec3 kd; float glint; };
+#ifndef WOVEN_WEAVE_SAMPLE
+WovenWeave wovenWeaveSample() { return WovenWeave( 1.0, 1.0, vec3( 1.0 ), 1.0 ); }
+#endif
+
+// Table2D::Sample: bilinear, texel centres (i + 0.5)/n, clamped to edge; texelFetch (no fp16).
+float wovenTable( const in sampler2D tex, const in int n, const in int channel, const in float u, const in float v ) {
+	vec2 x = clamp( vec2( u, v ) * float( n ) - 0.5, vec2( 0.0 ), vec2( float( n - 1 ) ) );
+	ivec2 i0 = ivec2( floor( x ) );
+	ivec2 i1 = min( i0 + 1, ivec2( n - 1 ) );
+	vec2 f = x - vec2( i0 );
+	int o = channel * n;
+	float a = texelFetch( tex, ivec2( o + i0.x, i0.y ), 0 ).r;
+	float b = texelFetch( tex, ivec2( o + i1.x, i0.y ), 0 ).r;
+	float c = texelFetch( tex, ivec2( o + i0.x, i1.y ), 0 ).r;
+	float d = texelFetch( tex, ivec2( o + i1.x, i1.y ), 0 ).r;
+	return ( a * ( 1.0 - f.x ) + b * f.x ) * ( 1.0 - f.y ) + ( c * ( 1.0 - f.x ) + d * f.x ) * f.y;
+}
+
+float wovenMax3( const in vec3 c ) { return max( c.r, max( c.g, c.b ) ); }
+
+// f0 PT_0 + (1 - f0) PT_beta at (NoV, r_e) (woven::YarnAlbedo).
+float wovenYarnAlbedo( const in float NoV, const in float rE ) {
+	float p0 = wovenTable( wovenPhase, 32, wovenPhaseK, NoV, rE );
+	float p1 = wovenTable( wovenPhase, 32, wovenPhaseK + 1, NoV, rE );
+	return wovenF0 * wovenTable( wovenPhase, 32, 0, NoV, rE ) + ( 1.0 - wovenF0 ) * ( p0 + ( p1 - p0 ) * wovenPhaseT );
+}
+
+float wovenSheenScaling( const in float mu ) {
+	return saturate( 1.0 - wovenMax3( saturate( wovenSheenColor ) ) * wovenTable( clothDG, 128, 0, mu, wovenRS ) );
+}
+
+float wovenYarnScaling( const in float mu, const in float rE ) {
+	#if defined( WOVEN_ALBEDO_SCALED )
+		return saturate( 1.0 - wovenMax3( wovenSpecularColor ) * wovenYarnAlbedo( mu, rE ) );
+	#else
+		return 1.0;
+	#endif
+}
+
+float wovenDGgxAniso( float at, float ab, const in float NoH, const in float ToH, const in float BoH ) {
+	at = max( at, 1e-8 );
+	ab = max( ab, 1e-8 );
+	float a2 = at * ab;
+	float q2 = max( pow2( ab * ToH ) + pow2( at * BoH ) + pow2( a2 * NoH ), 1e-12 );
+	return RECIPROCAL_PI * a2 * pow2( a2 / q2 );
+}
+
+float wovenVSmithAniso( const in float at, const in float ab, const in float NoV, const in float NoL, const in float ToV, const in float BoV, const in float ToL, const in float BoL ) {
+	float lv = sqrt( pow2( at * ToV ) + pow2( ab * BoV ) + pow2( NoV ) + 1e-20 );
+	float ll = sqrt( pow2( at * ToL ) + pow2( ab * BoL ) + pow2( NoL ) + 1e-20 );
+	return 0.5 / max( NoL * lv + NoV * ll, 1e-6 );
+}
+
+float wovenLobeDV( const in float NoV, const in float NoL, const in float NoH, const in float AoV, const in float CoV, const in float AoL, const in float CoL, const in float AoH, const in float CoH ) {
+	return wovenDGgxAniso( wovenAlphaC, wovenAlphaA, NoH, CoH, AoH ) *
+		wovenVSmithAniso( wovenAlphaC, wovenAlphaA, NoV, NoL, CoV, AoV, CoL, AoL );
+}
+
+void wovenFrame( const in vec3 n, out vec3 t, out vec3 b ) {
+	vec3 t0 = vWovenTangent;
+	t = normalize( t0 - n * dot( t0, n ) );
+	b = vWovenTangentSign * cross( n, t );
+}
+
+float wovenCharlie( const in float alpha, const in float NoH ) {
+	float a = max( alpha, 1e-8 );
+	float invAlpha = 1.0 / a;
+	float sin2h = max( 1.0 - NoH * NoH, 0.0078125 );
+	return ( 2.0 + invAlpha ) * pow( sin2h, invAlpha * 0.5 ) * ( 0.5 * RECIPROCAL_PI );
+}
+
+void RE_Direct_Woven( const in IncidentLight directLight, const in vec3 geometryPosition, const in vec3 geometryNormal, const in vec3 geometryViewDir, const in vec3 geometryClearcoatNormal, const in PhysicalMaterial material, inout ReflectedLight reflectedLight ) {
+	vec3 n = geometryNormal, v = geometryViewDir, l = directLight.direction;
+	vec3 h = normalize( l + v );
+	vec3 t, b;
+	wovenFrame( n, t, b );
+	float NoV = clamp( dot( n, v ), 1e-4, 1.0 );
+	float NoL = saturate( dot( n, l ) );
+	float NoH = saturate( dot( n, h ) );
+	float LoH = saturate( dot( l, h ) );
+	float ToV = dot( t, v ), BoV = dot( b, v ), ToL = dot( t, l ), BoL = dot( b, l ), ToH = dot( t, h ), BoH = dot( b, h );
+	float cr = wovenCr, sr = wovenSr;
+	float AoV = cr * ToV + sr * BoV, CoV = cr * BoV - sr * ToV;
+	float AoL = cr * ToL + sr * BoL, CoL = cr * BoL - sr * ToL;
+	float AoH = cr * ToH + sr * BoH, CoH = cr * BoH - sr * ToH;
+	float Lw = wovenLobeDV( NoV, NoL, NoH, AoV, CoV, AoL, CoL, AoH, CoH );
+	float Lf = wovenLobeDV( NoV, NoL, NoH, CoV, AoV, CoL, AoL, CoH, AoH );
+	WovenWeave ws = wovenWeaveSample();
+	vec3 lobes = wovenTintWarp * ( wovenM * ws.warp * Lw ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft * Lf );
+	float Fp = wovenF0 + ( 1.0 - wovenF0 ) * exp( -2.0 * wovenBeta * LoH * LoH );
+	vec3 yarn = wovenSpecularColor * lobes * ( Fp * ws.glint );
+	vec3 diffuse = material.diffuseColor * ws.kd * RECIPROCAL_PI;
+	float rE = material.roughness;
+	float y = min( wovenYarnScaling( NoV, rE ), wovenYarnScaling( NoL, rE ) );
+	float s = min( wovenSheenScaling( NoV ), wovenSheenScaling( NoL ) );
+	float dv = wovenCharlie( wovenRS * wovenRS, NoH ) / max( 4.0 * ( NoL + NoV - NoL * NoV ), 1e-12 );
+	reflectedLight.directSpecular += directLight.color * NoL * ( wovenSheenColor * dv + yarn * s );
+	reflectedLight.directDiffuse += directLight.color * NoL * ( diffuse * ( y * s ) );
+}
+
+void RE_IndirectDiffuse_Woven( const in vec3 irradiance, const in vec3 geometryPosition, const in vec3 geometryNormal, const in vec3 geometryViewDir, const in vec3 geometryClearcoatNormal, const in PhysicalMaterial material, inout ReflectedLight reflectedLight ) {
+	reflectedLight.indirectDiffuse += irradiance * material.diffuseColor * RECIPROCAL_PI;
+}
+
+// radiance: three.js's getIBLRadiance at material.roughness = r_e; the sheen lobe's at r_s.
+void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradiance, const in vec3 clearcoatRadiance, const in vec3 geometryPosition, const in vec3 geometryNormal, const in vec3 geometryViewDir, const in vec3 geometryClearcoatNormal, const in PhysicalMaterial material, inout ReflectedLight reflectedLight ) {
+	float NoV = clamp( dot( geometryNormal, geometryViewDir ), 1e-4, 1.0 );
+	float rE = material.roughness;
+	WovenWeave ws = wovenWeaveSample();
+	float s = wovenSheenScaling( NoV );
+	vec3 yarn = wovenSpecularColor * ( s * ws.glint * wovenYarnAlbedo( NoV, rE ) );
+	vec3 lobes = yarn * ( wovenTintWarp * ( wovenM * ws.warp ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft ) );
+	reflectedLight.indirectSpecular += lobes * radiance;
+	#if defined( USE_ENVMAP ) && defined( STANDARD )
+		vec3 sheenRadiance = getIBLRadiance( geometryViewDir, geometryNormal, wovenRS );
+		reflectedLight.indirectSpecular += wovenSheenColor * wovenTable( clothDG, 128, 0, NoV, wovenRS ) * sheenRadiance;
+	#endif
+	reflectedLight.indirectDiffuse += material.diffuseColor * ws.kd * ( s * wovenYarnScaling( NoV, rE ) ) * iblIrradiance * RECIPROCAL_PI;
+}
+
+#undef RE_Direct
+#undef RE_Direct_RectArea
+#undef RE_IndirectDiffuse
+#undef RE_IndirectSpecular
+#define RE_Direct           RE_Direct_Woven
+#define RE_IndirectDiffuse  RE_IndirectDiffuse_Woven
+#define RE_IndirectSpecular RE_IndirectSpecular_Woven
+`;
+
+// After three.js's roughness set-up: the IBL radiance three.js fetches is at r_e.
+const WOVEN_ROUGHNESS = /* glsl */ `
+material.roughness = wovenRE;
+`;
+
+/**
+ * MeshWovenMaterial: brdf/woven.h on three.js's MeshStandardMaterial program. Parameters are the
+ * preset's (snake_case, linear colours): base_color, specular_color, roughness, anisotropy,
+ * twist (degrees), warp_share, specular_f0, forward_scattering, sheen_color, sheen_roughness;
+ * options: yarnLayer 'additive' (default) | 'albedo-scaled', tintWarp / tintWeft (THREE.Color).
+ */
+export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
+  constructor(parameters = {}, { yarnLayer = 'additive', tintWarp = null, tintWeft = null, ...standard } = {}) {
+    const p = { ...WOVEN_DEFAULTS, ...parameters };
+    super({ metalness: 0, roughness: 1, color: linear(p.base_color), ...standard });
+    this.isMeshWovenMaterial = true;
+    this.woven = p;
+    this.yarnLayer = yarnLayer;
+    if (yarnLayer !== 'additive' && yarnLayer !== 'albedo-scaled') throw new Error(`MeshWovenMaterial: yarnLayer '${yarnLayer}' (valid: additive, albedo-scaled)`);
+    this.tintWarp = tintWarp ? new THREE.Color().copy(tintWarp) : new THREE.Color(1, 1, 1);
+    this.tintWeft = tintWeft ? new THREE.Color().copy(tintWeft) : new THREE.Color(1, 1, 1);
+    this._wovenUniforms = {
+      wovenSpecularColor: { value: new THREE.Color() }, wovenSheenColor: { value: new THREE.Color() },
+      wovenTintWarp: { value: new THREE.Color() }, wovenTintWeft: { value: new THREE.Color() },
+      wovenAlphaA: { value: 0 }, wovenAlphaC: { value: 0 }, wovenRE: { value: 0 }, wovenRS: { value: 0 },
+      wovenCr: { value: 1 }, wovenSr: { value: 0 }, wovenF0: { value: 0 }, wovenBeta: { value: 0 },
+      wovenM: { value: 0 }, wovenPhaseK: { value: 0 }, wovenPhaseT: { value: 0 },
+      wovenPhase: { value: wovenPhaseTexture }, clothDG: { value: clothDGTexture },
+    };
+    this._updateWovenUniforms();
+    if (!wovenPhaseTexture) wovenPhaseTable().then(() => { this.needsUpdate = true; });
+    if (!clothDGTexture) clothDGTable().then(() => { this.needsUpdate = true; });
+  }
+
+  _updateWovenUniforms() {
+    const u = this._wovenUniforms, p = this.woven, lb = wovenLobes(p);
+    u.wovenSpecularColor.value.copy(linear(p.specular_color));
+    u.wovenSheenColor.value.copy(linear(p.sheen_color));
+    u.wovenTintWarp.value.copy(this.tintWarp);
+    u.wovenTintWeft.value.copy(this.tintWeft);
+    u.wovenAlphaA.value = lb.alphaA; u.wovenAlphaC.value = lb.alphaC;
+    u.wovenRE.value = lb.rE; u.wovenRS.value = lb.rS;
+    u.wovenCr.value = lb.cr; u.wovenSr.value = lb.sr;
+    u.wovenF0.value = lb.f0; u.wovenBeta.value = lb.beta; u.wovenM.value = lb.m;
+    u.wovenPhaseK.value = lb.phaseK; u.wovenPhaseT.value = lb.phaseT;
+    u.wovenPhase.value = wovenPhaseTexture; u.clothDG.value = clothDGTexture;
+  }
+
+  onBeforeRender(renderer, scene, camera, geometry) {
+    if (!geometry.attributes.tangent && geometry.attributes.uv && geometry.index) geometry.computeTangents();
+    this._updateWovenUniforms();
+  }
+
+  onBeforeCompile(shader) {
+    Object.assign(shader.uniforms, this._wovenUniforms);
+    const defs = [];
+    if (this.yarnLayer === 'albedo-scaled') defs.push('#define WOVEN_ALBEDO_SCALED');
+    const fs = shader.fragmentShader;
+    const pars = '#include <lights_physical_pars_fragment>';
+    const setup = '#include <lights_physical_fragment>';
+    if (!fs.includes(pars) || !fs.includes(setup)) throw new Error('MeshWovenMaterial: unexpected three.js fragment shader (needs r187 chunks)');
+    shader.fragmentShader = defs.join('\n') + '\nuniform float wovenRE;\n' +
+      fs.replace(pars, pars + '\n' + WOVEN_PARS).replace(setup, setup + '\n' + WOVEN_ROUGHNESS);
+    const vs = shader.vertexShader;
+    if (!vs.includes('void main() {') || !vs.includes('#include <project_vertex>')) throw new Error('MeshWovenMaterial: unexpected three.js vertex shader');
+    shader.vertexShader = vs.replace('void main() {', WOVEN_VERTEX_PARS + 'void main() {')
+      .replace('#include <project_vertex>', '#include <project_vertex>\n' + WOVEN_VERTEX);
+  }
+
+  customProgramCacheKey() { return ['woven', this.yarnLayer].join(':'); }
+
+  copy(source) {
+    super.copy(source);
+    if (source.isMeshWovenMaterial) {
+      this.woven = { ...source.woven };
+      this.yarnLayer = source.yarnLayer;
+      this.tintWarp = source.tintWarp.clone();
+      this.tintWeft = source.tintWeft.clone();
+      this._wovenUniforms = THREE.UniformsUtils.clone(source._wovenUniforms);
+      this._updateWovenUniforms();
+    }
+    return this;
+  }
+}
+
+// brdf/woven.h kParameterTable defaults.
+const WOVEN_DEFAULTS = Object.freeze({
+  base_color: [0.5, 0.5, 0.5], specular_color: [0.5, 0.5, 0.5], roughness: 0.6, anisotropy: 0.7,
+  twist: 0, warp_share: 0.5, specular_f0: 0.05, forward_scattering: 2, sheen_color: [0, 0, 0],
+  sheen_roughness: 0.6,
+});
+
+// ---------------------------------------------------------------------------------------------
 // Presets (docs/preset-format.md). One factory per model name; parameters not in the preset take
 // the model's table default (the kParameterTable of brdf/<model>.h). A model added later (e.g.
 // 'woven') registers itself with registerClothfitModel(name, {defaults, make}).
@@ -355,6 +685,19 @@ registerClothfitModel('cloth', {
       sheenDefault: c.sheen_default ?? SheenDefault.EXPLICIT,
       subsurface: c.subsurface ?? false,
       platform: c.platform ?? 'desktop',
+    });
+  },
+});
+
+registerClothfitModel('woven', {
+  engine: 'clothfit MeshWovenMaterial (brdf/woven.h, uniform; weave maps: hook wovenWeaveSample)',
+  defaults: WOVEN_DEFAULTS,
+  make: (p, preset) => {
+    const w = preset.woven ?? {};
+    return new MeshWovenMaterial(p, {
+      yarnLayer: w.yarn_layer ?? 'additive',
+      tintWarp: w.tint_warp ? linear(w.tint_warp) : null,
+      tintWeft: w.tint_weft ? linear(w.tint_weft) : null,
     });
   },
 });
@@ -556,6 +899,6 @@ export async function loadSceneCard(url, options = {}) {
     const e = card.environment;
     await out.setEnvironment(e.path, { intensity: e.intensity ?? 1, rotationYDegrees: e.rotation_y_degrees ?? 0 });
   }
-  await clothDGTable();
+  await Promise.all([clothDGTable(), wovenPhaseTable()]);
   return out;
 }

@@ -13,7 +13,13 @@ export const repoRoot = path.resolve(path.dirname(fileURLToPath(import.meta.url)
 export const hdriDir = path.join(process.env.CLOTHFIT_DATA || path.join(os.homedir(), '.cache', 'clothfit'), 'hdri');
 const MIME = { '.html': 'text/html', '.js': 'text/javascript', '.mjs': 'text/javascript', '.json': 'application/json', '.png': 'image/png', '.css': 'text/css' };
 
-export function startServer({ port = 0, onShot = null, onLog = null } = {}) {
+// Options: port (0: ephemeral); onShot(body) for POST /shot; onLog(text) for POST /log;
+// onPost(url, body) for any other POST (the browser test's /result and /done); fsRoots: absolute
+// directories also served as GET /fs/<absolute path> (the browser test's work dir and data);
+// a path is served only if it lies under one of them (checked on the URL-normalised path, so
+// symlinked entries of a root are followed).
+export function startServer({ port = 0, onShot = null, onLog = null, onPost = null, fsRoots = [] } = {}) {
+  const roots = fsRoots.flatMap((r) => [r, fs.realpathSync(r)]);
   const server = http.createServer((req, res) => {
     const url = new URL(req.url, 'http://127.0.0.1');
     if (req.method === 'POST') {
@@ -23,12 +29,21 @@ export function startServer({ port = 0, onShot = null, onLog = null } = {}) {
         const body = Buffer.concat(chunks);
         if (url.pathname === '/shot' && onShot) onShot(body);
         else if (url.pathname === '/log' && onLog) onLog(body.toString());
+        else if (onPost) onPost(url, body);
         res.end('ok');
       });
       return;
     }
     const rel = path.normalize(decodeURIComponent(url.pathname));
     let file;
+    if (rel.startsWith('/fs/') && roots.length) {
+      file = rel.slice(3);
+      if (!roots.some((r) => file === r || file.startsWith(r + path.sep))) { res.statusCode = 403; res.end(); return; }
+      if (!fs.existsSync(file) || fs.statSync(file).isDirectory()) { res.statusCode = 404; res.end(); return; }
+      res.setHeader('Content-Type', MIME[path.extname(file)] ?? 'application/octet-stream');
+      fs.createReadStream(file).pipe(res);
+      return;
+    }
     if (rel === '/hdri/index.json') {
       const names = fs.existsSync(hdriDir) ? fs.readdirSync(hdriDir).filter((f) => /\.(exr|hdr)$/.test(f)).map((f) => f.replace(/\.(exr|hdr)$/, '')).sort() : [];
       res.setHeader('Content-Type', 'application/json');

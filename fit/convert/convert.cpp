@@ -172,6 +172,7 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
   Converted c;
   c.name = m.name;
   c.maps = m.maps;
+  c.double_sided = m.double_sided;
   const BrdfFitResult cr = FitOrThrow(s, ModelKind::kCloth, o.cloth, m);
   c.cloth = cr.preset;
   item.error = cr.error;

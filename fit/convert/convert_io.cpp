@@ -481,6 +481,7 @@ SourceMaterial ReadGltfMaterial(const tinygltf::Model& g, size_t i, const std::s
   SourceMaterial m;
   m.file = file;
   m.kind = "gltf";
+  m.double_sided = gm.doubleSided;
   m.name = gm.name.empty() ? "material" + std::to_string(i) : gm.name;
   if (seen[m.name]++ > 0) m.name += "-" + std::to_string(i);
   render::MaterialPreset p = render::DefaultPreset(ModelKind::kGltfSheen);
@@ -676,6 +677,7 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
   j["sheen"] = 1.0;  // sheen_color = sheenColor x sheen
   j["sheenColor"] = Hex(Factor(Colour(p, "sheen_color"), FindMap(c, "sheen_color")));
   j["sheenRoughness"] = p.values[size_t(p.Offset("sheen_roughness"))];
+  j["side"] = c.double_sided ? 2 : 0;  // THREE.DoubleSide : THREE.FrontSide (back faces culled)
   j["userData"] = {{"clothfit",
                     {{"engine", render::EngineOf(p.model)},
                      {"colour",
@@ -695,6 +697,7 @@ void WriteThreejsCloth(const std::string& path, const Converted& c) {
   j["color"] = Hex(Factor(Colour(p, "base_color"), FindMap(c, "base_color")));
   j["sheen"] = Hex(EffectiveSheen(p));
   j["roughness"] = p.values[6];
+  j["side"] = c.double_sided ? 2 : 0;  // THREE.DoubleSide : THREE.FrontSide (back faces culled)
   if (p.cloth.subsurface) {
     j["subsurface"] = true;
     j["subsurfaceColor"] = Hex(Colour(p, "subsurface_color"));
@@ -717,6 +720,7 @@ void WriteGltf(const std::string& path, const Converted& c) {
   j["extensionsUsed"] = json::array({"KHR_materials_sheen"});
   json m;
   m["name"] = c.name;
+  m["doubleSided"] = c.double_sided;
   const Rgb<double> base = Factor(Colour(p, "base_color"), FindMap(c, "base_color"));
   m["pbrMetallicRoughness"] = {{"baseColorFactor", {base[0], base[1], base[2], 1.0}},
                                {"roughnessFactor", p.values[3]},

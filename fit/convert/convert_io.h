@@ -55,6 +55,11 @@ struct SourceMaterial {
   std::vector<MapRef> maps;               // carried over
   std::vector<std::string> notes;         // what was averaged, dropped or not modelled
   std::vector<std::string> dependencies;  // further files whose content the output depends on
+  // Two-sidedness: a glTF material's doubleSided (glTF default false); every other source
+  // (presets, fabrics, surface materials, texture stacks) is a thin sheet seen from both
+  // sides, so true. The three.js outputs write it as "side" (DoubleSide 2 / FrontSide 0), the
+  // glTF output as doubleSided.
+  bool double_sided = true;
 };
 
 // Every input file kind, chosen by extension and, for .json, by its "schema"/"format" field.
@@ -81,6 +86,7 @@ struct Converted {
   std::optional<render::MaterialPreset> seed_cloth;
   std::vector<MapRef> maps;
   nlohmann::json provenance = nlohmann::json::object();
+  bool double_sided = true;  // SourceMaterial::double_sided
 };
 
 void WriteClothPreset(const std::string& path, const Converted& c);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -839,7 +840,13 @@ void FabricPageScene(std::ostream& h, const FabricSpec& spec, const SceneResult&
 }
 
 // Fitted parameters: one card per model.
-void FabricPageParameters(std::ostream& h, const FabricSpec& spec) {
+void FabricPageParameters(std::ostream& h, const FabricSpec& spec,
+                          const std::string& report_dir);
+void ViewerLinks(std::ostream& h, const FabricSpec& spec, const ModelSpec& m,
+                 const std::string& report_dir);
+
+void FabricPageParameters(std::ostream& h, const FabricSpec& spec,
+                          const std::string& report_dir) {
   h << "<h2>Fitted parameters</h2>\n<p class=\"meta\">Parameter values are <b>linear</b> sRGB "
        "(Rec.709 primaries) as the engines take them (a three.js <code>Color</code> after "
        "<code>convertSRGBToLinear</code>, a Filament <code>baseColor</code>); swatches show the "
@@ -854,6 +861,7 @@ void FabricPageParameters(std::ostream& h, const FabricSpec& spec) {
       h << "<p class=\"meta\">cloth options <code>" << EscapeHtml(m.preset.at("cloth").dump())
         << "</code></p>";
     h << "<p class=\"meta\">preset <code>" << EscapeHtml(m.preset_path) << "</code></p>\n";
+    ViewerLinks(h, spec, m, report_dir);
     h << "<table><tr><th class=\"l\">parameter</th><th class=\"l\">value (linear)</th>"
          "<th class=\"l\">swatch (sRGB-encoded)</th></tr>\n";
     if (m.preset.contains("parameters") && m.preset.at("parameters").is_object()) {
@@ -927,13 +935,90 @@ void FabricPageSolver(std::ostream& h, const FabricSpec& spec) {
 
 }  // namespace
 
-std::string FabricHtml(const FabricReport& rep) {
+namespace {
+
+// The directory holding web/viewer.html: the first ancestor of `start` (inclusive) that has it.
+fs::path FindRepoRoot(fs::path start) {
+  std::error_code ec;
+  start = fs::absolute(start, ec).lexically_normal();
+  for (fs::path d = start; !d.empty(); d = d.parent_path()) {
+    if (fs::is_regular_file(d / "web" / "viewer.html", ec)) return d;
+    if (d == d.parent_path()) break;
+  }
+  return {};
+}
+
+// Percent-encoding of a query value (RFC 3986 unreserved characters and '/' kept).
+std::string UrlEncode(const std::string& s) {
+  static const char* hex = "0123456789ABCDEF";
+  std::string out;
+  for (const unsigned char c : s) {
+    if (std::isalnum(c) || c == '-' || c == '_' || c == '.' || c == '~' || c == '/') {
+      out += char(c);
+    } else {
+      out += '%';
+      out += hex[c >> 4];
+      out += hex[c & 15];
+    }
+  }
+  return out;
+}
+
+// "open in the three.js viewer" links, one per scene, for one fitted preset.
+void ViewerLinks(std::ostream& h, const FabricSpec& spec, const ModelSpec& m,
+                 const std::string& report_dir) {
+  if (report_dir.empty()) return;
+  std::string links;
+  for (const SceneSpec& sc : spec.scenes) {
+    const std::string href = ViewerLink(report_dir, sc.scene_path, m.preset_path);
+    if (href.empty()) continue;
+    links += std::string(links.empty() ? "" : " &middot; ") + "<a class=\"viewer\" href=\"" +
+             EscapeHtml(href) + "\">" + EscapeHtml(sc.name) + "</a>";
+  }
+  if (!links.empty())
+    h << "<p class=\"meta\">three.js viewer (web/viewer.html, served by "
+         "<code>node web/serve.mjs</code>): "
+      << links << "</p>\n";
+}
+
+}  // namespace
+
+std::string ViewerLink(const std::string& report_dir, const std::string& scene_path,
+                       const std::string& preset_path) {
+  std::error_code ec;
+  fs::path root = FindRepoRoot(report_dir);
+  if (root.empty()) root = FindRepoRoot(fs::current_path(ec));
+  if (root.empty()) return "";
+  const fs::path web = root / "web";
+  fs::path card = scene_path;
+  if (card.is_relative()) {
+    const fs::path candidates[] = {root / card, fs::absolute(card, ec),
+                                   fs::path(preset_path).parent_path() / card};
+    card.clear();
+    for (const fs::path& c : candidates)
+      if (fs::is_regular_file(c, ec)) {
+        card = c;
+        break;
+      }
+  }
+  const fs::path preset = fs::absolute(preset_path, ec).lexically_normal();
+  const fs::path page = fs::absolute(report_dir, ec).lexically_normal();
+  std::string href = (web / "viewer.html").lexically_relative(page).generic_string() +
+                     "?preset=" +
+                     UrlEncode(preset.lexically_relative(web).generic_string());
+  if (!card.empty())
+    href += "&card=" + UrlEncode(fs::absolute(card, ec).lexically_normal()
+                                     .lexically_relative(web).generic_string());
+  return href;
+}
+
+std::string FabricHtml(const FabricReport& rep, const std::string& report_dir) {
   const FabricSpec& spec = rep.spec;
   std::ostringstream h;
   FabricPageIntro(h, spec);
   FabricPageSummary(h, rep);
   for (const SceneResult& s : rep.scenes) FabricPageScene(h, spec, s);
-  FabricPageParameters(h, spec);
+  FabricPageParameters(h, spec, report_dir);
   FabricPageSolver(h, spec);
   h << "</body></html>\n";
   return h.str();
@@ -1131,7 +1216,7 @@ std::string WriteReport(const std::vector<FabricReport>& reports, const std::str
   fs::create_directories(dir, ec);
   if (ec) throw ReportError(dir + ": cannot create the report directory: " + ec.message());
   for (const FabricReport& r : reports)
-    io::WriteTextAtomic((fs::path(dir) / PageName(r.spec.name)).string(), FabricHtml(r));
+    io::WriteTextAtomic((fs::path(dir) / PageName(r.spec.name)).string(), FabricHtml(r, dir));
   io::WriteTextAtomic((fs::path(dir) / "report.json").string(), ReportJson(reports).dump(2) + "\n");
   io::WriteTextAtomic((fs::path(dir) / "report.csv").string(), ReportCsv(reports));
   const std::string index = (fs::path(dir) / "index.html").string();

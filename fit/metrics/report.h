@@ -124,7 +124,19 @@ Numbers MeanOver(const std::vector<const Numbers*>& per_scene,
 // replaced by '_' ("fabric-index.html" for a fabric named "index", "fabric-.html" for "").
 std::string PageName(const std::string& fabric_name);
 
-std::string FabricHtml(const FabricReport& report);
+// `report_dir` (the directory the page is written to; empty: no viewer links): each fitted
+// preset gets, per scene, a link to web/viewer.html carrying the scene card and the preset
+// (ViewerLink).
+std::string FabricHtml(const FabricReport& report, const std::string& report_dir = "");
+
+// The relative link from a page in `report_dir` to the repository's web/viewer.html with
+// ?card=<scene card>&preset=<preset>, both relative to web/ (viewer.html resolves them against
+// itself); empty when no web/viewer.html is found above `report_dir` or the working directory.
+// A relative `scene_path` is taken from the repository root, the working directory or the
+// preset's directory, whichever holds it. The viewer needs `node web/serve.mjs` (an HTTP
+// server rooted at the repository), so the card and preset must lie inside the repository.
+std::string ViewerLink(const std::string& report_dir, const std::string& scene_path,
+                       const std::string& preset_path);
 std::string IndexHtml(const std::vector<FabricReport>& reports);
 nlohmann::json ReportJson(const std::vector<FabricReport>& reports);
 std::string ReportCsv(const std::vector<FabricReport>& reports);

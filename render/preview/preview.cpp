@@ -213,6 +213,38 @@ void FillRadianceTables(const PixelContext& x, const Vec3d& n, const Vec3d& R, P
   }
 }
 
+// Whether the camera ray `d` sees triangle `tri` of `m` from its back: glTF front faces are
+// counter-clockwise (the scene loader fixes the winding of mirroring transforms), so the face is
+// a back face when (P1 - P0) x (P2 - P0) points away from the viewer (gl_FrontFacing false).
+bool BackFacing(const Mesh& m, int tri, const Vec3d& d) {
+  const uint32_t* idx = &m.indices[size_t(tri) * 3];
+  auto p = [&](int k) {
+    const auto& q = m.positions[idx[k]];
+    return Vec3d(q[0], q[1], q[2]);
+  };
+  const Vec3d p0 = p(0);
+  return Dot(Cross(p(1) - p0, p(2) - p0), d) > 0.0;
+}
+
+// Primary visibility with back-face culling as the glTF material says (doubleSided false: back
+// faces are not drawn, as three.js's FrontSide and Filament's culling do): a culled hit is
+// skipped and the ray continues past it. *back_face: whether the kept hit is a back face (of a
+// double-sided material).
+Hit IntersectCulled(const PixelContext& x, const std::array<double, 3>& org,
+                    const std::array<double, 3>& dir, bool* back_face) {
+  const Vec3d d = V(dir);
+  double tnear = 0.0;
+  for (int guard = 0; guard < 64; ++guard) {
+    const Hit h = x.bvh.Intersect(org, dir, tnear);
+    if (!h.valid) return h;
+    const Mesh& m = x.scene.meshes[size_t(h.mesh)];
+    *back_face = BackFacing(m, h.triangle, d);
+    if (!*back_face || m.double_sided) return h;
+    tnear = h.t * (1.0 + 1e-6) + 1e-7 * x.bvh.scale();
+  }
+  return Hit{};
+}
+
 // Primary visibility at the centres of row y: background and non-fabric pixels go straight
 // into c->background, fabric pixels into *row.
 void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelData>* row) {
@@ -221,7 +253,8 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     const size_t pix = size_t(y) * size_t(W) + size_t(px);
     std::array<double, 3> org, dir;
     x.scene.CameraRay(px + 0.5, y + 0.5, org, dir);
-    const Hit h = x.bvh.Intersect(org, dir);
+    bool back_face = false;
+    const Hit h = IntersectCulled(x, org, dir, &back_face);
     const Vec3d d = V(dir);
     if (!h.valid) {
       const Rgb<double> bg =
@@ -240,7 +273,14 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     PrimaryHit hit;
     hit.v = d * -1.0;
     hit.n = V(a.normal);
-    if (Dot(hit.n, hit.v) < 0.0) hit.n = hit.n * -1.0;  // two-sided, as the reference renderer
+    if (UsesThreejsIbl(x.opt)) {
+      // three.js (normal_fragment_begin, DoubleSide): normal *= faceDirection, i.e. flipped on
+      // back faces by the triangle's winding (gl_FrontFacing), not by the shading normal; a
+      // front face may keep n.v < 0 near silhouettes (NoV then saturates to 0).
+      if (back_face) hit.n = hit.n * -1.0;
+    } else if (Dot(hit.n, hit.v) < 0.0) {
+      hit.n = hit.n * -1.0;  // two-sided by the shading normal, as the reference renderer
+    }
     hit.p = V(a.position) + V(h.ng) * (Dot(V(h.ng), hit.v) > 0 ? x.eps : -x.eps);
     hit.NoV = Dot(hit.n, hit.v);
     hit.mesh = &x.scene.meshes[size_t(h.mesh)];

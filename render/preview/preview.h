@@ -20,10 +20,16 @@
 // IBL engines (PreviewOptions::ibl_engine): three.js r187 (render/preview/threejs_ibl.h: PMREM
 // cube, irradiance from its top level, 16 x 16 DFG, per-quad geometryRoughness) or Filament
 // (SH9 irradiance, GGX prefilter chain with lod = (levels - 1) r (2 - r)).
-// Approximations, stated and measured in docs/preview.md against three.js in Chromium: faces
-// are shaded two-sided whatever glTF doubleSided says; radiance is tabulated at K roughness
-// nodes; the seed variant's accumulation of `directDiffuse *= saturate(subsurface + NoL)`
-// across lights is evaluated per light.
+// Faces: drawn as the glTF material's doubleSided says (back faces culled when false, the ray
+// continues behind them); on three.js IBL a double-sided face's normal is flipped by the
+// triangle's winding (gl_FrontFacing), on Filament IBL by the shading normal (as the reference
+// renderer). Approximations that remain, each measured in docs/preview.md against three.js in
+// Chromium: radiance tabulated at K = 33 roughness nodes (Catmull-Rom; K = 257 changed the
+// drape/studio metal frame's pixels off by > 2 levels from 983 to 955 only);
+// geometryRoughness from coarse per-quad derivatives evaluated in double where the GPU works in
+// fp32 (drape metal: 1.1 % of the pixels differ from the GPU's value by > 0.01);
+// the seed variant's accumulation of `directDiffuse *= saturate(subsurface + NoL)` across
+// lights is evaluated per light.
 #pragma once
 
 #include <array>

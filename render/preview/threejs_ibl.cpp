@@ -463,12 +463,22 @@ double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int 
     *out = V3(Dot(n, right), Dot(n, up), Dot(n, fwd));
     return true;
   };
+  // Coarse derivatives, as SwiftShader evaluates GLSL dFdx / dFdy (OpDPdx = OpDPdxCoarse): one
+  // value per 2 x 2 quad, dFdx = n(lane 1) - n(lane 0), dFdy = n(lane 2) - n(lane 0), lane 0 the
+  // quad's corner with even window x and even window y. Window y runs up from the bottom row,
+  // image rows down from the top: window row H - 1 - y. Measured against the browser on the
+  // drape (docs/preview.md): coarse with this lane 0 matched best (fine derivatives, or coarse
+  // with lane 0 at another corner, gave 1.5-2 x more pixels whose geometryRoughness differs by
+  // more than 0.01).
+  const int H = scene.card.height;
+  const int x0 = x & ~1, yw0 = (H - 1 - y) & ~1;
+  const int y0 = H - 1 - yw0, y1 = H - 2 - yw0;  // image rows of window rows yw0, yw0 + 1
   V3 n, nx, ny;
-  if (!normal_at(x, y, &n)) return 0.0;
+  if (!normal_at(x0, y0, &n)) return 0.0;
   double g = 0.0;
-  if (normal_at(x ^ 1, y, &nx))
+  if (normal_at(x0 + 1, y0, &nx))
     g = std::max({g, std::abs(nx.x - n.x), std::abs(nx.y - n.y), std::abs(nx.z - n.z)});
-  if (normal_at(x, y ^ 1, &ny))
+  if (normal_at(x0, y1, &ny))
     g = std::max({g, std::abs(ny.x - n.x), std::abs(ny.y - n.y), std::abs(ny.z - n.z)});
   return g;
 }

@@ -105,11 +105,12 @@ const Table2D& ThreejsDfgTable();
 
 // three.js's geometryRoughness at image pixel (x, y), whose primary hit is triangle `triangle`
 // of mesh `mesh`: max over the view-space components of max(|dFdx n|, |dFdy n|), where n is
-// the normalized interpolated vertex normal and the derivatives are a GPU's fine derivatives
-// over the 2 x 2 pixel quad: the partner pixels (x ^ 1, y) and (x, y ^ 1) evaluate the SAME
-// triangle's attribute plane (as helper invocations do), i.e. the camera ray through the
-// partner's centre meets the triangle's plane and the normal is interpolated there, even
-// outside the triangle. The sign of n (double-sided flips) does not change the result.
+// the normalized interpolated vertex normal and the derivatives are COARSE, as SwiftShader
+// computes them: one pair per 2 x 2 pixel quad, from the quad's lane 0 (even window x and y;
+// window y counts up from the bottom row) to lanes 1 (x + 1) and 2 (window y + 1). Every lane
+// evaluates the SAME triangle's attribute plane (as helper invocations do): the camera ray
+// through the lane's pixel centre meets the triangle's plane and the normal is interpolated
+// there, even outside the triangle. The sign of n (double-sided flips) does not change it.
 double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int x, int y);
 
 // Rounds to the nearest IEEE half (ties to even), as a GPU does when it writes RGBA16F.

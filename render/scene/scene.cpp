@@ -586,6 +586,7 @@ void ReadMeshMaterial(const GltfContext& g, const SceneCard& card, int mesh_inde
   }
   mesh->is_fabric = mesh->material >= 0 && mesh->material == card.fabric_material;
   if (mesh->material >= 0) {
+    mesh->double_sided = model.materials[mesh->material].doubleSided;
     const auto& f = model.materials[mesh->material].pbrMetallicRoughness.baseColorFactor;
     if (f.size() >= 3) {
       for (int c = 0; c < 3; ++c) {
@@ -597,6 +598,7 @@ void ReadMeshMaterial(const GltfContext& g, const SceneCard& card, int mesh_inde
       }
     }
   } else {
+    mesh->double_sided = false;             // glTF default material: single-sided
     mesh->base_color = {1.0f, 1.0f, 1.0f};  // glTF default material
   }
 }

@@ -46,6 +46,10 @@ struct Mesh {
   int material = -1;                                  // glTF material index (-1: default)
   bool is_fabric = false;                             // material == card.fabric_material
   std::array<float, 3> base_color{0.8f, 0.8f, 0.8f};  // linear; pbrMetallicRoughness factor
+  // Back faces are drawn (true) or culled (false) by the preview (render/preview), as an engine
+  // does. glTF meshes: the material's doubleSided (glTF default false, the default material
+  // too); meshes built in code default to two-sided.
+  bool double_sided = true;
 };
 
 struct Camera {

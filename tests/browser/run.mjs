@@ -5,7 +5,7 @@
 //   node tests/browser/run.mjs --clothfit build/bin/clothfit [--work DIR] [--chromium PATH]
 //        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS]
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 6 materials x 2 environments
+// Cases: each canonical scene (datasets/scenes/*.json) x 8 materials (6 + 2 woven) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -17,11 +17,11 @@
 // documented bound; every other case must meet the acceptance, mean <= 0.5 and p99 <= 2.
 import { spawn } from 'node:child_process';
 import fs from 'node:fs';
-import http from 'node:http';
 import os from 'node:os';
 import path from 'node:path';
 import zlib from 'node:zlib';
 import { fileURLToPath } from 'node:url';
+import { startServer } from '../../web/serve.mjs';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const repo = path.resolve(here, '..', '..');
@@ -48,6 +48,14 @@ for (const e of ['studio', HIGH]) {
 }
 if (!fs.existsSync(clothfit)) { console.error(`no ${clothfit}`); process.exit(1); }
 
+// ---- node-side checks of web/clothfit.js (tests/browser/unit.mjs: side, woven presets) ------
+{
+  const { spawnSync } = await import('node:child_process');
+  const u = spawnSync(process.execPath, [path.join(here, 'unit.mjs'), '--clothfit', clothfit, '--work', work], { encoding: 'utf8' });
+  process.stdout.write(u.stdout);
+  if (u.status !== 0) { console.error(u.stderr); console.error('unit checks failed'); process.exit(1); }
+}
+
 // ---- cases ----------------------------------------------------------------------------------
 const preset = (model, parameters, extra = {}) => ({ schema: 'clothfit.preset', version: 1, model, ...extra, parameters });
 const MATERIALS = {
@@ -60,6 +68,12 @@ const MATERIALS = {
     { cloth: { variant: 'seed-threejs', sheen_default: 'sqrt-base-color', subsurface: false, platform: 'desktop' } }),
   'cloth-subsurface': preset('cloth', { base_color: [0.6, 0.5, 0.4], sheen_color: [0.4, 0.4, 0.4], roughness: 0.65, subsurface_color: [0.5, 0.15, 0.1] },
     { cloth: { variant: 'filament', sheen_default: 'explicit', subsurface: true, platform: 'desktop' } }),
+  // brdf/woven.h, uniform (MeshWovenMaterial): anisotropic twisted lobes with sheen, and a
+  // sheen-less one with strong forward scattering.
+  'woven': preset('woven', { base_color: [0.35, 0.3, 0.25], specular_color: [0.6, 0.55, 0.5], roughness: 0.45, anisotropy: 0.7,
+    twist: 15, warp_share: 0.6, specular_f0: 0.05, forward_scattering: 2.5, sheen_color: [0.2, 0.2, 0.2], sheen_roughness: 0.5 }),
+  'woven-forward': preset('woven', { base_color: [0.1, 0.15, 0.3], specular_color: [0.8, 0.8, 0.8], roughness: 0.3, anisotropy: 0.9,
+    twist: -30, warp_share: 0.3, specular_f0: 0.1, forward_scattering: 5, sheen_color: [0, 0, 0], sheen_roughness: 0.6 }),
 };
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
@@ -110,40 +124,23 @@ async function cppAll() {
 const cppPromise = cppAll();
 
 // ---- server + chromium ----------------------------------------------------------------------
-// Served: the repository, the work dir and the HDRI cache (whose entries may be symlinks to
-// system data files, so the check is on the requested path, which URL parsing has normalised).
-const roots = [repo, work, hdriDir].flatMap((r) => [r, fs.realpathSync(r)]);
+// web/serve.mjs's server; served under /fs/<absolute path>: the repository, the work dir and
+// the HDRI cache (whose entries may be symlinks to system data files).
 const results = new Map();
-const MIME = { '.html': 'text/html', '.js': 'text/javascript', '.mjs': 'text/javascript', '.json': 'application/json' };
 let finish;
 const finished = new Promise((r) => { finish = r; });
-const server = http.createServer((req, res) => {
-  const url = new URL(req.url, 'http://127.0.0.1');
-  if (req.method === 'POST') {
-    const chunks = [];
-    req.on('data', (d) => chunks.push(d));
-    req.on('end', () => {
-      const body = Buffer.concat(chunks);
-      if (url.pathname === '/result') {
-        const name = url.searchParams.get('name');
-        results.set(name, { w: Number(url.searchParams.get('w')), h: Number(url.searchParams.get('h')), ms: Number(url.searchParams.get('ms')), body });
-      } else if (url.pathname === '/log') {
-        say(`page: ${body.toString()}`);
-      } else if (url.pathname === '/done') {
-        finish(body.toString());
-      }
-      res.end('ok');
-    });
-    return;
-  }
-  if (!url.pathname.startsWith('/fs/')) { res.statusCode = 404; res.end(); return; }
-  let file;
-  file = path.normalize(decodeURIComponent(url.pathname.slice(3)));
-  if (!roots.some((r) => file === r || file.startsWith(r + path.sep))) { res.statusCode = 403; res.end(); return; }
-  res.setHeader('Content-Type', MIME[path.extname(file)] ?? 'application/octet-stream');
-  fs.createReadStream(file).on('error', () => { res.statusCode = 404; res.end(); }).pipe(res);
+const server = await startServer({
+  fsRoots: [repo, work, hdriDir],
+  onLog: (text) => say(`page: ${text}`),
+  onPost: (url, body) => {
+    if (url.pathname === '/result') {
+      const name = url.searchParams.get('name');
+      results.set(name, { w: Number(url.searchParams.get('w')), h: Number(url.searchParams.get('h')), ms: Number(url.searchParams.get('ms')), body });
+    } else if (url.pathname === '/done') {
+      finish(body.toString());
+    }
+  },
 });
-await new Promise((r) => server.listen(0, '127.0.0.1', r));
 const port = server.address().port;
 const pageUrl = `http://127.0.0.1:${port}/fs${repo}/web/test/browser-test.html?plan=/fs${path.join(work, 'plan.json')}`;
 const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'clothfit-chromium-'));
@@ -245,6 +242,7 @@ for (const c of cases) {
   const ppm = Buffer.alloc(w * h * 3);
   for (let i = 0; i < w * h; ++i) for (let k = 0; k < 3; ++k) ppm[i * 3 + k] = body[i * 4 + k];
   fs.writeFileSync(c.png.replace(/\.png$/, '.browser.ppm'), Buffer.concat([Buffer.from(`P6\n${w} ${h}\n255\n`), ppm]));
+  fs.writeFileSync(c.png.replace(/\.png$/, '.mask.pgm'), Buffer.concat([Buffer.from(`P5\n${w} ${h}\n255\n`), mask]));
 }
 
 const fmt = (x) => (Number.isFinite(x) ? x.toFixed(2) : String(x));
