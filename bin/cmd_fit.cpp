@@ -122,7 +122,7 @@ struct FitArgs {
   std::string fabric, references, scenes, model = "cloth", space = "display", lock, out;
   std::string level = "auto", loss = "huber", variant = "filament", sheen_default = "explicit";
   std::string images, references2, alpha = "auto", coverage_channel, noise = "auto";
-  std::string weave_period, starts, start_values;
+  std::string weave_period, starts, start_values, weave_maps = "auto";
   double loss_scale = 1.0, min_coverage = 0.5;
   bool subsurface = false, no_floor = false;
   int spp = 256, stride = 0, threads = 0, max_iterations = 50;
@@ -150,6 +150,10 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "evaluate every n-th pixel per block axis (0 = auto: at most 4 x 4 per block)")
       ->check(CLI::Range(0, 16));
   cmd->add_flag("--no-noise-floor", a.no_floor, "(--fabric) skip the second-seed references");
+  cmd->add_option("--weave-maps", a.weave_maps,
+                  "woven with an Irawan --fabric: auto (bake weave maps next to --out and fit "
+                  "with them; fit/weave_maps.h) or none (the uniform woven model)")
+      ->check(CLI::IsMember({"auto", "none"}));
   cmd->add_option("--images", a.images, "directory for fitted previews and residual images");
   cmd->add_option("--threads", a.threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
   cmd->add_option("--references2", a.references2,
@@ -510,6 +514,12 @@ int RunFit(const FitArgs& a, const Globals& g) {
   const double weave_period = a.fabric.empty() ? 0.0 : render::LoadFabric(a.fabric).weave_period_uv;
   const FitFiles files = ResolveFitFiles(a, g);
   fit::FitOptions o = MakeFitOptions(a, StartPreset(a));
+  if (o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && a.weave_maps == "auto") {
+    const std::string maps = (fs::path(a.out).parent_path() /
+                              (fs::path(a.out).stem().string() + ".weave.exr")).string();
+    const std::string line = fit::AttachWeaveMaps(a.fabric, maps, &o);
+    if (!line.empty()) std::printf("fit: %s\n", line.c_str());
+  }
   // Load everything.
   fit::ReferenceOptions ro;
   ro.alpha = fit::ParseAlphaMode(a.alpha);

@@ -101,6 +101,7 @@ struct PixelData {
   std::vector<float> rad, srad;
   std::array<float, 2> tv{};  // woven: t.v, b.v
   std::vector<float> lt;      // woven: t.l, b.l, t.h, b.h per light sample
+  std::array<float, WeaveMaps::kChannels> weave{};  // woven with maps: the sampled maps
 };
 
 // What the per-pixel work of a cache build reads.
@@ -252,6 +253,13 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     pd.lights = std::move(ls);
     pd.tv = {float(Dot(hit.t, hit.v)), float(Dot(hit.b, hit.v))};
     pd.lt = std::move(lt);
+    if (woven_frame && x.opt.weave_maps) {
+      const WeaveMaps& wm = *x.opt.weave_maps;
+      const double lod = wm.Lod(UvDerivatives(x.scene, h, px + 0.5, y + 0.5),
+                                x.opt.weave_footprint_scale);
+      const auto s = wm.Sample(a.uv[0], a.uv[1], lod);
+      for (int k = 0; k < WeaveMaps::kChannels; ++k) pd.weave[size_t(k)] = float(s[size_t(k)]);
+    }
     for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
     if (x.env) FillRadianceTables(x, hit.n, R, &pd);
     row->push_back(std::move(pd));
@@ -275,6 +283,7 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       if (c->options.model == ModelKind::kWoven) {
         c->tangent_v.insert(c->tangent_v.end(), pd.tv.begin(), pd.tv.end());
         c->light_tangent.insert(c->light_tangent.end(), pd.lt.begin(), pd.lt.end());
+        if (c->options.weave_maps) c->weave.insert(c->weave.end(), pd.weave.begin(), pd.weave.end());
       }
     }
   }
@@ -370,9 +379,18 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
     wp = woven::FromFlat(x);
     wl = woven::PrepareLobes(wp);
   }
-  const woven::WeaveSample<T> ws{};
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& br) {
     for (size_t i = br.begin(); i != br.end(); ++i) {
+      // Woven: the pixel's weave-map sample; without maps the uniform defaults (all 1).
+      woven::WeaveSample<T> ws{};
+      if constexpr (M == ModelKind::kWoven) {
+        if (!c.weave.empty()) {
+          const float* wv = &c.weave[i * WeaveMaps::kChannels];
+          ws.warp = Const<T>(double(wv[0]));
+          ws.weft = Const<T>(double(wv[1]));
+          ws.kd = LoadRgb<T>(wv + 2);
+        }
+      }
       const T NoV = Const<T>(double(c.NoV[i]));
       standard::Options so;  // three.js geometryRoughness (0 unless the cache has it)
       if (!c.geometry_roughness.empty()) so.geometry_roughness = double(c.geometry_roughness[i]);
