@@ -151,9 +151,10 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
       ->check(CLI::Range(0, 16));
   cmd->add_flag("--no-noise-floor", a.no_floor, "(--fabric) skip the second-seed references");
   cmd->add_option("--weave-maps", a.weave_maps,
-                  "woven with an Irawan --fabric: auto (bake weave maps next to --out and fit "
-                  "with them; fit/weave_maps.h) or none (the uniform woven model)")
-      ->check(CLI::IsMember({"auto", "none"}));
+                  "woven with an Irawan --fabric: auto (bake weave maps next to --out, per-texel "
+                  "fit, and fit with them; fit/weave_maps.h), indicator (analytic yarn-on-top "
+                  "maps, no per-texel fit) or none (the uniform woven model)")
+      ->check(CLI::IsMember({"auto", "indicator", "none"}));
   cmd->add_option("--images", a.images, "directory for fitted previews and residual images");
   cmd->add_option("--threads", a.threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
   cmd->add_option("--references2", a.references2,
@@ -514,10 +515,12 @@ int RunFit(const FitArgs& a, const Globals& g) {
   const double weave_period = a.fabric.empty() ? 0.0 : render::LoadFabric(a.fabric).weave_period_uv;
   const FitFiles files = ResolveFitFiles(a, g);
   fit::FitOptions o = MakeFitOptions(a, StartPreset(a));
-  if (o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && a.weave_maps == "auto") {
+  if (o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && a.weave_maps != "none") {
     const std::string maps = (fs::path(a.out).parent_path() /
                               (fs::path(a.out).stem().string() + ".weave.exr")).string();
-    const std::string line = fit::AttachWeaveMaps(a.fabric, maps, &o);
+    fit::WeaveBakeOptions bake;
+    bake.indicator = a.weave_maps == "indicator";
+    const std::string line = fit::AttachWeaveMaps(a.fabric, maps, &o, bake);
     if (!line.empty()) std::printf("fit: %s\n", line.c_str());
   }
   // Load everything.

@@ -149,6 +149,21 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
   tbb::parallel_for(0, S, [&](int j) {
     for (int i = 0; i < S; ++i) {
       const size_t t = size_t(j) * size_t(S) + size_t(i);
+      if (o.indicator) {
+        std::array<double, kN> x{};
+        constexpr int kSub = 4;
+        for (int q = 0; q < kSub; ++q)
+          for (int p = 0; p < kSub; ++p) {
+            const render::IrawanPoint ip = bsdf.Locate(
+                {(i + (p + 0.5) / kSub) / (S * R), (j + (q + 0.5) / kSub) / (S * R)});
+            const render::Yarn& y = pattern.yarns[size_t(ip.yarn)];
+            x[y.type == render::YarnType::kWarp ? 0 : 1] += 1.0 / (kSub * kSub);
+            for (int c = 0; c < 3; ++c) x[size_t(2 + c)] += y.kd[c] / (kSub * kSub);
+          }
+        xs[t] = x;
+        targets[t].clear();
+        continue;
+      }
       render::ShadingPoint sp;
       sp.uv = {(i + 0.5) / (S * R), (j + 0.5) / (S * R)};
       std::vector<Rgb<double>>& target = targets[t];
@@ -205,6 +220,13 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
     for (int a = 0; a < kN; ++a) mean[size_t(a)] += x[size_t(a)] / double(texels);
   double eu = 0.0, em = 0.0;
   for (size_t t = 0; t < texels; ++t) {
+    if (targets[t].empty()) {  // indicator maps: the targets were not evaluated
+      render::ShadingPoint sp;
+      sp.uv = {(double(t % size_t(S)) + 0.5) / (S * R), (double(t / size_t(S)) + 0.5) / (S * R)};
+      targets[t].resize(pairs.size());
+      for (size_t k = 0; k < pairs.size(); ++k)
+        targets[t][k] = bsdf.Eval(pairs[k].v, pairs[k].l, sp) * pairs[k].l.z;
+    }
     eu += SquaredError(pairs, targets[t], mean);
     em += SquaredError(pairs, targets[t], xs[t]);
   }

@@ -41,6 +41,10 @@ struct WeaveBakeOptions {
   int phi_v = 4;      // view azimuths over [0, pi)
   int phi_l = 8;      // light azimuths over [0, 2 pi)
   double ridge = 1e-3;  // relative ridge towards x = 1 (see the header comment)
+  // true: no per-texel fit; the analytic maps of the design notes instead: warp = 1 where
+  // the reference's Locate puts a warp yarn on top (else 0), weft likewise, kd = that yarn's
+  // kd, each averaged over 4 x 4 sub-positions of the texel (a box prefilter).
+  bool indicator = false;
 };
 
 struct WeaveBakeResult {

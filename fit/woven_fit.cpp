@@ -35,6 +35,7 @@ std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& m
                                  {"pairs", r.pairs},
                                  {"bake_error_uniform", r.error_uniform},
                                  {"bake_error_mapped", r.error_mapped},
+                                 {"mode", bake.indicator ? "indicator" : "fitted"},
                                  {"lobes_from", "the start preset (woven defaults)"}};
   options->start.extra["weave_maps"] = render::WeaveMapsPresetField(maps_path, r.maps, source);
   char line[512];
