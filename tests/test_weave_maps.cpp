@@ -184,6 +184,20 @@ TEST(WeaveBake, FollowsTheReferenceWeaveAndLowersTheTexelError) {
   EXPECT_GT(weft_on_weft / n_weft, weft_on_warp / n_warp);
   EXPECT_THROW(fit::BakeWeaveMaps(*irawan, DefaultPreset(ModelKind::kCloth), o),
                std::invalid_argument);
+
+  // Indicator maps: warp + weft indicators sum to 1 per texel before normalisation, so
+  // warp / mean_warp x mean_warp + weft / mean_weft x mean_weft = 1; a texel whose centre and
+  // all sub-positions lie on one yarn type has 0 on the other channel.
+  o.indicator = true;
+  const fit::WeaveBakeResult ind = fit::BakeWeaveMaps(*irawan, DefaultPreset(ModelKind::kWoven), o);
+  EXPECT_NEAR(ind.mean_warp + ind.mean_weft, 1.0, 1e-9);
+  int zeros = 0;
+  for (int t = 0; t < 256; ++t) {
+    const float* x = &ind.maps.levels[0][size_t(t * C)];
+    EXPECT_NEAR(double(x[0]) * ind.mean_warp + double(x[1]) * ind.mean_weft, 1.0, 1e-5);
+    zeros += (x[0] == 0.f) + (x[1] == 0.f);
+  }
+  EXPECT_GT(zeros, 100);
 }
 
 std::vector<double> WovenParams() {
