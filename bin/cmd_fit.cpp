@@ -153,8 +153,9 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
   cmd->add_option("--weave-maps", a.weave_maps,
                   "woven with an Irawan --fabric: auto (bake weave maps next to --out, per-texel "
                   "fit, and fit with them; fit/weave_maps.h), indicator (analytic yarn-on-top "
-                  "maps, no per-texel fit) or none (the uniform woven model)")
-      ->check(CLI::IsMember({"auto", "indicator", "none"}));
+                  "maps, no per-texel fit), relief (auto plus a yarn-relief normal map), glint "
+                  "(auto plus the reference's glint map) or none (the uniform woven model)")
+      ->check(CLI::IsMember({"auto", "indicator", "relief", "glint", "none"}));
   cmd->add_option("--images", a.images, "directory for fitted previews and residual images");
   cmd->add_option("--threads", a.threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
   cmd->add_option("--references2", a.references2,
@@ -520,6 +521,8 @@ int RunFit(const FitArgs& a, const Globals& g) {
                               (fs::path(a.out).stem().string() + ".weave.exr")).string();
     fit::WeaveBakeOptions bake;
     bake.indicator = a.weave_maps == "indicator";
+    bake.relief = a.weave_maps == "relief";
+    bake.glint = a.weave_maps == "glint";
     const std::string line = fit::AttachWeaveMaps(a.fabric, maps, &o, bake);
     if (!line.empty()) std::printf("fit: %s\n", line.c_str());
   }

@@ -24,12 +24,33 @@ struct Pair {
   Rgb<double> b0, bw, bf, bkd;
 };
 
+// The basis of the per-texel model for (v, l) in a frame with normal n (t = +x Gram-Schmidt'd
+// against n, b = n x t): what the preview shades with a relief normal n.
+void Basis(const woven::Params<double>& p, const render::Vec3d& n, Pair* q) {
+  const woven::Options wo;  // tints 1 (the maps carry the per-yarn differences)
+  const render::Vec3d x(1, 0, 0);
+  const render::Vec3d t = Normalize(x - n * Dot(x, n));
+  const render::Vec3d b = Cross(n, t);
+  const render::Vec3d h = Normalize(q->v + q->l);
+  const Cosines<double> cs{Dot(n, q->v), Dot(n, q->l), Dot(n, h), Dot(q->l, h)};
+  const TangentCosines<double> tc{Dot(t, q->v), Dot(b, q->v), Dot(t, q->l),
+                                  Dot(b, q->l), Dot(t, h),    Dot(b, h)};
+  auto eval = [&](double w, double f, double kd) {
+    woven::WeaveSample<double> ws;
+    ws.warp = w;
+    ws.weft = f;
+    ws.kd = Rgb<double>(kd, kd, kd);
+    return woven::EvalDirect(p, wo, cs, tc, ws, lut::DefaultDfg(), lut::DefaultWovenPhase());
+  };
+  q->b0 = eval(0, 0, 0);
+  q->bw = eval(1, 0, 0) - q->b0;
+  q->bf = eval(0, 1, 0) - q->b0;
+  q->bkd = eval(0, 0, 1) - q->b0;
+}
+
 std::vector<Pair> BuildPairs(const render::MaterialPreset& preset, const WeaveBakeOptions& o) {
   const lut::GaussLegendre gl(o.mu_nodes);
   const woven::Params<double> p = woven::FromFlat(preset.values.data());
-  const woven::Options wo;  // tints 1 (the maps carry the per-yarn differences)
-  const Table2D& dfg = lut::DefaultDfg();
-  const Table2D& phase = lut::DefaultWovenPhase();
   std::vector<Pair> out;
   double total = 0.0;
   for (int a = 0; a < o.mu_nodes; ++a) {
@@ -47,19 +68,7 @@ std::vector<Pair> BuildPairs(const render::MaterialPreset& preset, const WeaveBa
           q.l = render::Vec3d(sl * std::cos(pl), sl * std::sin(pl), ml);
           q.weight = wv * wl * 2.0 * mv;
           total += q.weight;
-          const Cosines<double> cs = CosinesFromDirections(q.v, q.l);
-          const TangentCosines<double> tc = TangentCosinesFromDirections(q.v, q.l);
-          auto eval = [&](double w, double f, double kd) {
-            woven::WeaveSample<double> ws;
-            ws.warp = w;
-            ws.weft = f;
-            ws.kd = Rgb<double>(kd, kd, kd);
-            return woven::EvalDirect(p, wo, cs, tc, ws, dfg, phase);
-          };
-          q.b0 = eval(0, 0, 0);
-          q.bw = eval(1, 0, 0) - q.b0;
-          q.bf = eval(0, 1, 0) - q.b0;
-          q.bkd = eval(0, 0, 1) - q.b0;
+          Basis(p, render::Vec3d(0, 0, 1), &q);
           out.push_back(q);
         }
       }
@@ -144,6 +153,31 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
   const int S = o.size;
   const size_t texels = size_t(S) * size_t(S);
   std::vector<std::array<double, kN>> xs(texels);
+  const woven::Params<double> wp = woven::FromFlat(preset.values.data());
+  // Relief normals (tangent space: x = warp t, y = weft b, z = n): the yarn surface normal of
+  // the reference's geometry at each of 4 x 4 sub-positions, n_yarn = (sin v, sin u cos v,
+  // cos u cos v) in the yarn frame (irawan.h: u along, v across), to the shading frame by
+  // FromYarnFrame, averaged (a box prefilter; the preview normalises after sampling).
+  std::vector<float> normals;
+  if (o.relief) {
+    normals.resize(texels * 3);
+    for (int j = 0; j < S; ++j)
+      for (int i = 0; i < S; ++i) {
+        render::Vec3d acc(0, 0, 0);
+        constexpr int kSub = 4;
+        for (int q = 0; q < kSub; ++q)
+          for (int p = 0; p < kSub; ++p) {
+            const render::IrawanPoint ip = bsdf.Locate(
+                {(i + (p + 0.5) / kSub) / (S * R), (j + (q + 0.5) / kSub) / (S * R)});
+            const render::Yarn& y = pattern.yarns[size_t(ip.yarn)];
+            const render::Vec3d ny(std::sin(ip.v), std::sin(ip.u) * std::cos(ip.v),
+                                   std::cos(ip.u) * std::cos(ip.v));
+            acc = acc + render::FromYarnFrame(ny, y.type) * (1.0 / (kSub * kSub));
+          }
+        const size_t t = size_t(j) * size_t(S) + size_t(i);
+        for (int c = 0; c < 3; ++c) normals[t * 3 + size_t(c)] = float(c == 0 ? acc.x : c == 1 ? acc.y : acc.z);
+      }
+  }
   std::vector<std::vector<Rgb<double>>> targets(texels);
 
   tbb::parallel_for(0, S, [&](int j) {
@@ -166,12 +200,20 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       }
       render::ShadingPoint sp;
       sp.uv = {(i + 0.5) / (S * R), (j + 0.5) / (S * R)};
+      std::vector<Pair> local;  // relief: the basis in the texel's normal-mapped frame
+      if (o.relief) {
+        local = pairs;
+        const render::Vec3d n = Normalize(render::Vec3d(normals[t * 3], normals[t * 3 + 1],
+                                                        normals[t * 3 + 2]));
+        for (Pair& q : local) Basis(wp, n, &q);
+      }
+      const std::vector<Pair>& pairs_t = o.relief ? local : pairs;
       std::vector<Rgb<double>>& target = targets[t];
       target.resize(pairs.size());
       std::array<std::array<double, kN>, kN> A{};
       std::array<double, kN> r{};
-      for (size_t k = 0; k < pairs.size(); ++k) {
-        const Pair& q = pairs[k];
+      for (size_t k = 0; k < pairs_t.size(); ++k) {
+        const Pair& q = pairs_t[k];
         target[k] = bsdf.Eval(q.v, q.l, sp) * q.l.z;
         for (int c = 0; c < 3; ++c) {
           const double y = std::max(target[k][c], 0.0) + kEps;
@@ -213,6 +255,7 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
     }
   });
 
+  const std::vector<float> normals_copy = normals;
   WeaveBakeResult res;
   res.pairs = int(pairs.size());
   std::array<double, kN> mean{};
@@ -227,8 +270,16 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       for (size_t k = 0; k < pairs.size(); ++k)
         targets[t][k] = bsdf.Eval(pairs[k].v, pairs[k].l, sp) * pairs[k].l.z;
     }
-    eu += SquaredError(pairs, targets[t], mean);
-    em += SquaredError(pairs, targets[t], xs[t]);
+    eu += SquaredError(pairs, targets[t], mean);  // the uniform model (flat normal)
+    if (o.relief) {
+      std::vector<Pair> local = pairs;
+      const render::Vec3d n = Normalize(
+          render::Vec3d(normals_copy[t * 3], normals_copy[t * 3 + 1], normals_copy[t * 3 + 2]));
+      for (Pair& q : local) Basis(wp, n, &q);
+      em += SquaredError(local, targets[t], xs[t]);
+    } else {
+      em += SquaredError(pairs, targets[t], xs[t]);
+    }
   }
   res.error_uniform = std::sqrt(eu / (3.0 * double(texels)));
   res.error_mapped = std::sqrt(em / (3.0 * double(texels)));
@@ -241,6 +292,24 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
     for (int a = 0; a < kN; ++a)
       level0[t * kN + size_t(a)] = mean[size_t(a)] > 1e-9 ? float(xs[t][size_t(a)]) : 1.f;
   res.maps = render::WeaveMaps::FromLevel0(S, R, std::move(level0));
+  if (o.relief) res.maps.SetNormals(std::move(normals));
+  if (o.glint && source.pattern().fineness > 0.0) {
+    const render::WeavePattern& sp = source.pattern();
+    const double cells = sp.fineness * R * double(std::max(sp.tile_width, sp.tile_height));
+    int G = 1;
+    while (G < cells && G < 2048) G *= 2;
+    std::vector<float> g(size_t(G) * size_t(G));
+    tbb::parallel_for(0, G, [&](int j) {
+      for (int i = 0; i < G; ++i) {
+        double acc = 0.0;
+        for (int q = 0; q < 2; ++q)
+          for (int p = 0; p < 2; ++p)
+            acc += source.Locate({(i + (p + 0.5) / 2) / G, (j + (q + 0.5) / 2) / G}).intensity;
+        g[size_t(j) * size_t(G) + size_t(i)] = float(acc / 4.0);
+      }
+    });
+    res.maps.SetGlint(G, std::move(g));
+  }
   res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
 }

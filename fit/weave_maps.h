@@ -45,6 +45,15 @@ struct WeaveBakeOptions {
   // the reference's Locate puts a warp yarn on top (else 0), weft likewise, kd = that yarn's
   // kd, each averaged over 4 x 4 sub-positions of the texel (a box prefilter).
   bool indicator = false;
+  // true: also a relief normal map from the reference's yarn geometry (render/preview/
+  // weave_maps.h), and the per-texel fit evaluates the model in each texel's normal-mapped
+  // frame (what the preview then shades).
+  bool relief = false;
+  // true: also the glint map (render/preview/weave_maps.h): the reference's fineness
+  // intensity I = min(-log xi, 10) of its own hash (IrawanBsdf::Locate), over the whole uv
+  // square at the smallest power of two >= the fineness cells per uv unit (<= 2048), 2 x 2
+  // sub-positions per texel (box prefilter). Not normalised (the reference's E[I] is 1).
+  bool glint = false;
 };
 
 struct WeaveBakeResult {

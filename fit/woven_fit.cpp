@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <string>
 
 #include "render/reference/fabric.h"
@@ -35,9 +36,20 @@ std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& m
                                  {"pairs", r.pairs},
                                  {"bake_error_uniform", r.error_uniform},
                                  {"bake_error_mapped", r.error_mapped},
-                                 {"mode", bake.indicator ? "indicator" : "fitted"},
+                                 {"mode", std::string(bake.indicator ? "indicator" : "fitted") +
+                                              (bake.relief ? " + relief normals" : "") +
+                                              (bake.glint ? " + glint" : "")},
                                  {"lobes_from", "the start preset (woven defaults)"}};
   options->start.extra["weave_maps"] = render::WeaveMapsPresetField(maps_path, r.maps, source);
+  if (r.maps.has_glint()) {
+    std::string glint = maps_path;
+    const size_t dot = glint.rfind(".weave.exr");
+    glint = (dot != std::string::npos ? glint.substr(0, dot) : glint) + ".glint.exr";
+    render::WriteGlintMap(glint, r.maps);
+    options->start.extra["weave_maps"]["glint_file"] =
+        std::filesystem::absolute(glint).lexically_normal().string();
+    options->start.extra["weave_maps"]["glint_size"] = r.maps.glint_size;
+  }
   char line[512];
   std::snprintf(line, sizeof line,
                 "weave maps: %s, %dx%d texels per period, %d direction pairs per texel, "

@@ -250,3 +250,89 @@ TEST(WovenPreview, MapsVaryThePixelsAndTheirCoarsestMipIsTheUniformModel) {
 
 }  // namespace
 }  // namespace clothfit::render
+
+namespace clothfit::render {
+namespace {
+
+// Relief normal maps: file round trip, normalised trilinear sampling, a flat map leaves the
+// preview unchanged (to float rounding), and the bake's normals are the yarn geometry's.
+TEST(WeaveMaps, ReliefNormalsRoundTripAndAFlatMapChangesNothing) {
+  WeaveMaps m = WeaveMaps::FromLevel0(4, 10.0, std::vector<float>(16 * C, 1.f));
+  std::vector<float> n(16 * 3);
+  for (int t = 0; t < 16; ++t) {
+    n[size_t(t * 3)] = t % 2 ? 0.6f : -0.6f;
+    n[size_t(t * 3 + 2)] = 0.8f;
+  }
+  m.SetNormals(n);
+  const auto s = m.SampleNormal(0.5 / 40, 0.5 / 40, 0.0);  // centre of texel (0, 0)
+  EXPECT_NEAR(s[0], -0.6, 1e-6);
+  EXPECT_NEAR(s[2], 0.8, 1e-6);
+  const auto top = m.SampleNormal(0.3, 0.7, 99.0);  // the mean vector (0, 0, 0.8), normalised
+  EXPECT_NEAR(top[0], 0.0, 1e-6);
+  EXPECT_NEAR(top[2], 1.0, 1e-6);
+  const fs::path dir = fs::temp_directory_path() / "clothfit_weave_normals_test";
+  fs::create_directories(dir);
+  WriteWeaveMaps((dir / "n.exr").string(), m);
+  const WeaveMaps r = ReadWeaveMaps((dir / "n.exr").string());
+  ASSERT_TRUE(r.has_normals());
+  for (size_t k = 0; k < n.size(); ++k) EXPECT_NEAR(r.normal_levels[0][k], n[k], 1e-6);
+  fs::remove_all(dir);
+
+  const Scene sc = SphereWithLight(24);
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  const auto plain = Frame(sc, o);
+  auto flat = std::make_shared<WeaveMaps>(WeaveMaps::FromLevel0(4, 10.0, std::vector<float>(16 * C, 1.f)));
+  std::vector<float> up(16 * 3, 0.f);
+  for (int t = 0; t < 16; ++t) up[size_t(t * 3 + 2)] = 1.f;
+  flat->SetNormals(up);
+  o.weave_maps = flat;
+  const auto mapped = Frame(sc, o);
+  ASSERT_EQ(plain.size(), mapped.size());
+  for (size_t i = 0; i < plain.size(); ++i)
+    for (int ch = 0; ch < 3; ++ch)
+      EXPECT_NEAR(mapped[i][ch], plain[i][ch], 1e-6 * std::abs(plain[i][ch]) + 1e-9);
+  // A tilted map changes the shading.
+  auto tilted = std::make_shared<WeaveMaps>(*flat);
+  tilted->SetNormals(n);
+  o.weave_maps = tilted;
+  const auto t2 = Frame(sc, o);
+  double diff = 0;
+  for (size_t i = 0; i < plain.size(); ++i) diff += std::abs(t2[i][0] - plain[i][0]);
+  EXPECT_GT(diff / double(plain.size()), 1e-3);
+}
+
+TEST(WeaveBake, ReliefNormalsFollowTheYarnGeometry) {
+  const fs::path fabrics = fs::path(CLOTHFIT_TEST_SOURCE_DIR) / "datasets" / "fabrics";
+  const Fabric f = LoadFabric((fabrics / "canvas.json").string());
+  const auto* irawan = dynamic_cast<const IrawanBsdf*>(f.bsdf.get());
+  ASSERT_NE(irawan, nullptr);
+  fit::WeaveBakeOptions o;
+  o.size = 16;
+  o.relief = true;
+  const fit::WeaveBakeResult r = fit::BakeWeaveMaps(*irawan, DefaultPreset(ModelKind::kWoven), o);
+  ASSERT_TRUE(r.maps.has_normals());
+  const double R = irawan->repeat_u();
+  double tilt = 0;
+  ASSERT_GT(R, 0.0);
+  for (int j = 0; j < 16; ++j)
+    for (int i = 0; i < 16; ++i) {
+      const float* nv = &r.maps.normal_levels[0][size_t((j * 16 + i) * 3)];
+      EXPECT_GT(nv[2], 0.f);
+      const double len = std::sqrt(double(nv[0]) * nv[0] + double(nv[1]) * nv[1] + double(nv[2]) * nv[2]);
+      EXPECT_LE(len, 1.0 + 1e-6);
+      tilt += 1.0 - double(nv[2]) / len;
+      // On a warp yarn (along +u = +x) the normal turns about the yarn: the cross-section
+      // tilts it along y (weft direction), the inclination along x; at the segment's centre
+      // line (across = 0) the y component vanishes.
+      const IrawanPoint p = irawan->Locate({(i + 0.5) / (16 * R), (j + 0.5) / (16 * R)});
+      if (irawan->pattern().yarns[size_t(p.yarn)].type == YarnType::kWarp &&
+          std::abs(p.v) > 0.8)  // near the yarn's edge: clearly tilted across the yarn
+        EXPECT_GT(std::abs(double(nv[1])), std::abs(double(nv[0]))) << i << "," << j;
+    }
+  EXPECT_GT(tilt / 256, 0.01);  // the relief is not flat
+  EXPECT_TRUE(std::isfinite(r.error_mapped));
+}
+
+}  // namespace
+}  // namespace clothfit::render

@@ -235,6 +235,30 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     hit.t = Normalize(hit.t - hit.n * Dot(hit.t, hit.n));
     hit.b = Cross(hit.n, hit.t) * a.tangent_sign;
     const bool woven_frame = x.opt.model == ModelKind::kWoven && hit.mesh->is_fabric;
+    // Woven weave maps: sampled at the pixel's uv and GPU footprint; a relief normal map
+    // (if any) replaces n by normalize(t N.x + b N.y + n N.z) and re-derives t and b from it,
+    // before anything is shaded (lights, irradiance, reflection vector).
+    std::array<float, WeaveMaps::kChannels> weave{};
+    if (woven_frame && x.opt.weave_maps) {
+      const WeaveMaps& wm = *x.opt.weave_maps;
+      const std::array<double, 4> duv = UvDerivatives(x.scene, h, px + 0.5, y + 0.5);
+      const double lod = wm.Lod(duv, x.opt.weave_footprint_scale);
+      const auto s = wm.Sample(a.uv[0], a.uv[1], lod);
+      for (int k = 0; k < WeaveMaps::kChannels; ++k) weave[size_t(k)] = float(s[size_t(k)]);
+      if (wm.has_glint()) {  // the glint multiplies both yarn lobes: fold it into their weights
+        const double g = wm.SampleGlint(a.uv[0], a.uv[1], duv, x.opt.weave_footprint_scale);
+        weave[0] = float(s[0] * g);
+        weave[1] = float(s[1] * g);
+      }
+      if (wm.has_normals()) {
+        const auto nm = wm.SampleNormal(a.uv[0], a.uv[1], lod);
+        const Vec3d np = Normalize(hit.t * nm[0] + hit.b * nm[1] + hit.n * nm[2]);
+        hit.n = np;
+        hit.NoV = Dot(hit.n, hit.v);
+        hit.t = Normalize(hit.t - hit.n * Dot(hit.t, hit.n));
+        hit.b = Cross(hit.n, hit.t) * a.tangent_sign;
+      }
+    }
     std::vector<float> lt;
     std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit, woven_frame ? &lt : nullptr);
     Rgb<double> Ed(0, 0, 0);
@@ -253,13 +277,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     pd.lights = std::move(ls);
     pd.tv = {float(Dot(hit.t, hit.v)), float(Dot(hit.b, hit.v))};
     pd.lt = std::move(lt);
-    if (woven_frame && x.opt.weave_maps) {
-      const WeaveMaps& wm = *x.opt.weave_maps;
-      const double lod = wm.Lod(UvDerivatives(x.scene, h, px + 0.5, y + 0.5),
-                                x.opt.weave_footprint_scale);
-      const auto s = wm.Sample(a.uv[0], a.uv[1], lod);
-      for (int k = 0; k < WeaveMaps::kChannels; ++k) pd.weave[size_t(k)] = float(s[size_t(k)]);
-    }
+    pd.weave = weave;
     for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
     if (x.env) FillRadianceTables(x, hit.n, R, &pd);
     row->push_back(std::move(pd));

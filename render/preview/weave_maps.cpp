@@ -23,6 +23,50 @@ constexpr const char* kColourSpace =
 
 bool PowerOfTwo(int n) { return n > 0 && (n & (n - 1)) == 0; }
 
+
+// Bilinear (REPEAT, texel centres at +0.5) sample of an N-channel level of side s.
+template <int N>
+std::array<double, N> Bilinear(const std::vector<float>& lv, int s, double uv_repeats, double u,
+                               double v) {
+  auto wrap = [](double x) { return x - std::floor(x); };
+  const double x = wrap(u * uv_repeats) * s - 0.5;
+  const double y = wrap(v * uv_repeats) * s - 0.5;
+  const double fx = std::floor(x), fy = std::floor(y);
+  const double tx = x - fx, ty = y - fy;
+  auto idx = [s](double k) { return int(((long long)(k) % s + s) % s); };
+  const int i0 = idx(fx), i1 = idx(fx + 1), j0 = idx(fy), j1 = idx(fy + 1);
+  std::array<double, N> out{};
+  for (int ch = 0; ch < N; ++ch) {
+    auto at = [&](int i, int j) {
+      return double(lv[(size_t(j) * size_t(s) + size_t(i)) * N + size_t(ch)]);
+    };
+    out[size_t(ch)] = (1 - ty) * ((1 - tx) * at(i0, j0) + tx * at(i1, j0)) +
+                      ty * ((1 - tx) * at(i0, j1) + tx * at(i1, j1));
+  }
+  return out;
+}
+
+// 2 x 2 box mips of an N-channel level-0 image of side `size`.
+template <int N>
+void BuildBoxMips(int size, std::vector<std::vector<float>>* levels) {
+  for (int s = size / 2; s >= 1; s /= 2) {
+    const std::vector<float>& up = levels->back();
+    const int su = s * 2;
+    std::vector<float> lv(size_t(s) * size_t(s) * N);
+    for (int j = 0; j < s; ++j)
+      for (int i = 0; i < s; ++i)
+        for (int ch = 0; ch < N; ++ch) {
+          auto at = [&](int ii, int jj) {
+            return double(up[(size_t(jj) * size_t(su) + size_t(ii)) * N + size_t(ch)]);
+          };
+          lv[(size_t(j) * size_t(s) + size_t(i)) * N + size_t(ch)] =
+              float(0.25 * (at(2 * i, 2 * j) + at(2 * i + 1, 2 * j) + at(2 * i, 2 * j + 1) +
+                            at(2 * i + 1, 2 * j + 1)));
+        }
+    levels->push_back(std::move(lv));
+  }
+}
+
 }  // namespace
 
 WeaveMaps WeaveMaps::FromLevel0(int size, double uv_repeats, std::vector<float> level0) {
@@ -55,22 +99,7 @@ WeaveMaps WeaveMaps::FromLevel0(int size, double uv_repeats, std::vector<float> 
   m.size = size;
   m.uv_repeats = uv_repeats;
   m.levels.push_back(std::move(level0));
-  for (int s = size / 2; s >= 1; s /= 2) {
-    const std::vector<float>& up = m.levels.back();
-    const int su = s * 2;
-    std::vector<float> lv(size_t(s) * size_t(s) * kChannels);
-    for (int j = 0; j < s; ++j)
-      for (int i = 0; i < s; ++i)
-        for (int ch = 0; ch < kChannels; ++ch) {
-          auto at = [&](int ii, int jj) {
-            return double(up[(size_t(jj) * size_t(su) + size_t(ii)) * kChannels + size_t(ch)]);
-          };
-          lv[(size_t(j) * size_t(s) + size_t(i)) * kChannels + size_t(ch)] =
-              float(0.25 * (at(2 * i, 2 * j) + at(2 * i + 1, 2 * j) + at(2 * i, 2 * j + 1) +
-                            at(2 * i + 1, 2 * j + 1)));
-        }
-    m.levels.push_back(std::move(lv));
-  }
+  BuildBoxMips<kChannels>(size, &m.levels);
   return m;
 }
 
@@ -85,27 +114,91 @@ double WeaveMaps::Lod(const std::array<double, 4>& duv, double footprint_scale) 
   return std::min(std::log2(rho), top);
 }
 
+
+void WeaveMaps::SetNormals(std::vector<float> level0) {
+  if (level0.size() != size_t(size) * size_t(size) * 3)
+    throw std::invalid_argument("weave maps: the normal map has the wrong size");
+  for (float x : level0)
+    if (!std::isfinite(x)) throw std::invalid_argument("weave maps: non-finite normal");
+  normal_levels.clear();
+  normal_levels.push_back(std::move(level0));
+  BuildBoxMips<3>(size, &normal_levels);
+}
+
+std::array<double, 3> WeaveMaps::SampleNormal(double u, double v, double lambda) const {
+  if (normal_levels.empty()) return {0.0, 0.0, 1.0};
+  const double top = double(level_count() - 1);
+  const double l = std::clamp(std::isfinite(lambda) ? lambda : top, 0.0, top);
+  const int l0 = int(std::floor(l));
+  const int l1 = std::min(l0 + 1, level_count() - 1);
+  const double t = l - double(l0);
+  std::array<double, 3> a = Bilinear<3>(normal_levels[size_t(l0)], size >> l0, uv_repeats, u, v);
+  if (t > 0.0 && l1 != l0) {
+    const auto b = Bilinear<3>(normal_levels[size_t(l1)], size >> l1, uv_repeats, u, v);
+    for (int k = 0; k < 3; ++k) a[size_t(k)] = (1 - t) * a[size_t(k)] + t * b[size_t(k)];
+  }
+  const double len = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+  if (!(len > 1e-9)) return {0.0, 0.0, 1.0};
+  return {a[0] / len, a[1] / len, a[2] / len};
+}
+
+void WeaveMaps::SetGlint(int gsize, std::vector<float> level0) {
+  if (!PowerOfTwo(gsize) || gsize > 8192 || level0.size() != size_t(gsize) * size_t(gsize))
+    throw std::invalid_argument("weave maps: the glint map size is not a power of two <= 8192");
+  for (float x : level0)
+    if (!std::isfinite(x) || x < 0.f) throw std::invalid_argument("weave maps: bad glint value");
+  glint_size = gsize;
+  glint_levels.clear();
+  glint_levels.push_back(std::move(level0));
+  BuildBoxMips<1>(gsize, &glint_levels);
+}
+
+double WeaveMaps::SampleGlint(double u, double v, const std::array<double, 4>& duv,
+                              double footprint_scale) const {
+  if (glint_levels.empty()) return 1.0;
+  const double texels = double(glint_size) * footprint_scale;
+  const double rho = std::max(std::hypot(duv[0], duv[1]), std::hypot(duv[2], duv[3])) * texels;
+  const int n = int(glint_levels.size());
+  const double top = double(n - 1);
+  const double l = !(rho > 1.0) ? 0.0 : std::isfinite(rho) ? std::min(std::log2(rho), top) : top;
+  const int l0 = int(std::floor(l));
+  const int l1 = std::min(l0 + 1, n - 1);
+  const double t = l - double(l0);
+  double a = Bilinear<1>(glint_levels[size_t(l0)], glint_size >> l0, 1.0, u, v)[0];
+  if (t > 0.0 && l1 != l0)
+    a = (1 - t) * a + t * Bilinear<1>(glint_levels[size_t(l1)], glint_size >> l1, 1.0, u, v)[0];
+  return a;
+}
+
+void WriteGlintMap(const std::string& path, const WeaveMaps& maps) {
+  io::Image img;
+  img.width = maps.glint_size;
+  img.height = maps.glint_size;
+  img.channel_names = {"I"};
+  img.pixels = maps.glint_levels.at(0);
+  img.metadata["clothfit:glint_map"] = "1";
+  img.metadata["clothfit:convention"] =
+      "texel (i, j) covers TEXCOORD_0 [i, i+1) / size x [j, j+1) / size, row j from the top; "
+      "REPEAT with repeat 1; linear fineness intensity (reference mean 1)";
+  io::WriteExr(path, img);
+}
+
+void ReadGlintMap(const std::string& path, WeaveMaps* maps) {
+  const io::Image img = io::ReadImage(path);
+  if (img.width != img.height || img.channels() < 1 || img.channel_names[0] != "I")
+    throw std::invalid_argument(path + ": glint map: expected a square image with channel I");
+  std::vector<float> v(size_t(img.width) * size_t(img.height));
+  for (size_t t = 0; t < v.size(); ++t) v[t] = img.pixels[t * size_t(img.channels())];
+  try {
+    maps->SetGlint(img.width, std::move(v));
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(path + ": " + e.what());
+  }
+}
+
 std::array<double, WeaveMaps::kChannels> WeaveMaps::SampleLevel(double u, double v,
                                                                 int level) const {
-  const int s = size >> level;
-  const std::vector<float>& lv = levels[size_t(level)];
-  // Texel coordinates in the period (REPEAT), texel centres at +0.5.
-  auto wrap = [](double x) { return x - std::floor(x); };
-  const double x = wrap(u * uv_repeats) * s - 0.5;
-  const double y = wrap(v * uv_repeats) * s - 0.5;
-  const double fx = std::floor(x), fy = std::floor(y);
-  const double tx = x - fx, ty = y - fy;
-  auto idx = [s](double k) { return int(((long long)(k) % s + s) % s); };
-  const int i0 = idx(fx), i1 = idx(fx + 1), j0 = idx(fy), j1 = idx(fy + 1);
-  std::array<double, kChannels> out{};
-  for (int ch = 0; ch < kChannels; ++ch) {
-    auto at = [&](int i, int j) {
-      return double(lv[(size_t(j) * size_t(s) + size_t(i)) * kChannels + size_t(ch)]);
-    };
-    out[size_t(ch)] = (1 - ty) * ((1 - tx) * at(i0, j0) + tx * at(i1, j0)) +
-                      ty * ((1 - tx) * at(i0, j1) + tx * at(i1, j1));
-  }
-  return out;
+  return Bilinear<kChannels>(levels[size_t(level)], size >> level, uv_repeats, u, v);
 }
 
 std::array<double, WeaveMaps::kChannels> WeaveMaps::Sample(double u, double v,
@@ -130,6 +223,16 @@ void WriteWeaveMaps(const std::string& path, const WeaveMaps& maps,
   img.height = maps.size;
   img.channel_names.assign(kChannelNames.begin(), kChannelNames.end());
   img.pixels = maps.levels.at(0);
+  if (maps.has_normals()) {  // interleave N.X, N.Y, N.Z after the five ratio channels
+    const size_t n = size_t(maps.size) * size_t(maps.size);
+    std::vector<float> px(n * 8);
+    for (size_t t = 0; t < n; ++t) {
+      for (size_t c = 0; c < 5; ++c) px[t * 8 + c] = maps.levels[0][t * 5 + c];
+      for (size_t c = 0; c < 3; ++c) px[t * 8 + 5 + c] = maps.normal_levels[0][t * 3 + c];
+    }
+    img.pixels = std::move(px);
+    for (const char* c : {"N.X", "N.Y", "N.Z"}) img.channel_names.push_back(c);
+  }
   img.metadata = metadata;
   img.metadata["clothfit:weave_maps"] = "1";
   char buf[64];
@@ -169,7 +272,21 @@ WeaveMaps ReadWeaveMaps(const std::string& path) {
     for (int ch = 0; ch < WeaveMaps::kChannels; ++ch)
       l0[t * WeaveMaps::kChannels + size_t(ch)] = img.pixels[t * nc + size_t(col[size_t(ch)])];
   try {
-    return WeaveMaps::FromLevel0(img.width, repeats, std::move(l0));
+    WeaveMaps m = WeaveMaps::FromLevel0(img.width, repeats, std::move(l0));
+    std::array<int, 3> nc3{-1, -1, -1};
+    const std::array<const char*, 3> nn{"N.X", "N.Y", "N.Z"};
+    for (size_t k = 0; k < 3; ++k) {
+      const auto it = std::find(img.channel_names.begin(), img.channel_names.end(), std::string(nn[k]));
+      if (it != img.channel_names.end()) nc3[k] = int(it - img.channel_names.begin());
+    }
+    if (nc3[0] >= 0 || nc3[1] >= 0 || nc3[2] >= 0) {
+      if (nc3[0] < 0 || nc3[1] < 0 || nc3[2] < 0) throw bad("needs all of N.X, N.Y, N.Z or none");
+      std::vector<float> nv(n * 3);
+      for (size_t t = 0; t < n; ++t)
+        for (size_t k = 0; k < 3; ++k) nv[t * 3 + k] = img.pixels[t * nc + size_t(nc3[k])];
+      m.SetNormals(std::move(nv));
+    }
+    return m;
   } catch (const std::invalid_argument& e) {
     throw bad(e.what());
   }
@@ -198,6 +315,11 @@ std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& prese
     if (!r.is_number() || !(r.get<double>() > 0.0))
       throw MaterialError("preset field weave_maps.uv_repeats: expected a positive number");
     maps->uv_repeats = r.get<double>();  // the preset's value wins over the file's metadata
+  }
+  if (it->contains("glint_file")) {
+    if (!(*it)["glint_file"].is_string())
+      throw MaterialError("preset field weave_maps.glint_file: expected a string");
+    ReadGlintMap((*it)["glint_file"].get<std::string>(), maps.get());
   }
   return maps;
 }

@@ -28,7 +28,7 @@
 // lerped by frac(lambda). Mips are 2 x 2 box averages down to 1 x 1 (the tile means, 1).
 // Every channel enters the model linearly, so averaging the maps averages the shading.
 //
-// File: a 32-bit float EXR, channels warp, weft, kd.R, kd.G, kd.B, metadata
+// File: a 32-bit float EXR, channels warp, weft, kd.R, kd.G, kd.B [, N.X, N.Y, N.Z], metadata
 // clothfit:weave_maps = 1, clothfit:uv_repeats, clothfit:convention. The preset lists it in
 // its top-level "weave_maps" object (written by the fit; see PresetField below).
 #pragma once
@@ -52,6 +52,18 @@ struct WeaveMaps {
   int size = 0;                        // texels per period along u and v (power of two)
   double uv_repeats = 1.0;             // weave tiles per uv unit
   std::vector<std::vector<float>> levels;  // mip chain; level l: (size >> l)^2 x 5, row-major
+  // Optional relief normal map (empty: none): tangent-space unit normals (x along the mesh
+  // tangent t = +u = warp, y along b = tangent_sign n x t = +v = weft, z along n), 3 per
+  // texel, mips = 2 x 2 averages of the vectors (not renormalised: a GPU averages the texels
+  // and the shader normalises, which flattens the relief at coarse mips).
+  std::vector<std::vector<float>> normal_levels;
+  // Optional glint map (empty: none): the reference's fineness intensity I (Irawan: a hash
+  // per fineness cell, NOT periodic) over the whole uv square [0, 1)^2, glint_size^2 texels,
+  // REPEAT with repeat 1 (not uv_repeats), texel (i, j) covering uv [i, i+1) / glint_size x
+  // [j, j+1) / glint_size; 1 channel, linear, box mips. It multiplies the yarn specular (both
+  // lobes), so the preview folds it into the warp and weft weights.
+  int glint_size = 0;
+  std::vector<std::vector<float>> glint_levels;
 
   // From level 0 (size^2 x 5 values): checks the size, renormalises every channel to a tile
   // mean of 1 (throws std::invalid_argument on a non-positive or non-finite mean), builds mips.
@@ -63,9 +75,24 @@ struct WeaveMaps {
   std::array<double, kChannels> Sample(double u, double v, double lambda) const;
   // Bilinear sample of one level.
   std::array<double, kChannels> SampleLevel(double u, double v, int level) const;
+  // Sets the relief normal map from level 0 (size^2 x 3, unit vectors with z > 0) and builds
+  // its mips. Throws std::invalid_argument on a bad size or a non-finite value.
+  void SetNormals(std::vector<float> level0);
+  bool has_normals() const { return !normal_levels.empty(); }
+  // Trilinear sample of the normal map, normalised (the shader's normalize); (0, 0, 1) without one.
+  std::array<double, 3> SampleNormal(double u, double v, double lambda) const;
+  // Glint map (see above). SetGlint throws std::invalid_argument on a bad size or value.
+  void SetGlint(int size, std::vector<float> level0);
+  bool has_glint() const { return !glint_levels.empty(); }
+  // Trilinear sample of I with the GPU LOD of this map's own texel density; 1 without one.
+  double SampleGlint(double u, double v, const std::array<double, 4>& duv,
+                     double footprint_scale = 1.0) const;
 };
 
 // EXR I/O (io::IoError naming the file; std::invalid_argument on bad content, naming the file).
+// The glint map, if any, goes to its own file (channel I; another resolution).
+void WriteGlintMap(const std::string& path, const WeaveMaps& maps);
+void ReadGlintMap(const std::string& path, WeaveMaps* maps);
 void WriteWeaveMaps(const std::string& path, const WeaveMaps& maps,
                     const std::map<std::string, std::string>& metadata = {});
 WeaveMaps ReadWeaveMaps(const std::string& path);
@@ -75,7 +102,8 @@ WeaveMaps ReadWeaveMaps(const std::string& path);
 //    "channels": ["warp", "weft", "kd.R", "kd.G", "kd.B"],
 //    "colour_space": "linear ratios to the tile mean (kd: linear sRGB)",
 //    "convention": "texel (i, j) covers uv [i, i+1) / (size uv_repeats) x [j, j+1) / ..., row j from the top; REPEAT",
-//    "source": {...}   (what the bake was made from; informative)}
+//    "source": {...}   (what the bake was made from; informative),
+//    "glint_file": "<absolute path>"   (optional: the glint map)}
 nlohmann::json WeaveMapsPresetField(const std::string& file, const WeaveMaps& maps,
                                     const nlohmann::json& source = nlohmann::json::object());
 // The maps a woven preset names, or null (no field, or not a woven preset). Throws
