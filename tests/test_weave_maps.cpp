@@ -336,3 +336,37 @@ TEST(WeaveBake, ReliefNormalsFollowTheYarnGeometry) {
 
 }  // namespace
 }  // namespace clothfit::render
+
+namespace clothfit::render {
+namespace {
+
+// Glint map: sampled in uv with repeat 1 at its own LOD; a map of 2 doubles the yarn specular
+// (both lobes) and leaves the diffuse alone.
+TEST(WeaveMaps, GlintMapScalesTheYarnSpecular) {
+  WeaveMaps m = WeaveMaps::FromLevel0(4, 10.0, std::vector<float>(16 * C, 1.f));
+  std::vector<float> g(64 * 64);
+  for (size_t t = 0; t < g.size(); ++t) g[t] = float(t % 3);
+  m.SetGlint(64, g);
+  EXPECT_NEAR(m.SampleGlint((5 + 0.5) / 64, (7 + 0.5) / 64, {0, 0, 0, 0}), g[7 * 64 + 5], 1e-6);
+  EXPECT_NEAR(m.SampleGlint(0.3, 0.2, {1.0, 0, 0, 0}), m.glint_levels.back()[0], 1e-6);
+
+  const Scene sc = SphereWithLight(24);
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  auto uni = std::make_shared<WeaveMaps>(WeaveMaps::FromLevel0(4, 10.0, std::vector<float>(16 * C, 1.f)));
+  o.weave_maps = uni;
+  auto c1 = PreviewCache::Build(sc, nullptr, o);
+  auto two = std::make_shared<WeaveMaps>(*uni);
+  two->SetGlint(16, std::vector<float>(256, 2.f));
+  o.weave_maps = two;
+  auto c2 = PreviewCache::Build(sc, nullptr, o);
+  ASSERT_EQ(c1->weave.size(), c2->weave.size());
+  for (size_t i = 0; i < c1->pixels.size(); ++i) {
+    EXPECT_NEAR(c2->weave[i * C + 0], 2.0 * double(c1->weave[i * C + 0]), 1e-6);  // warp
+    EXPECT_NEAR(c2->weave[i * C + 1], 2.0 * double(c1->weave[i * C + 1]), 1e-6);  // weft
+    EXPECT_EQ(c2->weave[i * C + 2], c1->weave[i * C + 2]);                        // kd
+  }
+}
+
+}  // namespace
+}  // namespace clothfit::render
