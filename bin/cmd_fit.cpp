@@ -140,7 +140,7 @@ struct FitArgs {
   std::string fabric, references, scenes, model = "cloth", space = "display", lock, out;
   std::string level = "auto", loss = "huber", variant = "filament", sheen_default = "explicit";
   std::string images, references2, alpha = "auto", coverage_channel, noise = "auto";
-  std::string weave_period, starts, start_values;
+  std::string weave_period, starts, start_values, weave_maps = "auto";
   std::string target_error;  // reference adaptive sampling (TargetErrorFor)
   double loss_scale = 1.0, min_coverage = 0.5;
   bool subsurface = false, no_floor = false;
@@ -172,6 +172,12 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "evaluate every n-th pixel per block axis (0 = auto: at most 4 x 4 per block)")
       ->check(CLI::Range(0, 16));
   cmd->add_flag("--no-noise-floor", a.no_floor, "(--fabric) skip the second-seed references");
+  cmd->add_option("--weave-maps", a.weave_maps,
+                  "woven with an Irawan --fabric: auto (bake weave maps next to --out, per-texel "
+                  "fit, and fit with them; fit/weave_maps.h), indicator (analytic yarn-on-top "
+                  "maps, no per-texel fit), relief (auto plus a yarn-relief normal map), glint "
+                  "(auto plus the reference's glint map) or none (the uniform woven model)")
+      ->check(CLI::IsMember({"auto", "indicator", "relief", "glint", "none"}));
   cmd->add_option("--images", a.images, "directory for fitted previews and residual images");
   cmd->add_option("--threads", a.threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
   cmd->add_option("--references2", a.references2,
@@ -580,6 +586,16 @@ int RunFit(const FitArgs& a, const Globals& g) {
   const double weave_period = a.fabric.empty() ? 0.0 : render::LoadFabric(a.fabric).weave_period_uv;
   const FitFiles files = ResolveFitFiles(a, g);
   fit::FitOptions o = MakeFitOptions(a, StartPreset(a));
+  if (o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && a.weave_maps != "none") {
+    const std::string maps = (fs::path(a.out).parent_path() /
+                              (fs::path(a.out).stem().string() + ".weave.exr")).string();
+    fit::WeaveBakeOptions bake;
+    bake.indicator = a.weave_maps == "indicator";
+    bake.relief = a.weave_maps == "relief";
+    bake.glint = a.weave_maps == "glint";
+    const std::string line = fit::AttachWeaveMaps(a.fabric, maps, &o, bake);
+    if (!line.empty()) std::printf("fit: %s\n", line.c_str());
+  }
   // Load everything.
   fit::ReferenceOptions ro;
   ro.alpha = fit::ParseAlphaMode(a.alpha);

@@ -82,6 +82,11 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
                               full.light_tangent.begin() + long(full.light_begin[ui]) * 4,
                               full.light_tangent.begin() + long(full.light_begin[ui + 1]) * 4);
     }
+    if (!full.weave.empty()) {  // woven with weave maps: the sampled maps per pixel
+      const size_t nc = size_t(render::WeaveMaps::kChannels);
+      c->weave.insert(c->weave.end(), full.weave.begin() + long(ui * nc),
+                      full.weave.begin() + long((ui + 1) * nc));
+    }
     for (size_t k = 0; k < 3; ++k)
       if (!full.irradiance.empty()) c->irradiance.push_back(full.irradiance[ui * 3 + k]);
     if (!full.radiance.empty())
@@ -405,6 +410,8 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   // Only the pixels a block can sample get preview cache entries (fit speed: the radiance
   // tables of the other pixels were built and thrown away); every pixel's fabric flag is kept.
   po.sample_mask = SampleMask(scene.card.width, scene.card.height, B, stride);
+  po.weave_maps = render::LoadPresetWeaveMaps(opt.start);  // woven weave maps (null: none)
+  po.weave_footprint_scale = stride;  // a kept pixel stands for its stride x stride cell
   const auto full = render::PreviewCache::Build(scene, in.environment, po);
   std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
   for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
@@ -700,6 +707,7 @@ std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::
   render::PreviewOptions o;
   o.model = preset.model;
   o.cloth = preset.cloth;
+  o.weave_maps = render::LoadPresetWeaveMaps(preset);  // woven weave maps (null: none)
   auto cache = render::PreviewCache::Build(scene, env, o);
   std::vector<Rgb<double>> px;
   render::EvaluatePreview(*cache, preset.values.data(), px);

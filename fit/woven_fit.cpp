@@ -1,7 +1,11 @@
 #include "fit/woven_fit.h"
 
 #include <algorithm>
+#include <cstdio>
+#include <filesystem>
 #include <string>
+
+#include "render/reference/fabric.h"
 
 namespace clothfit::fit {
 namespace {
@@ -13,6 +17,47 @@ std::vector<std::string> Union(std::vector<std::string> a, const std::vector<std
 }
 
 }  // namespace
+
+std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& maps_path,
+                            FitOptions* options, const WeaveBakeOptions& bake) {
+  if (options->start.model != render::ModelKind::kWoven)
+    throw FitError("AttachWeaveMaps: the start preset is not a woven preset");
+  const render::Fabric fabric = render::LoadFabric(fabric_path);
+  const auto* irawan = dynamic_cast<const render::IrawanBsdf*>(fabric.bsdf.get());
+  if (!irawan) return "";
+  const WeaveBakeResult r = BakeWeaveMaps(*irawan, options->start, bake);
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.17g", r.error_mapped);
+  render::WriteWeaveMaps(maps_path, r.maps,
+                         {{"clothfit:fabric", fabric_path}, {"clothfit:bake_error_mapped", buf}});
+  const nlohmann::json source = {{"fabric", fabric_path},
+                                 {"weave", irawan->pattern().name},
+                                 {"texels", r.maps.size},
+                                 {"pairs", r.pairs},
+                                 {"bake_error_uniform", r.error_uniform},
+                                 {"bake_error_mapped", r.error_mapped},
+                                 {"mode", std::string(bake.indicator ? "indicator" : "fitted") +
+                                              (bake.relief ? " + relief normals" : "") +
+                                              (bake.glint ? " + glint" : "")},
+                                 {"lobes_from", "the start preset (woven defaults)"}};
+  options->start.extra["weave_maps"] = render::WeaveMapsPresetField(maps_path, r.maps, source);
+  if (r.maps.has_glint()) {
+    std::string glint = maps_path;
+    const size_t dot = glint.rfind(".weave.exr");
+    glint = (dot != std::string::npos ? glint.substr(0, dot) : glint) + ".glint.exr";
+    render::WriteGlintMap(glint, r.maps);
+    options->start.extra["weave_maps"]["glint_file"] =
+        std::filesystem::absolute(glint).lexically_normal().string();
+    options->start.extra["weave_maps"]["glint_size"] = r.maps.glint_size;
+  }
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "weave maps: %s, %dx%d texels per period, %d direction pairs per texel, "
+                "BRDF-space error uniform %.4f -> mapped %.4f (cube-root units), %.2f s",
+                maps_path.c_str(), r.maps.size, r.maps.size, r.pairs, r.error_uniform,
+                r.error_mapped, r.seconds);
+  return line;
+}
 
 FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options) {
   if (options.start.model != render::ModelKind::kWoven)

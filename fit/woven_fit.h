@@ -12,13 +12,27 @@
 //      RMSE in the fit space (it cannot raise the cost it minimises: it starts at stage 1's
 //      optimum with the sheen at a small value).
 // Parameters the caller locks stay locked in both stages.
+//
+// Weave maps (fit/weave_maps.h): AttachWeaveMaps bakes them for an Irawan fabric BEFORE the
+// stages, writes the EXR and names it in the start preset's "weave_maps" field; FitImages
+// then builds every preview cache with the maps fixed (render/preview/weave_maps.h), so both
+// stages fit the global parameters with the maps in place.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include "fit/image_fit.h"
+#include "fit/weave_maps.h"
 
 namespace clothfit::fit {
+
+// Bakes the maps of `fabric_path` (an Irawan fabric) with the lobes of options->start, writes
+// them to `maps_path` and sets options->start.extra["weave_maps"]. Returns a one-line summary
+// for the log, or "" (nothing attached) when the fabric is not an Irawan fabric. Throws on
+// unreadable files and bad fabrics.
+std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& maps_path,
+                            FitOptions* options, const WeaveBakeOptions& bake = {});
 
 FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options);
 

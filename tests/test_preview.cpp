@@ -13,24 +13,13 @@
 #include "render/scene/lights.h"
 #include "render/reference/path_tracer.h"
 #include "render/preview/preview.h"
+#include "tests/preview_fixtures.h"
 #include "tests/scene_fixtures.h"
 
 namespace clothfit::render {
 namespace {
 
 using Jet = ceres::Jet<double, 10>;
-
-Scene SphereWithLight(int size) {
-  Scene s = CameraScene(size, size, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(SphereMesh(0.5, 96, 48, true, 0.f));
-  Light l;
-  l.type = Light::Type::kDirectional;
-  l.intensity = 3.0;
-  l.color = {1.0, 0.9, 0.8};
-  l.direction = {0.4, -0.5, -0.768};
-  s.lights.push_back(l);
-  return s;
-}
 
 std::vector<double> ClothParams() {
   return {0.6, 0.35, 0.2, 0.8, 0.7, 0.5, 0.55, 0.3, 0.15, 0.05};

@@ -11,29 +11,17 @@
 #include "render/preview/preview.h"
 #include "render/scene/embree_scene.h"
 #include "render/scene/lights.h"
-#include "tests/scene_fixtures.h"
+#include "tests/preview_fixtures.h"
 
 namespace clothfit::render {
 namespace {
-
-Scene Sphere(int size) {
-  Scene s = CameraScene(size, size, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(SphereMesh(0.5, 96, 48, true, 0.f));
-  Light l;
-  l.type = Light::Type::kDirectional;
-  l.intensity = 3.0;
-  l.color = {1.0, 0.9, 0.8};
-  l.direction = {0.4, -0.5, -0.768};
-  s.lights.push_back(l);
-  return s;
-}
 
 std::vector<double> WovenParams() {
   return {0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75, -9.0, 0.54, 0.07, 1.6, 0.1, 0.05, 0.02, 0.6};
 }
 
 TEST(WovenPreview, DirectLightUsesTheReferenceTangentFrame) {
-  const Scene s = Sphere(32);
+  const Scene s = SphereWithLight(32);
   PreviewOptions o;
   o.model = ModelKind::kWoven;
   auto cache = PreviewCache::Build(s, nullptr, o);
@@ -78,7 +66,7 @@ TEST(WovenPreview, DirectLightUsesTheReferenceTangentFrame) {
 }
 
 TEST(WovenPreview, JetFrameWithTenFreeParametersIsFinite) {
-  const Scene s = Sphere(24);
+  const Scene s = SphereWithLight(24);
   PreviewOptions o;
   o.model = ModelKind::kWoven;
   auto cache = PreviewCache::Build(s, nullptr, o);

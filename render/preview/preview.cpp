@@ -110,6 +110,7 @@ struct PixelData {
   std::vector<float> rad, srad;
   std::array<float, 2> tv{};  // woven: t.v, b.v
   std::vector<float> lt;      // woven: t.l, b.l, t.h, b.h per light sample
+  std::array<float, WeaveMaps::kChannels> weave{};  // woven with maps: the sampled maps
 };
 
 // What the per-pixel work of a cache build reads.
@@ -288,6 +289,30 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     hit.t = Normalize(hit.t - hit.n * Dot(hit.t, hit.n));
     hit.b = Cross(hit.n, hit.t) * a.tangent_sign;
     const bool woven_frame = x.opt.model == ModelKind::kWoven && hit.mesh->is_fabric;
+    // Woven weave maps: sampled at the pixel's uv and GPU footprint; a relief normal map
+    // (if any) replaces n by normalize(t N.x + b N.y + n N.z) and re-derives t and b from it,
+    // before anything is shaded (lights, irradiance, reflection vector).
+    std::array<float, WeaveMaps::kChannels> weave{};
+    if (woven_frame && x.opt.weave_maps) {
+      const WeaveMaps& wm = *x.opt.weave_maps;
+      const std::array<double, 4> duv = UvDerivatives(x.scene, h, px + 0.5, y + 0.5);
+      const double lod = wm.Lod(duv, x.opt.weave_footprint_scale);
+      const auto s = wm.Sample(a.uv[0], a.uv[1], lod);
+      for (int k = 0; k < WeaveMaps::kChannels; ++k) weave[size_t(k)] = float(s[size_t(k)]);
+      if (wm.has_glint()) {  // the glint multiplies both yarn lobes: fold it into their weights
+        const double g = wm.SampleGlint(a.uv[0], a.uv[1], duv, x.opt.weave_footprint_scale);
+        weave[0] = float(s[0] * g);
+        weave[1] = float(s[1] * g);
+      }
+      if (wm.has_normals()) {
+        const auto nm = wm.SampleNormal(a.uv[0], a.uv[1], lod);
+        const Vec3d np = Normalize(hit.t * nm[0] + hit.b * nm[1] + hit.n * nm[2]);
+        hit.n = np;
+        hit.NoV = Dot(hit.n, hit.v);
+        hit.t = Normalize(hit.t - hit.n * Dot(hit.t, hit.n));
+        hit.b = Cross(hit.n, hit.t) * a.tangent_sign;
+      }
+    }
     std::vector<float> lt;
     std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit, woven_frame ? &lt : nullptr);
     Rgb<double> Ed(0, 0, 0);
@@ -306,6 +331,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     pd.lights = std::move(ls);
     pd.tv = {float(Dot(hit.t, hit.v)), float(Dot(hit.b, hit.v))};
     pd.lt = std::move(lt);
+    pd.weave = weave;
     for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
     if (x.env) FillRadianceTables(x, hit.n, R, &pd);
     row->push_back(std::move(pd));
@@ -329,6 +355,7 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       if (c->options.model == ModelKind::kWoven) {
         c->tangent_v.insert(c->tangent_v.end(), pd.tv.begin(), pd.tv.end());
         c->light_tangent.insert(c->light_tangent.end(), pd.lt.begin(), pd.lt.end());
+        if (c->options.weave_maps) c->weave.insert(c->weave.end(), pd.weave.begin(), pd.weave.end());
       }
     }
   }
@@ -427,9 +454,18 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
     wp = woven::FromFlat(x);
     wl = woven::PrepareLobes(wp);
   }
-  const woven::WeaveSample<T> ws{};
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& br) {
     for (size_t i = br.begin(); i != br.end(); ++i) {
+      // Woven: the pixel's weave-map sample; without maps the uniform defaults (all 1).
+      woven::WeaveSample<T> ws{};
+      if constexpr (M == ModelKind::kWoven) {
+        if (!c.weave.empty()) {
+          const float* wv = &c.weave[i * WeaveMaps::kChannels];
+          ws.warp = Const<T>(double(wv[0]));
+          ws.weft = Const<T>(double(wv[1]));
+          ws.kd = LoadRgb<T>(wv + 2);
+        }
+      }
       const T NoV = Const<T>(double(c.NoV[i]));
       standard::Options so;  // three.js geometryRoughness (0 unless the cache has it)
       if (!c.geometry_roughness.empty()) so.geometry_roughness = double(c.geometry_roughness[i]);

@@ -41,6 +41,7 @@
 #include "brdf/math.h"
 #include "brdf/table.h"
 #include "brdf/woven.h"
+#include "render/preview/weave_maps.h"
 #include "render/scene/environment.h"
 #include "render/scene/material.h"
 #include "render/scene/scene.h"
@@ -60,7 +61,13 @@ struct PreviewOptions {
   ModelKind model = ModelKind::kCloth;
   IblEngine ibl_engine = IblEngine::kFilament;  // default: unchanged fits and previews
   cloth::Options cloth;      // model == kCloth
-  woven::Options woven;      // model == kWoven
+  ::clothfit::woven::Options woven;  // model == kWoven (qualified: render::woven is the reference sampler)
+  // Woven only: the weave maps (render/preview/weave_maps.h), sampled per fabric pixel at cache
+  // build with the GPU's LOD times weave_footprint_scale (the image fit keeps one pixel per
+  // stride x stride cell and passes the stride, so a kept pixel carries its cell's average).
+  // Null: the uniform model (bit-identical to a preview without maps).
+  std::shared_ptr<const WeaveMaps> weave_maps;
+  double weave_footprint_scale = 1.0;
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
@@ -119,6 +126,9 @@ class PreviewCache {
   // light sample (parallel to light_samples).
   std::vector<float> tangent_v;
   std::vector<float> light_tangent;
+  // Woven with weave maps only (else empty): WeaveMaps::kChannels per fabric pixel (warp,
+  // weft, kd.R, kd.G, kd.B ratios), the maps sampled at the pixel's uv and footprint.
+  std::vector<float> weave;
   const Table2D* woven_phase = nullptr;   // lut::DefaultWovenPhase() (woven only)
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
   const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table

@@ -1,0 +1,317 @@
+#include "fit/weave_maps.h"
+
+#include <tbb/parallel_for.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "brdf/lut.h"
+#include "brdf/woven.h"
+
+namespace clothfit::fit {
+namespace {
+
+constexpr int kN = render::WeaveMaps::kChannels;  // unknowns: a_w, a_f, kd_R, kd_G, kd_B
+constexpr double kEps = 1e-4;                     // fit/brdf_fit.h kCbrtEps
+
+struct Pair {
+  render::Vec3d v, l;
+  double weight;
+  // Basis of the linear per-texel model (cosine included): constant (sheen), warp, weft, kd.
+  Rgb<double> b0, bw, bf, bkd;
+};
+
+// The basis of the per-texel model for (v, l) in a frame with normal n (t = +x Gram-Schmidt'd
+// against n, b = n x t): what the preview shades with a relief normal n.
+void Basis(const woven::Params<double>& p, const render::Vec3d& n, Pair* q) {
+  const woven::Options wo;  // tints 1 (the maps carry the per-yarn differences)
+  const render::Vec3d x(1, 0, 0);
+  const render::Vec3d t = Normalize(x - n * Dot(x, n));
+  const render::Vec3d b = Cross(n, t);
+  const render::Vec3d h = Normalize(q->v + q->l);
+  const Cosines<double> cs{Dot(n, q->v), Dot(n, q->l), Dot(n, h), Dot(q->l, h)};
+  const TangentCosines<double> tc{Dot(t, q->v), Dot(b, q->v), Dot(t, q->l),
+                                  Dot(b, q->l), Dot(t, h),    Dot(b, h)};
+  auto eval = [&](double w, double f, double kd) {
+    woven::WeaveSample<double> ws;
+    ws.warp = w;
+    ws.weft = f;
+    ws.kd = Rgb<double>(kd, kd, kd);
+    return woven::EvalDirect(p, wo, cs, tc, ws, lut::DefaultDfg(), lut::DefaultWovenPhase());
+  };
+  q->b0 = eval(0, 0, 0);
+  q->bw = eval(1, 0, 0) - q->b0;
+  q->bf = eval(0, 1, 0) - q->b0;
+  q->bkd = eval(0, 0, 1) - q->b0;
+}
+
+std::vector<Pair> BuildPairs(const render::MaterialPreset& preset, const WeaveBakeOptions& o) {
+  const lut::GaussLegendre gl(o.mu_nodes);
+  const woven::Params<double> p = woven::FromFlat(preset.values.data());
+  std::vector<Pair> out;
+  double total = 0.0;
+  for (int a = 0; a < o.mu_nodes; ++a) {
+    const double mv = 0.5 * (gl.x[size_t(a)] + 1.0), wv = 0.5 * gl.w[size_t(a)];
+    const double sv = std::sqrt(1.0 - mv * mv);
+    for (int b = 0; b < o.mu_nodes; ++b) {
+      const double ml = 0.5 * (gl.x[size_t(b)] + 1.0), wl = 0.5 * gl.w[size_t(b)];
+      const double sl = std::sqrt(1.0 - ml * ml);
+      for (int i = 0; i < o.phi_v; ++i) {
+        const double pv = (i + 0.5) * kPi / o.phi_v;
+        for (int k = 0; k < o.phi_l; ++k) {
+          const double pl = (k + 0.5) * 2.0 * kPi / o.phi_l;
+          Pair q;
+          q.v = render::Vec3d(sv * std::cos(pv), sv * std::sin(pv), mv);
+          q.l = render::Vec3d(sl * std::cos(pl), sl * std::sin(pl), ml);
+          q.weight = wv * wl * 2.0 * mv;
+          total += q.weight;
+          Basis(p, render::Vec3d(0, 0, 1), &q);
+          out.push_back(q);
+        }
+      }
+    }
+  }
+  for (Pair& q : out) q.weight /= total;
+  return out;
+}
+
+// Solves the symmetric positive definite system A x = r (Gaussian elimination with partial
+// pivoting on the active unknowns; inactive ones are 0). Returns false if singular.
+bool Solve(std::array<std::array<double, kN>, kN> A, std::array<double, kN> r,
+           const std::array<bool, kN>& active, std::array<double, kN>* x) {
+  std::array<int, kN> idx{};
+  int n = 0;
+  for (int k = 0; k < kN; ++k)
+    if (active[size_t(k)]) idx[size_t(n++)] = k;
+  std::vector<std::vector<double>> M(size_t(n), std::vector<double>(size_t(n) + 1));
+  for (int a = 0; a < n; ++a) {
+    for (int b = 0; b < n; ++b) M[size_t(a)][size_t(b)] = A[size_t(idx[size_t(a)])][size_t(idx[size_t(b)])];
+    M[size_t(a)][size_t(n)] = r[size_t(idx[size_t(a)])];
+  }
+  for (int c = 0; c < n; ++c) {
+    int piv = c;
+    for (int a = c + 1; a < n; ++a)
+      if (std::abs(M[size_t(a)][size_t(c)]) > std::abs(M[size_t(piv)][size_t(c)])) piv = a;
+    if (!(std::abs(M[size_t(piv)][size_t(c)]) > 1e-300)) return false;
+    std::swap(M[size_t(c)], M[size_t(piv)]);
+    for (int a = c + 1; a < n; ++a) {
+      const double f = M[size_t(a)][size_t(c)] / M[size_t(c)][size_t(c)];
+      for (int b = c; b <= n; ++b) M[size_t(a)][size_t(b)] -= f * M[size_t(c)][size_t(b)];
+    }
+  }
+  x->fill(0.0);
+  for (int a = n - 1; a >= 0; --a) {
+    double s = M[size_t(a)][size_t(n)];
+    for (int b = a + 1; b < n; ++b) s -= M[size_t(a)][size_t(b)] * (*x)[size_t(idx[size_t(b)])];
+    (*x)[size_t(idx[size_t(a)])] = s / M[size_t(a)][size_t(a)];
+  }
+  return true;
+}
+
+// The design row of unknown j for pair q, channel c.
+inline double Design(const Pair& q, int c, int j) {
+  switch (j) {
+    case 0: return q.bw[c];
+    case 1: return q.bf[c];
+    default: return j - 2 == c ? q.bkd[c] : 0.0;
+  }
+}
+
+double SquaredError(const std::vector<Pair>& pairs, const std::vector<Rgb<double>>& target,
+                    const std::array<double, kN>& x) {
+  double e = 0.0;
+  for (size_t k = 0; k < pairs.size(); ++k)
+    for (int c = 0; c < 3; ++c) {
+      double f = pairs[k].b0[c];
+      for (int j = 0; j < kN; ++j) f += x[size_t(j)] * Design(pairs[k], c, j);
+      const double d = std::cbrt(std::max(target[k][c], 0.0) + kEps) - std::cbrt(std::max(f, 0.0) + kEps);
+      e += pairs[k].weight * d * d;
+    }
+  return e;
+}
+
+}  // namespace
+
+WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
+                              const render::MaterialPreset& preset, const WeaveBakeOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (preset.model != render::ModelKind::kWoven)
+    throw std::invalid_argument("BakeWeaveMaps: the preset is not a woven preset");
+  if (source.repeat_u() != source.repeat_v())
+    throw std::invalid_argument("BakeWeaveMaps: the fabric's repeat_u and repeat_v differ");
+  if (o.size < 1 || (o.size & (o.size - 1)) != 0 || o.mu_nodes < 1 || o.phi_v < 1 || o.phi_l < 1)
+    throw std::invalid_argument("BakeWeaveMaps: bad options (size a power of two, counts >= 1)");
+  // The reference without its fineness glints (a global, non-periodic hash; E[I] = 1).
+  render::WeavePattern pattern = source.pattern();
+  pattern.fineness = 0.0;
+  const double R = source.repeat_u();
+  const render::IrawanBsdf bsdf(pattern, R, R);
+  const std::vector<Pair> pairs = BuildPairs(preset, o);
+  const int S = o.size;
+  const size_t texels = size_t(S) * size_t(S);
+  std::vector<std::array<double, kN>> xs(texels);
+  const woven::Params<double> wp = woven::FromFlat(preset.values.data());
+  // Relief normals (tangent space: x = warp t, y = weft b, z = n): the yarn surface normal of
+  // the reference's geometry at each of 4 x 4 sub-positions, n_yarn = (sin v, sin u cos v,
+  // cos u cos v) in the yarn frame (irawan.h: u along, v across), to the shading frame by
+  // FromYarnFrame, averaged (a box prefilter; the preview normalises after sampling).
+  std::vector<float> normals;
+  if (o.relief) {
+    normals.resize(texels * 3);
+    for (int j = 0; j < S; ++j)
+      for (int i = 0; i < S; ++i) {
+        render::Vec3d acc(0, 0, 0);
+        constexpr int kSub = 4;
+        for (int q = 0; q < kSub; ++q)
+          for (int p = 0; p < kSub; ++p) {
+            const render::IrawanPoint ip = bsdf.Locate(
+                {(i + (p + 0.5) / kSub) / (S * R), (j + (q + 0.5) / kSub) / (S * R)});
+            const render::Yarn& y = pattern.yarns[size_t(ip.yarn)];
+            const render::Vec3d ny(std::sin(ip.v), std::sin(ip.u) * std::cos(ip.v),
+                                   std::cos(ip.u) * std::cos(ip.v));
+            acc = acc + render::FromYarnFrame(ny, y.type) * (1.0 / (kSub * kSub));
+          }
+        const size_t t = size_t(j) * size_t(S) + size_t(i);
+        for (int c = 0; c < 3; ++c) normals[t * 3 + size_t(c)] = float(c == 0 ? acc.x : c == 1 ? acc.y : acc.z);
+      }
+  }
+  std::vector<std::vector<Rgb<double>>> targets(texels);
+
+  tbb::parallel_for(0, S, [&](int j) {
+    for (int i = 0; i < S; ++i) {
+      const size_t t = size_t(j) * size_t(S) + size_t(i);
+      if (o.indicator) {
+        std::array<double, kN> x{};
+        constexpr int kSub = 4;
+        for (int q = 0; q < kSub; ++q)
+          for (int p = 0; p < kSub; ++p) {
+            const render::IrawanPoint ip = bsdf.Locate(
+                {(i + (p + 0.5) / kSub) / (S * R), (j + (q + 0.5) / kSub) / (S * R)});
+            const render::Yarn& y = pattern.yarns[size_t(ip.yarn)];
+            x[y.type == render::YarnType::kWarp ? 0 : 1] += 1.0 / (kSub * kSub);
+            for (int c = 0; c < 3; ++c) x[size_t(2 + c)] += y.kd[c] / (kSub * kSub);
+          }
+        xs[t] = x;
+        targets[t].clear();
+        continue;
+      }
+      render::ShadingPoint sp;
+      sp.uv = {(i + 0.5) / (S * R), (j + 0.5) / (S * R)};
+      std::vector<Pair> local;  // relief: the basis in the texel's normal-mapped frame
+      if (o.relief) {
+        local = pairs;
+        const render::Vec3d n = Normalize(render::Vec3d(normals[t * 3], normals[t * 3 + 1],
+                                                        normals[t * 3 + 2]));
+        for (Pair& q : local) Basis(wp, n, &q);
+      }
+      const std::vector<Pair>& pairs_t = o.relief ? local : pairs;
+      std::vector<Rgb<double>>& target = targets[t];
+      target.resize(pairs.size());
+      std::array<std::array<double, kN>, kN> A{};
+      std::array<double, kN> r{};
+      for (size_t k = 0; k < pairs_t.size(); ++k) {
+        const Pair& q = pairs_t[k];
+        target[k] = bsdf.Eval(q.v, q.l, sp) * q.l.z;
+        for (int c = 0; c < 3; ++c) {
+          const double y = std::max(target[k][c], 0.0) + kEps;
+          const double w = q.weight * std::pow(y, -4.0 / 3.0) / 9.0;
+          const double res = target[k][c] - q.b0[c];
+          for (int a = 0; a < kN; ++a) {
+            const double da = Design(q, c, a);
+            if (da == 0.0) continue;
+            r[size_t(a)] += w * da * res;
+            for (int b = 0; b < kN; ++b) A[size_t(a)][size_t(b)] += w * da * Design(q, c, b);
+          }
+        }
+      }
+      // Ridge towards 1, relative to the diagonal's scale.
+      double diag = 0.0;
+      for (int a = 0; a < kN; ++a) diag = std::max(diag, A[size_t(a)][size_t(a)]);
+      for (int a = 0; a < kN; ++a) {
+        A[size_t(a)][size_t(a)] += o.ridge * diag;
+        r[size_t(a)] += o.ridge * diag * 1.0;
+      }
+      std::array<bool, kN> active;
+      active.fill(true);
+      std::array<double, kN> x{};
+      for (int it = 0; it <= kN; ++it) {
+        if (!Solve(A, r, active, &x)) {
+          x.fill(1.0);
+          break;
+        }
+        bool neg = false;
+        for (int a = 0; a < kN; ++a)
+          if (active[size_t(a)] && x[size_t(a)] < 0.0) {
+            active[size_t(a)] = false;
+            neg = true;
+          }
+        if (!neg) break;
+      }
+      for (double& v : x) v = std::max(v, 0.0);
+      xs[t] = x;
+    }
+  });
+
+  const std::vector<float> normals_copy = normals;
+  WeaveBakeResult res;
+  res.pairs = int(pairs.size());
+  std::array<double, kN> mean{};
+  for (const auto& x : xs)
+    for (int a = 0; a < kN; ++a) mean[size_t(a)] += x[size_t(a)] / double(texels);
+  double eu = 0.0, em = 0.0;
+  for (size_t t = 0; t < texels; ++t) {
+    if (targets[t].empty()) {  // indicator maps: the targets were not evaluated
+      render::ShadingPoint sp;
+      sp.uv = {(double(t % size_t(S)) + 0.5) / (S * R), (double(t / size_t(S)) + 0.5) / (S * R)};
+      targets[t].resize(pairs.size());
+      for (size_t k = 0; k < pairs.size(); ++k)
+        targets[t][k] = bsdf.Eval(pairs[k].v, pairs[k].l, sp) * pairs[k].l.z;
+    }
+    eu += SquaredError(pairs, targets[t], mean);  // the uniform model (flat normal)
+    if (o.relief) {
+      std::vector<Pair> local = pairs;
+      const render::Vec3d n = Normalize(
+          render::Vec3d(normals_copy[t * 3], normals_copy[t * 3 + 1], normals_copy[t * 3 + 2]));
+      for (Pair& q : local) Basis(wp, n, &q);
+      em += SquaredError(local, targets[t], xs[t]);
+    } else {
+      em += SquaredError(pairs, targets[t], xs[t]);
+    }
+  }
+  res.error_uniform = std::sqrt(eu / (3.0 * double(texels)));
+  res.error_mapped = std::sqrt(em / (3.0 * double(texels)));
+  res.mean_warp = mean[0];
+  res.mean_weft = mean[1];
+  res.mean_kd = {mean[2], mean[3], mean[4]};
+  // A channel with a zero tile mean (e.g. no weft lobe anywhere) stays uniform.
+  std::vector<float> level0(texels * kN);
+  for (size_t t = 0; t < texels; ++t)
+    for (int a = 0; a < kN; ++a)
+      level0[t * kN + size_t(a)] = mean[size_t(a)] > 1e-9 ? float(xs[t][size_t(a)]) : 1.f;
+  res.maps = render::WeaveMaps::FromLevel0(S, R, std::move(level0));
+  if (o.relief) res.maps.SetNormals(std::move(normals));
+  if (o.glint && source.pattern().fineness > 0.0) {
+    const render::WeavePattern& sp = source.pattern();
+    const double cells = sp.fineness * R * double(std::max(sp.tile_width, sp.tile_height));
+    int G = 1;
+    while (G < cells && G < 2048) G *= 2;
+    std::vector<float> g(size_t(G) * size_t(G));
+    tbb::parallel_for(0, G, [&](int j) {
+      for (int i = 0; i < G; ++i) {
+        double acc = 0.0;
+        for (int q = 0; q < 2; ++q)
+          for (int p = 0; p < 2; ++p)
+            acc += source.Locate({(i + (p + 0.5) / 2) / G, (j + (q + 0.5) / 2) / G}).intensity;
+        g[size_t(j) * size_t(G) + size_t(i)] = float(acc / 4.0);
+      }
+    });
+    res.maps.SetGlint(G, std::move(g));
+  }
+  res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return res;
+}
+
+}  // namespace clothfit::fit

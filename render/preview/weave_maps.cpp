@@ -1,0 +1,373 @@
+#include "render/preview/weave_maps.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <stdexcept>
+
+#include "render/scene/embree_scene.h"
+#include "render/scene/image_io.h"
+#include "render/scene/scene.h"
+
+namespace clothfit::render {
+namespace {
+
+constexpr std::array<const char*, WeaveMaps::kChannels> kChannelNames{"warp", "weft", "kd.R",
+                                                                       "kd.G", "kd.B"};
+constexpr const char* kConvention =
+    "texel (i, j) covers TEXCOORD_0 [i, i+1) / (size uv_repeats) x [j, j+1) / (size uv_repeats), "
+    "i = column from the left, j = row from the top; texel centres at +0.5; REPEAT on both axes";
+constexpr const char* kColourSpace =
+    "linear; every channel a ratio to its tile mean (mean 1); kd channels linear sRGB";
+
+bool PowerOfTwo(int n) { return n > 0 && (n & (n - 1)) == 0; }
+
+
+// Bilinear (REPEAT, texel centres at +0.5) sample of an N-channel level of side s.
+template <int N>
+std::array<double, N> Bilinear(const std::vector<float>& lv, int s, double uv_repeats, double u,
+                               double v) {
+  auto wrap = [](double x) { return x - std::floor(x); };
+  const double x = wrap(u * uv_repeats) * s - 0.5;
+  const double y = wrap(v * uv_repeats) * s - 0.5;
+  const double fx = std::floor(x), fy = std::floor(y);
+  const double tx = x - fx, ty = y - fy;
+  auto idx = [s](double k) { return int(((long long)(k) % s + s) % s); };
+  const int i0 = idx(fx), i1 = idx(fx + 1), j0 = idx(fy), j1 = idx(fy + 1);
+  std::array<double, N> out{};
+  for (int ch = 0; ch < N; ++ch) {
+    auto at = [&](int i, int j) {
+      return double(lv[(size_t(j) * size_t(s) + size_t(i)) * N + size_t(ch)]);
+    };
+    out[size_t(ch)] = (1 - ty) * ((1 - tx) * at(i0, j0) + tx * at(i1, j0)) +
+                      ty * ((1 - tx) * at(i0, j1) + tx * at(i1, j1));
+  }
+  return out;
+}
+
+// 2 x 2 box mips of an N-channel level-0 image of side `size`.
+template <int N>
+void BuildBoxMips(int size, std::vector<std::vector<float>>* levels) {
+  for (int s = size / 2; s >= 1; s /= 2) {
+    const std::vector<float>& up = levels->back();
+    const int su = s * 2;
+    std::vector<float> lv(size_t(s) * size_t(s) * N);
+    for (int j = 0; j < s; ++j)
+      for (int i = 0; i < s; ++i)
+        for (int ch = 0; ch < N; ++ch) {
+          auto at = [&](int ii, int jj) {
+            return double(up[(size_t(jj) * size_t(su) + size_t(ii)) * N + size_t(ch)]);
+          };
+          lv[(size_t(j) * size_t(s) + size_t(i)) * N + size_t(ch)] =
+              float(0.25 * (at(2 * i, 2 * j) + at(2 * i + 1, 2 * j) + at(2 * i, 2 * j + 1) +
+                            at(2 * i + 1, 2 * j + 1)));
+        }
+    levels->push_back(std::move(lv));
+  }
+}
+
+}  // namespace
+
+WeaveMaps WeaveMaps::FromLevel0(int size, double uv_repeats, std::vector<float> level0) {
+  if (!PowerOfTwo(size) || size > 4096)
+    throw std::invalid_argument("weave maps: size " + std::to_string(size) +
+                                " is not a power of two in [1, 4096]");
+  if (!(uv_repeats > 0.0) || !std::isfinite(uv_repeats))
+    throw std::invalid_argument("weave maps: uv_repeats must be positive and finite");
+  const size_t n = size_t(size) * size_t(size);
+  if (level0.size() != n * kChannels)
+    throw std::invalid_argument("weave maps: level 0 has " + std::to_string(level0.size()) +
+                                " values, expected " + std::to_string(n * kChannels));
+  for (int ch = 0; ch < kChannels; ++ch) {
+    double mean = 0.0;
+    for (size_t t = 0; t < n; ++t) {
+      const double x = level0[t * kChannels + size_t(ch)];
+      if (!std::isfinite(x) || x < 0.0)
+        throw std::invalid_argument(std::string("weave maps: channel ") + kChannelNames[size_t(ch)] +
+                                    " has a negative or non-finite texel");
+      mean += x;
+    }
+    mean /= double(n);
+    if (!(mean > 0.0))
+      throw std::invalid_argument(std::string("weave maps: channel ") + kChannelNames[size_t(ch)] +
+                                  " has a zero mean");
+    for (size_t t = 0; t < n; ++t)
+      level0[t * kChannels + size_t(ch)] = float(double(level0[t * kChannels + size_t(ch)]) / mean);
+  }
+  WeaveMaps m;
+  m.size = size;
+  m.uv_repeats = uv_repeats;
+  m.levels.push_back(std::move(level0));
+  BuildBoxMips<kChannels>(size, &m.levels);
+  return m;
+}
+
+double WeaveMaps::Lod(const std::array<double, 4>& duv, double footprint_scale) const {
+  const double texels = double(size) * uv_repeats * footprint_scale;
+  const double rx = std::hypot(duv[0], duv[1]) * texels;
+  const double ry = std::hypot(duv[2], duv[3]) * texels;
+  const double rho = std::max(rx, ry);
+  const double top = double(level_count() - 1);
+  if (!(rho > 1.0)) return 0.0;  // magnification (or NaN): level 0
+  if (!std::isfinite(rho)) return top;
+  return std::min(std::log2(rho), top);
+}
+
+
+void WeaveMaps::SetNormals(std::vector<float> level0) {
+  if (level0.size() != size_t(size) * size_t(size) * 3)
+    throw std::invalid_argument("weave maps: the normal map has the wrong size");
+  for (float x : level0)
+    if (!std::isfinite(x)) throw std::invalid_argument("weave maps: non-finite normal");
+  normal_levels.clear();
+  normal_levels.push_back(std::move(level0));
+  BuildBoxMips<3>(size, &normal_levels);
+}
+
+std::array<double, 3> WeaveMaps::SampleNormal(double u, double v, double lambda) const {
+  if (normal_levels.empty()) return {0.0, 0.0, 1.0};
+  const double top = double(level_count() - 1);
+  const double l = std::clamp(std::isfinite(lambda) ? lambda : top, 0.0, top);
+  const int l0 = int(std::floor(l));
+  const int l1 = std::min(l0 + 1, level_count() - 1);
+  const double t = l - double(l0);
+  std::array<double, 3> a = Bilinear<3>(normal_levels[size_t(l0)], size >> l0, uv_repeats, u, v);
+  if (t > 0.0 && l1 != l0) {
+    const auto b = Bilinear<3>(normal_levels[size_t(l1)], size >> l1, uv_repeats, u, v);
+    for (int k = 0; k < 3; ++k) a[size_t(k)] = (1 - t) * a[size_t(k)] + t * b[size_t(k)];
+  }
+  const double len = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+  if (!(len > 1e-9)) return {0.0, 0.0, 1.0};
+  return {a[0] / len, a[1] / len, a[2] / len};
+}
+
+void WeaveMaps::SetGlint(int gsize, std::vector<float> level0) {
+  if (!PowerOfTwo(gsize) || gsize > 8192 || level0.size() != size_t(gsize) * size_t(gsize))
+    throw std::invalid_argument("weave maps: the glint map size is not a power of two <= 8192");
+  for (float x : level0)
+    if (!std::isfinite(x) || x < 0.f) throw std::invalid_argument("weave maps: bad glint value");
+  glint_size = gsize;
+  glint_levels.clear();
+  glint_levels.push_back(std::move(level0));
+  BuildBoxMips<1>(gsize, &glint_levels);
+}
+
+double WeaveMaps::SampleGlint(double u, double v, const std::array<double, 4>& duv,
+                              double footprint_scale) const {
+  if (glint_levels.empty()) return 1.0;
+  const double texels = double(glint_size) * footprint_scale;
+  const double rho = std::max(std::hypot(duv[0], duv[1]), std::hypot(duv[2], duv[3])) * texels;
+  const int n = int(glint_levels.size());
+  const double top = double(n - 1);
+  const double l = !(rho > 1.0) ? 0.0 : std::isfinite(rho) ? std::min(std::log2(rho), top) : top;
+  const int l0 = int(std::floor(l));
+  const int l1 = std::min(l0 + 1, n - 1);
+  const double t = l - double(l0);
+  double a = Bilinear<1>(glint_levels[size_t(l0)], glint_size >> l0, 1.0, u, v)[0];
+  if (t > 0.0 && l1 != l0)
+    a = (1 - t) * a + t * Bilinear<1>(glint_levels[size_t(l1)], glint_size >> l1, 1.0, u, v)[0];
+  return a;
+}
+
+void WriteGlintMap(const std::string& path, const WeaveMaps& maps) {
+  io::Image img;
+  img.width = maps.glint_size;
+  img.height = maps.glint_size;
+  img.channel_names = {"I"};
+  img.pixels = maps.glint_levels.at(0);
+  img.metadata["clothfit:glint_map"] = "1";
+  img.metadata["clothfit:convention"] =
+      "texel (i, j) covers TEXCOORD_0 [i, i+1) / size x [j, j+1) / size, row j from the top; "
+      "REPEAT with repeat 1; linear fineness intensity (reference mean 1)";
+  io::WriteExr(path, img);
+}
+
+void ReadGlintMap(const std::string& path, WeaveMaps* maps) {
+  const io::Image img = io::ReadImage(path);
+  if (img.width != img.height || img.channels() < 1 || img.channel_names[0] != "I")
+    throw std::invalid_argument(path + ": glint map: expected a square image with channel I");
+  std::vector<float> v(size_t(img.width) * size_t(img.height));
+  for (size_t t = 0; t < v.size(); ++t) v[t] = img.pixels[t * size_t(img.channels())];
+  try {
+    maps->SetGlint(img.width, std::move(v));
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(path + ": " + e.what());
+  }
+}
+
+std::array<double, WeaveMaps::kChannels> WeaveMaps::SampleLevel(double u, double v,
+                                                                int level) const {
+  return Bilinear<kChannels>(levels[size_t(level)], size >> level, uv_repeats, u, v);
+}
+
+std::array<double, WeaveMaps::kChannels> WeaveMaps::Sample(double u, double v,
+                                                           double lambda) const {
+  const double top = double(level_count() - 1);
+  const double l = std::clamp(std::isfinite(lambda) ? lambda : top, 0.0, top);
+  const int l0 = int(std::floor(l));
+  const int l1 = std::min(l0 + 1, level_count() - 1);
+  const double t = l - double(l0);
+  std::array<double, kChannels> a = SampleLevel(u, v, l0);
+  if (t > 0.0 && l1 != l0) {
+    const std::array<double, kChannels> b = SampleLevel(u, v, l1);
+    for (int ch = 0; ch < kChannels; ++ch) a[size_t(ch)] = (1 - t) * a[size_t(ch)] + t * b[size_t(ch)];
+  }
+  return a;
+}
+
+void WriteWeaveMaps(const std::string& path, const WeaveMaps& maps,
+                    const std::map<std::string, std::string>& metadata) {
+  io::Image img;
+  img.width = maps.size;
+  img.height = maps.size;
+  img.channel_names.assign(kChannelNames.begin(), kChannelNames.end());
+  img.pixels = maps.levels.at(0);
+  if (maps.has_normals()) {  // interleave N.X, N.Y, N.Z after the five ratio channels
+    const size_t n = size_t(maps.size) * size_t(maps.size);
+    std::vector<float> px(n * 8);
+    for (size_t t = 0; t < n; ++t) {
+      for (size_t c = 0; c < 5; ++c) px[t * 8 + c] = maps.levels[0][t * 5 + c];
+      for (size_t c = 0; c < 3; ++c) px[t * 8 + 5 + c] = maps.normal_levels[0][t * 3 + c];
+    }
+    img.pixels = std::move(px);
+    for (const char* c : {"N.X", "N.Y", "N.Z"}) img.channel_names.push_back(c);
+  }
+  img.metadata = metadata;
+  img.metadata["clothfit:weave_maps"] = "1";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.17g", maps.uv_repeats);
+  img.metadata["clothfit:uv_repeats"] = buf;
+  img.metadata["clothfit:convention"] = kConvention;
+  img.metadata["clothfit:colour_space"] = kColourSpace;
+  io::WriteExr(path, img);
+}
+
+WeaveMaps ReadWeaveMaps(const std::string& path) {
+  const io::Image img = io::ReadImage(path);
+  auto bad = [&](const std::string& why) {
+    return std::invalid_argument(path + ": weave maps: " + why);
+  };
+  if (img.width != img.height) throw bad("not square");
+  std::array<int, WeaveMaps::kChannels> col{};
+  for (int ch = 0; ch < WeaveMaps::kChannels; ++ch) {
+    const auto it = std::find(img.channel_names.begin(), img.channel_names.end(),
+                              std::string(kChannelNames[size_t(ch)]));
+    if (it == img.channel_names.end())
+      throw bad(std::string("no channel ") + kChannelNames[size_t(ch)]);
+    col[size_t(ch)] = int(it - img.channel_names.begin());
+  }
+  const auto rep = img.metadata.find("clothfit:uv_repeats");
+  if (rep == img.metadata.end()) throw bad("no clothfit:uv_repeats metadata");
+  double repeats = 0.0;
+  try {
+    repeats = std::stod(rep->second);
+  } catch (const std::exception&) {
+    throw bad("clothfit:uv_repeats is not a number");
+  }
+  const size_t n = size_t(img.width) * size_t(img.height);
+  std::vector<float> l0(n * WeaveMaps::kChannels);
+  const size_t nc = size_t(img.channels());
+  for (size_t t = 0; t < n; ++t)
+    for (int ch = 0; ch < WeaveMaps::kChannels; ++ch)
+      l0[t * WeaveMaps::kChannels + size_t(ch)] = img.pixels[t * nc + size_t(col[size_t(ch)])];
+  try {
+    WeaveMaps m = WeaveMaps::FromLevel0(img.width, repeats, std::move(l0));
+    std::array<int, 3> nc3{-1, -1, -1};
+    const std::array<const char*, 3> nn{"N.X", "N.Y", "N.Z"};
+    for (size_t k = 0; k < 3; ++k) {
+      const auto it = std::find(img.channel_names.begin(), img.channel_names.end(), std::string(nn[k]));
+      if (it != img.channel_names.end()) nc3[k] = int(it - img.channel_names.begin());
+    }
+    if (nc3[0] >= 0 || nc3[1] >= 0 || nc3[2] >= 0) {
+      if (nc3[0] < 0 || nc3[1] < 0 || nc3[2] < 0) throw bad("needs all of N.X, N.Y, N.Z or none");
+      std::vector<float> nv(n * 3);
+      for (size_t t = 0; t < n; ++t)
+        for (size_t k = 0; k < 3; ++k) nv[t * 3 + k] = img.pixels[t * nc + size_t(nc3[k])];
+      m.SetNormals(std::move(nv));
+    }
+    return m;
+  } catch (const std::invalid_argument& e) {
+    throw bad(e.what());
+  }
+}
+
+nlohmann::json WeaveMapsPresetField(const std::string& file, const WeaveMaps& maps,
+                                    const nlohmann::json& source) {
+  return {{"file", std::filesystem::absolute(file).lexically_normal().string()},
+          {"size", maps.size},
+          {"uv_repeats", maps.uv_repeats},
+          {"channels", kChannelNames},
+          {"colour_space", kColourSpace},
+          {"convention", kConvention},
+          {"source", source}};
+}
+
+std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& preset) {
+  if (preset.model != ModelKind::kWoven || !preset.extra.is_object()) return nullptr;
+  const auto it = preset.extra.find("weave_maps");
+  if (it == preset.extra.end() || it->is_null()) return nullptr;
+  if (!it->is_object() || !it->contains("file") || !(*it)["file"].is_string())
+    throw MaterialError("preset field weave_maps: expected an object with a string \"file\"");
+  auto maps = std::make_shared<WeaveMaps>(ReadWeaveMaps((*it)["file"].get<std::string>()));
+  if (it->contains("uv_repeats")) {
+    const auto& r = (*it)["uv_repeats"];
+    if (!r.is_number() || !(r.get<double>() > 0.0))
+      throw MaterialError("preset field weave_maps.uv_repeats: expected a positive number");
+    maps->uv_repeats = r.get<double>();  // the preset's value wins over the file's metadata
+  }
+  if (it->contains("glint_file")) {
+    if (!(*it)["glint_file"].is_string())
+      throw MaterialError("preset field weave_maps.glint_file: expected a string");
+    ReadGlintMap((*it)["glint_file"].get<std::string>(), maps.get());
+  }
+  return maps;
+}
+
+std::array<double, 4> UvDerivatives(const Scene& scene, const Hit& hit, double px, double py) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  const Mesh& m = scene.meshes.at(size_t(hit.mesh));
+  if (m.uvs.empty()) return {0.0, 0.0, 0.0, 0.0};
+  const size_t t3 = size_t(hit.triangle) * 3;
+  std::array<std::array<double, 3>, 3> p;
+  std::array<std::array<double, 2>, 3> uv;
+  for (int k = 0; k < 3; ++k) {
+    const uint32_t vi = m.indices[t3 + size_t(k)];
+    for (int c = 0; c < 3; ++c) p[size_t(k)][size_t(c)] = m.positions[vi][size_t(c)];
+    for (int c = 0; c < 2; ++c) uv[size_t(k)][size_t(c)] = m.uvs[vi][size_t(c)];
+  }
+  auto sub = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
+    return std::array<double, 3>{a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+  };
+  auto dot = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  };
+  const auto e1 = sub(p[1], p[0]), e2 = sub(p[2], p[0]);
+  const double d00 = dot(e1, e1), d01 = dot(e1, e2), d11 = dot(e2, e2);
+  const double den = d00 * d11 - d01 * d01;
+  const std::array<double, 3>& ng = hit.ng;
+  bool ok = den > 0.0;
+  // uv of the triangle's plane where the ray through pixel position (x, y) meets it.
+  auto uv_at = [&](double x, double y) {
+    std::array<double, 3> o, d;
+    scene.CameraRay(x, y, o, d);
+    const double dn = dot(d, ng);
+    if (std::abs(dn) < 1e-12) {
+      ok = false;
+      return std::array<double, 2>{0.0, 0.0};
+    }
+    const double t = dot(sub(p[0], o), ng) / dn;
+    const std::array<double, 3> w{o[0] + t * d[0] - p[0][0], o[1] + t * d[1] - p[0][1],
+                                  o[2] + t * d[2] - p[0][2]};
+    const double d20 = dot(w, e1), d21 = dot(w, e2);
+    const double b1 = (d11 * d20 - d01 * d21) / den, b2 = (d00 * d21 - d01 * d20) / den;
+    return std::array<double, 2>{uv[0][0] + b1 * (uv[1][0] - uv[0][0]) + b2 * (uv[2][0] - uv[0][0]),
+                                 uv[0][1] + b1 * (uv[1][1] - uv[0][1]) + b2 * (uv[2][1] - uv[0][1])};
+  };
+  if (!ok) return {kInf, kInf, kInf, kInf};
+  const auto c0 = uv_at(px, py), cx = uv_at(px + 1.0, py), cy = uv_at(px, py + 1.0);
+  if (!ok) return {kInf, kInf, kInf, kInf};
+  return {cx[0] - c0[0], cx[1] - c0[1], cy[0] - c0[0], cy[1] - c0[1]};
+}
+
+}  // namespace clothfit::render

@@ -1,0 +1,120 @@
+// render/preview/weave_maps.h: the woven model's weave maps (issue 12, deliverable 2) as the
+// preview samples them. The maps are baked by fit/weave_maps.h (which may read the reference
+// BSDF); this file only holds the data type, its file format and the GPU-style sampling, so
+// the preview never depends on render/reference (docs/architecture.md).
+//
+// Content. One weave period, size x size texels (size a power of two), 5 channels, all LINEAR
+// and all RATIOS with a tile mean of exactly 1 (so a uniform map of 1 is the uniform model,
+// and the mapped and uniform models have the same block means under constant lighting):
+//   warp   weight of the warp yarn lobe here / its tile mean   -> woven::WeaveSample::warp
+//   weft   weight of the weft yarn lobe here / its tile mean   -> woven::WeaveSample::weft
+//   kd.R, kd.G, kd.B  diffuse albedo here / its tile mean (linear sRGB, per channel)
+//                                                              -> woven::WeaveSample::kd
+// The "yarn direction" of the issue is carried by warp/weft: each texel's specular sits on
+// the lobe aligned with its yarn (the woven model's two lobes, brdf/woven.h); a direction map
+// (KHR anisotropyTexture) would not mip linearly (warp + weft average to a 45 degree lobe).
+//
+// Convention (stated; the same as a glTF texture with KHR_texture_transform scale (R, R) and
+// REPEAT wrapping): texel (i, j), i = column from the left, j = row from the TOP of the image,
+// covers uv in [i, i+1) / (size R) x [j, j+1) / (size R) of TEXCOORD_0 (glTF: v down from the
+// top), R = uv_repeats (weave tiles per uv unit, the fabric's `uv_repeats`); texel centres at
+// (i + 0.5, j + 0.5). This is the reference renderer's uv convention by construction (the bake
+// locates each texel with the reference BSDF's own Locate).
+//
+// Sampling (as a GPU with isotropic filtering, texture.anisotropy = 1, does it): the LOD is
+// lambda = log2(max(|d(uv)/dx|, |d(uv)/dy|) x size x R x footprint_scale) from the screen-
+// space uv derivatives (OpenGL 4.6 section 8.14, rho = max of the two lengths), clamped to
+// [0, levels - 1]; trilinear: bilinear (REPEAT, texel centres) in the two nearest levels,
+// lerped by frac(lambda). Mips are 2 x 2 box averages down to 1 x 1 (the tile means, 1).
+// Every channel enters the model linearly, so averaging the maps averages the shading.
+//
+// File: a 32-bit float EXR, channels warp, weft, kd.R, kd.G, kd.B [, N.X, N.Y, N.Z], metadata
+// clothfit:weave_maps = 1, clothfit:uv_repeats, clothfit:convention. The preset lists it in
+// its top-level "weave_maps" object (written by the fit; see PresetField below).
+#pragma once
+
+#include <array>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "render/scene/material.h"
+
+namespace clothfit::render {
+
+struct Scene;
+struct Hit;
+
+struct WeaveMaps {
+  static constexpr int kChannels = 5;  // warp, weft, kd.R, kd.G, kd.B
+  int size = 0;                        // texels per period along u and v (power of two)
+  double uv_repeats = 1.0;             // weave tiles per uv unit
+  std::vector<std::vector<float>> levels;  // mip chain; level l: (size >> l)^2 x 5, row-major
+  // Optional relief normal map (empty: none): tangent-space unit normals (x along the mesh
+  // tangent t = +u = warp, y along b = tangent_sign n x t = +v = weft, z along n), 3 per
+  // texel, mips = 2 x 2 averages of the vectors (not renormalised: a GPU averages the texels
+  // and the shader normalises, which flattens the relief at coarse mips).
+  std::vector<std::vector<float>> normal_levels;
+  // Optional glint map (empty: none): the reference's fineness intensity I (Irawan: a hash
+  // per fineness cell, NOT periodic) over the whole uv square [0, 1)^2, glint_size^2 texels,
+  // REPEAT with repeat 1 (not uv_repeats), texel (i, j) covering uv [i, i+1) / glint_size x
+  // [j, j+1) / glint_size; 1 channel, linear, box mips. It multiplies the yarn specular (both
+  // lobes), so the preview folds it into the warp and weft weights.
+  int glint_size = 0;
+  std::vector<std::vector<float>> glint_levels;
+
+  // From level 0 (size^2 x 5 values): checks the size, renormalises every channel to a tile
+  // mean of 1 (throws std::invalid_argument on a non-positive or non-finite mean), builds mips.
+  static WeaveMaps FromLevel0(int size, double uv_repeats, std::vector<float> level0);
+  int level_count() const { return int(levels.size()); }
+  // GPU LOD from the uv derivatives (du/dx, dv/dx, du/dy, dv/dy) times footprint_scale.
+  double Lod(const std::array<double, 4>& duv, double footprint_scale = 1.0) const;
+  // Trilinear sample (REPEAT) at uv (TEXCOORD_0) and LOD lambda.
+  std::array<double, kChannels> Sample(double u, double v, double lambda) const;
+  // Bilinear sample of one level.
+  std::array<double, kChannels> SampleLevel(double u, double v, int level) const;
+  // Sets the relief normal map from level 0 (size^2 x 3, unit vectors with z > 0) and builds
+  // its mips. Throws std::invalid_argument on a bad size or a non-finite value.
+  void SetNormals(std::vector<float> level0);
+  bool has_normals() const { return !normal_levels.empty(); }
+  // Trilinear sample of the normal map, normalised (the shader's normalize); (0, 0, 1) without one.
+  std::array<double, 3> SampleNormal(double u, double v, double lambda) const;
+  // Glint map (see above). SetGlint throws std::invalid_argument on a bad size or value.
+  void SetGlint(int size, std::vector<float> level0);
+  bool has_glint() const { return !glint_levels.empty(); }
+  // Trilinear sample of I with the GPU LOD of this map's own texel density; 1 without one.
+  double SampleGlint(double u, double v, const std::array<double, 4>& duv,
+                     double footprint_scale = 1.0) const;
+};
+
+// EXR I/O (io::IoError naming the file; std::invalid_argument on bad content, naming the file).
+// The glint map, if any, goes to its own file (channel I; another resolution).
+void WriteGlintMap(const std::string& path, const WeaveMaps& maps);
+void ReadGlintMap(const std::string& path, WeaveMaps* maps);
+void WriteWeaveMaps(const std::string& path, const WeaveMaps& maps,
+                    const std::map<std::string, std::string>& metadata = {});
+WeaveMaps ReadWeaveMaps(const std::string& path);
+
+// The preset's top-level field (MaterialPreset::extra["weave_maps"]):
+//   {"file": "<absolute path of the EXR>", "size": 64, "uv_repeats": 40,
+//    "channels": ["warp", "weft", "kd.R", "kd.G", "kd.B"],
+//    "colour_space": "linear ratios to the tile mean (kd: linear sRGB)",
+//    "convention": "texel (i, j) covers uv [i, i+1) / (size uv_repeats) x [j, j+1) / ..., row j from the top; REPEAT",
+//    "source": {...}   (what the bake was made from; informative),
+//    "glint_file": "<absolute path>"   (optional: the glint map)}
+nlohmann::json WeaveMapsPresetField(const std::string& file, const WeaveMaps& maps,
+                                    const nlohmann::json& source = nlohmann::json::object());
+// The maps a woven preset names, or null (no field, or not a woven preset). Throws
+// MaterialError naming the field on a malformed field, io::IoError on an unreadable file.
+std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& preset);
+
+// Screen-space uv derivatives of the hit's triangle at pixel (px, py) (pixel centres at +0.5):
+// the triangle's uv plane evaluated where the rays through (px + 1, py) and (px, py + 1) meet
+// the triangle's plane, minus its value at (px, py) (what a GPU's quad derivatives of an
+// interpolated varying give on one triangle). Returns {du/dx, dv/dx, du/dy, dv/dy}; a ray
+// parallel to the plane gives +inf derivatives (the coarsest mip).
+std::array<double, 4> UvDerivatives(const Scene& scene, const Hit& hit, double px, double py);
+
+}  // namespace clothfit::render
