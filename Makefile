@@ -9,7 +9,7 @@ JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 CLOTHFIT := $(BUILD_DIR)/bin/clothfit
 GENERATOR := $(shell command -v ninja >/dev/null 2>&1 && echo "-G Ninja")
 
-.PHONY: all deps data configure build test demo bench stress lut format clean san-build san-fuzzers sanitize fuzz fuzz-replay regressions
+.PHONY: all deps data configure build test demo bench stress lut format clean san-build san-fuzzers sanitize fuzz fuzz-replay regressions regressions-san
 
 all: build
 
@@ -58,6 +58,7 @@ lut: build
 #                                FUZZ_JOBS=2 runs two at a time; FUZZ_LOG_DIR=dir keeps the logs)
 #   make fuzz-replay             each corpus file and reproducer once per harness (CI, seconds)
 #   make regressions             the issue-14 reproducers through the Release executable
+#   make regressions-san         the same through the ASan+UBSan executable in $(SAN_DIR) (CI)
 SAN_DIR ?= build-san
 FUZZ_SECONDS ?= 60
 FUZZ ?= all
@@ -100,6 +101,10 @@ fuzz-replay: san-fuzzers
 
 regressions: build
 	@tests/fuzz/run_regressions.sh $(CLOTHFIT)
+
+regressions-san: $(SAN_DIR)/CMakeCache.txt
+	@$(SAN_LOCK) cmake --build $(SAN_DIR) -j $(JOBS) --target clothfit
+	@$(SAN_ENV) tests/fuzz/run_regressions.sh $(SAN_DIR)/bin/clothfit
 
 format:
 	@clang-format -i $$(git ls-files '*.h' '*.cpp')

@@ -41,6 +41,8 @@ json ReadJson(const std::string& path) {
     const long line = 1 + std::count(text.begin(), text.begin() + long(at), '\n');
     Fail(path, "line " + std::to_string(line),
          "malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
+  } catch (const json::out_of_range& e) {  // 406: a number beyond double (1e400) while parsing
+    Fail(path, "JSON", "malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
   }
 }
 

@@ -21,6 +21,7 @@ TMPROOT=$(mktemp -d "${TMPDIR:-/tmp}/clothfit-fuzz.XXXXXX")
 trap 'rm -rf "$TMPROOT"' EXIT
 export CLOTHFIT_FUZZ_TMP=$TMPROOT
 tar xzf "$HERE/regressions/fuzz-crashers.tar.gz" -C "$TMPROOT"
+cp -r "$HERE/regressions/extra/." "$TMPROOT/"
 
 regressions_of() {
   awk -v h="$1" '$1 == h { print $2 }' "$HERE/regressions/harnesses.txt" |

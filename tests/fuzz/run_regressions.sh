@@ -13,6 +13,8 @@ DATASETS=$(cd "$HERE/../../datasets" && pwd)
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/clothfit-regressions.XXXXXX")
 trap 'rm -rf "$TMP"' EXIT
 tar xzf "$HERE/regressions/fuzz-crashers.tar.gz" -C "$TMP"
+# Reproducers found later by the harnesses (one folder each) sit next to the tarball's.
+cp -r "$HERE/regressions/extra/." "$TMP/"
 TIMEOUT_S=${CLOTHFIT_REGRESSION_TIMEOUT:-60}
 MAX_CPU_S=5
 MAX_KB=1048576
