@@ -66,7 +66,7 @@ FUZZ_JOBS ?= 1
 FUZZ_LOG_DIR ?=
 SAN_ENV := ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:detect_stack_use_after_return=0 \
            UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \
-           LSAN_OPTIONS=suppressions=$(CURDIR)/tests/fuzz/lsan.supp:print_suppressions=0 \
+           LSAN_OPTIONS=suppressions=$(CURDIR)/tests/fuzz/lsan.supp:print_suppressions=1 \
            CLOTHFIT_REGRESSION_TIMEOUT=120
 
 $(SAN_DIR)/CMakeCache.txt:
@@ -89,7 +89,8 @@ san-fuzzers: $(SAN_DIR)/CMakeCache.txt
 
 sanitize: san-build
 	@echo "[make] running the test suite under ASan+UBSan"
-	@start=$$(date +%s); cd $(SAN_DIR) && $(SAN_ENV) ctest --output-on-failure -j $(JOBS); \
+	@start=$$(date +%s); cd $(SAN_DIR) && $(SAN_ENV) ctest --output-on-failure -j $(JOBS) \
+	  --output-log sanitize.log; \
 	  rc=$$?; echo "[make] sanitize: ctest exit $$rc in $$(( $$(date +%s) - start )) s"; exit $$rc
 
 fuzz: san-fuzzers

@@ -638,7 +638,7 @@ std::vector<SourceMaterial> ReadMaterials(const std::string& path,
   if (schema == "seed.SurfaceMaterial") return ReadSurfaceMaterial(j, path);
   if (schema == "seed.TextureStack") return ReadTextureStack(j, path);
   Fail(path, "schema",
-       "'" + schema +
+       "'" + limits::EscapeForMessage(schema, 80) +
            "' is not a known input (valid: clothfit.preset, "
            "clothfit-fabric (\"format\"), seed.SurfaceMaterial, seed.TextureStack)");
 }
