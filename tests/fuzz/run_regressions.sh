@@ -49,7 +49,8 @@ while IFS= read -r line; do
     status="no convert-log.json written"
   fi
   # Optional checks after the message: creates=<file>[,<file>...] (the rest of a batch was
-  # converted), failed=<N> (convert-log.json counts exactly N failed items, each with a reason).
+  # converted), failed=<N> (convert-log.json counts exactly N failed items, each with a reason),
+# logclean (no control byte or DEL in any reason of convert-log.json).
   for kv in $extra; do
     [ "$status" = ok ] || break
     case "$kv" in
@@ -61,6 +62,9 @@ while IFS= read -r line; do
       failed=*)
         got=$(python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); f=[i for i in d["items"] if i["status"]=="failed" and i.get("reason")]; print(d["failed"] if d["failed"]==len(f) else -1)' "$work/OUT/convert-log.json" 2>/dev/null || echo "?")
         [ "$got" = "${kv#failed=}" ] || status="convert-log.json: $got failed items with a reason, expected ${kv#failed=}" ;;
+      logclean)  # no control byte or DEL in any reason of convert-log.json (decoded)
+        python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); bad=[i["file"] for i in d["items"] if any(ord(c)<32 or 127<=ord(c)<160 for c in i.get("reason",""))]; sys.exit(1 if bad else 0)' "$work/OUT/convert-log.json" 2>/dev/null ||
+          status="convert-log.json: a reason carries control bytes" ;;
       *) status="cases.txt: unknown check '$kv'" ;;
     esac
   done
