@@ -23,7 +23,9 @@ using nlohmann::json;
 using render::ModelKind;
 
 [[noreturn]] void Fail(const std::string& file, const std::string& field, const std::string& msg) {
-  throw ConvertError(file + ": " + field + ": " + msg);
+  // `field` is built from keys of the input file (parameters.<key>): escape it like every
+  // untrusted text in a message (docs/reliability.md; found by fuzz_convert_json).
+  throw ConvertError(file + ": " + limits::EscapeForMessage(field, 200) + ": " + msg);
 }
 
 json ReadJson(const std::string& path) {
