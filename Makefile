@@ -9,7 +9,7 @@ JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 CLOTHFIT := $(BUILD_DIR)/bin/clothfit
 GENERATOR := $(shell command -v ninja >/dev/null 2>&1 && echo "-G Ninja")
 
-.PHONY: all deps data configure build test demo bench stress lut format clean san-build sanitize fuzz fuzz-replay regressions
+.PHONY: all deps data configure build test demo bench stress lut format clean san-build san-fuzzers sanitize fuzz fuzz-replay regressions regressions-san
 
 all: build
 
@@ -54,15 +54,19 @@ lut: build
 # object has ASan+UBSan and libFuzzer coverage, so it holds the test suite, the executable and
 # the harnesses.
 #   make sanitize                the whole ctest suite under ASan+UBSan (no report allowed)
-#   make fuzz FUZZ_SECONDS=N     every harness for N seconds (FUZZ=name for one)
+#   make fuzz FUZZ_SECONDS=N     every harness for N seconds (FUZZ=name or FUZZ=a,b for some;
+#                                FUZZ_JOBS=2 runs two at a time; FUZZ_LOG_DIR=dir keeps the logs)
 #   make fuzz-replay             each corpus file and reproducer once per harness (CI, seconds)
 #   make regressions             the issue-14 reproducers through the Release executable
+#   make regressions-san         the same through the ASan+UBSan executable in $(SAN_DIR) (CI)
 SAN_DIR ?= build-san
 FUZZ_SECONDS ?= 60
 FUZZ ?= all
+FUZZ_JOBS ?= 1
+FUZZ_LOG_DIR ?=
 SAN_ENV := ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:detect_stack_use_after_return=0 \
            UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \
-           LSAN_OPTIONS=suppressions=$(CURDIR)/tests/fuzz/lsan.supp:print_suppressions=0 \
+           LSAN_OPTIONS=suppressions=$(CURDIR)/tests/fuzz/lsan.supp:print_suppressions=1 \
            CLOTHFIT_REGRESSION_TIMEOUT=120
 
 $(SAN_DIR)/CMakeCache.txt:
@@ -70,22 +74,38 @@ $(SAN_DIR)/CMakeCache.txt:
 	@cmake -S . -B $(SAN_DIR) $(GENERATOR) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DCMAKE_CXX_COMPILER=clang++ -DCLOTHFIT_FUZZ=ON
 
+# Builds in $(SAN_DIR) hold a lock, so a fuzz campaign started in the background and a build
+# of the test suite never run ninja in the same directory at once.
+SAN_LOCK := $(shell command -v flock >/dev/null 2>&1 && echo "flock $(SAN_DIR)/.build.lock")
+
 san-build: $(SAN_DIR)/CMakeCache.txt
-	@cmake --build $(SAN_DIR) -j $(JOBS)
+	@$(SAN_LOCK) cmake --build $(SAN_DIR) -j $(JOBS)
+
+comma := ,
+# The harnesses named by FUZZ (all of them by default), without the test suite.
+FUZZ_TARGETS := $(if $(filter all,$(FUZZ)),clothfit_fuzzers,$(addprefix fuzz_,$(subst $(comma), ,$(FUZZ))))
+san-fuzzers: $(SAN_DIR)/CMakeCache.txt
+	@$(SAN_LOCK) cmake --build $(SAN_DIR) -j $(JOBS) --target $(FUZZ_TARGETS)
 
 sanitize: san-build
 	@echo "[make] running the test suite under ASan+UBSan"
-	@start=$$(date +%s); cd $(SAN_DIR) && $(SAN_ENV) ctest --output-on-failure -j $(JOBS); \
+	@start=$$(date +%s); cd $(SAN_DIR) && $(SAN_ENV) ctest --output-on-failure -j $(JOBS) \
+	  --output-log sanitize.log; \
 	  rc=$$?; echo "[make] sanitize: ctest exit $$rc in $$(( $$(date +%s) - start )) s"; exit $$rc
 
-fuzz: san-build
-	@tests/fuzz/fuzz.sh run $(SAN_DIR)/fuzz $(FUZZ) $(FUZZ_SECONDS)
+fuzz: san-fuzzers
+	@FUZZ_JOBS=$(FUZZ_JOBS) FUZZ_LOG_DIR=$(FUZZ_LOG_DIR) \
+	  tests/fuzz/fuzz.sh run $(SAN_DIR)/fuzz $(FUZZ) $(FUZZ_SECONDS)
 
-fuzz-replay: san-build
+fuzz-replay: san-fuzzers
 	@tests/fuzz/fuzz.sh replay $(SAN_DIR)/fuzz $(FUZZ)
 
 regressions: build
 	@tests/fuzz/run_regressions.sh $(CLOTHFIT)
+
+regressions-san: $(SAN_DIR)/CMakeCache.txt
+	@$(SAN_LOCK) cmake --build $(SAN_DIR) -j $(JOBS) --target clothfit
+	@$(SAN_ENV) tests/fuzz/run_regressions.sh $(SAN_DIR)/bin/clothfit
 
 format:
 	@clang-format -i $$(git ls-files '*.h' '*.cpp')

@@ -23,7 +23,9 @@ using nlohmann::json;
 using render::ModelKind;
 
 [[noreturn]] void Fail(const std::string& file, const std::string& field, const std::string& msg) {
-  throw ConvertError(file + ": " + field + ": " + msg);
+  // `field` is built from keys of the input file (parameters.<key>): escape it like every
+  // untrusted text in a message (docs/reliability.md; found by fuzz_convert_json).
+  throw ConvertError(file + ": " + limits::EscapeForMessage(field, 200) + ": " + msg);
 }
 
 json ReadJson(const std::string& path) {
@@ -41,6 +43,8 @@ json ReadJson(const std::string& path) {
     const long line = 1 + std::count(text.begin(), text.begin() + long(at), '\n');
     Fail(path, "line " + std::to_string(line),
          "malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
+  } catch (const json::out_of_range& e) {  // 406: a number beyond double (1e400) while parsing
+    Fail(path, "JSON", "malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
   }
 }
 
@@ -637,7 +641,7 @@ std::vector<SourceMaterial> ReadMaterials(const std::string& path,
   if (schema == "seed.SurfaceMaterial") return ReadSurfaceMaterial(j, path);
   if (schema == "seed.TextureStack") return ReadTextureStack(j, path);
   Fail(path, "schema",
-       "'" + schema +
+       "'" + limits::EscapeForMessage(schema, 80) +
            "' is not a known input (valid: clothfit.preset, "
            "clothfit-fabric (\"format\"), seed.SurfaceMaterial, seed.TextureStack)");
 }

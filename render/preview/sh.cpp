@@ -63,7 +63,8 @@ Sh9 ProjectEnvironment(const Environment& env) {
     Rgb<double> s0, sc, ss, scc, sss, scs;
     for (int i = 0; i < w; ++i) {
       const size_t p = (static_cast<size_t>(j) * static_cast<size_t>(w) + size_t(i)) * 3;
-      const Rgb<double> l(double(px[p]), double(px[p + 1]), double(px[p + 2]));
+      const Rgb<double> l(static_cast<double>(px[p]), static_cast<double>(px[p + 1]),
+                          static_cast<double>(px[p + 2]));
       const PhiIntegrals& c = cols[static_cast<size_t>(i)];
       s0 += l * c.p0;
       sc += l * c.pc;

@@ -75,6 +75,8 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
   } catch (const nlohmann::json::parse_error& e) {
     Fail(path, "JSON syntax error at " + LineColumn(text, e.byte) + ": " +
                    limits::EscapeForMessage(e.what(), 400));
+  } catch (const nlohmann::json::out_of_range& e) {  // 406: a number beyond double (1e400)
+    Fail(path, "malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
   }
   if (!j.is_object()) Fail(path, "top level must be a JSON object");
   static const std::set<std::string> known = {"format", "version",    "name",       "model",

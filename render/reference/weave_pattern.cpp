@@ -7,13 +7,17 @@
 #include <map>
 #include <sstream>
 
+#include "render/scene/input_limits.h"
+
 namespace clothfit::render {
 namespace {
 
 constexpr double kDegToRad = kPi / 180.0;
 
 [[noreturn]] void Fail(const std::string& context, const std::string& message) {
-  throw WeavePatternError(context + ": " + message);
+  // Tokens from the file are quoted in messages: escape control bytes and invalid UTF-8
+  // (docs/reliability.md), so no raw byte from the input reaches a terminal or a log.
+  throw WeavePatternError(limits::EscapeForMessage(context + ": " + message, 1000));
 }
 
 std::string Located(const std::string& source, int line) {

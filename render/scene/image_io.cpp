@@ -9,6 +9,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -55,6 +56,81 @@ void WriteWithOiio(const std::string& path, const std::string& tmp, const OIIO::
   }
 }
 
+// Validate before the decoder allocates (docs/reliability.md): libpng and OpenEXR allocate a
+// chunk's or header attribute's *declared* length (up to 2 GiB) before reading it, so a few
+// hundred forged bytes requested 1.7 GB (found by fuzz_image_png / fuzz_image_exr). Every
+// declared length must fit in what remains of the real file. Returns the OIIO plugin for the
+// file's magic bytes; anything but EXR, PNG and Radiance HDR (the formats clothfit reads) is
+// refused, so OIIO never tries its other plugins on an unknown file.
+std::string CheckContainer(const std::string& path, const std::string& shown, size_t file_bytes) {
+  std::ifstream f(path, std::ios::binary);
+  unsigned char head[8] = {};
+  if (!f.read(reinterpret_cast<char*>(head), std::min<std::streamsize>(8, std::streamsize(file_bytes))))
+    f.clear();
+  auto fail = [&](const std::string& what) {
+    throw IoError(shown + ": " + what + " (truncated or forged; docs/reliability.md)");
+  };
+  static const unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (file_bytes >= 8 && std::equal(head, head + 8, kPng)) {
+    // Chunks: 4-byte big-endian length, 4-byte type, data, 4-byte CRC; IEND ends the list.
+    size_t pos = 8;
+    for (size_t n = 0; pos + 12 <= file_bytes; ++n) {
+      unsigned char c[8];
+      f.seekg(std::streamoff(pos));
+      if (!f.read(reinterpret_cast<char*>(c), 8)) break;
+      const size_t len = (size_t(c[0]) << 24) | (size_t(c[1]) << 16) | (size_t(c[2]) << 8) | c[3];
+      const std::string type = limits::EscapeForMessage(
+          std::string_view(reinterpret_cast<const char*>(c + 4), 4), 16);
+      if (len > file_bytes - pos - 12)
+        fail("PNG chunk '" + type + "' at byte " + std::to_string(pos) + " claims " +
+             std::to_string(len) + " bytes but only " + std::to_string(file_bytes - pos - 12) +
+             " remain");
+      if (n > (size_t(1) << 20)) fail("PNG has over 2^20 chunks");
+      if (std::memcmp(c + 4, "IEND", 4) == 0) break;
+      pos += 12 + len;
+    }
+    return "png";
+  }
+  if (file_bytes >= 8 && head[0] == 0x76 && head[1] == 0x2f && head[2] == 0x31 && head[3] == 0x01) {
+    // Header(s): attributes "name\0type\0" + int32 little-endian size + value, an empty name
+    // ends a header; a multi-part file (version flag 0x1000) ends its header list with an
+    // empty header. Only the first 16 MiB are checked (real headers are a few KB).
+    const bool multipart = (head[5] & 0x10) != 0;
+    const size_t window = std::min(file_bytes, size_t(16) << 20);
+    std::string buf(window, '\0');
+    f.seekg(0);
+    f.read(buf.data(), std::streamsize(window));
+    buf.resize(size_t(f.gcount()));
+    size_t pos = 8;
+    auto cstr = [&](std::string* out) {  // false when the string runs past the window
+      const size_t end = buf.find('\0', pos);
+      if (end == std::string::npos || end - pos > 255) return false;
+      *out = buf.substr(pos, end - pos);
+      pos = end + 1;
+      return true;
+    };
+    for (bool first = true;; first = false) {
+      size_t attributes = 0;
+      std::string name, type;
+      while (cstr(&name) && !name.empty() && cstr(&type) && pos + 4 <= buf.size()) {
+        const uint32_t u = uint32_t(uint8_t(buf[pos])) | uint32_t(uint8_t(buf[pos + 1])) << 8 |
+                           uint32_t(uint8_t(buf[pos + 2])) << 16 | uint32_t(uint8_t(buf[pos + 3])) << 24;
+        pos += 4;
+        if (u > file_bytes - pos)
+          fail("EXR header attribute '" + limits::EscapeForMessage(name, 64) + "' claims " +
+               std::to_string(int32_t(u)) + " bytes but only " + std::to_string(file_bytes - pos) +
+               " remain");
+        pos += u;
+        ++attributes;
+      }
+      if (!multipart || (attributes == 0 && !first) || pos >= buf.size() || !name.empty()) break;
+    }
+    return "openexr";
+  }
+  if (file_bytes >= 2 && head[0] == '#' && head[1] == '?') return "hdr";
+  throw IoError(shown + ": not an EXR, PNG or Radiance HDR file (the image formats clothfit reads)");
+}
+
 }  // namespace
 
 void WriteExr(const std::string& path, const Image& image) {
@@ -85,8 +161,13 @@ Image ReadImage(const std::string& path) {
   } catch (const limits::InputError& e) {
     throw IoError(e.what());
   }
-  auto in = OIIO::ImageInput::open(path);
-  if (!in) throw IoError(shown + ": cannot read image: " + OIIO::geterror());
+  // The plugin for the file's magic bytes only (no fallback to OIIO's other readers), after the
+  // container's declared lengths were checked against the file.
+  auto in = OIIO::ImageInput::create(CheckContainer(path, shown, file_bytes));
+  OIIO::ImageSpec opened;
+  if (!in || !in->open(path, opened))
+    throw IoError(shown + ": cannot read image: " +
+                  limits::EscapeForMessage(in ? in->geterror() : OIIO::geterror(), 400));
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxDimension ||
       spec.height > kMaxDimension || spec.nchannels <= 0 || spec.nchannels > kMaxChannels ||

@@ -232,6 +232,8 @@ MaterialPreset ReadPreset(const std::string& path) {
     }
     throw MaterialError(path + ":" + std::to_string(line) + ":" + std::to_string(col) +
                         ": malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
+  } catch (const json::out_of_range& e) {  // 406: a number beyond double (1e400) while parsing
+    throw MaterialError(path + ": malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
   }
   return ParsePreset(j, path);
 }

@@ -976,6 +976,8 @@ Json ParseCardJson(const std::string& text, const std::string& card_path) {
     }
     throw SceneError(card_path + ":" + std::to_string(line) + ":" + std::to_string(column) +
                      ": malformed JSON: " + limits::EscapeForMessage(msg, 400));
+  } catch (const Json::out_of_range& e) {  // 406: a number beyond double (1e400) while parsing
+    throw SceneError(card_path + ": malformed JSON: " + limits::EscapeForMessage(e.what(), 400));
   }
 }
 
