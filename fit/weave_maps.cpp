@@ -158,22 +158,27 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
   // the reference's geometry at each of 4 x 4 sub-positions, n_yarn = (sin v, sin u cos v,
   // cos u cos v) in the yarn frame (irawan.h: u along, v across), to the shading frame by
   // FromYarnFrame, averaged (a box prefilter; the preview normalises after sampling).
+  // Texel (i, j) as 4 x 4 sub-positions of the pattern: fn(point, its yarn, weight 1/16).
+  const auto for_each_sub = [&](int i, int j, const auto& fn) {
+    constexpr int kSub = 4;
+    for (int q = 0; q < kSub; ++q)
+      for (int p = 0; p < kSub; ++p) {
+        const render::IrawanPoint ip = bsdf.Locate(
+            {(i + (p + 0.5) / kSub) / (S * R), (j + (q + 0.5) / kSub) / (S * R)});
+        fn(ip, pattern.yarns[size_t(ip.yarn)], 1.0 / (kSub * kSub));
+      }
+  };
   std::vector<float> normals;
   if (o.relief) {
     normals.resize(texels * 3);
     for (int j = 0; j < S; ++j)
       for (int i = 0; i < S; ++i) {
         render::Vec3d acc(0, 0, 0);
-        constexpr int kSub = 4;
-        for (int q = 0; q < kSub; ++q)
-          for (int p = 0; p < kSub; ++p) {
-            const render::IrawanPoint ip = bsdf.Locate(
-                {(i + (p + 0.5) / kSub) / (S * R), (j + (q + 0.5) / kSub) / (S * R)});
-            const render::Yarn& y = pattern.yarns[size_t(ip.yarn)];
-            const render::Vec3d ny(std::sin(ip.v), std::sin(ip.u) * std::cos(ip.v),
-                                   std::cos(ip.u) * std::cos(ip.v));
-            acc = acc + render::FromYarnFrame(ny, y.type) * (1.0 / (kSub * kSub));
-          }
+        for_each_sub(i, j, [&](const render::IrawanPoint& ip, const render::Yarn& y, double w) {
+          const render::Vec3d ny(std::sin(ip.v), std::sin(ip.u) * std::cos(ip.v),
+                                 std::cos(ip.u) * std::cos(ip.v));
+          acc = acc + render::FromYarnFrame(ny, y.type) * w;
+        });
         const size_t t = size_t(j) * size_t(S) + size_t(i);
         for (int c = 0; c < 3; ++c) normals[t * 3 + size_t(c)] = float(c == 0 ? acc.x : c == 1 ? acc.y : acc.z);
       }
@@ -185,15 +190,10 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       const size_t t = size_t(j) * size_t(S) + size_t(i);
       if (o.indicator) {
         std::array<double, kN> x{};
-        constexpr int kSub = 4;
-        for (int q = 0; q < kSub; ++q)
-          for (int p = 0; p < kSub; ++p) {
-            const render::IrawanPoint ip = bsdf.Locate(
-                {(i + (p + 0.5) / kSub) / (S * R), (j + (q + 0.5) / kSub) / (S * R)});
-            const render::Yarn& y = pattern.yarns[size_t(ip.yarn)];
-            x[y.type == render::YarnType::kWarp ? 0 : 1] += 1.0 / (kSub * kSub);
-            for (int c = 0; c < 3; ++c) x[size_t(2 + c)] += y.kd[c] / (kSub * kSub);
-          }
+        for_each_sub(i, j, [&](const render::IrawanPoint&, const render::Yarn& y, double w) {
+          x[y.type == render::YarnType::kWarp ? 0 : 1] += w;
+          for (int c = 0; c < 3; ++c) x[size_t(2 + c)] += y.kd[c] * w;
+        });
         xs[t] = x;
         targets[t].clear();
         continue;
