@@ -248,12 +248,6 @@ TEST(WovenPreview, MapsVaryThePixelsAndTheirCoarsestMipIsTheUniformModel) {
       EXPECT_NEAR(coarse[i][ch], uniform[i][ch], 1e-5 * std::abs(uniform[i][ch]) + 1e-7);
 }
 
-}  // namespace
-}  // namespace clothfit::render
-
-namespace clothfit::render {
-namespace {
-
 // Relief normal maps: file round trip, normalised trilinear sampling, a flat map leaves the
 // preview unchanged (to float rounding), and the bake's normals are the yarn geometry's.
 TEST(WeaveMaps, ReliefNormalsRoundTripAndAFlatMapChangesNothing) {
@@ -333,12 +327,6 @@ TEST(WeaveBake, ReliefNormalsFollowTheYarnGeometry) {
   EXPECT_GT(tilt / 256, 0.01);  // the relief is not flat
   EXPECT_TRUE(std::isfinite(r.error_mapped));
 }
-
-}  // namespace
-}  // namespace clothfit::render
-
-namespace clothfit::render {
-namespace {
 
 // Glint map: sampled in uv with repeat 1 at its own LOD; a map of 2 doubles the yarn specular
 // (both lobes) and leaves the diffuse alone.
