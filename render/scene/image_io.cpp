@@ -56,6 +56,69 @@ void WriteWithOiio(const std::string& path, const std::string& tmp, const OIIO::
   }
 }
 
+// OpenEXR reads some attribute types by their content, not by their declared size (a channel
+// list runs to its empty name; fixed-size types read their own size; a preview reads width x
+// height x 4 bytes), and sizes buffers from dataWindow before any pixel is read. A forged
+// header whose declared sizes disagree with the content desynchronises OpenEXR's parse from
+// ours, and a forged dataWindow or sampling makes it allocate line tables and buffers of up to
+// gigabytes before failing (found by fuzz_image_exr). So each such attribute must hold exactly
+// what its type reads, and the data window must fit the image limits. Sizes: OpenEXR file
+// layout, "Header attributes" (openexr.com/en/latest/OpenEXRFileLayout.html).
+template <class Fail>
+void CheckExrAttribute(std::string_view v, const std::string& name, const std::string& type,
+                       const std::string& shown, const Fail& fail) {
+  auto i32 = [&](size_t at) {
+    return int32_t(uint32_t(uint8_t(v[at])) | uint32_t(uint8_t(v[at + 1])) << 8 |
+                   uint32_t(uint8_t(v[at + 2])) << 16 | uint32_t(uint8_t(v[at + 3])) << 24);
+  };
+  auto need = [&](size_t bytes) {
+    if (v.size() != bytes)
+      fail("EXR header attribute '" + shown + "' of type " + limits::EscapeForMessage(type, 32) +
+           " declares " + std::to_string(v.size()) + " bytes but its type holds " +
+           std::to_string(bytes));
+  };
+  static const std::pair<const char*, size_t> kFixed[] = {
+      {"box2i", 16}, {"box2f", 16}, {"chromaticities", 32}, {"compression", 1}, {"double", 8},
+      {"envmap", 1}, {"float", 4}, {"int", 4}, {"keycode", 28}, {"lineOrder", 1}, {"m33f", 36},
+      {"m33d", 72}, {"m44f", 64}, {"m44d", 128}, {"rational", 8}, {"tiledesc", 9},
+      {"timecode", 8}, {"v2i", 8}, {"v2f", 8}, {"v2d", 16}, {"v3i", 12}, {"v3f", 12},
+      {"v3d", 24}, {"deepImageState", 1}};
+  for (const auto& [t, bytes] : kFixed)
+    if (type == t) need(bytes);
+  if (type == "chlist") {  // (name \0, int32 type, u8 pLinear, 3 reserved, int32 xs, int32 ys)* \0
+    size_t p = 0;
+    for (;;) {
+      const size_t end = v.find('\0', p);
+      if (end == std::string_view::npos) fail("EXR channel list '" + shown + "' has no end");
+      if (end == p) { p = end + 1; break; }
+      p = end + 1;
+      if (p + 16 > v.size()) fail("EXR channel list '" + shown + "' is truncated");
+      const int32_t pixel_type = i32(p), xs = i32(p + 8), ys = i32(p + 12);
+      if (pixel_type < 0 || pixel_type > 2 || xs < 1 || ys < 1 || xs > kMaxDimension ||
+          ys > kMaxDimension)
+        fail("EXR channel list '" + shown + "' has a channel with pixel type " +
+             std::to_string(pixel_type) + " and sampling " + std::to_string(xs) + "x" +
+             std::to_string(ys) + " (types 0-2, sampling 1-" + std::to_string(kMaxDimension) + ")");
+      p += 16;
+    }
+    need(p);
+  }
+  if (type == "preview") {
+    if (v.size() < 8) need(8);
+    const uint64_t w = uint32_t(i32(0)), h = uint32_t(i32(4));
+    if (w != 0 && h > (v.size() - 8) / 4 / w)  // 8 + 4 w h would exceed the declared size
+      fail("EXR preview '" + shown + "' claims " + std::to_string(w) + "x" + std::to_string(h) +
+           " pixels in " + std::to_string(v.size()) + " bytes");
+    need(size_t(8 + 4 * w * h));
+  }
+  if (name == "dataWindow" && type == "box2i") {
+    const int64_t w = int64_t(i32(8)) - i32(0) + 1, h = int64_t(i32(12)) - i32(4) + 1;
+    if (w < 1 || h < 1 || w > kMaxDimension || h > kMaxDimension)
+      fail("EXR " + name + " is " + std::to_string(w) + "x" + std::to_string(h) +
+           " (limit 1-" + std::to_string(kMaxDimension) + " per side)");
+  }
+}
+
 // Validate before the decoder allocates (docs/reliability.md): libpng and OpenEXR allocate a
 // chunk's or header attribute's *declared* length (up to 2 GiB) before reading it, so a few
 // hundred forged bytes requested 1.7 GB (found by fuzz_image_png / fuzz_image_exr). Every
@@ -116,10 +179,13 @@ std::string CheckContainer(const std::string& path, const std::string& shown, si
         const uint32_t u = uint32_t(uint8_t(buf[pos])) | uint32_t(uint8_t(buf[pos + 1])) << 8 |
                            uint32_t(uint8_t(buf[pos + 2])) << 16 | uint32_t(uint8_t(buf[pos + 3])) << 24;
         pos += 4;
+        const std::string shown_name = limits::EscapeForMessage(name, 64);
         if (u > file_bytes - pos)
-          fail("EXR header attribute '" + limits::EscapeForMessage(name, 64) + "' claims " +
+          fail("EXR header attribute '" + shown_name + "' claims " +
                std::to_string(int32_t(u)) + " bytes but only " + std::to_string(file_bytes - pos) +
                " remain");
+        if (pos + u <= buf.size())
+          CheckExrAttribute(std::string_view(buf).substr(pos, u), name, type, shown_name, fail);
         pos += u;
         ++attributes;
       }
