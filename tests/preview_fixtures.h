@@ -1,9 +1,18 @@
 // tests/preview_fixtures.h: the lit sphere shared by the preview tests (test_preview.cpp,
 // test_woven_preview.cpp, test_weave_maps.cpp): a 0.5 m fabric UV sphere at the origin seen
 // from (0, 0, 3) with a 0.4 rad field of view, one directional light (intensity 3, colour
-// (1, 0.9, 0.8), direction (0.4, -0.5, -0.768)), no environment.
+// (1, 0.9, 0.8), direction (0.4, -0.5, -0.768)), no environment; and the independent
+// per-pixel recomputation those tests compare the preview's cache against.
 #pragma once
 
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstddef>
+
+#include "brdf/math.h"
+#include "render/preview/preview.h"
+#include "render/scene/embree_scene.h"
 #include "render/scene/lights.h"
 #include "render/scene/scene.h"
 #include "tests/scene_fixtures.h"
@@ -20,6 +29,46 @@ inline Scene SphereWithLight(int size) {
   l.direction = {0.4, -0.5, -0.768};
   s.lights.push_back(l);
   return s;
+}
+
+// What a pixel centre sees, recomputed without the preview's cache: the camera ray through
+// the pixel centre traced with Embree, the viewer-side shading normal n, the view vector v,
+// the reference renderer's tangent frame (t Gram-Schmidt'd against n, b = tangent_sign n x t),
+// the first light's sample at the hit, and the shading cosines of (n, v, that light).
+struct PixelGeometry {
+  Vec3<double> n, v, t, b;
+  LightSample light;
+  Cosines<double> cosines;
+  TangentCosines<double> tangent_cosines;
+};
+
+// Calls fn(i, geometry) for every cached pixel i of `cache`, in order; fails the test (and
+// stops) when a pixel's camera ray misses the scene.
+template <class Fn>
+void ForEachPixelGeometry(const Scene& s, const PreviewCache& cache, Fn&& fn) {
+  EmbreeScene bvh(s);
+  for (size_t i = 0; i < cache.pixels.size(); ++i) {
+    const int px = cache.pixels[i] % s.card.width, py = cache.pixels[i] / s.card.width;
+    std::array<double, 3> org, dir;
+    s.CameraRay(px + 0.5, py + 0.5, org, dir);
+    const Hit h = bvh.Intersect(org, dir);
+    ASSERT_TRUE(h.valid) << "pixel " << i;
+    const SurfaceAttributes a = bvh.Attributes(h);
+    PixelGeometry g;
+    g.n = Vec3<double>(a.normal[0], a.normal[1], a.normal[2]);
+    g.v = Vec3<double>(-dir[0], -dir[1], -dir[2]);
+    if (Dot(g.n, g.v) < 0) g.n = g.n * -1.0;
+    const Vec3<double> t(a.tangent[0], a.tangent[1], a.tangent[2]);
+    g.t = Normalize(t - g.n * Dot(t, g.n));
+    g.b = Cross(g.n, g.t) * a.tangent_sign;
+    g.light = EvaluateLight(s.lights[0], Vec3<double>(a.position[0], a.position[1], a.position[2]));
+    const Vec3<double>& l = g.light.wi;
+    const Vec3<double> hv = Normalize(g.v + l);
+    g.cosines = {Dot(g.n, g.v), Dot(g.n, l), Dot(g.n, hv), Dot(l, hv)};
+    g.tangent_cosines = {Dot(g.t, g.v), Dot(g.b, g.v), Dot(g.t, l),
+                         Dot(g.b, l),   Dot(g.t, hv),  Dot(g.b, hv)};
+    fn(i, g);
+  }
 }
 
 }  // namespace clothfit::render

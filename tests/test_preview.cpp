@@ -41,29 +41,16 @@ TEST(Preview, DirectLightEqualsBrdfTimesLightAtEveryPixel) {
     EvaluatePreview(*cache, x.data(), out);
     ASSERT_GT(out.size(), 300u);
     // Recompute independently at each pixel centre.
-    EmbreeScene bvh(s);
     cloth::Params<double> p{{x[0], x[1], x[2]}, {x[3], x[4], x[5]}, x[6], {x[7], x[8], x[9]}};
     int checked = 0;
-    for (size_t i = 0; i < cache->pixels.size(); ++i) {
-      const int px = cache->pixels[i] % s.card.width, py = cache->pixels[i] / s.card.width;
-      std::array<double, 3> org, dir;
-      s.CameraRay(px + 0.5, py + 0.5, org, dir);
-      const Hit h = bvh.Intersect(org, dir);
-      ASSERT_TRUE(h.valid);
-      const SurfaceAttributes a = bvh.Attributes(h);
-      Vec3<double> n(a.normal[0], a.normal[1], a.normal[2]);
-      const Vec3<double> v(-dir[0], -dir[1], -dir[2]);
-      if (Dot(n, v) < 0) n = n * -1.0;
-      const LightSample ls = EvaluateLight(s.lights[0], Vec3<double>(a.position[0], a.position[1], a.position[2]));
-      const Vec3<double> hv = Normalize(v + ls.wi);
-      const Cosines<double> c{Dot(n, v), Dot(n, ls.wi), Dot(n, hv), Dot(ls.wi, hv)};
-      const Rgb<double> f = cloth::EvalDirect(p, o.cloth, c);
+    ForEachPixelGeometry(s, *cache, [&](size_t i, const PixelGeometry& g) {
+      const Rgb<double> f = cloth::EvalDirect(p, o.cloth, g.cosines);
       for (int ch = 0; ch < 3; ++ch) {
-        const double expected = f[ch] * ls.scale * s.lights[0].color[size_t(ch)];
+        const double expected = f[ch] * g.light.scale * s.lights[0].color[size_t(ch)];
         EXPECT_NEAR(out[i][ch], expected, 1e-5 * std::abs(expected) + 1e-7) << "pixel " << i;
       }
       ++checked;
-    }
+    });
     EXPECT_EQ(checked, int(cache->pixels.size()));
   }
 }

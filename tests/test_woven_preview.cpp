@@ -31,27 +31,11 @@ TEST(WovenPreview, DirectLightUsesTheReferenceTangentFrame) {
   std::vector<Rgb<double>> out;
   EvaluatePreview(*cache, x.data(), out);
   ASSERT_GT(out.size(), 300u);
-  EmbreeScene bvh(s);
   const woven::Params<double> p = woven::FromFlat(x.data());
-  for (size_t i = 0; i < cache->pixels.size(); ++i) {
-    const int px = cache->pixels[i] % s.card.width, py = cache->pixels[i] / s.card.width;
-    std::array<double, 3> org, dir;
-    s.CameraRay(px + 0.5, py + 0.5, org, dir);
-    const Hit h = bvh.Intersect(org, dir);
-    ASSERT_TRUE(h.valid);
-    const SurfaceAttributes a = bvh.Attributes(h);
-    Vec3<double> n(a.normal[0], a.normal[1], a.normal[2]);
-    const Vec3<double> v(-dir[0], -dir[1], -dir[2]);
-    if (Dot(n, v) < 0) n = n * -1.0;
-    Vec3<double> t(a.tangent[0], a.tangent[1], a.tangent[2]);
-    t = Normalize(t - n * Dot(t, n));
-    const Vec3<double> b = Cross(n, t) * a.tangent_sign;
-    const LightSample ls =
-        EvaluateLight(s.lights[0], Vec3<double>(a.position[0], a.position[1], a.position[2]));
-    const Vec3<double> hv = Normalize(v + ls.wi);
-    const Cosines<double> c{Dot(n, v), Dot(n, ls.wi), Dot(n, hv), Dot(ls.wi, hv)};
-    const TangentCosines<double> tc{Dot(t, v), Dot(b, v), Dot(t, ls.wi),
-                                    Dot(b, ls.wi), Dot(t, hv), Dot(b, hv)};
+  ForEachPixelGeometry(s, *cache, [&](size_t i, const PixelGeometry& g) {
+    const Cosines<double>& c = g.cosines;
+    const TangentCosines<double>& tc = g.tangent_cosines;
+    const LightSample& ls = g.light;
     EXPECT_NEAR(cache->tangent_v[i * 2], tc.ToV, 1e-6);
     EXPECT_NEAR(cache->tangent_v[i * 2 + 1], tc.BoV, 1e-6);
     Rgb<double> expected(0, 0, 0);
@@ -62,7 +46,7 @@ TEST(WovenPreview, DirectLightUsesTheReferenceTangentFrame) {
       const double e = expected[ch] * ls.scale * s.lights[0].color[size_t(ch)];
       EXPECT_NEAR(out[i][ch], e, 1e-5 * std::abs(e) + 1e-6) << "pixel " << i;
     }
-  }
+  });
 }
 
 TEST(WovenPreview, JetFrameWithTenFreeParametersIsFinite) {
