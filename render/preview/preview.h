@@ -69,6 +69,12 @@ struct PreviewOptions {
   std::shared_ptr<const WeaveMaps> weave_maps;
   double weave_footprint_scale = 1.0;
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
+  // three.js IBL engine only: the sub-pixel precision of the rasteriser whose G-buffer the
+  // preview reproduces (render/preview/threejs_ibl.h RasterBarycentrics): normals, view
+  // directions and geometryRoughness are interpolated at the barycentrics of the triangle with
+  // its vertices snapped to 1 / 2^bits pixel. 4: SwiftShader (GL_SUBPIXEL_BITS of Chromium's
+  // WebGL2 on SwiftShader); -1: exact (the camera ray's hit).
+  int raster_subpixel_bits = 4;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;
