@@ -207,6 +207,19 @@ export function clothMinRoughness(variant, platform) {
   return platform === 'mobile' ? 0.089 : 0.045;
 }
 
+// Shared by MeshClothMaterial and MeshWovenMaterial: `prefix` (#defines, uniforms) before
+// three.js r187's fragment shader, `pars` after its lights_physical_pars_fragment chunk (the
+// material's functions and RE_* hooks), `setup` after lights_physical_fragment (after three.js's
+// roughness set-up). Throws, naming the material, if those chunks are missing.
+function injectPhysicalChunks(shader, who, prefix, pars, setup) {
+  const fs = shader.fragmentShader;
+  const parsChunk = '#include <lights_physical_pars_fragment>';
+  const setupChunk = '#include <lights_physical_fragment>';
+  if (!fs.includes(parsChunk) || !fs.includes(setupChunk)) throw new Error(`${who}: unexpected three.js fragment shader (needs r187 chunks)`);
+  shader.fragmentShader = prefix +
+    fs.replace(parsChunk, parsChunk + '\n' + pars).replace(setupChunk, setupChunk + '\n' + setup);
+}
+
 /**
  * MeshClothMaterial: clothfit's cloth model on three.js's MeshStandardMaterial program.
  *
@@ -273,12 +286,7 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
     if (this.subsurface) defs.push('#define CLOTH_SUBSURFACE');
     if (this.geometryRoughness) defs.push('#define CLOTH_GEOMETRY_ROUGHNESS');
     defs.push(`#define CLOTH_MIN_ROUGHNESS ${clothMinRoughness(this.variant, this.platform).toFixed(6)}`);
-    const fs = shader.fragmentShader;
-    const pars = '#include <lights_physical_pars_fragment>';
-    const setup = '#include <lights_physical_fragment>';
-    if (!fs.includes(pars) || !fs.includes(setup)) throw new Error('MeshClothMaterial: unexpected three.js fragment shader (needs r187 chunks)');
-    shader.fragmentShader = defs.join('\n') + '\n' +
-      fs.replace(pars, pars + '\n' + CLOTH_PARS).replace(setup, setup + '\n' + CLOTH_ROUGHNESS);
+    injectPhysicalChunks(shader, 'MeshClothMaterial', defs.join('\n') + '\n', CLOTH_PARS, CLOTH_ROUGHNESS);
   }
 
   customProgramCacheKey() {
@@ -596,12 +604,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     Object.assign(shader.uniforms, this._wovenUniforms);
     const defs = [];
     if (this.yarnLayer === 'albedo-scaled') defs.push('#define WOVEN_ALBEDO_SCALED');
-    const fs = shader.fragmentShader;
-    const pars = '#include <lights_physical_pars_fragment>';
-    const setup = '#include <lights_physical_fragment>';
-    if (!fs.includes(pars) || !fs.includes(setup)) throw new Error('MeshWovenMaterial: unexpected three.js fragment shader (needs r187 chunks)');
-    shader.fragmentShader = defs.join('\n') + '\nuniform float wovenRE;\n' +
-      fs.replace(pars, pars + '\n' + WOVEN_PARS).replace(setup, setup + '\n' + WOVEN_ROUGHNESS);
+    injectPhysicalChunks(shader, 'MeshWovenMaterial', defs.join('\n') + '\nuniform float wovenRE;\n', WOVEN_PARS, WOVEN_ROUGHNESS);
     const vs = shader.vertexShader;
     if (!vs.includes('void main() {') || !vs.includes('#include <project_vertex>')) throw new Error('MeshWovenMaterial: unexpected three.js vertex shader');
     shader.vertexShader = vs.replace('void main() {', WOVEN_VERTEX_PARS + 'void main() {')
