@@ -120,6 +120,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       render::PreviewOptions o;
       o.model = preset.model;
       o.cloth = preset.cloth;
+      o.woven = preset.woven;
       o.shadows = args->shadows;
       o.ibl_engine = args->ibl_engine == "threejs"    ? render::IblEngine::kThreejs
                      : args->ibl_engine == "filament" ? render::IblEngine::kFilament

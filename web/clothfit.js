@@ -207,6 +207,19 @@ export function clothMinRoughness(variant, platform) {
   return platform === 'mobile' ? 0.089 : 0.045;
 }
 
+// Shared by MeshClothMaterial and MeshWovenMaterial: `prefix` (#defines, uniforms) before
+// three.js r187's fragment shader, `pars` after its lights_physical_pars_fragment chunk (the
+// material's functions and RE_* hooks), `setup` after lights_physical_fragment (after three.js's
+// roughness set-up). Throws, naming the material, if those chunks are missing.
+function injectPhysicalChunks(shader, who, prefix, pars, setup) {
+  const fs = shader.fragmentShader;
+  const parsChunk = '#include <lights_physical_pars_fragment>';
+  const setupChunk = '#include <lights_physical_fragment>';
+  if (!fs.includes(parsChunk) || !fs.includes(setupChunk)) throw new Error(`${who}: unexpected three.js fragment shader (needs r187 chunks)`);
+  shader.fragmentShader = prefix +
+    fs.replace(parsChunk, parsChunk + '\n' + pars).replace(setupChunk, setupChunk + '\n' + setup);
+}
+
 /**
  * MeshClothMaterial: clothfit's cloth model on three.js's MeshStandardMaterial program.
  *
@@ -273,12 +286,7 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
     if (this.subsurface) defs.push('#define CLOTH_SUBSURFACE');
     if (this.geometryRoughness) defs.push('#define CLOTH_GEOMETRY_ROUGHNESS');
     defs.push(`#define CLOTH_MIN_ROUGHNESS ${clothMinRoughness(this.variant, this.platform).toFixed(6)}`);
-    const fs = shader.fragmentShader;
-    const pars = '#include <lights_physical_pars_fragment>';
-    const setup = '#include <lights_physical_fragment>';
-    if (!fs.includes(pars) || !fs.includes(setup)) throw new Error('MeshClothMaterial: unexpected three.js fragment shader (needs r187 chunks)');
-    shader.fragmentShader = defs.join('\n') + '\n' +
-      fs.replace(pars, pars + '\n' + CLOTH_PARS).replace(setup, setup + '\n' + CLOTH_ROUGHNESS);
+    injectPhysicalChunks(shader, 'MeshClothMaterial', defs.join('\n') + '\n', CLOTH_PARS, CLOTH_ROUGHNESS);
   }
 
   customProgramCacheKey() {
@@ -596,12 +604,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     Object.assign(shader.uniforms, this._wovenUniforms);
     const defs = [];
     if (this.yarnLayer === 'albedo-scaled') defs.push('#define WOVEN_ALBEDO_SCALED');
-    const fs = shader.fragmentShader;
-    const pars = '#include <lights_physical_pars_fragment>';
-    const setup = '#include <lights_physical_fragment>';
-    if (!fs.includes(pars) || !fs.includes(setup)) throw new Error('MeshWovenMaterial: unexpected three.js fragment shader (needs r187 chunks)');
-    shader.fragmentShader = defs.join('\n') + '\nuniform float wovenRE;\n' +
-      fs.replace(pars, pars + '\n' + WOVEN_PARS).replace(setup, setup + '\n' + WOVEN_ROUGHNESS);
+    injectPhysicalChunks(shader, 'MeshWovenMaterial', defs.join('\n') + '\nuniform float wovenRE;\n', WOVEN_PARS, WOVEN_ROUGHNESS);
     const vs = shader.vertexShader;
     if (!vs.includes('void main() {') || !vs.includes('#include <project_vertex>')) throw new Error('MeshWovenMaterial: unexpected three.js vertex shader');
     shader.vertexShader = vs.replace('void main() {', WOVEN_VERTEX_PARS + 'void main() {')
@@ -693,14 +696,44 @@ registerClothfitModel('woven', {
   engine: 'clothfit MeshWovenMaterial (brdf/woven.h, uniform; weave maps: hook wovenWeaveSample)',
   defaults: WOVEN_DEFAULTS,
   make: (p, preset) => {
-    const w = preset.woven ?? {};
+    const w = wovenOptions(preset.woven);
     return new MeshWovenMaterial(p, {
-      yarnLayer: w.yarn_layer ?? 'additive',
-      tintWarp: w.tint_warp ? linear(w.tint_warp) : null,
-      tintWeft: w.tint_weft ? linear(w.tint_weft) : null,
+      yarnLayer: w.yarn_layer,
+      tintWarp: linear(w.tint_warp),
+      tintWeft: linear(w.tint_weft),
     });
   },
 });
+
+// A woven preset's "woven" object, checked as the C++ reader checks it (render/scene/material.cpp
+// ParseWovenOptions; brdf/woven.h woven::Options): yarn_layer 'additive' (default) |
+// 'albedo-scaled'; tint_warp / tint_weft linear RGB, each >= 0, default [1, 1, 1]. Unknown keys
+// and values throw, naming the field.
+export const WOVEN_OPTION_DEFAULTS = Object.freeze({ yarn_layer: 'additive', tint_warp: [1, 1, 1], tint_weft: [1, 1, 1] });
+export function wovenOptions(w) {
+  if (w === undefined) return { ...WOVEN_OPTION_DEFAULTS };
+  const fail = (f, msg) => { throw new Error(`loadClothfitPreset: ${f}: ${msg}`); };
+  if (w === null || typeof w !== 'object' || Array.isArray(w)) fail('woven', 'expected an object');
+  const out = { ...WOVEN_OPTION_DEFAULTS };
+  for (const [k, v] of Object.entries(w)) {
+    const f = `woven.${k}`;
+    if (k === 'yarn_layer') {
+      if (v !== 'additive' && v !== 'albedo-scaled') fail(f, 'expected "additive" or "albedo-scaled"');
+      out.yarn_layer = v;
+    } else if (k === 'tint_warp' || k === 'tint_weft') {
+      if (!Array.isArray(v) || v.length !== 3) fail(f, 'expected an array of 3 numbers');
+      v.forEach((x, c) => {
+        if (typeof x !== 'number') fail(`${f}[${c}]`, 'expected a number');
+        if (!Number.isFinite(x)) fail(`${f}[${c}]`, 'not finite');
+        if (x < 0) fail(`${f}[${c}]`, 'must be >= 0');
+      });
+      out[k] = [...v];
+    } else {
+      fail(f, 'unknown key (valid: yarn_layer, tint_warp, tint_weft)');
+    }
+  }
+  return out;
+}
 
 /**
  * A clothfit preset (object or JSON text) -> a three.js material. Throws on an unknown model or
@@ -718,6 +751,7 @@ export function loadClothfitPreset(json) {
   for (const k of Object.keys(given)) {
     if (!(k in model.defaults)) throw new Error(`loadClothfitPreset: parameters.${k}: unknown for model '${preset.model}' (valid: ${Object.keys(model.defaults).join(', ')})`);
   }
+  if (preset.woven !== undefined && preset.model !== 'woven') throw new Error('loadClothfitPreset: woven: only allowed with model "woven"');
   const p = { ...model.defaults, ...given };
   const m = model.make(p, preset);
   if (preset.side !== undefined) m.side = typeof preset.side === 'number' ? preset.side : SIDES[preset.side];
@@ -754,7 +788,12 @@ function fromThreejsJson(j) {
 export async function fetchClothfitPreset(url) {
   const r = await fetch(url);
   if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
-  return loadClothfitPreset(await r.json());
+  const j = await r.json();
+  try {
+    return loadClothfitPreset(j);
+  } catch (e) {
+    throw new Error(`${url}: ${e.message}`);  // name the file, as the C++ reader does
+  }
 }
 
 // ---------------------------------------------------------------------------------------------

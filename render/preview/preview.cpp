@@ -275,6 +275,22 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     hit.v = d * -1.0;
     hit.n = V(a.normal);
     if (UsesThreejsIbl(x.opt)) {
+      // The GPU's G-buffer: normal and view direction interpolated at the rasteriser's
+      // perspective-correct barycentrics of the pixel centre, which SwiftShader computes from
+      // the vertices snapped to its sub-pixel grid (RasterBarycentrics), not at the exact ray
+      // hit. (Visibility, position for the lights and the other attributes stay exact.)
+      const Mesh& m = x.scene.meshes[size_t(h.mesh)];
+      const uint32_t* idx = &m.indices[size_t(h.triangle) * 3];
+      auto v3 = [](const std::array<float, 3>& q) { return Vec3d(q[0], q[1], q[2]); };
+      const std::array<Vec3d, 3> P{v3(m.positions[idx[0]]), v3(m.positions[idx[1]]),
+                                   v3(m.positions[idx[2]])};
+      double b[3];
+      if (x.opt.raster_subpixel_bits >= 0 &&
+          RasterBarycentrics(x.scene, P, px + 0.5, y + 0.5, x.opt.raster_subpixel_bits, b)) {
+        hit.n = Normalize(v3(m.normals[idx[0]]) * b[0] + v3(m.normals[idx[1]]) * b[1] +
+                          v3(m.normals[idx[2]]) * b[2]);
+        hit.v = Normalize(V(x.scene.camera.position) - (P[0] * b[0] + P[1] * b[1] + P[2] * b[2]));
+      }
       // three.js (normal_fragment_begin, DoubleSide): normal *= faceDirection, i.e. flipped on
       // back faces by the triangle's winding (gl_FrontFacing), not by the shading normal; a
       // front face may keep n.v < 0 near silhouettes (NoV then saturates to 0).
@@ -327,7 +343,8 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     pd.index = int(pix);
     pd.nov = float(hit.NoV);
     if (ThreejsGeometryRoughnessApplies(x.opt))
-      pd.gr = float(ThreejsGeometryRoughness(x.scene, h.mesh, h.triangle, px, y));
+      pd.gr = float(ThreejsGeometryRoughness(x.scene, h.mesh, h.triangle, px, y,
+                                                x.opt.raster_subpixel_bits));
     pd.lights = std::move(ls);
     pd.tv = {float(Dot(hit.t, hit.v)), float(Dot(hit.b, hit.v))};
     pd.lt = std::move(lt);

@@ -26,8 +26,12 @@
 // renderer). Approximations that remain, each measured in docs/preview.md against three.js in
 // Chromium: radiance tabulated at K = 33 roughness nodes (Catmull-Rom; K = 257 changed the
 // drape/studio metal frame's pixels off by > 2 levels from 983 to 955 only);
-// geometryRoughness from coarse per-quad derivatives evaluated in double where the GPU works in
-// fp32 (drape metal: 1.1 % of the pixels differ from the GPU's value by > 0.01);
+// on three.js IBL the G-buffer (normal, view direction, geometryRoughness from coarse per-quad
+// derivatives) is interpolated at the rasteriser's barycentrics, vertices snapped to
+// SwiftShader's 1/16 pixel (PreviewOptions::raster_subpixel_bits), but visibility (which
+// triangle covers a pixel) is the exact ray's and the arithmetic is double where the GPU's is
+// fp32: on drape/studio metal 104 of the 18 339 compared pixels (0.6 %) still have a
+// geometryRoughness differing from the GPU's by > 0.01 (206 before the snapping);
 // the seed variant's accumulation of `directDiffuse *= saturate(subsurface + NoL)` across
 // lights is evaluated per light.
 #pragma once
@@ -69,6 +73,12 @@ struct PreviewOptions {
   std::shared_ptr<const WeaveMaps> weave_maps;
   double weave_footprint_scale = 1.0;
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
+  // three.js IBL engine only: the sub-pixel precision of the rasteriser whose G-buffer the
+  // preview reproduces (render/preview/threejs_ibl.h RasterBarycentrics): normals, view
+  // directions and geometryRoughness are interpolated at the barycentrics of the triangle with
+  // its vertices snapped to 1 / 2^bits pixel. 4: SwiftShader (GL_SUBPIXEL_BITS of Chromium's
+  // WebGL2 on SwiftShader); -1: exact (the camera ray's hit).
+  int raster_subpixel_bits = 4;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;

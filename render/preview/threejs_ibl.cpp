@@ -438,28 +438,64 @@ bool UsesThreejsIbl(const PreviewOptions& o) {
   return o.model == ModelKind::kCloth && o.cloth.variant == cloth::Variant::kSeedThreejs;
 }
 
-double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int x, int y) {
+bool RasterBarycentrics(const Scene& scene, const std::array<V3, 3>& P, double sx, double sy,
+                        int subpixel_bits, double b[3]) {
+  const Camera& cam = scene.camera;
+  const V3 eye(cam.position[0], cam.position[1], cam.position[2]);
+  const V3 right(cam.right[0], cam.right[1], cam.right[2]), up(cam.up[0], cam.up[1], cam.up[2]),
+      fwd(cam.forward[0], cam.forward[1], cam.forward[2]);
+  const double W = scene.card.width, H = scene.card.height;
+  const double tan_half = std::tan(0.5 * cam.yfov), aspect = W / H;
+  // Window coordinates (x right, y up from the bottom row; pixel centres at +0.5) and clip w.
+  double X[3], Y[3], w[3];
+  for (int k = 0; k < 3; ++k) {
+    const V3 q = P[size_t(k)] - eye;
+    w[k] = Dot(q, fwd);
+    if (!(w[k] > 0.0)) return false;
+    X[k] = (Dot(q, right) / (w[k] * tan_half * aspect) + 1.0) * 0.5 * W;
+    Y[k] = (Dot(q, up) / (w[k] * tan_half) + 1.0) * 0.5 * H;
+    if (subpixel_bits >= 0) {  // fixed point, round to nearest (ties to even, as cvtps2dq)
+      const double f = std::ldexp(1.0, subpixel_bits);
+      X[k] = std::nearbyint(X[k] * f) / f;
+      Y[k] = std::nearbyint(Y[k] * f) / f;
+    }
+  }
+  const double x = sx, y = H - sy;  // the sample in window coordinates
+  const double area = (X[1] - X[0]) * (Y[2] - Y[0]) - (X[2] - X[0]) * (Y[1] - Y[0]);
+  if (area == 0.0) return false;
+  // Screen-space (linear) barycentrics, then perspective correction by 1 / w.
+  double l[3];
+  l[1] = ((x - X[0]) * (Y[2] - Y[0]) - (X[2] - X[0]) * (y - Y[0])) / area;
+  l[2] = ((X[1] - X[0]) * (y - Y[0]) - (x - X[0]) * (Y[1] - Y[0])) / area;
+  l[0] = 1.0 - l[1] - l[2];
+  double sum = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    b[k] = l[k] / w[k];
+    sum += b[k];
+  }
+  if (sum == 0.0 || !std::isfinite(sum)) return false;
+  for (int k = 0; k < 3; ++k) b[k] /= sum;
+  return true;
+}
+
+double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int x, int y,
+                                int subpixel_bits) {
   const Mesh& m = scene.meshes[size_t(mesh)];
   const uint32_t* idx = &m.indices[size_t(triangle) * 3];
   auto v3 = [](const std::array<float, 3>& a) { return V3(a[0], a[1], a[2]); };
-  const V3 P0 = v3(m.positions[idx[0]]), P1 = v3(m.positions[idx[1]]), P2 = v3(m.positions[idx[2]]);
+  const std::array<V3, 3> P{v3(m.positions[idx[0]]), v3(m.positions[idx[1]]),
+                            v3(m.positions[idx[2]])};
   const V3 N0 = v3(m.normals[idx[0]]), N1 = v3(m.normals[idx[1]]), N2 = v3(m.normals[idx[2]]);
   const Camera& cam = scene.camera;
   const V3 right(cam.right[0], cam.right[1], cam.right[2]), up(cam.up[0], cam.up[1], cam.up[2]),
       fwd(cam.forward[0], cam.forward[1], cam.forward[2]);
-  // View-space interpolated normal at pixel (px, py) on the triangle's plane (Moller-Trumbore
-  // without the inside test); false when the ray is parallel to the plane.
+  // View-space interpolated normal at pixel (px, py) on the triangle's attribute plane (the
+  // rasteriser's perspective-correct barycentrics, extrapolated outside the triangle); false
+  // when the triangle has no usable plane there.
   auto normal_at = [&](int px, int py, V3* out) {
-    std::array<double, 3> o, d;
-    scene.CameraRay(px + 0.5, py + 0.5, o, d);
-    const V3 org(o[0], o[1], o[2]), dir(d[0], d[1], d[2]);
-    const V3 e1 = P1 - P0, e2 = P2 - P0, p = Cross(dir, e2);
-    const double det = Dot(e1, p);
-    if (std::abs(det) < 1e-300) return false;
-    const V3 s = org - P0;
-    const double b1 = Dot(s, p) / det;
-    const double b2 = Dot(dir, Cross(s, e1)) / det;
-    const V3 n = Normalize(N0 * (1.0 - b1 - b2) + N1 * b1 + N2 * b2);
+    double b[3];
+    if (!RasterBarycentrics(scene, P, px + 0.5, py + 0.5, subpixel_bits, b)) return false;
+    const V3 n = Normalize(N0 * b[0] + N1 * b[1] + N2 * b[2]);
     *out = V3(Dot(n, right), Dot(n, up), Dot(n, fwd));
     return true;
   };

@@ -103,6 +103,27 @@ std::shared_ptr<const ThreejsPmrem> SharedThreejsPmrem(const Environment& env);
 // clamp to edge, which is how three.js reads it.
 const Table2D& ThreejsDfgTable();
 
+// The rasteriser's vertex snapping. A GPU rasterises a triangle from its window-space vertex
+// positions rounded to a fixed-point grid of 1 / 2^bits pixel (GL_SUBPIXEL_BITS; Vulkan
+// subPixelPrecisionBits), and SwiftShader also sets up the attribute plane equations
+// (perspective-correct: a / w and 1 / w interpolated linearly in window space) from those
+// snapped positions (src/Pipeline/SetupRoutine.cpp: X, Y are the fixed-point projected
+// positions). Chromium's SwiftShader WebGL2 (the browser tests) reports GL_SUBPIXEL_BITS = 4.
+constexpr int kSwiftShaderSubpixelBits = 4;
+
+// Perspective-correct barycentrics b[0..2] (sum 1) of the sample at image point (sx, sy)
+// (image coordinates: x right, y down, pixel (x, y)'s centre at (x + 0.5, y + 0.5)) on the
+// world-space triangle P0 P1 P2, as a rasteriser with `subpixel_bits` of sub-pixel precision
+// gives them: vertices projected by the scene's camera to window coordinates (window y counts
+// up from the bottom row), each rounded to the nearest multiple of 2^-bits pixel; the sample's
+// screen-space barycentrics in that snapped triangle (extrapolated outside it, as for helper
+// lanes); each divided by its vertex's clip w (the view depth) and renormalised.
+// subpixel_bits < 0: no snapping, which equals intersecting the camera ray through (sx, sy)
+// with the triangle's plane. Returns false when a vertex is not in front of the camera or the
+// (snapped) triangle has no area on screen.
+bool RasterBarycentrics(const Scene& scene, const std::array<Vec3<double>, 3>& P, double sx,
+                        double sy, int subpixel_bits, double b[3]);
+
 // three.js's geometryRoughness at image pixel (x, y), whose primary hit is triangle `triangle`
 // of mesh `mesh`: max over the view-space components of max(|dFdx n|, |dFdy n|), where n is
 // the normalized interpolated vertex normal and the derivatives are COARSE, as SwiftShader
@@ -111,7 +132,10 @@ const Table2D& ThreejsDfgTable();
 // evaluates the SAME triangle's attribute plane (as helper invocations do): the camera ray
 // through the lane's pixel centre meets the triangle's plane and the normal is interpolated
 // there, even outside the triangle. The sign of n (double-sided flips) does not change it.
-double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int x, int y);
+// `subpixel_bits`: the rasteriser's sub-pixel precision (RasterBarycentrics); < 0: exact planes.
+double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int x, int y,
+                                int subpixel_bits = kSwiftShaderSubpixelBits);
+
 
 // Rounds to the nearest IEEE half (ties to even), as a GPU does when it writes RGBA16F.
 float RoundToHalf(float x);

@@ -140,6 +140,32 @@ void ParseClothOptions(const json& c, const std::string& where, cloth::Options* 
   }
 }
 
+// The "woven" object: brdf/woven.h woven::Options (the same keys and meaning as
+// web/clothfit.js loadClothfitPreset).
+void ParseWovenOptions(const json& w, const std::string& where, woven::Options* o) {
+  if (!w.is_object()) Fail(where, "woven", "expected an object");
+  for (auto it = w.begin(); it != w.end(); ++it) {
+    const std::string k = it.key();
+    const std::string f = "woven." + k;
+    if (k == "yarn_layer") {
+      const std::string v = it->is_string() ? it->get<std::string>() : "";
+      if (v == "additive") o->yarn_layer = woven::YarnLayer::kAdditive;
+      else if (v == "albedo-scaled") o->yarn_layer = woven::YarnLayer::kAlbedoScaled;
+      else Fail(where, f, "expected \"additive\" or \"albedo-scaled\"");
+    } else if (k == "tint_warp" || k == "tint_weft") {
+      if (!it->is_array() || it->size() != 3) Fail(where, f, "expected an array of 3 numbers");
+      Rgb<double> t;
+      for (size_t c = 0; c < 3; ++c) {
+        t[int(c)] = Number((*it)[c], where, f + "[" + std::to_string(c) + "]");
+        if (t[int(c)] < 0.0) Fail(where, f + "[" + std::to_string(c) + "]", "must be >= 0");
+      }
+      (k == "tint_warp" ? o->tint_warp : o->tint_weft) = t;
+    } else {
+      Fail(where, f, "unknown key (valid: yarn_layer, tint_warp, tint_weft)");
+    }
+  }
+}
+
 // One entry of "parameters": looked up in the model's table, range-checked, stored in p->values.
 void ParseParameter(const std::string& name, const json& value, const std::string& where,
                     MaterialPreset* p) {
@@ -190,14 +216,18 @@ MaterialPreset ParsePreset(const json& j, const std::string& where) {
     if (p.model != ModelKind::kCloth) Fail(where, "cloth", "only allowed with model \"cloth\"");
     ParseClothOptions(j["cloth"], where, &p.cloth);
   }
+  if (j.contains("woven")) {
+    if (p.model != ModelKind::kWoven) Fail(where, "woven", "only allowed with model \"woven\"");
+    ParseWovenOptions(j["woven"], where, &p.woven);
+  }
   if (!j.contains("parameters") || !j["parameters"].is_object())
     Fail(where, "parameters", "missing or not an object");
   for (auto it = j["parameters"].begin(); it != j["parameters"].end(); ++it) {
     ParseParameter(it.key(), *it, where, &p);
   }
   // Keys this build does not interpret are kept and written back (PresetToJson).
-  static const char* kKnown[] = {"schema", "version", "model", "engine", "cloth", "conventions",
-                                 "parameters"};
+  static const char* kKnown[] = {"schema", "version", "model", "engine", "cloth", "woven",
+                                 "conventions", "parameters"};
   for (auto it = j.begin(); it != j.end(); ++it) {
     bool known = false;
     for (const char* k : kKnown) known = known || it.key() == k;
@@ -249,6 +279,12 @@ json PresetToJson(const MaterialPreset& p) {
                   {"sheen_default", std::string(cloth::ToString(p.cloth.sheen_default))},
                   {"subsurface", p.cloth.subsurface},
                   {"platform", p.cloth.platform == Platform::kMobile ? "mobile" : "desktop"}};
+  }
+  if (p.model == ModelKind::kWoven) {
+    auto rgb = [](const Rgb<double>& c) { return json::array({c[0], c[1], c[2]}); };
+    j["woven"] = {{"yarn_layer", std::string(woven::ToString(p.woven.yarn_layer))},
+                  {"tint_warp", rgb(p.woven.tint_warp)},
+                  {"tint_weft", rgb(p.woven.tint_weft)}};
   }
   j["conventions"] = {{"colour_space", "linear sRGB (Rec.709 primaries), not gamma-encoded"},
                       {"roughness", "perceptual r in [0, 1]; the models use alpha = r^2"}};

@@ -8,6 +8,10 @@
 //     "cloth": {"variant": "filament" | "seed-threejs",
 //               "sheen_default": "explicit" | "sqrt-base-color" | "white",
 //               "subsurface": true | false, "platform": "desktop" | "mobile"}   (cloth only)
+//     "woven": {"yarn_layer": "additive" | "albedo-scaled",
+//               "tint_warp": [r, g, b], "tint_weft": [r, g, b]}   (woven only; brdf/woven.h
+//               woven::Options; tints linear, >= 0, default [1, 1, 1]; web/clothfit.js reads
+//               the same keys)
 //     "conventions": {"colour_space": "linear sRGB (Rec.709 primaries)",
 //                     "roughness": "perceptual r; alpha = r^2"}          (written, informative)
 //     "parameters": {"<name>": number | [r, g, b], ...}   names from the model's parameter
@@ -16,7 +20,7 @@
 //     ... any further top-level keys (e.g. "fit", "provenance") are kept but not interpreted
 //   }
 // Reading validates every field and range and throws MaterialError naming the file and the
-// field; unknown parameter names and unknown keys inside "cloth"/"parameters" are errors.
+// field; unknown parameter names and unknown keys inside "cloth"/"woven"/"parameters" are errors.
 #pragma once
 
 #include <map>
@@ -27,6 +31,7 @@
 
 #include "brdf/cloth.h"
 #include "brdf/params.h"
+#include "brdf/woven.h"
 
 namespace clothfit::render {
 
@@ -45,6 +50,7 @@ std::string EngineOf(ModelKind m);
 struct MaterialPreset {
   ModelKind model = ModelKind::kCloth;
   cloth::Options cloth;                             // used when model == kCloth
+  ::clothfit::woven::Options woven;                 // used when model == kWoven ("woven")
   std::vector<double> values;                       // flat, in parameter-table order
   nlohmann::json extra = nlohmann::json::object();  // uninterpreted top-level keys
 

@@ -5,7 +5,7 @@
 //   node tests/browser/run.mjs --clothfit build/bin/clothfit [--work DIR] [--chromium PATH]
 //        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS]
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 8 materials (6 + 2 woven) x 2 environments
+// Cases: each canonical scene (datasets/scenes/*.json) x 9 materials (6 + 3 woven) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -74,6 +74,11 @@ const MATERIALS = {
     twist: 15, warp_share: 0.6, specular_f0: 0.05, forward_scattering: 2.5, sheen_color: [0.2, 0.2, 0.2], sheen_roughness: 0.5 }),
   'woven-forward': preset('woven', { base_color: [0.1, 0.15, 0.3], specular_color: [0.8, 0.8, 0.8], roughness: 0.3, anisotropy: 0.9,
     twist: -30, warp_share: 0.3, specular_f0: 0.1, forward_scattering: 5, sheen_color: [0, 0, 0], sheen_roughness: 0.6 }),
+  // The preset's "woven" options (yarn layer, per-lobe tints), read by web/clothfit.js and the
+  // C++ preset reader with the same meaning: non-default values on both sides.
+  'woven-tinted': preset('woven', { base_color: [0.35, 0.3, 0.25], specular_color: [0.6, 0.55, 0.5], roughness: 0.45, anisotropy: 0.7,
+    twist: 15, warp_share: 0.6, specular_f0: 0.05, forward_scattering: 2.5, sheen_color: [0.2, 0.2, 0.2], sheen_roughness: 0.5 },
+  { woven: { yarn_layer: 'albedo-scaled', tint_warp: [0.3, 0.6, 1.0], tint_weft: [1.0, 0.8, 0.4] } }),
 };
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();

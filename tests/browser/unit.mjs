@@ -53,6 +53,23 @@ check(() => assert.equal(w.woven.twist, 15), 'woven twist');
 check(() => assert.equal(w.woven.forward_scattering, 2), 'woven default beta');
 check(() => assert.throws(() => loadClothfitPreset({ schema: 'clothfit.preset', version: 1, model: 'woven', parameters: { twisst: 1 } }), /parameters\.twisst/), 'woven unknown');
 
+// Woven options ("woven": yarn_layer, tint_warp, tint_weft): the keys and meaning of the C++
+// reader (render/scene/material.cpp), unknown keys and values refused with the field named.
+const wp = (woven, model = 'woven') => ({ schema: 'clothfit.preset', version: 1, model, parameters: {}, ...(woven === undefined ? {} : { woven }) });
+const wd = loadClothfitPreset(wp());
+check(() => assert.equal(wd.yarnLayer, 'additive'), 'woven default yarn layer');
+check(() => assert.deepEqual(wd.tintWarp.toArray(), [1, 1, 1]), 'woven default tint');
+const wo = loadClothfitPreset(wp({ yarn_layer: 'albedo-scaled', tint_warp: [0.2, 0.5, 1], tint_weft: [1, 0.9, 0.3] }));
+check(() => assert.equal(wo.yarnLayer, 'albedo-scaled'), 'woven yarn layer');
+check(() => assert.deepEqual(wo.tintWarp.toArray(), [0.2, 0.5, 1]), 'woven tint warp (linear, as given)');
+check(() => assert.deepEqual(wo.tintWeft.toArray(), [1, 0.9, 0.3]), 'woven tint weft');
+check(() => assert.notEqual(wo.customProgramCacheKey(), wd.customProgramCacheKey()), 'albedo-scaled compiles another program');
+check(() => assert.throws(() => loadClothfitPreset(wp({ yarn: 'additive' })), /woven\.yarn: unknown key/), 'woven unknown key');
+check(() => assert.throws(() => loadClothfitPreset(wp({ yarn_layer: 'scaled' })), /woven\.yarn_layer/), 'woven bad yarn layer');
+check(() => assert.throws(() => loadClothfitPreset(wp({ tint_warp: [1, 1] })), /woven\.tint_warp: expected an array of 3/), 'woven short tint');
+check(() => assert.throws(() => loadClothfitPreset(wp({ tint_weft: [1, -0.1, 1] })), /woven\.tint_weft\[1\]: must be >= 0/), 'woven negative tint');
+check(() => assert.throws(() => loadClothfitPreset(wp({}, 'cloth')), /woven: only allowed with model "woven"/), 'woven block on cloth');
+
 // From the real converter: a glTF with one single-sided and one double-sided material.
 if (args.clothfit) {
   const work = path.resolve(args.work ?? fs.mkdtempSync('/tmp/clothfit-unit-'));
