@@ -223,6 +223,11 @@ void FillRadianceTables(const PixelContext& x, const Vec3d& n, const Vec3d& R, P
 // anisotropy_rotation; a preset with another rotation gets its direct light rotated, its IBL
 // bent normal not: docs/fitting.md, "The honest baseline").
 constexpr int kAnisoBentNodes = 5;
+// Which way the anisotropy direction (where three.js raises the roughness to alpha_t) points
+// relative to the dominant yarn: false = along it (warp -> t, weft -> b, the mapping),
+// true = across it (warp -> b, weft -> t: a cylinder's normals spread across its axis).
+// Both measured in docs/fitting.md, "The honest baseline".
+constexpr bool kAnisoAcrossYarn = false;
 
 // The anisotropyMap texel a weave-map sample stands for (docs/fitting.md): direction t where
 // the warp lobe weight dominates, b where the weft does; strength |warp - weft| / (warp + weft).
@@ -231,8 +236,8 @@ physical_aniso::AnisoSample<T> AnisoFromWeave(const float* wv) {
   physical_aniso::AnisoSample<T> s;
   const double wa = double(wv[0]), wb = double(wv[1]);
   const bool warp = wa >= wb;
-  s.dx = Const<T>(warp ? 1.0 : 0.0);
-  s.dy = Const<T>(warp ? 0.0 : 1.0);
+  s.dx = Const<T>(warp != kAnisoAcrossYarn ? 1.0 : 0.0);
+  s.dy = Const<T>(warp != kAnisoAcrossYarn ? 0.0 : 1.0);
   s.b = Const<T>(wa + wb > 0.0 ? std::abs(wa - wb) / (wa + wb) : 0.0);
   return s;
 }
@@ -242,7 +247,8 @@ void FillAnisoRadianceTables(const PixelContext& x, const PrimaryHit& hit, const
   const int K = x.opt.roughness_nodes;
   pd->rad.resize(size_t(K) * kAnisoBentNodes * 3);
   const bool weft = weave && weave[1] > weave[0];
-  const Vec3d B = weft ? hit.t * -1.0 : hit.b;  // B = b ux - t uy at (ux, uy) = (1,0) / (0,1)
+  const bool along_b = weave && (weft != kAnisoAcrossYarn);  // direction (0, 1)
+  const Vec3d B = along_b ? hit.t * -1.0 : hit.b;  // B = b ux - t uy at (ux, uy) = (1,0) / (0,1)
   for (int j = 0; j < kAnisoBentNodes; ++j) {
     const double w = double(j) / double(kAnisoBentNodes - 1);
     const Vec3d bent = physical_aniso::BentNormal(hit.n, hit.v, B, w);
