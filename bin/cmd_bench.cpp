@@ -4,6 +4,7 @@
 #include <benchmark/benchmark.h>
 #include <ceres/jet.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdlib>
 #include <cstdio>
@@ -64,11 +65,16 @@ void BM_Model(benchmark::State& state, ModelId m) {
   // Values in [0, 1] for the first 10 (every model's range); woven's last six inside theirs.
   const std::array<double, kMaxModelParameters> values{0.6, 0.4, 0.3, 0.8,  0.7, 0.6, 0.55, 0.2,
                                                        0.1, 0.05, 0.05, 2.0, 0.1, 0.1, 0.1, 0.6};
+  // Each value clamped into the model's documented range (physical-aniso's
+  // specular_intensity is in [0, 1]; the others' values already are).
+  std::array<double, kMaxModelParameters> lo{}, hi{};
+  FlatBounds(m, lo.data(), hi.data());
   for (int k = 0; k < ParameterCount(m); ++k) {
+    const double v = std::clamp(values[size_t(k)], lo[size_t(k)], hi[size_t(k)]);
     if constexpr (std::is_same_v<T, double>) {
-      x[size_t(k)] = values[size_t(k)];
+      x[size_t(k)] = v;
     } else {  // Jet10: the first 10 parameters carry derivatives (the image fit's free set)
-      x[size_t(k)] = k < 10 ? T(values[size_t(k)], k) : T(values[size_t(k)]);
+      x[size_t(k)] = k < 10 ? T(v, k) : T(v);
     }
   }
   size_t i = 0;

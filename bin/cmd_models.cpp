@@ -37,6 +37,9 @@ void AddModelsCommand(CLI::App& app, const Globals&, int& exit_code) {
     PrintTable("woven (warp/weft anisotropic GGX x phase Fresnel + Charlie sheen + Lambert; "
                "see brdf/woven.h)",
                woven::kParameterTable);
+    PrintTable("physical-aniso (three.js r187 MeshPhysicalMaterial sheen + anisotropy + specular; "
+               "see brdf/physical_aniso.h)",
+               physical_aniso::kParameterTable);
     exit_code = 0;
   });
 }

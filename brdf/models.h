@@ -9,6 +9,7 @@
 #include "brdf/cloth.h"
 #include "brdf/gltf_sheen.h"
 #include "brdf/lut.h"
+#include "brdf/physical_aniso.h"
 #include "brdf/physical_sheen.h"
 #include "brdf/standard.h"
 #include "brdf/woven.h"
@@ -25,17 +26,19 @@ enum class ModelId {
   kPhysicalSheen,            // three.js r187 MeshPhysicalMaterial sheen
   kGltfSheen,                // glTF KHR_materials_sheen
   kWoven,                    // clothfit woven (yarn lobes + sheen + Lambert), uniform
+  kPhysicalAniso,            // three.js r187 MeshPhysicalMaterial sheen + anisotropy + specular
 };
 
-inline constexpr std::array<ModelId, 9> kAllModels{
+inline constexpr std::array<ModelId, 10> kAllModels{
     ModelId::kClothFilament,       ModelId::kClothFilamentSubsurface,
     ModelId::kClothFilamentMobile, ModelId::kClothSeed,
     ModelId::kClothSeedSubsurface, ModelId::kStandard,
     ModelId::kPhysicalSheen,       ModelId::kGltfSheen,
-    ModelId::kWoven};
+    ModelId::kWoven,               ModelId::kPhysicalAniso};
 
 // Largest ParameterCount over kAllModels (array sizes of flat-vector callers).
 inline constexpr int kMaxModelParameters = woven::kParameterCount;
+static_assert(physical_aniso::kParameterCount <= kMaxModelParameters);
 
 inline std::string_view ModelName(ModelId m) {
   switch (m) {
@@ -48,6 +51,7 @@ inline std::string_view ModelName(ModelId m) {
     case ModelId::kPhysicalSheen: return "physical-sheen";
     case ModelId::kGltfSheen: return "gltf-sheen";
     case ModelId::kWoven: return "woven";
+    case ModelId::kPhysicalAniso: return "physical-aniso";
   }
   return "?";
 }
@@ -78,6 +82,7 @@ inline int ParameterCount(ModelId m) {
     case ModelId::kPhysicalSheen:
     case ModelId::kGltfSheen: return 9;
     case ModelId::kWoven: return woven::kParameterCount;
+    case ModelId::kPhysicalAniso: return physical_aniso::kParameterCount;
     default: return 10;
   }
 }
@@ -123,6 +128,14 @@ inline void EvaluateFlat(ModelId m, const T* x, const Cosines<T>& c, Rgb<T>& dir
       ibl_uniform = w.warp + w.weft + w.diffuse + w.sheen;
       return;
     }
+    case ModelId::kPhysicalAniso: {
+      // No map: anisotropy along the tangent, rotated by anisotropy_rotation.
+      const physical_aniso::Params<T> p = physical_aniso::FromFlat(x);
+      const TangentCosines<T> t = tc ? *tc : woven::TangentCosinesInPlane(c);
+      direct = physical_aniso::EvalDirect(p, {}, c, t, {}, dfg);
+      ibl_uniform = sum(physical_aniso::EvalIbl(p, {}, c.NoV, dfg));
+      return;
+    }
     default: {
       const cloth::Options o = ClothOptionsFor(m);
       cloth::Params<T> p{rgb(0), rgb(3), x[6], rgb(7)};
@@ -148,6 +161,7 @@ inline void FlatBounds(ModelId m, double* lo, double* hi) {
     case ModelId::kPhysicalSheen: fill(physical_sheen::kParameterTable); return;
     case ModelId::kGltfSheen: fill(gltf_sheen::kParameterTable); return;
     case ModelId::kWoven: fill(woven::kParameterTable); return;
+    case ModelId::kPhysicalAniso: fill(physical_aniso::kParameterTable); return;
     default:
       fill(cloth::kParameterTable);
       lo[6] = cloth::MinRoughness(ClothOptionsFor(m));

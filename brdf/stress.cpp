@@ -52,6 +52,7 @@ std::vector<bool> ClampedFlags(ModelId m) {
     case ModelId::kPhysicalSheen: fill(physical_sheen::kParameterTable); break;
     case ModelId::kGltfSheen: fill(gltf_sheen::kParameterTable); break;
     case ModelId::kWoven: fill(woven::kParameterTable); break;
+    case ModelId::kPhysicalAniso: fill(physical_aniso::kParameterTable); break;
     default: fill(cloth::kParameterTable); break;
   }
   return out;

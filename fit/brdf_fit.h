@@ -88,6 +88,10 @@ Rgb<T> EvalDirectFlat(render::ModelKind m, const cloth::Options& co, const T* x,
       return woven::EvalDirect(woven::FromFlat(x), {}, c, woven::TangentCosinesInPlane(c),
                                woven::WeaveSample<T>{}, lut::DefaultDfg(),
                                lut::DefaultWovenPhase());
+    case render::ModelKind::kPhysicalAniso:  // in-plane v, as woven; no map
+      return physical_aniso::EvalDirect(physical_aniso::FromFlat(x), {}, c,
+                                        woven::TangentCosinesInPlane(c),
+                                        physical_aniso::AnisoSample<T>{}, lut::DefaultDfg());
   }
   return Rgb<T>(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
 }

@@ -67,6 +67,7 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
   c->sheen_albedo = full.sheen_albedo;
   c->woven_phase = full.woven_phase;
   const size_t K3 = size_t(full.options.roughness_nodes) * 3;
+  const size_t KR = full.pixels.empty() ? K3 : full.radiance.size() / full.pixels.size();  // physical-aniso: K3 x bent nodes
   c->light_begin.push_back(0);
   for (int i : keep) {
     const size_t ui = size_t(i);
@@ -90,8 +91,8 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
     for (size_t k = 0; k < 3; ++k)
       if (!full.irradiance.empty()) c->irradiance.push_back(full.irradiance[ui * 3 + k]);
     if (!full.radiance.empty())
-      c->radiance.insert(c->radiance.end(), full.radiance.begin() + long(ui * K3),
-                         full.radiance.begin() + long((ui + 1) * K3));
+      c->radiance.insert(c->radiance.end(), full.radiance.begin() + long(ui * KR),
+                         full.radiance.begin() + long((ui + 1) * KR));
     if (!full.sheen_radiance.empty())
       c->sheen_radiance.insert(c->sheen_radiance.end(), full.sheen_radiance.begin() + long(ui * K3),
                                full.sheen_radiance.begin() + long((ui + 1) * K3));

@@ -5,6 +5,7 @@
 #include "brdf/cloth.h"
 #include "brdf/gltf_sheen.h"
 #include "brdf/lut.h"
+#include "brdf/physical_aniso.h"
 #include "brdf/physical_sheen.h"
 #include "brdf/standard.h"
 #include "tests/quadrature.h"
@@ -38,6 +39,28 @@ TEST_P(Normalisation, CharlieUnclampedIntegratesToOne) {
 
 INSTANTIATE_TEST_SUITE_P(Roughness, Normalisation,
                          ::testing::Values(0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0));
+
+// physical-aniso's direct lobe (three.js r187 D_GGX_Anisotropic with alpha_t = mix(alpha, 1,
+// a^2), alpha_b = alpha): the projected distribution integrates to 1 over the hemisphere of h
+// for anisotropic alphas too (midpoint rule in (cos theta_h, phi_h)).
+TEST(Normalisation, ThreejsAnisotropicGgxIntegratesToOne) {
+  for (double r : {0.3, 0.5, 0.8}) {
+    for (double a : {0.3, 0.7, 1.0}) {
+      const double alpha = r * r;
+      const double at = physical_aniso::AlphaT(alpha, a);
+      const int nt = 2000, np = 256;
+      double sum = 0.0;
+      for (int i = 0; i < nt; ++i) {
+        const double ct = (double(i) + 0.5) / nt, st = std::sqrt(1.0 - ct * ct);
+        for (int j = 0; j < np; ++j) {
+          const double ph = 2.0 * kPi * (double(j) + 0.5) / np;
+          sum += D_GGX_Anisotropic(at, alpha, ct, st * std::cos(ph), st * std::sin(ph)) * ct;
+        }
+      }
+      EXPECT_NEAR(sum * (1.0 / nt) * (2.0 * kPi / np), 1.0, 2e-3) << "r " << r << " a " << a;
+    }
+  }
+}
 
 // --- reciprocity ----------------------------------------------------------------------
 // BRDF value (cosine removed) for a model at raw cosines.

@@ -378,3 +378,29 @@ TEST(ConvertBatch, UnionOfShardsEqualsTheUnshardedOutput) {
 
 }  // namespace
 }  // namespace clothfit::fit
+
+namespace clothfit::fit {
+namespace {
+
+// A physical-aniso preset is a convert SOURCE (fit/brdf_fit.h samples it with v in the
+// tangent-normal plane): at anisotropy 0 and default specular it is physical-sheen, so the
+// three.js target (a physical-sheen fit) must come back close to its own parameters.
+TEST(ConvertReaders, PhysicalAnisoPresetConvertsToThreejs) {
+  const fs::path d = TempDir("physical_aniso");
+  render::MaterialPreset p = render::DefaultPreset(ModelKind::kPhysicalAniso);
+  const double v[15] = {0.4, 0.29, 0.2, 0.8, 0.0, 0.3, 0.25, 0.2, 0.55,
+                        0.0, 0.0, 1.0, 1.0, 1.0, 1.0};
+  p.values.assign(v, v + 15);
+  fs::create_directories(d / "in");
+  render::WritePreset((d / "in" / "aniso.json").string(), p);
+  const ConvertReport r = RunBatch({(d / "in").string()}, d / "out", {"threejs"});
+  ASSERT_EQ(r.converted, 1) << (r.items.empty() ? "" : r.items[0].reason);
+  const render::MaterialPreset t = ReadThreejsPhysical((d / "out" / "aniso.three.json").string());
+  EXPECT_NEAR(t.values[3], 0.8, 0.02);   // roughness
+  EXPECT_NEAR(t.values[8], 0.55, 0.05);  // sheen roughness
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(t.values[size_t(k)], v[k], 0.02) << "base " << k;
+  fs::remove_all(d);
+}
+
+}  // namespace
+}  // namespace clothfit::fit

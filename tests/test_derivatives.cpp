@@ -125,6 +125,23 @@ TEST(Derivatives, GltfSheenInteriorAndNearBounds) {
   }
 }
 
+// physical-aniso: 15 parameters (in-plane tangent cosines: EvaluateFlat's default frame);
+// anisotropy strength and rotation off zero so their derivatives act, specular colour below
+// the 25 where min(0.04 c, 1) kinks.
+TEST(Derivatives, PhysicalAnisoInteriorAndNearBounds) {
+  for (const auto& c : kConfigs) {
+    Check<15>(ModelId::kPhysicalAniso,
+              {0.6, 0.35, 0.2, 0.5546875, 0.0, 0.5, 0.4, 0.3, 0.62, 0.55, 0.4, 0.8, 1.3, 0.9, 0.7},
+              c, kRtol);
+    Check<15>(ModelId::kPhysicalAniso,
+              {0.6, 0.35, 0.2, 0.0461, 0.1, 0.9, 0.4, 0.3, 0.0711, 0.95, -2.1, 0.3, 5.0, 2.0, 1.0},
+              c, kRtol);
+    Check<15>(ModelId::kPhysicalAniso,
+              {0.6, 0.35, 0.2, 0.9987, 0.0, 0.9, 0.4, 0.3, 0.9987, 0.02, 3.0, 0.999, 0.5, 0.6, 0.7},
+              c, kRtol);
+  }
+}
+
 TEST(Derivatives, GuardedSingularPointsGiveFiniteJets) {
   // The points cloth-models.md section 8 names: NoV = NoL = 0 (Neubelt), sin2h = 0 with
   // alpha > 0.5 (pow(0, g)), x = 0 inside the Charlie Lambda fit, sqrt(0) of a black base.

@@ -666,6 +666,25 @@ registerClothfitModel('physical-sheen', {
     sheen: 1, sheenColor: linear(p.sheen_color), sheenRoughness: p.sheen_roughness }),
 });
 
+// ---- physical-aniso (brdf/physical_aniso.h; issue 12's honest baseline) ----------------------
+// MeshPhysicalMaterial with sheen + anisotropy + specular, every parameter the C++ one
+// (specular_color is three.js specularColor, linear, may exceed 1; anisotropy_rotation radians).
+// The preset's weave maps (top-level "weave_maps", an EXR) are NOT loaded here yet: the
+// material is the uniform one (no colour map, anisotropy along the mesh tangent).
+registerClothfitModel('physical-aniso', {
+  engine: 'three.js r187 MeshPhysicalMaterial (sheen + anisotropy + specular)',
+  defaults: {
+    base_color: [1, 1, 1], roughness: 1, metalness: 0, sheen_color: [0, 0, 0], sheen_roughness: 1,
+    anisotropy_strength: 0, anisotropy_rotation: 0, specular_intensity: 1, specular_color: [1, 1, 1],
+  },
+  make: (p) => new THREE.MeshPhysicalMaterial({
+    color: linear(p.base_color), roughness: p.roughness, metalness: p.metalness,
+    sheen: 1, sheenColor: linear(p.sheen_color), sheenRoughness: p.sheen_roughness,
+    anisotropy: p.anisotropy_strength, anisotropyRotation: p.anisotropy_rotation,
+    specularIntensity: p.specular_intensity, specularColor: linear(p.specular_color) }),
+});
+// ---- end physical-aniso ---------------------------------------------------------------------
+
 // glTF 2.0 + KHR_materials_sheen: three.js draws it the way GLTFLoader maps the extension, as a
 // MeshPhysicalMaterial with sheen (so in three.js it is the physical-sheen model).
 registerClothfitModel('gltf-sheen', {

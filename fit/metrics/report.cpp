@@ -36,7 +36,8 @@ int ModelRank(const std::string& model) {
   if (model == "standard") return 2;
   if (model == "gltf-sheen") return 3;
   if (model == "woven") return 4;
-  return 5;
+  if (model == "physical-aniso") return 5;
+  return 6;
 }
 
 std::string ModelTitle(const std::string& model) {
@@ -45,6 +46,7 @@ std::string ModelTitle(const std::string& model) {
   if (model == "standard") return "MeshStandardMaterial";
   if (model == "gltf-sheen") return "glTF KHR_materials_sheen";
   if (model == "woven") return "woven (clothfit, web/)";
+  if (model == "physical-aniso") return "MeshPhysicalMaterial (sheen + anisotropy, weave maps)";
   return model;
 }
 

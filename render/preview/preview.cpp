@@ -20,6 +20,7 @@
 #include "brdf/cloth.h"
 #include "brdf/gltf_sheen.h"
 #include "brdf/lut.h"
+#include "brdf/physical_aniso.h"
 #include "brdf/physical_sheen.h"
 #include "brdf/standard.h"
 #include "brdf/woven.h"
@@ -214,6 +215,55 @@ void FillRadianceTables(const PixelContext& x, const Vec3d& n, const Vec3d& R, P
   }
 }
 
+// physical-aniso (three.js getIBLAnisotropyRadiance): the bent normal depends on the fitted
+// anisotropy and roughness through one weight w = (1 - a (1 - r))^4, so the cache holds the
+// K-node roughness table at kAnisoBentNodes values of w in [0, 1] (node w = 1 is the
+// isotropic table: bent = n exactly); the kernel interpolates linearly in w. The bitangent
+// B of the anisotropy frame comes from the weave-map direction at rotation 0 (the fit locks
+// anisotropy_rotation; a preset with another rotation gets its direct light rotated, its IBL
+// bent normal not: docs/fitting.md, "The honest baseline").
+constexpr int kAnisoBentNodes = 5;
+// Which way the anisotropy direction (where three.js raises the roughness to alpha_t) points
+// relative to the dominant yarn: false = along it (warp -> t, weft -> b, the mapping),
+// true = across it (warp -> b, weft -> t: a cylinder's normals spread across its axis).
+// Both measured in docs/fitting.md, "The honest baseline".
+constexpr bool kAnisoAcrossYarn = false;
+
+// The anisotropyMap texel a weave-map sample stands for (docs/fitting.md): direction t where
+// the warp lobe weight dominates, b where the weft does; strength |warp - weft| / (warp + weft).
+template <typename T>
+physical_aniso::AnisoSample<T> AnisoFromWeave(const float* wv) {
+  physical_aniso::AnisoSample<T> s;
+  const double wa = double(wv[0]), wb = double(wv[1]);
+  const bool warp = wa >= wb;
+  s.dx = Const<T>(warp != kAnisoAcrossYarn ? 1.0 : 0.0);
+  s.dy = Const<T>(warp != kAnisoAcrossYarn ? 0.0 : 1.0);
+  s.b = Const<T>(wa + wb > 0.0 ? std::abs(wa - wb) / (wa + wb) : 0.0);
+  return s;
+}
+
+void FillAnisoRadianceTables(const PixelContext& x, const PrimaryHit& hit, const float* weave,
+                             PixelData* pd) {
+  const int K = x.opt.roughness_nodes;
+  pd->rad.resize(size_t(K) * kAnisoBentNodes * 3);
+  const bool weft = weave && weave[1] > weave[0];
+  const bool along_b = weave && (weft != kAnisoAcrossYarn);  // direction (0, 1)
+  const Vec3d B = along_b ? hit.t * -1.0 : hit.b;  // B = b ux - t uy at (ux, uy) = (1,0) / (0,1)
+  for (int j = 0; j < kAnisoBentNodes; ++j) {
+    const double w = double(j) / double(kAnisoBentNodes - 1);
+    const Vec3d bent = physical_aniso::BentNormal(hit.n, hit.v, B, w);
+    for (int k = 0; k < K; ++k) {
+      const double r = double(k) / double(K - 1);
+      const Vec3d dd = physical_aniso::IblDirection(bent, hit.v, r);
+      const Rgb<double> L =
+          x.e.pmrem ? x.e.pmrem->Sample(dd, x.e.pmrem->MipForRoughness(r))
+                    : x.e.ggx->Sample(dd, LodFor(x.opt.model, *x.e.ggx, r, x.opt.prefilter_levels));
+      for (int ch = 0; ch < 3; ++ch)
+        pd->rad[(size_t(j) * size_t(K) + size_t(k)) * 3 + size_t(ch)] = float(L[ch]);
+    }
+  }
+}
+
 // Whether the camera ray `d` sees triangle `tri` of `m` from its back: glTF front faces are
 // counter-clockwise (the scene loader fixes the winding of mirroring transforms), so the face is
 // a back face when (P1 - P0) x (P2 - P0) points away from the viewer (gl_FrontFacing false).
@@ -304,7 +354,9 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     hit.t = V(a.tangent);
     hit.t = Normalize(hit.t - hit.n * Dot(hit.t, hit.n));
     hit.b = Cross(hit.n, hit.t) * a.tangent_sign;
-    const bool woven_frame = x.opt.model == ModelKind::kWoven && hit.mesh->is_fabric;
+    const bool woven_frame = (x.opt.model == ModelKind::kWoven ||
+                              x.opt.model == ModelKind::kPhysicalAniso) &&
+                             hit.mesh->is_fabric;
     // Woven weave maps: sampled at the pixel's uv and GPU footprint; a relief normal map
     // (if any) replaces n by normalize(t N.x + b N.y + n N.z) and re-derives t and b from it,
     // before anything is shaded (lights, irradiance, reflection vector).
@@ -350,7 +402,10 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     pd.lt = std::move(lt);
     pd.weave = weave;
     for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
-    if (x.env) FillRadianceTables(x, hit.n, R, &pd);
+    if (x.env && x.opt.model == ModelKind::kPhysicalAniso)
+      FillAnisoRadianceTables(x, hit, x.opt.weave_maps ? weave.data() : nullptr, &pd);
+    else if (x.env)
+      FillRadianceTables(x, hit.n, R, &pd);
     row->push_back(std::move(pd));
   }
 }
@@ -369,7 +424,8 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       c->irradiance.insert(c->irradiance.end(), pd.irr.begin(), pd.irr.end());
       c->radiance.insert(c->radiance.end(), pd.rad.begin(), pd.rad.end());
       c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
-      if (c->options.model == ModelKind::kWoven) {
+      if (c->options.model == ModelKind::kWoven ||
+          c->options.model == ModelKind::kPhysicalAniso) {
         c->tangent_v.insert(c->tangent_v.end(), pd.tv.begin(), pd.tv.end());
         c->light_tangent.insert(c->light_tangent.end(), pd.lt.begin(), pd.lt.end());
         if (c->options.weave_maps) c->weave.insert(c->weave.end(), pd.weave.begin(), pd.weave.end());
@@ -471,6 +527,8 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
     wp = woven::FromFlat(x);
     wl = woven::PrepareLobes(wp);
   }
+  physical_aniso::Params<T> ap;
+  if constexpr (M == ModelKind::kPhysicalAniso) ap = physical_aniso::FromFlat(x);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& br) {
     for (size_t i = br.begin(); i != br.end(); ++i) {
       // Woven: the pixel's weave-map sample; without maps the uniform defaults (all 1).
@@ -486,6 +544,17 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
       const T NoV = Const<T>(double(c.NoV[i]));
       standard::Options so;  // three.js geometryRoughness (0 unless the cache has it)
       if (!c.geometry_roughness.empty()) so.geometry_roughness = double(c.geometry_roughness[i]);
+      // physical-aniso: the kd map multiplies the base colour, the warp/weft weights give the
+      // anisotropyMap texel (AnisoFromWeave); without maps, no map.
+      physical_aniso::Params<T> apx = ap;
+      physical_aniso::AnisoSample<T> as{};
+      if constexpr (M == ModelKind::kPhysicalAniso) {
+        if (!c.weave.empty()) {
+          const float* wv = &c.weave[i * WeaveMaps::kChannels];
+          as = AnisoFromWeave<T>(wv);
+          for (int ch = 0; ch < 3; ++ch) apx.base_color[ch] = ap.base_color[ch] * Const<T>(double(wv[2 + ch]));
+        }
+      }
       Rgb<T> L(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
       if constexpr (kDirect) {
         for (int s = c.light_begin[i]; s < c.light_begin[i + 1]; ++s) {
@@ -500,6 +569,13 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
                                        Const<T>(double(lt[0])), Const<T>(double(lt[1])),
                                        Const<T>(double(lt[2])), Const<T>(double(lt[3]))};
             f = woven::EvalDirect(wp, c.options.woven, wl, cs, tc, ws, *c.dfg, *c.woven_phase);
+          } else if constexpr (M == ModelKind::kPhysicalAniso) {
+            const float* tv = &c.tangent_v[i * 2];
+            const float* lt = &c.light_tangent[size_t(s) * 4];
+            const TangentCosines<T> tc{Const<T>(double(tv[0])), Const<T>(double(tv[1])),
+                                       Const<T>(double(lt[0])), Const<T>(double(lt[1])),
+                                       Const<T>(double(lt[2])), Const<T>(double(lt[3]))};
+            f = physical_aniso::EvalDirect(apx, so, cs, tc, as, *c.dfg);
           } else if constexpr (M == ModelKind::kCloth) {
             f = cloth::EvalDirect(cloth::Params<T>{rgb(0), rgb(3), x[6], rgb(7)}, co, cs);
           } else if constexpr (M == ModelKind::kStandard) {
@@ -516,12 +592,24 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
       }
       if constexpr (kIbl) {
         const Rgb<T> Ed = LoadRgb<T>(&c.irradiance[i * 3]);
-        const float* rad = &c.radiance[i * size_t(K) * 3];
+        const size_t rad_stride =
+            size_t(K) * 3 * size_t(M == ModelKind::kPhysicalAniso ? kAnisoBentNodes : 1);
+        const float* rad = &c.radiance[i * rad_stride];
         if constexpr (M == ModelKind::kWoven) {
           const woven::WovenIblWeights<T> w =
               woven::EvalIbl(wp, c.options.woven, wl, NoV, ws, *c.dfg, *c.woven_phase);
           L += (w.warp + w.weft) * TableRadiance(rad, K, wl.r_e) +
                w.sheen * TableRadiance(rad, K, wl.r_s) + w.diffuse * Ed;
+        } else if constexpr (M == ModelKind::kPhysicalAniso) {
+          const IblWeights<T> w = physical_aniso::EvalIbl(apx, so, NoV, *c.dfg);
+          const T r = standard::ClampedRoughness(apx.roughness, so);
+          const T a = physical_aniso::MakeFrame(apx, as).anisotropy;
+          const T bw = physical_aniso::BentNormalWeight(a, r) * Const<T>(kAnisoBentNodes - 1);
+          const int j = std::clamp(int(std::floor(ScalarPart(bw))), 0, kAnisoBentNodes - 2);
+          const T f = bw - Const<T>(double(j));
+          const Rgb<T> L0 = TableRadiance(rad + size_t(j) * size_t(K) * 3, K, r);
+          const Rgb<T> L1 = TableRadiance(rad + size_t(j + 1) * size_t(K) * 3, K, r);
+          L += w.specular * (L0 * (Const<T>(1.0) - f) + L1 * f) + w.diffuse * Ed;
         } else if constexpr (M == ModelKind::kCloth) {
           const cloth::Params<T> p{rgb(0), rgb(3), x[6], rgb(7)};
           const IblWeights<T> w = cloth::EvalIbl(p, co, NoV, *c.dfg);
@@ -578,6 +666,8 @@ void EvaluatePreview(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out
       return DispatchFeatures<T, ModelKind::kPhysicalSheen>(c, x, out);
     case ModelKind::kGltfSheen: return DispatchFeatures<T, ModelKind::kGltfSheen>(c, x, out);
     case ModelKind::kWoven: return DispatchFeatures<T, ModelKind::kWoven>(c, x, out);
+    case ModelKind::kPhysicalAniso:
+      return DispatchFeatures<T, ModelKind::kPhysicalAniso>(c, x, out);
   }
 }
 

@@ -434,7 +434,9 @@ bool UsesThreejsIbl(const PreviewOptions& o) {
     case IblEngine::kThreejs: return true;
     case IblEngine::kAuto: break;
   }
-  if (o.model == ModelKind::kStandard || o.model == ModelKind::kPhysicalSheen) return true;
+  if (o.model == ModelKind::kStandard || o.model == ModelKind::kPhysicalSheen ||
+      o.model == ModelKind::kPhysicalAniso)
+    return true;
   return o.model == ModelKind::kCloth && o.cloth.variant == cloth::Variant::kSeedThreejs;
 }
 
@@ -521,7 +523,8 @@ double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int 
 
 bool ThreejsGeometryRoughnessApplies(const PreviewOptions& o) {
   return UsesThreejsIbl(o) &&
-         (o.model == ModelKind::kStandard || o.model == ModelKind::kPhysicalSheen);
+         (o.model == ModelKind::kStandard || o.model == ModelKind::kPhysicalSheen ||
+          o.model == ModelKind::kPhysicalAniso);
 }
 
 const Table2D& ThreejsDfgTable() {

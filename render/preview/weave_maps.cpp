@@ -304,7 +304,9 @@ nlohmann::json WeaveMapsPresetField(const std::string& file, const WeaveMaps& ma
 }
 
 std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& preset) {
-  if (preset.model != ModelKind::kWoven || !preset.extra.is_object()) return nullptr;
+  if ((preset.model != ModelKind::kWoven && preset.model != ModelKind::kPhysicalAniso) ||
+      !preset.extra.is_object())
+    return nullptr;
   const auto it = preset.extra.find("weave_maps");
   if (it == preset.extra.end() || it->is_null()) return nullptr;
   if (!it->is_object() || !it->contains("file") || !(*it)["file"].is_string())

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "brdf/gltf_sheen.h"
+#include "brdf/physical_aniso.h"
 #include "brdf/physical_sheen.h"
 #include "brdf/standard.h"
 #include "brdf/woven.h"
@@ -22,6 +23,7 @@ std::string ToString(ModelKind m) {
     case ModelKind::kPhysicalSheen: return "physical-sheen";
     case ModelKind::kGltfSheen: return "gltf-sheen";
     case ModelKind::kWoven: return "woven";
+    case ModelKind::kPhysicalAniso: return "physical-aniso";
   }
   return "?";
 }
@@ -32,8 +34,9 @@ ModelKind ParseModelKind(const std::string& s) {
   if (s == "physical-sheen") return ModelKind::kPhysicalSheen;
   if (s == "gltf-sheen") return ModelKind::kGltfSheen;
   if (s == "woven") return ModelKind::kWoven;
+  if (s == "physical-aniso") return ModelKind::kPhysicalAniso;
   throw std::invalid_argument("unknown model '" + limits::EscapeForMessage(s, 80) +
-                              "' (valid: cloth, standard, physical-sheen, gltf-sheen, woven)");
+                              "' (valid: cloth, standard, physical-sheen, gltf-sheen, woven, physical-aniso)");
 }
 
 std::span<const ParamInfo> ParameterTable(ModelKind m) {
@@ -43,6 +46,7 @@ std::span<const ParamInfo> ParameterTable(ModelKind m) {
     case ModelKind::kPhysicalSheen: return physical_sheen::kParameterTable;
     case ModelKind::kGltfSheen: return gltf_sheen::kParameterTable;
     case ModelKind::kWoven: return woven::kParameterTable;
+    case ModelKind::kPhysicalAniso: return physical_aniso::kParameterTable;
   }
   return {};
 }
@@ -54,6 +58,7 @@ std::string EngineOf(ModelKind m) {
     case ModelKind::kPhysicalSheen: return std::string(physical_sheen::kEngine);
     case ModelKind::kGltfSheen: return std::string(gltf_sheen::kEngine);
     case ModelKind::kWoven: return std::string(woven::kEngine);
+    case ModelKind::kPhysicalAniso: return std::string(physical_aniso::kEngine);
   }
   return "?";
 }

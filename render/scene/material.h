@@ -3,7 +3,7 @@
 //
 //   {
 //     "schema": "clothfit.preset", "version": 1,
-//     "model": "cloth" | "standard" | "physical-sheen" | "gltf-sheen" | "woven",
+//     "model": "cloth" | "standard" | "physical-sheen" | "gltf-sheen" | "woven" | "physical-aniso",
 //     "engine": "<engine release the parameters are meant for>"        (written, informative)
 //     "cloth": {"variant": "filament" | "seed-threejs",
 //               "sheen_default": "explicit" | "sqrt-base-color" | "white",
@@ -40,7 +40,7 @@ class MaterialError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-enum class ModelKind { kCloth, kStandard, kPhysicalSheen, kGltfSheen, kWoven };
+enum class ModelKind { kCloth, kStandard, kPhysicalSheen, kGltfSheen, kWoven, kPhysicalAniso };
 
 std::string ToString(ModelKind m);
 ModelKind ParseModelKind(const std::string& s);  // throws std::invalid_argument
