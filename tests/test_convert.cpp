@@ -404,3 +404,51 @@ TEST(ConvertReaders, PhysicalAnisoPresetConvertsToThreejs) {
 
 }  // namespace
 }  // namespace clothfit::fit
+
+namespace clothfit::fit {
+namespace {
+
+// A physical-aniso preset with anisotropy and specular is carried EXACTLY (no fit) into the
+// three.js MaterialLoader JSON (anisotropy, anisotropyRotation, specularIntensity,
+// specularColor) and into glTF (KHR_materials_anisotropy, KHR_materials_specular, sheen).
+TEST(ConvertReaders, PhysicalAnisoPresetIsCarriedExactlyToThreejsAndGltf) {
+  const fs::path d = TempDir("physical_aniso_exact");
+  render::MaterialPreset p = render::DefaultPreset(ModelKind::kPhysicalAniso);
+  const double v[15] = {0.4, 0.29, 0.2, 0.62, 0.0, 0.3, 0.25, 0.2, 0.55,
+                        0.6, 0.3, 0.7, 1.0, 0.8, 0.6};
+  p.values.assign(v, v + 15);
+  fs::create_directories(d / "in");
+  render::WritePreset((d / "in" / "aniso.json").string(), p);
+  const ConvertReport r = RunBatch({(d / "in").string()}, d / "out", {"threejs", "gltf"});
+  ASSERT_EQ(r.converted, 1) << (r.items.empty() ? "" : r.items[0].reason);
+  const render::MaterialPreset t = ReadThreejsPhysical((d / "out" / "aniso.three.json").string());
+  ASSERT_EQ(t.model, ModelKind::kPhysicalAniso);
+  // Colours pass through 8-bit sRGB hex; scalars are exact.
+  for (size_t k : {3, 4, 8, 9, 10, 11}) EXPECT_DOUBLE_EQ(t.values[k], v[k]) << "parameter " << k;
+  for (size_t k : {0, 1, 2, 5, 6, 7, 12, 13, 14})
+    EXPECT_NEAR(t.values[k], v[k], 0.01) << "colour component " << k;
+
+  std::ifstream in(d / "out" / "aniso.gltf");
+  const nlohmann::json g = nlohmann::json::parse(in);
+  const nlohmann::json& m = g.at("materials").at(0);
+  const nlohmann::json& ext = m.at("extensions");
+  EXPECT_DOUBLE_EQ(ext.at("KHR_materials_anisotropy").at("anisotropyStrength").get<double>(), 0.6);
+  EXPECT_DOUBLE_EQ(ext.at("KHR_materials_anisotropy").at("anisotropyRotation").get<double>(), 0.3);
+  EXPECT_DOUBLE_EQ(ext.at("KHR_materials_specular").at("specularFactor").get<double>(), 0.7);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_DOUBLE_EQ(ext.at("KHR_materials_specular").at("specularColorFactor").at(k).get<double>(),
+                     v[12 + k]);
+    EXPECT_DOUBLE_EQ(ext.at("KHR_materials_sheen").at("sheenColorFactor").at(k).get<double>(),
+                     v[5 + k]);
+    EXPECT_DOUBLE_EQ(m.at("pbrMetallicRoughness").at("baseColorFactor").at(k).get<double>(), v[k]);
+  }
+  EXPECT_DOUBLE_EQ(ext.at("KHR_materials_sheen").at("sheenRoughnessFactor").get<double>(), 0.55);
+  EXPECT_DOUBLE_EQ(m.at("pbrMetallicRoughness").at("roughnessFactor").get<double>(), 0.62);
+  const auto used = g.at("extensionsUsed").get<std::vector<std::string>>();
+  for (const char* e : {"KHR_materials_sheen", "KHR_materials_anisotropy", "KHR_materials_specular"})
+    EXPECT_NE(std::find(used.begin(), used.end(), e), used.end()) << e;
+  fs::remove_all(d);
+}
+
+}  // namespace
+}  // namespace clothfit::fit

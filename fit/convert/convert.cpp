@@ -178,11 +178,19 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
   item.error = cr.error;
   json fits = {{"cloth", cr.error}};
   json iterations = {{"cloth", cr.iterations}};
+  // A physical-aniso source is MeshPhysicalMaterial itself: the three.js and glTF targets
+  // carry it exactly instead of fitting physical-sheen / gltf-sheen to it.
+  if (m.analytic && m.analytic->model == ModelKind::kPhysicalAniso) {
+    c.physical_aniso = *m.analytic;
+    fits["physical-aniso"] = 0.0;
+  }
   if (Wants(o, "threejs")) {
-    const BrdfFitResult r = FitOrThrow(s, ModelKind::kPhysicalSheen, {}, m);
-    c.physical_sheen = r.preset;
-    fits["physical-sheen"] = r.error;
-    iterations["physical-sheen"] = r.iterations;
+    if (!c.physical_aniso) {
+      const BrdfFitResult r = FitOrThrow(s, ModelKind::kPhysicalSheen, {}, m);
+      c.physical_sheen = r.preset;
+      fits["physical-sheen"] = r.error;
+      iterations["physical-sheen"] = r.iterations;
+    }
     if (o.cloth.variant != cloth::Variant::kSeedThreejs) {
       cloth::Options seed;
       seed.variant = cloth::Variant::kSeedThreejs;  // the seed's MeshClothMaterial, its own fit
@@ -192,7 +200,7 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
       iterations["cloth/seed-threejs"] = sr.iterations;
     }
   }
-  if (Wants(o, "gltf")) {
+  if (Wants(o, "gltf") && !c.physical_aniso) {
     const BrdfFitResult r = FitOrThrow(s, ModelKind::kGltfSheen, {}, m);
     c.gltf_sheen = r.preset;
     fits["gltf-sheen"] = r.error;

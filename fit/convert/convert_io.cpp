@@ -667,9 +667,25 @@ void WriteClothPreset(const std::string& path, const Converted& c) {
   render::WritePreset(path, p);
 }
 
+namespace {
+double Value(const render::MaterialPreset& p, const char* name) {
+  return p.values[size_t(p.Offset(name))];
+}
+// three.js MaterialLoader reads colours as sRGB hex (components in [0, 1]); a specular colour
+// above 1 (allowed by the parameter table) cannot be written that way.
+void CheckHexable(const Rgb<double>& c, const std::string& path, const char* field) {
+  for (int k = 0; k < 3; ++k)
+    if (!(c[k] >= 0.0 && c[k] <= 1.0))
+      throw ConvertError(path + ": " + field + ": component " + std::to_string(k) + " = " +
+                         std::to_string(c[k]) +
+                         " is outside [0, 1], which a three.js hex colour cannot hold");
+}
+}  // namespace
+
 void WriteThreejsPhysical(const std::string& path, const Converted& c) {
-  if (!c.physical_sheen) throw ConvertError(path + ": no physical-sheen fit to write");
-  const render::MaterialPreset& p = *c.physical_sheen;
+  if (!c.physical_sheen && !c.physical_aniso)
+    throw ConvertError(path + ": no physical-sheen fit to write");
+  const render::MaterialPreset& p = c.physical_aniso ? *c.physical_aniso : *c.physical_sheen;
   json j;
   j["metadata"] = {{"version", 4.6}, {"type", "Material"}, {"generator", "clothfit convert"}};
   j["uuid"] = c.provenance.value("uuid", "00000000-0000-4000-8000-000000000000");
@@ -681,6 +697,16 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
   j["sheen"] = 1.0;  // sheen_color = sheenColor x sheen
   j["sheenColor"] = Hex(Factor(Colour(p, "sheen_color"), FindMap(c, "sheen_color")));
   j["sheenRoughness"] = p.values[size_t(p.Offset("sheen_roughness"))];
+  if (c.physical_aniso) {
+    // Exact: the model is MeshPhysicalMaterial's own (brdf/physical_aniso.h). anisotropy and
+    // anisotropyRotation (radians, from the tangent toward the bitangent), specularIntensity
+    // and specularColor (f0 = min(0.04 specularColor, 1) specularIntensity).
+    j["anisotropy"] = Value(p, "anisotropy_strength");
+    j["anisotropyRotation"] = Value(p, "anisotropy_rotation");
+    j["specularIntensity"] = Value(p, "specular_intensity");
+    CheckHexable(Colour(p, "specular_color"), path, "specular_color");
+    j["specularColor"] = Hex(Colour(p, "specular_color"));
+  }
   j["side"] = c.double_sided ? 2 : 0;  // THREE.DoubleSide : THREE.FrontSide (back faces culled)
   j["userData"] = {{"clothfit",
                     {{"engine", render::EngineOf(p.model)},
@@ -717,21 +743,38 @@ void WriteThreejsCloth(const std::string& path, const Converted& c) {
 }
 
 void WriteGltf(const std::string& path, const Converted& c) {
-  if (!c.gltf_sheen) throw ConvertError(path + ": no glTF sheen fit to write");
-  const render::MaterialPreset& p = *c.gltf_sheen;
+  if (!c.gltf_sheen && !c.physical_aniso) throw ConvertError(path + ": no glTF sheen fit to write");
+  const render::MaterialPreset& p = c.physical_aniso ? *c.physical_aniso : *c.gltf_sheen;
   json j;
   j["asset"] = {{"version", "2.0"}, {"generator", "clothfit convert"}};
-  j["extensionsUsed"] = json::array({"KHR_materials_sheen"});
+  j["extensionsUsed"] = c.physical_aniso
+                            ? json::array({"KHR_materials_sheen", "KHR_materials_anisotropy",
+                                           "KHR_materials_specular"})
+                            : json::array({"KHR_materials_sheen"});
   json m;
   m["name"] = c.name;
   m["doubleSided"] = c.double_sided;
   const Rgb<double> base = Factor(Colour(p, "base_color"), FindMap(c, "base_color"));
   m["pbrMetallicRoughness"] = {{"baseColorFactor", {base[0], base[1], base[2], 1.0}},
-                               {"roughnessFactor", p.values[3]},
-                               {"metallicFactor", p.values[4]}};
+                               {"roughnessFactor", Value(p, "roughness")},
+                               {"metallicFactor", Value(p, c.physical_aniso ? "metalness" : "metallic")}};
   m["extensions"]["KHR_materials_sheen"] = {
       {"sheenColorFactor", Arr(Factor(Colour(p, "sheen_color"), FindMap(c, "sheen_color")))},
-      {"sheenRoughnessFactor", p.values[8]}};
+      {"sheenRoughnessFactor", Value(p, "sheen_roughness")}};
+  if (c.physical_aniso) {
+    // KHR_materials_anisotropy: alpha_t = mix(alpha, 1, strength^2), rotation in radians
+    // from the tangent, as three.js r187 (GLTFLoader maps it onto MeshPhysicalMaterial
+    // .anisotropy / .anisotropyRotation). KHR_materials_specular: f0 = min(0.04
+    // specularColorFactor, 1) specularFactor, f90 = specularFactor (three.js's
+    // specularIntensity / specularColor). Exact for three.js; the Khronos sample viewer's
+    // sheen visibility (Charlie) differs from three.js's (Neubelt): docs/convert.md.
+    m["extensions"]["KHR_materials_anisotropy"] = {
+        {"anisotropyStrength", Value(p, "anisotropy_strength")},
+        {"anisotropyRotation", Value(p, "anisotropy_rotation")}};
+    m["extensions"]["KHR_materials_specular"] = {
+        {"specularFactor", Value(p, "specular_intensity")},
+        {"specularColorFactor", Arr(Colour(p, "specular_color"))}};
+  }
   json images = json::array(), textures = json::array();
   auto add = [&](const MapRef* map) {
     images.push_back({{"uri", Relative(map->path, path)}});
@@ -816,7 +859,20 @@ render::MaterialPreset ReadThreejsPhysical(const std::string& path) {
   p.values[3] = CheckedNumber(j.value("roughness", json()), path, "roughness", 0, 1);
   p.values[4] = CheckedNumber(j.value("metalness", json()), path, "metalness", 0, 1);
   p.values[8] = CheckedNumber(j.value("sheenRoughness", json()), path, "sheenRoughness", 0, 1);
-  return p;
+  if (!j.contains("anisotropy") && !j.contains("specularIntensity")) return p;
+  // With anisotropy or specular: the physical-aniso model (same first 9 parameters).
+  render::MaterialPreset a = render::DefaultPreset(ModelKind::kPhysicalAniso);
+  std::copy(p.values.begin(), p.values.begin() + 9, a.values.begin());
+  a.values[size_t(a.Offset("anisotropy_strength"))] =
+      CheckedNumber(j.value("anisotropy", json(0.0)), path, "anisotropy", 0, 1);
+  a.values[size_t(a.Offset("anisotropy_rotation"))] = CheckedNumber(
+      j.value("anisotropyRotation", json(0.0)), path, "anisotropyRotation", -kPi, kPi);
+  a.values[size_t(a.Offset("specular_intensity"))] =
+      CheckedNumber(j.value("specularIntensity", json(1.0)), path, "specularIntensity", 0, 1);
+  const Rgb<double> sc = FromHex(j.value("specularColor", json(0xffffff)), path, "specularColor");
+  const int o = a.Offset("specular_color");
+  for (int k = 0; k < 3; ++k) a.values[size_t(o + k)] = sc[k];
+  return a;
 }
 
 render::MaterialPreset ReadThreejsCloth(const std::string& path) {

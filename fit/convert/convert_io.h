@@ -84,17 +84,23 @@ struct Converted {
   // The seed's MeshClothMaterial (cloth/seed-threejs, explicit sheen) for the three.js target,
   // when `cloth` is another variant; WriteThreejsCloth falls back to `cloth`.
   std::optional<render::MaterialPreset> seed_cloth;
+  // The source itself when it is a physical-aniso preset: three.js MeshPhysicalMaterial with
+  // sheen + anisotropy + specular, which the three.js and glTF targets carry exactly (no
+  // fit; docs/convert.md, "physical-aniso").
+  std::optional<render::MaterialPreset> physical_aniso;
   std::vector<MapRef> maps;
   nlohmann::json provenance = nlohmann::json::object();
   bool double_sided = true;  // SourceMaterial::double_sided
 };
 
 void WriteClothPreset(const std::string& path, const Converted& c);
-// three.js r187 MaterialLoader JSON (MeshPhysicalMaterial with sheen).
+// three.js r187 MaterialLoader JSON (MeshPhysicalMaterial with sheen; with anisotropy and
+// specular when `physical_aniso` is set).
 void WriteThreejsPhysical(const std::string& path, const Converted& c);
 // The seed's MeshClothMaterial parameters (same layout, type "MeshClothMaterial").
 void WriteThreejsCloth(const std::string& path, const Converted& c);
-// glTF 2.0 (materials only) with KHR_materials_sheen.
+// glTF 2.0 (materials only) with KHR_materials_sheen; with KHR_materials_anisotropy and
+// KHR_materials_specular when `physical_aniso` is set.
 void WriteGltf(const std::string& path, const Converted& c);
 // Filament material source (.mat) for shadingModel: cloth.
 void WriteFilamentMat(const std::string& path, const Converted& c);
