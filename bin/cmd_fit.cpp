@@ -196,7 +196,7 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "uv_metres_per_unit, or UV units (0.05uv)");
   cmd->add_option("--max-iterations", a.max_iterations, "solver iterations per start (default 50)")
       ->check(CLI::Range(1, 100000));
-  cmd->add_option("--starts", a.starts, "comma-separated start roughness values (default 0.6,0.9)");
+  cmd->add_option("--starts", a.starts, "comma-separated start roughness values (default 0.6,0.9; woven 0.6)");
   cmd->add_option("--start", a.start_values,
                   "start values: name=value,... (colours as r:g:b, e.g. base_color=0.5:0.4:0.3)");
   cmd->add_option("--out", a.out, "output preset JSON")->required();
