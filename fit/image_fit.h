@@ -19,7 +19,8 @@
 //
 // Solver. Ceres trust region (Levenberg-Marquardt) with the parameter table's bounds; the
 // Jacobian comes from one ceres::Jet<double, N> evaluation of the preview per scene (all free
-// parameters at once; N = 4, 8 or 10, the narrowest width holding the free scalars). The
+// parameters at once; N = 4, 6, 8 or 10, the narrowest width holding the free derivative
+// slots: a channel-separable colour block takes one slot, FitOptions::pack_colours). The
 // preview cache of a scene is built only for the pixels the blocks sample
 // (PreviewOptions::sample_mask), with every pixel's fabric flag (docs/fitting.md, "Fit speed"). Multi-start over roughness (the colours are started from the
 // reference's mean colour); the best usable start wins. A fit whose Summary is not usable, or
