@@ -156,7 +156,7 @@ void BM_Preview(benchmark::State& state, const render::PreviewCache* cache) {
 }
 
 struct BenchFitArgs {
-  std::string fabrics = "canvas,twill";
+  std::string fabrics;  // empty: canvas,twill for the sweep; canvas,twill,velvet for --models
   std::string widths = "64,128,256,512";
   std::string strides = "0,1";
   std::string starts = "1,2,3";
@@ -174,7 +174,8 @@ void RunBenchModels(const BenchFitArgs& a, bool quiet) {
   std::vector<render::ModelKind> models;
   if (a.models == "all") {
     models = {render::ModelKind::kCloth, render::ModelKind::kStandard,
-              render::ModelKind::kPhysicalSheen, render::ModelKind::kGltfSheen};
+              render::ModelKind::kPhysicalSheen, render::ModelKind::kGltfSheen,
+              render::ModelKind::kWoven};  // every model clothfit fits
   } else {
     std::stringstream ms(a.models);
     std::string m;
@@ -184,7 +185,7 @@ void RunBenchModels(const BenchFitArgs& a, bool quiet) {
   std::vector<fit::ModelRow> all;
   std::printf("%-8s %-15s %8s %8s %6s %6s %9s %-15s\n", "fabric", "model", "seconds", "cpu s",
               "iters", "starts", "error", "termination");
-  std::stringstream ss(a.fabrics);
+  std::stringstream ss(a.fabrics.empty() ? std::string("canvas,twill,velvet") : a.fabrics);
   std::string name;
   while (std::getline(ss, name, ',')) {
     const std::string fabric_path = root + "/fabrics/" + name + ".json";
@@ -205,7 +206,7 @@ void RunBenchModels(const BenchFitArgs& a, bool quiet) {
                   r.model.c_str(), r.seconds, r.cpu_seconds, r.iterations, r.starts, r.error, r.termination.c_str(),
                   r.usable ? "" : "  (unusable)");
       std::fflush(stdout);
-    });
+    }, fabric_path);
     all.insert(all.end(), rows.begin(), rows.end());
   }
   const std::filesystem::path dir = std::filesystem::path(a.csv).parent_path();
@@ -243,7 +244,7 @@ void RunBenchFit(const BenchFitArgs& a, bool quiet) {
     for (int stride : IntList(a.strides, "--strides", 0, 16))
       for (int starts : IntList(a.starts, "--starts", 1, 3)) settings.push_back({width, -1, stride, starts});
   std::vector<fit::BenchRow> all;
-  std::stringstream ss(a.fabrics);
+  std::stringstream ss(a.fabrics.empty() ? std::string("canvas,twill") : a.fabrics);
   std::string name;
   std::printf("%-8s %5s %5s %6s %6s %8s %9s\n", "fabric", "width", "level", "stride", "starts",
               "seconds", "error");
@@ -325,7 +326,9 @@ void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
   cmd->add_option("--count", a.count,
                   "`bench convert`: materials per input format when generating");
   cmd->add_option("-j,--jobs", a.jobs, "`bench convert`: worker threads (0: all cores)");
-  cmd->add_option("--fabrics", fa.fabrics, "`bench fit`: comma-separated fabric names");
+  cmd->add_option("--fabrics", fa.fabrics,
+                  "`bench fit`: comma-separated fabric names (default canvas,twill; with "
+                  "--models canvas,twill,velvet)");
   cmd->add_option("--widths", fa.widths, "`bench fit`: fit resolutions (image widths, px)");
   cmd->add_option("--strides", fa.strides, "`bench fit`: pixel strides (0 = auto)");
   cmd->add_option("--starts", fa.starts, "`bench fit`: multi-start counts (1-3)");

@@ -4,11 +4,13 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <ctime>
 #include <map>
 #include <sstream>
 
 #include "fit/metrics/plot.h"
+#include "fit/woven_fit.h"
 #include "render/scene/image_io.h"
 
 namespace clothfit::fit {
@@ -109,7 +111,8 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
                                     const std::vector<SceneInput>& inputs,
                                     double weave_period_uv,
                                     const std::vector<render::ModelKind>& models,
-                                    const std::function<void(const ModelRow&)>& log) {
+                                    const std::function<void(const ModelRow&)>& log,
+                                    const std::string& fabric_path) {
   std::vector<ModelRow> rows;
   const int level = AutoLevel(inputs, weave_period_uv);
   for (render::ModelKind m : models) {
@@ -126,7 +129,17 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
     const std::clock_t c0 = std::clock();
     FitResult r;
     try {
-      r = FitImages(inputs, o);
+      if (m == render::ModelKind::kWoven) {
+        o.start_roughness = {0.6};  // the `clothfit fit` default for woven
+        if (!fabric_path.empty()) {
+          const std::filesystem::path maps = std::filesystem::temp_directory_path() /
+                                             ("clothfit-bench-" + fabric + ".weave.exr");
+          (void)AttachWeaveMaps(fabric_path, maps.string(), &o);
+        }
+        r = FitWovenImages(inputs, o);
+      } else {
+        r = FitImages(inputs, o);
+      }
     } catch (const FitError&) {
       r.usable = false;
     }

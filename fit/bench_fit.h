@@ -56,11 +56,15 @@ struct ModelRow {
   std::string termination;
   bool usable = false;
 };
+// woven: as `clothfit fit --model woven --fabric F` (weave maps baked from `fabric_path`
+// into a temporary file when it is an Irawan fabric, inside the timed span; the two stages
+// of fit/woven_fit.h; one start).
 std::vector<ModelRow> RunModelBench(const std::string& fabric,
                                     const std::vector<SceneInput>& inputs,
                                     double weave_period_uv,
                                     const std::vector<render::ModelKind>& models,
-                                    const std::function<void(const ModelRow&)>& log = {});
+                                    const std::function<void(const ModelRow&)>& log = {},
+                                    const std::string& fabric_path = "");
 void WriteModelBench(const std::vector<ModelRow>& rows, const std::string& csv_path);
 
 // Writes rows as CSV (atomically) and an error-vs-time plot as PNG: x = seconds (log scale),

@@ -20,7 +20,16 @@ namespace {
 // smallest instantiated width (render/preview/preview.cpp) holding the free scalars: the cost
 // of Jet arithmetic grows with N, and most models have fewer than 10 free scalars
 // (standard 4; cloth, physical-sheen, gltf-sheen 7-8; woven stages 10).
-constexpr int kJetWidths[] = {4, 8, 10};
+//
+// Colour packing (docs/fitting.md, "Fit speed"): a free RGB block whose channel c enters only
+// the preview's channel c (base_color of every model; cloth's sheen and subsurface colours;
+// woven's specular_color with additive yarn layering; NOT a sheen colour under albedo scaling,
+// whose max3 couples the channels) needs one derivative slot, not three: its three scalars
+// share a slot and output channel c's derivative in that slot is d(out_c)/d(x_c). The block
+// means are linear in the pixels, so they keep this; the display transform may mix channels
+// (AgX, Neutral), so its 3 x 3 Jacobian is applied per block before the residuals
+// (PreviewCost::PackedResiduals).
+constexpr int kJetWidths[] = {4, 6, 8, 10};
 constexpr int kMaxJetWidth = 10;
 
 // The space transform, templated so Jets flow through it.
@@ -106,9 +115,12 @@ class PreviewCost final : public ceres::CostFunction {
   using Jet = ceres::Jet<double, N>;
 
  public:
-  PreviewCost(const SceneData& d, std::vector<int> block_sizes) : d_(d), sizes_(std::move(block_sizes)) {
+  // packed[b]: block b is a channel-separable colour (one derivative slot, see kJetWidths).
+  PreviewCost(const SceneData& d, std::vector<int> block_sizes, std::vector<char> packed)
+      : d_(d), sizes_(std::move(block_sizes)), packed_(std::move(packed)) {
     set_num_residuals(3 * d.blocks());
     for (int s : sizes_) mutable_parameter_block_sizes()->push_back(s);
+    packed_.resize(sizes_.size(), 0);
   }
 
   bool Evaluate(double const* const* parameters, double* residuals,
@@ -121,18 +133,23 @@ class PreviewCost final : public ceres::CostFunction {
     // blocks get jacobians[b] == nullptr), packed in order: at most N free scalars.
     std::vector<Jet> xj(x.size());
     std::vector<int> slot(sizes_.size(), -1);
+    bool any_packed = false;
     {
       int next = 0;
       size_t k = 0;
       for (size_t b = 0; b < sizes_.size(); ++b) {
-        const bool free_block = jacobians[b] != nullptr && next + sizes_[b] <= N;
+        const bool pack = jacobians[b] != nullptr && packed_[b] && sizes_[b] == 3;
+        const int width = pack ? 1 : sizes_[b];
+        const bool free_block = jacobians[b] != nullptr && next + width <= N;
         if (jacobians[b] != nullptr && !free_block) return false;  // FitImages checks this
         if (free_block) slot[b] = next;
         for (int j = 0; j < sizes_[b]; ++j, ++k)
-          xj[k] = free_block ? Jet(x[k], next + j) : Jet(x[k]);
-        if (free_block) next += sizes_[b];
+          xj[k] = free_block ? Jet(x[k], next + (pack ? 0 : j)) : Jet(x[k]);
+        if (free_block) next += width;
+        any_packed = any_packed || pack;
       }
     }
+    if (any_packed) return PackedResiduals(xj.data(), slot, residuals, jacobians);
     std::vector<Jet> r(static_cast<size_t>(num_residuals()));
     if (!Residuals<Jet>(xj.data(), residuals, r.data())) return false;
     for (size_t b = 0; b < sizes_.size(); ++b) {
@@ -143,6 +160,48 @@ class PreviewCost final : public ceres::CostFunction {
       }
     }
     return true;
+  }
+
+  // Residuals and Jacobians with packed colour slots: the block means carry packed
+  // derivatives; each is expanded per parameter through the display transform's 3 x 3
+  // Jacobian (a Jet<double, 3> evaluation at the mean).
+  bool PackedResiduals(const Jet* x, const std::vector<int>& slot, double* residuals,
+                       double** jacobians) const {
+    using J3 = ceres::Jet<double, 3>;
+    std::vector<Rgb<Jet>> px;
+    render::EvaluatePreview(*d_.cache, x, px);
+    bool finite = true;
+    for (int b = 0; b < d_.blocks(); ++b) {
+      Rgb<Jet> sum(Jet(0.0), Jet(0.0), Jet(0.0));
+      const int begin = d_.block_begin[size_t(b)], end = d_.block_begin[size_t(b) + 1];
+      for (int i = begin; i < end; ++i) sum += px[size_t(i)] * Jet(d_.pixel_weight[size_t(i)]);
+      const Rgb<Jet> mean = sum * Jet(1.0 / d_.block_weight[size_t(b)]);
+      const Rgb<J3> t = Transform(Rgb<J3>(J3(mean[0].a, 0), J3(mean[1].a, 1), J3(mean[2].a, 2)),
+                                  d_.space, d_.op, d_.exposure);
+      for (int c = 0; c < 3; ++c) {
+        const size_t row = size_t(b) * 3 + size_t(c);
+        const double w = d_.weight[size_t(b)][c];
+        const double r = (t[c].a - d_.ref_t[size_t(b)][c]) * w;
+        residuals[row] = r;
+        finite = finite && std::isfinite(r) && ceres::isfinite(t[c]);
+        for (size_t pb = 0; pb < sizes_.size(); ++pb) {
+          if (!jacobians[pb]) continue;
+          const int n = sizes_[pb];
+          const bool pack = packed_[pb] && n == 3;
+          for (int j = 0; j < n; ++j) {
+            double dt = 0.0;  // d t_c / d x_{pb, j}
+            if (pack) {
+              dt = t[c].v[j] * mean[j].v[slot[pb]];
+            } else {
+              for (int k = 0; k < 3; ++k) dt += t[c].v[k] * mean[k].v[slot[pb] + j];
+            }
+            jacobians[pb][row * size_t(n) + size_t(j)] = w * dt;
+            finite = finite && std::isfinite(w * dt);
+          }
+        }
+      }
+    }
+    return finite;
   }
 
   template <typename T>
@@ -176,6 +235,7 @@ class PreviewCost final : public ceres::CostFunction {
  private:
   const SceneData& d_;
   std::vector<int> sizes_;
+  std::vector<char> packed_;
 };
 
 // Unweighted sum of squared block errors in the fit space for flat parameters x.
@@ -491,11 +551,39 @@ bool IsConstantBlock(const ParamInfo& p, const FitOptions& opt) {
   return ignored || IsLocked(opt, p.name);
 }
 
-// Free scalars of a model under the options (what the Jet must carry).
+// Free scalars of a model under the options.
 int FreeScalars(ParamTable table, const FitOptions& opt) {
   int n = 0;
   for (const ParamInfo& p : table)
     if (!IsConstantBlock(p, opt)) n += p.size;
+  return n;
+}
+
+// Whether a parameter's RGB channels enter only the same preview channel (the colour packing
+// of kJetWidths). `yarn`: the woven yarn layering of the preview caches.
+bool ChannelSeparable(const ParamInfo& p, const FitOptions& opt, woven::YarnLayer yarn) {
+  if (!opt.pack_colours || p.size != 3) return false;
+  const std::string_view name = p.name;
+  if (name == "base_color") return true;  // every model: diffuse and F0 per channel
+  switch (opt.start.model) {
+    case render::ModelKind::kCloth: return name == "sheen_color" || name == "subsurface_color";
+    case render::ModelKind::kWoven:
+      return name == "specular_color" && yarn == woven::YarnLayer::kAdditive;
+    default: return false;  // physical-sheen, gltf-sheen: sheen albedo scaling uses max3
+  }
+}
+
+std::vector<char> PackedBlocks(ParamTable table, const FitOptions& opt, woven::YarnLayer yarn) {
+  std::vector<char> packed;
+  for (const ParamInfo& p : table) packed.push_back(ChannelSeparable(p, opt, yarn) ? 1 : 0);
+  return packed;
+}
+
+// Derivative slots the Jet must carry: the free scalars, a packed colour counting once.
+int FreeSlots(ParamTable table, const FitOptions& opt, woven::YarnLayer yarn) {
+  int n = 0;
+  for (const ParamInfo& p : table)
+    if (!IsConstantBlock(p, opt)) n += ChannelSeparable(p, opt, yarn) ? 1 : p.size;
   return n;
 }
 
@@ -507,23 +595,31 @@ int JetWidthFor(int free_scalars) {
 }
 
 ceres::CostFunction* MakePreviewCost(const SceneData& d, const std::vector<int>& sizes,
-                                     int jet_width) {
+                                     const std::vector<char>& packed, int jet_width) {
   switch (jet_width) {
-    case 4: return new PreviewCost<4>(d, sizes);
-    case 8: return new PreviewCost<8>(d, sizes);
-    default: return new PreviewCost<kMaxJetWidth>(d, sizes);
+    case 4: return new PreviewCost<4>(d, sizes, packed);
+    case 6: return new PreviewCost<6>(d, sizes, packed);
+    case 8: return new PreviewCost<8>(d, sizes, packed);
+    default: return new PreviewCost<kMaxJetWidth>(d, sizes, packed);
   }
 }
 
+woven::YarnLayer YarnLayerOf(const SceneList& data) {
+  return data.empty() ? woven::YarnLayer::kAdditive : data[0]->cache->options.woven.yarn_layer;
+}
+
 // One residual block per scene, with the chosen robust loss.
-void AddSceneResiduals(ceres::Problem& problem, const SceneList& data,
-                       const std::vector<int>& sizes, const FitOptions& opt, int jet_width,
+void AddSceneResiduals(ceres::Problem& problem, const SceneList& data, ParamTable table,
+                       const std::vector<int>& sizes, const FitOptions& opt,
                        const std::vector<double*>& ptrs) {
+  const woven::YarnLayer yarn = YarnLayerOf(data);
+  const std::vector<char> packed = PackedBlocks(table, opt, yarn);
+  const int jet_width = JetWidthFor(FreeSlots(table, opt, yarn));
   for (const auto& d : data) {
     ceres::LossFunction* loss = nullptr;
     if (opt.loss == Loss::kHuber) loss = new ceres::HuberLoss(opt.loss_scale);
     if (opt.loss == Loss::kCauchy) loss = new ceres::CauchyLoss(opt.loss_scale);
-    problem.AddResidualBlock(MakePreviewCost(*d, sizes, jet_width), loss, ptrs);
+    problem.AddResidualBlock(MakePreviewCost(*d, sizes, packed, jet_width), loss, ptrs);
   }
 }
 
@@ -561,7 +657,7 @@ ceres::Solver::Summary SolveStart(const SceneList& data, ParamTable table,
   ceres::Problem problem;
   std::vector<double*> ptrs;
   for (auto& b : blocks) ptrs.push_back(b.data());
-  AddSceneResiduals(problem, data, sizes, opt, JetWidthFor(FreeScalars(table, opt)), ptrs);
+  AddSceneResiduals(problem, data, table, sizes, opt, ptrs);
   SetBoundsOrConstant(problem, table, opt, blocks, ptrs);
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
@@ -715,7 +811,47 @@ std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::
   return render::ComposeFrame(*cache, px);
 }
 
+struct PreparedScenes {
+  SceneList data;
+  int level = 0, stride = 0;
+  Space space = Space::kDisplay;
+  double min_coverage = 0.0;
+  render::ModelKind model = render::ModelKind::kCloth;
+  nlohmann::json weave_maps;  // the start preset's "weave_maps" field (null: none)
+  double seconds = 0.0;
+};
+
+namespace {
+nlohmann::json WeaveMapsField(const render::MaterialPreset& p) {
+  const auto it = p.extra.find("weave_maps");
+  return it == p.extra.end() ? nlohmann::json() : *it;
+}
+}  // namespace
+
+std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput>& inputs,
+                                                    const FitOptions& opt) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (inputs.empty()) throw FitError("fit: no (scene, reference) pairs");
+  auto p = std::make_shared<PreparedScenes>();
+  p->data = BuildScenes(inputs, opt);
+  p->level = opt.level;
+  p->stride = opt.pixel_stride;
+  p->space = opt.space;
+  p->min_coverage = opt.min_coverage;
+  p->model = opt.start.model;
+  p->weave_maps = WeaveMapsField(opt.start);
+  p->seconds = SecondsSince(t0);
+  return p;
+}
+
+double PreparedSeconds(const PreparedScenes& prepared) { return prepared.seconds; }
+
 FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt) {
+  return FitImages(inputs, opt, nullptr);
+}
+
+FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt,
+                    const PreparedScenes* prepared) {
   const auto t0 = std::chrono::steady_clock::now();
   if (inputs.empty()) throw FitError("fit: no (scene, reference) pairs");
   const render::ModelKind model = opt.start.model;
@@ -728,8 +864,21 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
     throw FitError("fit: model " + render::ToString(model) + " has " + std::to_string(free_scalars) +
                    " free parameters; at most 10 (lock some with --lock)");
 
-  // Per scene: cache, blocks, transformed reference, weights.
-  const SceneList data = BuildScenes(inputs, opt);
+  // Per scene: cache, blocks, transformed reference, weights (built here, or prepared by the
+  // caller for the same inputs and cache-relevant options: checked).
+  std::shared_ptr<const PreparedScenes> own;
+  if (prepared) {
+    if (prepared->data.size() != inputs.size() || prepared->level != opt.level ||
+        prepared->stride != opt.pixel_stride || prepared->space != opt.space ||
+        prepared->min_coverage != opt.min_coverage || prepared->model != opt.start.model ||
+        (opt.start.model == render::ModelKind::kCloth) ||
+        prepared->weave_maps != WeaveMapsField(opt.start))
+      throw FitError("fit: the prepared scenes were built with other options");
+  } else {
+    own = PrepareScenes(inputs, opt);
+    prepared = own.get();
+  }
+  const SceneList& data = prepared->data;
 
   FitResult best;
   best.usable = false;

@@ -19,7 +19,8 @@
 //
 // Solver. Ceres trust region (Levenberg-Marquardt) with the parameter table's bounds; the
 // Jacobian comes from one ceres::Jet<double, N> evaluation of the preview per scene (all free
-// parameters at once; N = 4, 8 or 10, the narrowest width holding the free scalars). The
+// parameters at once; N = 4, 6, 8 or 10, the narrowest width holding the free derivative
+// slots: a channel-separable colour block takes one slot, FitOptions::pack_colours). The
 // preview cache of a scene is built only for the pixels the blocks sample
 // (PreviewOptions::sample_mask), with every pixel's fabric flag (docs/fitting.md, "Fit speed"). Multi-start over roughness (the colours are started from the
 // reference's mean colour); the best usable start wins. A fit whose Summary is not usable, or
@@ -83,6 +84,10 @@ struct FitOptions {
   double function_tolerance = 1e-7;
   bool verbose = false;
   bool init_from_reference = true;  // start colours from the reference's mean colour
+  // Jacobian: a channel-separable colour block takes one derivative slot instead of three
+  // (fit/image_fit.cpp, kJetWidths; docs/fitting.md "Fit speed"). Same Jacobian up to
+  // rounding; false only to compare.
+  bool pack_colours = true;
 };
 
 struct SceneInput {
@@ -129,6 +134,18 @@ int AutoLevel(const std::vector<SceneInput>& inputs, double weave_period_uv, int
 // The fit. Throws FitError on bad input (mismatched sizes, no usable blocks, infeasible
 // start); returns usable = false when the solver fails.
 FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& options);
+
+// The per-scene fit data (preview caches of the sampled pixels, blocks, targets, weights),
+// built once and shared by several fits of the same inputs (the woven stages): they must use
+// the same level, pixel stride, space, min_coverage, model and weave maps (FitError if not;
+// cloth, whose cache depends on its options, is not shared). `setup_seconds` of such a fit
+// does not include the preparation (PreparedScenes::seconds, see PreparedSeconds).
+struct PreparedScenes;
+std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput>& inputs,
+                                                    const FitOptions& options);
+double PreparedSeconds(const PreparedScenes& prepared);
+FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& options,
+                    const PreparedScenes* prepared);
 
 // The preview (linear, full frame) of a preset on a scene: for residual images and reports.
 std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,

@@ -62,9 +62,13 @@ std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& m
 FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options) {
   if (options.start.model != render::ModelKind::kWoven)
     throw FitError("FitWovenImages: the start preset is not a woven preset");
+  // Both stages fit over the same caches, blocks and targets: built once.
+  const auto prepared = PrepareScenes(inputs, options);
   FitOptions yarn = options;
   yarn.locked = Union(options.locked, {"anisotropy", "twist", "sheen_color", "sheen_roughness"});
-  FitResult r1 = FitImages(inputs, yarn);
+  FitResult r1 = FitImages(inputs, yarn, prepared.get());
+  r1.setup_seconds += PreparedSeconds(*prepared);
+  r1.seconds += PreparedSeconds(*prepared);
   if (!r1.usable) return r1;
 
   FitOptions sheen = options;
@@ -76,7 +80,7 @@ FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions
     sheen.start.values[size_t(off + c)] = std::max(sheen.start.values[size_t(off + c)], 0.02);
   sheen.locked = Union(options.locked, {"roughness", "anisotropy", "twist", "warp_share",
                                         "specular_f0", "forward_scattering"});
-  FitResult r2 = FitImages(inputs, sheen);
+  FitResult r2 = FitImages(inputs, sheen, prepared.get());
   const double seconds = r1.seconds + r2.seconds, setup = r1.setup_seconds + r2.setup_seconds;
   const int iterations = r1.iterations + r2.iterations, starts = r1.starts + r2.starts;
   FitResult best = (r2.usable && r2.rmse < r1.rmse) ? std::move(r2) : std::move(r1);

@@ -11,7 +11,9 @@
 //      sheen_roughness (10); the lobe shape is held. Kept only if it lowers the unweighted
 //      RMSE in the fit space (it cannot raise the cost it minimises: it starts at stage 1's
 //      optimum with the sheen at a small value).
-// Parameters the caller locks stay locked in both stages.
+// Parameters the caller locks stay locked in both stages. Each stage carries 6 derivative
+// slots with colour packing (fit/image_fit.h); both use one PrepareScenes (caches, blocks);
+// the stages run once per options.start_roughness value (clothfit fit: one, 0.6).
 //
 // Weave maps (fit/weave_maps.h): AttachWeaveMaps bakes them for an Irawan fabric BEFORE the
 // stages, writes the EXR and names it in the start preset's "weave_maps" field; FitImages

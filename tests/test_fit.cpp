@@ -335,3 +335,87 @@ TEST(Fit, FittedParametersDoNotDriftWithWeaveScale) {
 
 }  // namespace
 }  // namespace clothfit::fit
+
+namespace clothfit::fit {
+namespace {
+
+// Colour packing (fit/image_fit.cpp, kJetWidths): a channel-separable colour block carried in
+// one derivative slot gives the same Jacobian as three slots (up to rounding), so the same
+// fit: same iterations, same parameters. Under ACES (per channel) and AgX (mixes channels:
+// the display transform's 3 x 3 Jacobian is applied per block), for every model with a
+// packed block (woven: both image stages' free sets).
+TEST(Fit, ColourPackingGivesTheSameFitAsOneSlotPerScalar) {
+  struct PackCase {
+    ModelKind model;
+    std::vector<double> truth, start;
+    std::vector<std::string> locked;
+  };
+  const std::vector<PackCase> cases = {
+      {ModelKind::kCloth, {0.6, 0.35, 0.2, 0.8, 0.7, 0.5, 0.62, 0, 0, 0},
+       {0.4, 0.4, 0.4, 0.5, 0.5, 0.5, 0.8, 0, 0, 0}, {}},
+      {ModelKind::kStandard, {0.5, 0.3, 0.2, 0.45, 0.0}, {0.3, 0.3, 0.3, 0.7, 0.0}, {"metalness"}},
+      {ModelKind::kGltfSheen, {0.5, 0.3, 0.2, 0.5, 0.0, 0.6, 0.5, 0.4, 0.5},
+       {0.3, 0.3, 0.3, 0.7, 0.0, 0.3, 0.3, 0.3, 0.7}, {"metallic"}},
+      {ModelKind::kWoven,
+       {0.5, 0.3, 0.2, 0.6, 0.5, 0.4, 0.5, 0.7, 0, 0.6, 0.1, 3.0, 0, 0, 0, 0.6},
+       {0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.7, 0.7, 0, 0.5, 0.05, 2.0, 0, 0, 0, 0.6},
+       {"anisotropy", "twist", "sheen_color", "sheen_roughness"}},
+      {ModelKind::kWoven,
+       {0.5, 0.3, 0.2, 0.6, 0.5, 0.4, 0.5, 0.7, 0, 0.6, 0.1, 3.0, 0.2, 0.15, 0.1, 0.5},
+       {0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.5, 0.7, 0, 0.6, 0.1, 3.0, 0.05, 0.05, 0.05, 0.7},
+       {"roughness", "anisotropy", "twist", "warp_share", "specular_f0", "forward_scattering"}},
+  };
+  for (const char* tone : {"ACESFilmic", "AgX"}) {
+    render::Scene s = TestScene(32);
+    s.card.tone_mapping = tone;
+    const render::Environment env = render::Environment::ProceduralSky(1.0, 0.7);
+    for (const PackCase& c : cases) {
+      render::MaterialPreset truth = render::DefaultPreset(c.model);
+      truth.values = c.truth;
+      const Reference ref = PreviewReference(s, &env, truth);
+      render::MaterialPreset start = truth;
+      start.values = c.start;
+      FitOptions packed = Options(start, c.locked);
+      packed.max_iterations = 30;
+      FitOptions plain = packed;
+      plain.pack_colours = false;
+      const FitResult a = FitImages({{&s, &env, &ref, nullptr, "test"}}, packed);
+      const FitResult b = FitImages({{&s, &env, &ref, nullptr, "test"}}, plain);
+      const std::string what = std::string(tone) + " " + render::ToString(c.model);
+      ASSERT_TRUE(a.usable && b.usable) << what;
+      EXPECT_EQ(a.iterations, b.iterations) << what;
+      EXPECT_NEAR(a.final_cost, b.final_cost, 1e-9 * (1.0 + b.final_cost)) << what;
+      EXPECT_NEAR(a.initial_cost, b.initial_cost, 1e-12 * (1.0 + b.initial_cost)) << what;
+      for (size_t k = 0; k < c.truth.size(); ++k)
+        EXPECT_NEAR(a.preset.values[k], b.preset.values[k], 1e-7) << what << " parameter " << k;
+      EXPECT_LT(a.final_cost, 0.5 * a.initial_cost) << what;  // the fit moved
+    }
+  }
+}
+
+// Prepared scenes are shared only by fits with the same cache-relevant options.
+TEST(Fit, PreparedScenesMustMatchTheFitOptions) {
+  const render::Scene s = TestScene(32);
+  const render::Environment env = render::Environment::ProceduralSky(1.0, 0.7);
+  render::MaterialPreset truth = render::DefaultPreset(ModelKind::kStandard);
+  truth.values = {0.5, 0.3, 0.2, 0.45, 0.0};
+  const Reference ref = PreviewReference(s, &env, truth);
+  const std::vector<SceneInput> in = {{&s, &env, &ref, nullptr, "test"}};
+  FitOptions o = Options(truth, {"metalness"});
+  const auto prepared = PrepareScenes(in, o);
+  const FitResult shared = FitImages(in, o, prepared.get());
+  const FitResult own = FitImages(in, o);
+  ASSERT_TRUE(shared.usable && own.usable);
+  EXPECT_EQ(shared.final_cost, own.final_cost);
+  EXPECT_EQ(shared.preset.values, own.preset.values);
+  FitOptions other = o;
+  other.level = 1;
+  EXPECT_THROW(FitImages(in, other, prepared.get()), FitError);
+  other = o;
+  other.start = render::DefaultPreset(ModelKind::kGltfSheen);
+  other.locked = {"metallic"};
+  EXPECT_THROW(FitImages(in, other, prepared.get()), FitError);
+}
+
+}  // namespace
+}  // namespace clothfit::fit

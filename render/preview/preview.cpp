@@ -678,6 +678,9 @@ template void EvaluatePreview<float>(const PreviewCache&, const float*, std::vec
 template void EvaluatePreview<ceres::Jet<double, 4>>(const PreviewCache&,
                                                       const ceres::Jet<double, 4>*,
                                                       std::vector<Rgb<ceres::Jet<double, 4>>>&);
+template void EvaluatePreview<ceres::Jet<double, 6>>(const PreviewCache&,
+                                                      const ceres::Jet<double, 6>*,
+                                                      std::vector<Rgb<ceres::Jet<double, 6>>>&);
 template void EvaluatePreview<ceres::Jet<double, 8>>(const PreviewCache&,
                                                       const ceres::Jet<double, 8>*,
                                                       std::vector<Rgb<ceres::Jet<double, 8>>>&);
