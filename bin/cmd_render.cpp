@@ -67,7 +67,7 @@ bool ParseAovs(const std::string& list, render::AovSet& aovs, std::string& bad) 
 void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   struct Args {
     std::string scene, fabric, out, aov;
-    int spp = 64, threads = 0, max_depth = 8, env_samples = -1, rr_start_depth = -1;
+    int spp = 64, threads = 0, max_depth = 8, env_samples = -1;
     uint64_t seed = 1;
     double target_error = 0.0;
   };
@@ -85,9 +85,6 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--env-samples", args->env_samples,
                   "environment samples at each camera ray's hit (default: the renderer's)")
       ->check(CLI::Range(1, 16));
-  cmd->add_option("--rr-start-depth", args->rr_start_depth,
-                  "Russian roulette from this path depth on (default: the renderer's)")
-      ->check(CLI::Range(1, 64));
   cmd->add_option("--target-error", args->target_error,
                   "adaptive sampling: target mean standard error / mean value (0.02 = 2 %); "
                   "--spp is then the per-pixel budget (a multiple of 16 >= 32)")
@@ -101,7 +98,6 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       st.seed = args->seed;
       st.max_depth = args->max_depth;
       if (args->env_samples > 0) st.first_env_samples = args->env_samples;
-      if (args->rr_start_depth > 0) st.rr_start_depth = args->rr_start_depth;
       st.target_error = args->target_error;
       if (st.target_error > 0.0 && (args->spp < 32 || args->spp % 16 != 0)) {
         std::fprintf(stderr,
@@ -137,8 +133,7 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
            {"clothfit:spp", std::to_string(args->spp)},
            {"clothfit:seed", std::to_string(args->seed)},
            {"clothfit:max_depth", std::to_string(args->max_depth)},
-           {"clothfit:env_samples", std::to_string(r.first_env_samples)},
-           {"clothfit:rr_start_depth", std::to_string(st.rr_start_depth)},
+           {"clothfit:env_samples", std::to_string(st.first_env_samples)},
            {"clothfit:target_error", std::to_string(st.target_error)},
            {"clothfit:mean_spp", std::to_string(r.mean_spp)},
            {"clothfit:environment", env ? env->source() : std::string("none")},

@@ -51,11 +51,6 @@ class Bsdf {
   virtual bool Sample(const Vec3d& wo, const Point2d& u, double uc, const ShadingPoint& sp,
                       BsdfSample* out) const = 0;
   virtual std::string Name() const = 0;
-  // Environment samples the path tracer takes at the camera ray's hit when this BSDF is the
-  // fabric and the settings leave the count to it (RenderSettings::first_env_samples = 0):
-  // the count that renders its references fastest at a given standard error, measured on the
-  // canonical scenes (docs/reference-renderer.md, "Environment samples per fabric model").
-  virtual int PreferredFirstEnvSamples() const { return 2; }
 };
 
 // Cosine-weighted hemisphere sampling (Malley), pdf = cos(theta) / pi.

@@ -590,9 +590,6 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   const Scene& scene = impl_->scene;
   const int W = scene.card.width, H = scene.card.height;
   RenderResult r = AllocateResult(W, H, st.aovs);
-  // Environment samples at the first vertex: the settings' count, or the fabric's preference.
-  const int env_samples =
-      st.first_env_samples > 0 ? st.first_env_samples : impl_->fabric.PreferredFirstEnvSamples();
 
   const int tiles_x = (W + st.tile_size - 1) / st.tile_size;
   const int tiles_y = (H + st.tile_size - 1) / st.tile_size;
@@ -620,7 +617,7 @@ RenderResult PathTracer::Render(const RenderSettings& st,
       throw std::invalid_argument(
           "adaptive sampling: need target_error in (0, 1000), min_spp and pilot_spp multiples "
           "of 16 >= 32, spp >= min_spp");
-    const SamplingPlan pilot = PlanFor(st.pilot_spp, env_samples);
+    const SamplingPlan pilot = PlanFor(st.pilot_spp, st.first_env_samples);
     std::vector<Impl::PilotStats> stats(static_cast<size_t>(tiles));
     tbb::parallel_for(0, tiles, [&](int tile) {
       stats[size_t(tile)] = impl_->PilotTile(st, pilot, tile, tiles_x);
@@ -649,12 +646,11 @@ RenderResult PathTracer::Render(const RenderSettings& st,
 
   // Batches per tile (see PlanFor); r.batches is the count of the first tile (16 whenever
   // every tile's spp is a multiple of 16 >= 32, as adaptive counts always are).
-  r.batches = PlanFor(tile_spp[0], env_samples).K;
-  r.first_env_samples = PlanFor(tile_spp[0], env_samples).env_samples;
+  r.batches = PlanFor(tile_spp[0], st.first_env_samples).K;
   tbb::parallel_for(0, tiles, [&](int tile) {
     const int spp = tile_spp[size_t(tile)];
     total_rays +=
-        impl_->RenderTile(st, PlanFor(spp, env_samples), spp, tile, tiles_x, r);
+        impl_->RenderTile(st, PlanFor(spp, st.first_env_samples), spp, tile, tiles_x, r);
     tick(1);
   });
 

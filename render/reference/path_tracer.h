@@ -33,10 +33,7 @@ struct AovSet {
 // 2: stratified first-vertex environment/BSDF numbers and two environment samples there.
 // 3: Sadeghi evaluated through identities (same expectation, rounding-level changes) and
 //    adaptive sampling (target_error; fixed-spp images are unchanged by it).
-// 4: first_env_samples defaults to the fabric BSDF's preference (Sadeghi velvet 8, others 2):
-//    velvet images change; canvas and twill images are bit-identical to version 3 (the key
-//    still changes with the version).
-inline constexpr int kReferenceRendererVersion = 4;
+inline constexpr int kReferenceRendererVersion = 3;
 
 struct RenderSettings {
   int spp = 64;
@@ -46,9 +43,8 @@ struct RenderSettings {
   int tile_size = 16;
   // Environment samples at the camera ray's hit (stratified over the pixel's batch; deeper
   // vertices take one). Only with batches of more than one sample (spp >= 32, a multiple of 16).
-  // 0 (default): the fabric BSDF's Bsdf::PreferredFirstEnvSamples() (2 for Irawan and the
-  // simple materials, 8 for the Sadeghi velvet; measured, docs/reference-renderer.md).
-  int first_env_samples = 0;
+  // 2: measured best over the canonical scenes (docs/reference-renderer.md).
+  int first_env_samples = 2;
   AovSet aovs;
   double max_sample_value = 0.0;  // > 0: clamp each sample's channels (biased; 0 = off)
   // Adaptive sampling (docs/reference-renderer.md, "Adaptive sampling"): > 0 = target for
@@ -73,7 +69,6 @@ struct RenderResult {
   std::vector<float> std_error;  // standard error of the pixel mean per channel, from the
                                  // spread of `batches` i.i.d. batch means (see Render)
   int batches = 0;
-  int first_env_samples = 0;  // environment samples used at the camera ray's hit
   std::vector<float> coverage;   // fraction of camera samples hitting geometry (alpha)
   std::vector<float> fabric;     // fraction of camera samples hitting the fabric material
   // AOVs (first-hit, averaged over the pixel's samples that hit; empty unless requested)

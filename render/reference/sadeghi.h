@@ -80,10 +80,6 @@ class SadeghiBsdf final : public Bsdf {
   bool Sample(const Vec3d& wo, const Point2d& u, double uc, const ShadingPoint& sp,
               BsdfSample* out) const override;
   std::string Name() const override { return "sadeghi:" + fabric_.name; }
-  // Velvet's noise is the environment seen through its broad, grazing sheen: 8 samples
-  // render its canonical references 2.5 to 3.9 times more efficiently (1 / (error^2 x CPU s),
-  // 32 spp) than 2 (docs/reference-renderer.md).
-  int PreferredFirstEnvSamples() const override { return 8; }
 
   const SadeghiFabric& fabric() const { return fabric_; }
 
