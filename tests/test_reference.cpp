@@ -8,7 +8,9 @@
 #include <cstdio>
 
 #include "render/scene/environment.h"
+#include "render/reference/irawan.h"
 #include "render/reference/path_tracer.h"
+#include "render/reference/weave_pattern.h"
 #include "render/scene/scene.h"
 #include "tests/scene_fixtures.h"
 
@@ -245,6 +247,48 @@ TEST(Reference, NoEnvironmentMeansBackgroundOnlyAndNoEnvSampling) {
   EXPECT_FLOAT_EQ(r.rgb[0], 0.25f);  // corner pixel misses the sphere: background
   EXPECT_FLOAT_EQ(r.rgb[2], 0.75f);
   EXPECT_EQ(r.coverage[0], 0.0f);
+}
+
+// Filament yarns with smoothing ss > 0 (polyester: ss = 0.5, kappa = -0.7): the specular term
+// reads the spine's radius of curvature at min(|u_h|, (1 - ss) umax) on the arc of maximum
+// inclination (1 - ss) umax (Mitsuba 0.5, src/bsdfs/irawan.cpp; cloth-models.md section 9), not
+// at |u_h| on the arc of umax. Checked through SpecularIntegrand itself: for two patterns that
+// differ only in kappa, everything but G = a (R + a cos v) / (len |t x h|) is equal, so the
+// integrands' ratio at v = 0 is (R_kappa + a) / (R_0 + a).
+TEST(Reference, IrawanFilamentCurvatureFollowsSmoothedSpine) {
+  const std::string path = std::string(CLOTHFIT_TEST_SOURCE_DIR) + "/datasets/weaves/polyester.weave";
+  WeavePattern bent = LoadWeave(path);
+  ASSERT_EQ(bent.ss, 0.5);
+  WeavePattern circle = bent;
+  for (Yarn& y : circle.yarns) y.kappa = 0.0;
+  const IrawanBsdf fb(bent, 1.0, 1.0), fc(circle, 1.0, 1.0);
+  const Yarn& y = bent.yarns[0];  // a warp, psi = 0
+  ASSERT_EQ(y.type, YarnType::kWarp);
+  ASSERT_EQ(y.psi, 0.0);
+  const double umax = y.umax * kPi / 180.0, a = 0.5 * y.width, ss = bent.ss;
+  for (const double frac : {0.3, 0.8}) {  // below and above (1 - ss) umax
+    const double u_h = frac * umax;
+    IrawanPoint p;
+    p.yarn = 0;
+    p.umax = umax;
+    p.v = 0.0;
+    p.along = u_h / umax * 0.5 * y.length;  // the band's centre (inside the clamp for hWidth 0.5)
+    // Shading-frame half vector of a warp yarn at inclination u_h (ToYarnFrame: y_yarn = x).
+    const Vec3d h(std::sin(u_h), 0.0, std::cos(u_h)), e(0.0, 1.0, 0.0);
+    const double th = 0.4;
+    const Vec3d wi = h * std::cos(th) + e * std::sin(th), wo = h * std::cos(th) - e * std::sin(th);
+    const double ib = fb.SpecularIntegrand(p, wo, wi), ic = fc.SpecularIntegrand(p, wo, wi);
+    ASSERT_GT(ic, 0.0) << frac;
+    const double us = (1.0 - ss) * umax;
+    const double r_bent = SpineRadius(std::min(u_h, us), us, y.kappa, y.width, y.length);
+    const double r_circle = (0.5 * y.length - a * std::sin(us)) / std::sin(us);  // constant
+    EXPECT_NEAR(FilamentRadius(u_h, umax, ss, y.kappa, y.width, y.length), r_bent, 1e-12);
+    EXPECT_NEAR(FilamentRadius(u_h, umax, ss, 0.0, y.width, y.length), r_circle, 1e-12);
+    EXPECT_NEAR(ib / ic, (r_bent + a) / (r_circle + a), 1e-9) << "u_h = " << frac << " umax";
+    // ss = 0: the plain spine.
+    EXPECT_EQ(FilamentRadius(u_h, umax, 0.0, y.kappa, y.width, y.length),
+              SpineRadius(u_h, umax, y.kappa, y.width, y.length));
+  }
 }
 
 }  // namespace

@@ -113,6 +113,13 @@ double SpineRadius(double u_abs, double umax, double kappa, double width, double
   return std::pow(b * b * ch * ch + c * c * sh * sh, 1.5) / (b * c);
 }
 
+double FilamentRadius(double u_h_abs, double umax, double ss, double kappa, double width,
+                      double length) {
+  if (ss <= 0.0) return SpineRadius(u_h_abs, umax, kappa, width, length);
+  const double umax_s = (1.0 - ss) * umax;
+  return SpineRadius(std::min(u_h_abs, umax_s), umax_s, kappa, width, length);
+}
+
 IrawanBsdf::IrawanBsdf(WeavePattern pattern, double repeat_u, double repeat_v)
     : pattern_(std::move(pattern)), repeat_u_(repeat_u), repeat_v_(repeat_v) {
   if (!(repeat_u > 0.0) || !(repeat_v > 0.0) || !std::isfinite(repeat_u) ||
@@ -232,7 +239,7 @@ double IrawanBsdf::SpecularIntegrand(const IrawanPoint& p, const Vec3d& wo_s,
     const double v = p.v, sv = std::sin(v), cv = std::cos(v);
     const Vec3d n(sv, sin_uh * cv, cos_uh * cv);
     const Vec3d t(0.0, cos_uh, -sin_uh);
-    const double R = SpineRadius(std::abs(u_h), umax, y.kappa, w, l);
+    const double R = FilamentRadius(std::abs(u_h), umax, pattern_.ss, y.kappa, w, l);
     const double txh_x = t.y * h.z - t.z * h.y;
     const double G = a * (R + a * cv) / (len * std::abs(txh_x));
     double A = Seeliger(Dot(n, wi), Dot(n, wo));

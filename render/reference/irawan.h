@@ -132,6 +132,15 @@ Vec3d FromYarnFrame(const Vec3d& d, YarnType type);
 // Radius of curvature of the yarn spine at inclination |u| (see docs/woven-cloth.md 1.3).
 double SpineRadius(double u_abs, double umax, double kappa, double width, double length);
 
+// Radius of curvature the specular term of a filament yarn (psi = 0) uses at the highlight's
+// inclination u_h, with filament smoothing ss (0 <= ss < 1): following Mitsuba 0.5
+// (src/bsdfs/irawan.cpp, specular term), the spine is taken as the arc of maximum inclination
+// (1 - ss) umax and the radius is read at min(|u_h|, (1 - ss) umax):
+//   R = SpineRadius(min(|u_h|, (1 - ss) umax), (1 - ss) umax, kappa, width, length).
+// ss = 0 gives SpineRadius(|u_h|, umax, ...) exactly.
+double FilamentRadius(double u_h_abs, double umax, double ss, double kappa, double width,
+                      double length);
+
 // Modified Bessel function of the first kind, order 0 (power series).
 double BesselI0(double x);
 
