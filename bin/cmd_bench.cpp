@@ -175,7 +175,7 @@ void RunBenchModels(const BenchFitArgs& a, bool quiet) {
   if (a.models == "all") {
     models = {render::ModelKind::kCloth, render::ModelKind::kStandard,
               render::ModelKind::kPhysicalSheen, render::ModelKind::kGltfSheen,
-              render::ModelKind::kWoven};  // every model clothfit fits
+              render::ModelKind::kWoven, render::ModelKind::kPhysicalAniso};  // every model clothfit fits
   } else {
     std::stringstream ms(a.models);
     std::string m;

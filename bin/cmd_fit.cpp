@@ -319,20 +319,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   fit::FitOptions o;
   o.start = start;
   o.locked = SplitList(a.lock);
-  if (start.model == render::ModelKind::kStandard ||
-      start.model == render::ModelKind::kPhysicalSheen)
-    o.locked.push_back("metalness");
-  if (start.model == render::ModelKind::kGltfSheen) o.locked.push_back("metallic");
-  // physical-aniso (docs/fitting.md, "The honest baseline"): 10 free scalars (base colour,
-  // roughness, sheen colour and roughness, anisotropy strength, specular intensity); the
-  // direction comes from the weave maps, so the rotation is held at 0; specular colour white.
-  if (start.model == render::ModelKind::kPhysicalAniso) {
-    for (const char* n : {"metalness", "anisotropy_rotation", "specular_color"})
-      o.locked.push_back(n);
-    // Start the strength off 0, where d alpha_t / d strength = 2 strength (1 - alpha) = 0
-    // would hold it (measured: every fit from 0 stayed at 0). --start overrides.
-    o.start.values[size_t(o.start.Offset("anisotropy_strength"))] = 0.5;
-  }
+  fit::ApplyModelDefaults(&o);  // dielectric locks; physical-aniso's locks and start
   o.space = fit::ParseSpace(a.space);
   o.loss = a.loss == "huber" ? fit::Loss::kHuber
            : a.loss == "cauchy" ? fit::Loss::kCauchy
@@ -614,13 +601,10 @@ int RunFit(const FitArgs& a, const Globals& g) {
   // a colour map and an anisotropy map (render/preview/preview.cpp, AnisoFromWeave).
   if (o.start.model == render::ModelKind::kPhysicalAniso && !a.fabric.empty() &&
       a.weave_maps != "none") {
-    fit::FitOptions wo;
-    wo.start = render::DefaultPreset(render::ModelKind::kWoven);
     const std::string maps = (fs::path(a.out).parent_path() /
                               (fs::path(a.out).stem().string() + ".weave.exr")).string();
-    const std::string line = fit::AttachWeaveMaps(a.fabric, maps, &wo, {});
+    const std::string line = fit::AttachWeaveMapsToPhysicalAniso(a.fabric, maps, &o);
     if (!line.empty()) std::printf("fit: %s\n", line.c_str());
-    if (wo.start.extra.contains("weave_maps")) o.start.extra["weave_maps"] = wo.start.extra["weave_maps"];
   }
   // Load everything.
   fit::ReferenceOptions ro;

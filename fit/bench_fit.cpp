@@ -119,9 +119,7 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
     FitOptions o;
     o.start = render::DefaultPreset(m);
     o.level = level;
-    if (m == render::ModelKind::kStandard || m == render::ModelKind::kPhysicalSheen)
-      o.locked.push_back("metalness");
-    if (m == render::ModelKind::kGltfSheen) o.locked.push_back("metallic");
+    ApplyModelDefaults(&o);  // as clothfit fit
     ModelRow row;
     row.fabric = fabric;
     row.model = render::ToString(m);
@@ -137,6 +135,13 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
           (void)AttachWeaveMaps(fabric_path, maps.string(), &o);
         }
         r = FitWovenImages(inputs, o);
+      } else if (m == render::ModelKind::kPhysicalAniso) {
+        if (!fabric_path.empty()) {  // the same maps as woven, baked as clothfit fit does
+          const std::filesystem::path maps = std::filesystem::temp_directory_path() /
+                                             ("clothfit-bench-" + fabric + ".aniso.weave.exr");
+          (void)AttachWeaveMapsToPhysicalAniso(fabric_path, maps.string(), &o);
+        }
+        r = FitImages(inputs, o);
       } else {
         r = FitImages(inputs, o);
       }

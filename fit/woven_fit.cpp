@@ -91,4 +91,28 @@ FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions
   return best;
 }
 
+void ApplyModelDefaults(FitOptions* o) {
+  const render::ModelKind m = o->start.model;
+  if (m == render::ModelKind::kStandard || m == render::ModelKind::kPhysicalSheen)
+    o->locked.push_back("metalness");
+  if (m == render::ModelKind::kGltfSheen) o->locked.push_back("metallic");
+  if (m == render::ModelKind::kPhysicalAniso) {
+    for (const char* n : {"metalness", "anisotropy_rotation", "specular_color"})
+      o->locked.push_back(n);
+    o->start.values[size_t(o->start.Offset("anisotropy_strength"))] = 0.5;
+  }
+}
+
+std::string AttachWeaveMapsToPhysicalAniso(const std::string& fabric_path,
+                                           const std::string& maps_path, FitOptions* options) {
+  if (options->start.model != render::ModelKind::kPhysicalAniso)
+    throw FitError("AttachWeaveMapsToPhysicalAniso: the start preset is not physical-aniso");
+  FitOptions wo;
+  wo.start = render::DefaultPreset(render::ModelKind::kWoven);
+  const std::string line = AttachWeaveMaps(fabric_path, maps_path, &wo, {});
+  if (wo.start.extra.contains("weave_maps"))
+    options->start.extra["weave_maps"] = wo.start.extra["weave_maps"];
+  return line;
+}
+
 }  // namespace clothfit::fit

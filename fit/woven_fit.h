@@ -38,4 +38,19 @@ std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& m
 
 FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options);
 
+// The per-model defaults every image fit shares (clothfit fit, bench fit): metalness /
+// metallic locked for the three.js and glTF baselines (fabrics are dielectric); physical-aniso
+// (docs/fitting.md, "The honest baseline"): metalness, anisotropy_rotation (the maps carry the
+// direction) and specular_color locked, and the strength started at 0.5, off 0 where
+// d alpha_t / d strength = 2 strength (1 - alpha) = 0 would hold it (measured: every fit from 0
+// stayed at 0). Appends to options->locked; changes options->start only for physical-aniso.
+void ApplyModelDefaults(FitOptions* options);
+
+// physical-aniso: bakes the SAME maps a woven fit of `fabric_path` bakes (woven defaults as the
+// start lobes), writes them to `maps_path` and names them in options->start.extra
+// ["weave_maps"] (the preview uses them as a colour map and an anisotropy map). Returns the
+// log line, or "" when the fabric is not an Irawan fabric.
+std::string AttachWeaveMapsToPhysicalAniso(const std::string& fabric_path,
+                                           const std::string& maps_path, FitOptions* options);
+
 }  // namespace clothfit::fit
