@@ -30,6 +30,7 @@ void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddTonemapCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddReportCommand(CLI::App& app, const Globals& g, int& exit_code);
 void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code);
+void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code);  // cmd_evaluate.cpp
 
 // `clothfit bench convert`: converts a catalogue (generated into a temporary directory by
 // datasets/catalogue/generate.py when `catalogue` is empty) and prints materials/s per kind and

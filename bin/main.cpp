@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   clothfit::cli::AddTonemapCommand(app, globals, exit_code);
   clothfit::cli::AddReportCommand(app, globals, exit_code);
   clothfit::cli::AddConvertCommand(app, globals, exit_code);
+  clothfit::cli::AddEvaluateCommand(app, globals, exit_code);
 
   try {
     app.parse(argc, argv);

@@ -526,6 +526,65 @@ TEST(SceneGeometry, NonFabricWithoutUvsGetsZeroUvs) {
   for (const auto& uv : s.meshes[2].uvs) ASSERT_EQ(uv, (std::array<float, 2>{0, 0}));
 }
 
+// glTF 2.0 spec, 3.9.6 ("default material"): a primitive without `material` uses base colour
+// 1, metallic 1, roughness 1, single-sided. clothfit (docs/scenes.md, "A glTF without
+// materials"): in a glTF with no materials at all, that default slot is the fabric when the
+// card's fabric_material is 0 (clothfit's fabric material applies, not the spec's metal);
+// with materials present, a primitive without one is a non-fabric mesh with the default.
+TEST(SceneGeometry, GltfWithoutMaterialsMakesTheDefaultMaterialTheFabric) {
+  TempDir dir;
+  const std::string card = CopyScene(dir, "sphere", [](Json& g) {
+    g.erase("materials");
+    g["meshes"][0]["primitives"][0].erase("material");
+  });
+  const Scene s = LoadScene(card);
+  ASSERT_EQ(s.meshes.size(), 1u);
+  EXPECT_TRUE(s.meshes[0].is_fabric);
+  EXPECT_EQ(s.meshes[0].material, -1);
+  EXPECT_EQ(s.meshes[0].base_color, (std::array<float, 3>{1, 1, 1}));
+  EXPECT_FALSE(s.meshes[0].double_sided);
+  ExpectWellFormed(s.meshes[0]);
+  bool warned = false;
+  for (const std::string& w : s.warnings) warned |= w.find("no materials") != std::string::npos;
+  EXPECT_TRUE(warned);
+}
+
+TEST(SceneBadInput, GltfGivenAsTheCardIsNamedAsSuch) {
+  TempDir dir;
+  const std::string card = CopyScene(dir, "sphere", {});
+  const std::string gltf = (dir.path() / "sphere.gltf").string();
+  const std::string err = LoadError(gltf);
+  EXPECT_CONTAINS(err, gltf);
+  EXPECT_CONTAINS(err, "this is a glTF file, not a clothfit scene card");
+  EXPECT_EQ(LoadError(card), "");
+}
+
+TEST(SceneGeometry, GltfWithoutMaterialsAndAnotherFabricSlotIsAnError) {
+  TempDir dir;
+  const std::string card = CopyScene(
+      dir, "sphere",
+      [](Json& g) {
+        g.erase("materials");
+        g["meshes"][0]["primitives"][0].erase("material");
+      },
+      [](Json& c) { c["fabric_material"] = 1; });
+  const std::string err = LoadError(card);
+  EXPECT_CONTAINS(err, "fabric_material");
+  EXPECT_CONTAINS(err, "0 materials");
+}
+
+TEST(SceneGeometry, PrimitiveWithoutMaterialBesideOthersIsNotFabric) {
+  TempDir dir;
+  const std::string card =
+      CopyScene(dir, "drape", [](Json& g) { g["meshes"][2]["primitives"][0].erase("material"); });
+  const Scene s = LoadScene(card);
+  ASSERT_EQ(s.meshes.size(), 3u);
+  EXPECT_TRUE(s.meshes[0].is_fabric);
+  EXPECT_FALSE(s.meshes[2].is_fabric);
+  EXPECT_EQ(s.meshes[2].material, -1);
+  EXPECT_EQ(s.meshes[2].base_color, (std::array<float, 3>{1, 1, 1}));
+}
+
 // A one-triangle glTF with a two-level hierarchy: parent `matrix`, child TRS.
 std::string TriangleGltf(const Json& parent_matrix, const Json& child) {
   // Positions (0,0,0) (1,0,0) (0,1,0), normals +Z, UVs; no indices (non-indexed).

@@ -584,7 +584,13 @@ void ReadMeshMaterial(const GltfContext& g, const SceneCard& card, int mesh_inde
   if (mesh->material >= static_cast<int>(model.materials.size())) {
     Fail(g.file, where, "material index " + std::to_string(mesh->material) + " out of range");
   }
-  mesh->is_fabric = mesh->material >= 0 && mesh->material == card.fabric_material;
+  // A glTF without any material (docs/scenes.md, "A glTF without materials"): every primitive
+  // has the glTF default material, and with fabric_material 0 that default slot is the fabric
+  // (clothfit's fabric material applies, as for any fabric slot). With materials present, a
+  // primitive without one is a non-fabric mesh with the glTF default material (below).
+  const bool default_is_fabric = model.materials.empty() && card.fabric_material == 0;
+  mesh->is_fabric = mesh->material >= 0 ? mesh->material == card.fabric_material
+                                        : default_is_fabric;
   if (mesh->material >= 0) {
     mesh->double_sided = model.materials[mesh->material].doubleSided;
     const auto& f = model.materials[mesh->material].pbrMetallicRoughness.baseColorFactor;
@@ -671,7 +677,8 @@ void ReadUvs(const PrimitiveInput& in, const SceneCard& card, Mesh* mesh) {
     for (size_t i = 0; i < in.n; ++i) mesh->uvs[i] = {uv[2 * i], uv[2 * i + 1]};
   } else if (mesh->is_fabric) {
     Fail(in.g.file, in.where,
-         "no TEXCOORD_0 attribute, but its material " + std::to_string(mesh->material) +
+         "no TEXCOORD_0 attribute, but its material " +
+             (mesh->material >= 0 ? std::to_string(mesh->material) : std::string("(default)")) +
              " is the fabric (scene card " + card.path +
              ", field 'fabric_material'); the weave needs UVs");
   } else {
@@ -1043,6 +1050,12 @@ SceneCard LoadSceneCard(const std::string& card_path) {
   card.path = card_path;
   const fs::path dir = fs::absolute(fs::path(card_path)).parent_path();
   const FieldReader r(card.path, root, "");
+  // A glTF given where a card is expected (every command's --scene/--scenes): say so, rather
+  // than failing on its first field ("unknown field 'accessors'").
+  if (root.contains("asset") && root["asset"].is_object() && !root.contains("gltf"))
+    Fail(card_path, "top level",
+         "this is a glTF file, not a clothfit scene card (docs/scene-card.md): a card names its "
+         "glTF in the `gltf` field (e.g. datasets/scenes/sphere.json)");
   r.RejectUnknown({"version", "description", "gltf", "width", "height", "environment",
                    "tone_mapping", "exposure", "fabric_material", "light_scale", "camera",
                    "background", "uv_metres_per_unit"});
@@ -1115,7 +1128,7 @@ Scene LoadScene(const std::string& card_path) {
   for (int root : roots) Visit(file, model, root, Mat4{}, on_path, 0, flat);
 
   const int n_materials = static_cast<int>(model.materials.size());
-  if (card.fabric_material >= n_materials) {
+  if (card.fabric_material >= n_materials && !(n_materials == 0 && card.fabric_material == 0)) {
     Fail(card.path, "field 'fabric_material'",
          std::to_string(card.fabric_material) + " is out of range: " + file + " has " +
              std::to_string(n_materials) + " material" + (n_materials == 1 ? "" : "s"));
@@ -1137,6 +1150,9 @@ Scene LoadScene(const std::string& card_path) {
     }
   }
   if (scene.meshes.empty()) Fail(file, "meshes", "the scene has no triangle meshes");
+  if (n_materials == 0)
+    scene.warnings.push_back(file + " has no materials: every primitive has the glTF default "
+                             "material, which is the fabric (fabric_material 0)");
   if (std::none_of(scene.meshes.begin(), scene.meshes.end(),
                    [](const Mesh& m) { return m.is_fabric; })) {
     Fail(card.path, "field 'fabric_material'",

@@ -1,0 +1,154 @@
+// clothfit evaluate: the block error of a fitted preset against references, without refitting.
+//
+// The error is the fit's own (fit/image_fit.h): the same blocks (the preset's fit.level and
+// fit.pixel_stride, coverage rule of docs/references.md), the same residual space
+// (fit.space), the same unweighted block RMSE. It is computed by FitImages with every
+// parameter locked at the preset's values (Ceres then has no free parameter and returns at
+// once), so "evaluate" and "fit" cannot drift apart. Without --references the preset's own
+// fit.scenes (scene card + reference) are evaluated: the in-sample error, which must equal
+// fit.rmse. With --references/--scenes: out-of-sample (e.g. scripts/cross-env: the same
+// fabric under another environment).
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "bin/commands.h"
+#include "fit/image_fit.h"
+#include "fit/reference.h"
+#include "render/scene/input_limits.h"
+#include "render/scene/material.h"
+
+namespace clothfit::cli {
+
+void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code);
+
+namespace {
+
+std::vector<std::string> SplitList(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+struct EvaluateArgs {
+  std::string preset, references, scenes;
+  int level = -1, stride = -1;
+  bool json = false;
+};
+
+int RunEvaluate(const EvaluateArgs& a, bool quiet) {
+  std::ifstream in(a.preset);
+  if (!in) throw std::runtime_error(a.preset + ": cannot open the preset");
+  const nlohmann::json pj = nlohmann::json::parse(in, nullptr, true);
+  const render::MaterialPreset preset = render::ReadPreset(a.preset);
+  if (!pj.contains("fit") || !pj["fit"].is_object())
+    throw std::runtime_error(a.preset + ": field 'fit': missing (evaluate needs a fitted preset)");
+  const nlohmann::json& fj = pj["fit"];
+  std::vector<std::string> scenes = SplitList(a.scenes), refs = SplitList(a.references);
+  if (refs.empty() != scenes.empty())
+    throw std::invalid_argument("give both --references and --scenes, or neither");
+  if (refs.empty()) {
+    if (!fj.contains("scenes") || !fj["scenes"].is_array())
+      throw std::runtime_error(a.preset + ": field 'fit.scenes': missing");
+    for (const auto& s : fj["scenes"]) {
+      scenes.push_back(s.at("scene").get<std::string>());
+      refs.push_back(s.at("reference").get<std::string>());
+    }
+  }
+  if (refs.size() != scenes.size())
+    throw std::invalid_argument(std::to_string(refs.size()) + " references but " +
+                                std::to_string(scenes.size()) + " scenes");
+
+  fit::FitOptions o;
+  o.start = preset;
+  for (const auto& p : render::ParameterTable(preset.model)) o.locked.emplace_back(p.name);
+  o.level = a.level >= 0 ? a.level : fj.value("level", 4);
+  o.pixel_stride = a.stride >= 0 ? a.stride : fj.value("pixel_stride", 0);
+  o.space = fit::ParseSpace(fj.value("space", std::string("display")));
+  o.start_roughness = {0.5};  // one "start": every parameter is locked at the preset's value
+  o.init_from_reference = false;
+
+  std::vector<render::Scene> loaded;
+  std::vector<std::unique_ptr<render::Environment>> envs;
+  std::vector<fit::Reference> references;
+  loaded.reserve(scenes.size());
+  references.reserve(refs.size());
+  for (size_t i = 0; i < scenes.size(); ++i) {
+    loaded.push_back(render::LoadScene(scenes[i]));
+    envs.push_back(LoadSceneEnvironment(loaded.back(), quiet));
+    references.push_back(fit::ReadReference(refs[i], fit::ReferenceOptions{}));
+  }
+  std::vector<fit::SceneInput> inputs;
+  for (size_t i = 0; i < scenes.size(); ++i)
+    inputs.push_back({&loaded[i], envs[i].get(), &references[i], nullptr, scenes[i]});
+  const fit::FitResult r = fit::FitImages(inputs, o);
+  if (!r.usable) throw std::runtime_error("evaluation failed: " + r.message);
+  for (size_t i = 0; i < r.preset.values.size(); ++i)
+    if (r.preset.values[i] != preset.values[i])
+      throw std::logic_error("evaluate: a locked parameter moved (internal error)");
+
+  if (a.json) {
+    nlohmann::json j;
+    j["preset"] = a.preset;
+    j["model"] = render::ToString(preset.model);
+    j["level"] = o.level;
+    j["pixel_stride"] = o.pixel_stride;
+    j["space"] = fit::ToString(o.space);
+    j["rmse"] = r.rmse;
+    if (fj.contains("rmse")) j["fit_rmse"] = fj["rmse"];
+    j["scenes"] = nlohmann::json::array();
+    for (const auto& s : r.scenes)
+      j["scenes"].push_back({{"scene", s.scene}, {"reference", s.reference}, {"blocks", s.blocks},
+                             {"rmse", s.rmse}});
+    std::printf("%s\n", limits::DumpJson(j).c_str());
+  } else {
+    std::printf("evaluate: %s (%s), level %d, stride %d, %s space\n", a.preset.c_str(),
+                render::ToString(preset.model).c_str(), o.level, o.pixel_stride,
+                fit::ToString(o.space).c_str());
+    for (const auto& s : r.scenes)
+      std::printf("evaluate:   %s: %d blocks, block rmse %.5f\n", s.scene.c_str(), s.blocks,
+                  s.rmse);
+    std::printf("evaluate: block rmse %.5f", r.rmse);
+    if (fj.contains("rmse") && fj["rmse"].is_number())
+      std::printf(" (the fit's in-sample rmse: %.5f)", fj["rmse"].get<double>());
+    std::printf("\n");
+  }
+  return 0;
+}
+
+}  // namespace
+
+void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code) {
+  auto args = std::make_shared<EvaluateArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "evaluate",
+      "block error of a fitted preset against references, without refitting (the fit's own "
+      "error at the preset's values; default: its own fit.scenes)");
+  cmd->add_option("--preset", args->preset, "fitted preset (written by clothfit fit)")->required();
+  cmd->add_option("--references", args->references,
+                  "comma-separated reference EXRs (default: the preset's fit.scenes)");
+  cmd->add_option("--scenes", args->scenes, "comma-separated scene cards, one per reference");
+  cmd->add_option("--level", args->level, "block level (default: the preset's fit.level)");
+  cmd->add_option("--stride", args->stride,
+                  "pixel stride per block axis (default: the preset's fit.pixel_stride)");
+  cmd->add_flag("--json", args->json, "print the result as JSON");
+  cmd->callback([args, &g, &exit_code]() {
+    try {
+      exit_code = RunEvaluate(*args, g.quiet);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "clothfit evaluate: error: %s\n",
+                   limits::EscapeForMessage(e.what(), 2000).c_str());
+      exit_code = 1;
+    }
+  });
+}
+
+}  // namespace clothfit::cli
