@@ -29,15 +29,6 @@ void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code);
 
 namespace {
 
-std::vector<std::string> SplitList(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, ','))
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
 struct EvaluateArgs {
   std::string preset, references, scenes;
   int level = -1, stride = -1;

@@ -231,19 +231,6 @@ inline Rgb<T> EvalDirect(const Params<T>& p, const Options& o, const Cosines<T>&
   return sheen + (spec + diff) * (NoL * sc);
 }
 
-// Fdez-Aguera single + multiple scattering with three.js's f90.
-template <typename T>
-inline void MultiScatter(const Rgb<T>& Fr, const T& f90, const T& A, const T& B, Rgb<T>& ss,
-                         Rgb<T>& ms) {
-  const T one = Const<T>(1.0);
-  const T Ems = one - (A + B);
-  ss = Fr * A + Rgb<T>::Splat(f90 * B);
-  const Rgb<T> Favg = Fr + (Rgb<T>::Splat(one) - Fr) * Const<T>(1.0 / 21.0);
-  Rgb<T> Fms;
-  for (int i = 0; i < 3; ++i) Fms[i] = ss[i] * Favg[i] / (one - Ems * Favg[i]);
-  ms = Fms * Ems;
-}
-
 // IBL weights: specular (on the radiance along the bent-normal reflection), diffuse (on the
 // Lambert-convolved irradiance), as brdf/physical_sheen.h.
 template <typename T>
@@ -256,8 +243,8 @@ inline IblWeights<T> EvalIbl(const Params<T>& p, const Options& o, const T& NoV_
   const T B = dfg.Sample(NoV, r, 1);
   const T f90 = SpecularF90(p);
   Rgb<T> ss_d, ms_d, ss_m, ms_m;
-  MultiScatter(SpecularColor(p), f90, A, B, ss_d, ms_d);
-  MultiScatter(p.base_color, f90, A, B, ss_m, ms_m);
+  standard::MultiScatter(SpecularColor(p), f90, A, B, ss_d, ms_d);  // f90 = specularIntensity
+  standard::MultiScatter(p.base_color, f90, A, B, ss_m, ms_m);
   const T m = p.metalness;
   const Rgb<T> ss = ss_d * (one - m) + ss_m * m;
   const Rgb<T> ms = ms_d * (one - m) + ms_m * m;

@@ -99,17 +99,24 @@ inline Rgb<T> EvalDirect(const Params<T>& p, const Options& o, const Cosines<T>&
   return (spec + diff) * NoL;
 }
 
-// Fdez-Aguera single + multiple scattering for one Fresnel colour.
+// Fdez-Aguera single + multiple scattering for one Fresnel colour Fr and grazing value f90
+// (three.js computeMultiscattering: FssEss = Fr A + f90 B; Ems = 1 - (A + B)).
 template <typename T>
-inline void MultiScatter(const Rgb<T>& Fr, const T& A, const T& B, Rgb<T>& ss, Rgb<T>& ms) {
+inline void MultiScatter(const Rgb<T>& Fr, const T& f90, const T& A, const T& B, Rgb<T>& ss,
+                         Rgb<T>& ms) {
   const T one = Const<T>(1.0);
-  const T Ess = A + B;
-  const T Ems = one - Ess;
-  ss = Fr * A + Rgb<T>::Splat(B);
+  const T Ems = one - (A + B);
+  ss = Fr * A + Rgb<T>::Splat(f90 * B);
   const Rgb<T> Favg = Fr + (Rgb<T>::Splat(one) - Fr) * Const<T>(1.0 / 21.0);
   Rgb<T> Fms;
   for (int i = 0; i < 3; ++i) Fms[i] = ss[i] * Favg[i] / (one - Ems * Favg[i]);
   ms = Fms * Ems;
+}
+
+// The same with f90 = 1 (MeshStandardMaterial).
+template <typename T>
+inline void MultiScatter(const Rgb<T>& Fr, const T& A, const T& B, Rgb<T>& ss, Rgb<T>& ms) {
+  MultiScatter(Fr, Const<T>(1.0), A, B, ss, ms);
 }
 
 template <typename T>
