@@ -122,6 +122,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       o.cloth = preset.cloth;
       o.woven = preset.woven;
       o.shadows = args->shadows;
+      if (preset.model == render::ModelKind::kPhysicalAniso)  // brdf/physical_aniso.h FromFlat
+        o.anisotropy_rotation = preset.values.at(10);
       o.ibl_engine = args->ibl_engine == "threejs"    ? render::IblEngine::kThreejs
                      : args->ibl_engine == "filament" ? render::IblEngine::kFilament
                                                       : render::IblEngine::kAuto;

@@ -219,9 +219,9 @@ void FillRadianceTables(const PixelContext& x, const Vec3d& n, const Vec3d& R, P
 // anisotropy and roughness through one weight w = (1 - a (1 - r))^4, so the cache holds the
 // K-node roughness table at kAnisoBentNodes values of w in [0, 1] (node w = 1 is the
 // isotropic table: bent = n exactly); the kernel interpolates linearly in w. The bitangent
-// B of the anisotropy frame comes from the weave-map direction at rotation 0 (the fit locks
-// anisotropy_rotation; a preset with another rotation gets its direct light rotated, its IBL
-// bent normal not: docs/fitting.md, "The honest baseline").
+// B of the anisotropy frame comes from the weave-map direction rotated by
+// PreviewOptions::anisotropy_rotation (render-preview: the preset's; the fit locks the rotation
+// and leaves it at 0).
 constexpr int kAnisoBentNodes = 5;
 // Which way the anisotropy direction (where three.js raises the roughness to alpha_t) points
 // relative to the dominant yarn: false = along it (warp -> t, weft -> b, the mapping),
@@ -248,7 +248,12 @@ void FillAnisoRadianceTables(const PixelContext& x, const PrimaryHit& hit, const
   pd->rad.resize(size_t(K) * kAnisoBentNodes * 3);
   const bool weft = weave && weave[1] > weave[0];
   const bool along_b = weave && (weft != kAnisoAcrossYarn);  // direction (0, 1)
-  const Vec3d B = along_b ? hit.t * -1.0 : hit.b;  // B = b ux - t uy at (ux, uy) = (1,0) / (0,1)
+  // The map direction (dx, dy) = (1, 0) or (0, 1), rotated by the preset's rotation as
+  // physical_aniso::MakeFrame does: (ux, uy) = R(rot) (dx, dy); B = b ux - t uy.
+  const double dx = along_b ? 0.0 : 1.0, dy = along_b ? 1.0 : 0.0;
+  const double cr = std::cos(x.opt.anisotropy_rotation), sr = std::sin(x.opt.anisotropy_rotation);
+  const double ux = cr * dx - sr * dy, uy = sr * dx + cr * dy;
+  const Vec3d B = hit.b * ux - hit.t * uy;
   for (int j = 0; j < kAnisoBentNodes; ++j) {
     const double w = double(j) / double(kAnisoBentNodes - 1);
     const Vec3d bent = physical_aniso::BentNormal(hit.n, hit.v, B, w);

@@ -73,6 +73,10 @@ struct PreviewOptions {
   std::shared_ptr<const WeaveMaps> weave_maps;
   double weave_footprint_scale = 1.0;
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
+  // physical-aniso only: the anisotropy_rotation (radians) the bent-normal IBL radiance cache is
+  // built for (three.js bends the normal toward B = b cos(rot) - t sin(rot)); the direct light
+  // uses the evaluated parameter. render-preview sets it from the preset; 0: rotation 0.
+  double anisotropy_rotation = 0.0;
   // three.js IBL engine only: the sub-pixel precision of the rasteriser whose G-buffer the
   // preview reproduces (render/preview/threejs_ibl.h RasterBarycentrics): normals, view
   // directions and geometryRoughness are interpolated at the barycentrics of the triangle with

@@ -5,7 +5,7 @@
 //   node tests/browser/run.mjs --clothfit build/bin/clothfit [--work DIR] [--chromium PATH]
 //        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS]
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 9 materials (6 + 3 woven) x 2 environments
+// Cases: each canonical scene (datasets/scenes/*.json) x 11 materials (6 + 3 woven + 2 physical-aniso) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -79,6 +79,13 @@ const MATERIALS = {
   'woven-tinted': preset('woven', { base_color: [0.35, 0.3, 0.25], specular_color: [0.6, 0.55, 0.5], roughness: 0.45, anisotropy: 0.7,
     twist: 15, warp_share: 0.6, specular_f0: 0.05, forward_scattering: 2.5, sheen_color: [0.2, 0.2, 0.2], sheen_roughness: 0.5 },
   { woven: { yarn_layer: 'albedo-scaled', tint_warp: [0.3, 0.6, 1.0], tint_weft: [1.0, 0.8, 0.4] } }),
+  // brdf/physical_aniso.h, uniform (MeshPhysicalMaterial, sheen + anisotropy + specular; no
+  // weave maps, anisotropy along the mesh tangent): a moderate one along the tangent, and a
+  // stronger rotated one with a tinted specular colour below full intensity.
+  'physical-aniso': preset('physical-aniso', { base_color: [0.4, 0.25, 0.2], roughness: 0.5, metalness: 0, sheen_color: [0.5, 0.45, 0.4],
+    sheen_roughness: 0.5, anisotropy_strength: 0.6, anisotropy_rotation: 0, specular_intensity: 1, specular_color: [1, 1, 1] }),
+  'physical-aniso-rot': preset('physical-aniso', { base_color: [0.15, 0.2, 0.35], roughness: 0.35, metalness: 0, sheen_color: [0.3, 0.3, 0.3],
+    sheen_roughness: 0.4, anisotropy_strength: 0.8, anisotropy_rotation: 0.7, specular_intensity: 0.8, specular_color: [1.5, 1.3, 1.1] }),
 };
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
