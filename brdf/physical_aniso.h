@@ -73,24 +73,14 @@ struct Params {
   Rgb<T> specular_color{Const<T>(1.0), Const<T>(1.0), Const<T>(1.0)};
 };
 
+// The first five entries are physical-sheen's (the same parameters, same order and ranges:
+// with anisotropy 0 and the specular defaults this model IS physical-sheen).
 inline constexpr std::array<ParamInfo, 9> kParameterTable{{
-    {"base_color", 3, {1.0, 1.0, 1.0}, 0.0, 1.0, true, "linear sRGB"},
-    {"roughness",
-     1,
-     {1.0, 0.0, 0.0},
-     standard::kMinRoughness,
-     1.0,
-     true,
-     "perceptual r, clamped to [0.045, 1]; alpha = r^2"},
-    {"metalness", 1, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "0 = dielectric"},
-    {"sheen_color", 3, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "linear sRGB; sheenColor x sheen"},
-    {"sheen_roughness",
-     1,
-     {1.0, 0.0, 0.0},
-     physical_sheen::kMinSheenRoughness,
-     1.0,
-     true,
-     "perceptual r_s, clamped to [1e-4, 1]; alpha = r_s^2"},
+    physical_sheen::kParameterTable[0],
+    physical_sheen::kParameterTable[1],
+    physical_sheen::kParameterTable[2],
+    physical_sheen::kParameterTable[3],
+    physical_sheen::kParameterTable[4],
     {"anisotropy_strength",
      1,
      {0.0, 0.0, 0.0},
