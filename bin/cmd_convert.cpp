@@ -58,7 +58,8 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "input files (.json preset/fabric/SurfaceMaterial/TextureStack, .gltf, .glb, "
                   ".binary MERL), directories (searched recursively) or manifests (.txt)")
       ->required();
-  cmd->add_option("--to", *to, "comma-separated targets: preset, threejs, gltf, filament");
+  cmd->add_option("--to", *to, "comma-separated targets: preset, threejs, gltf, filament, preset-maps (the source "
+                  "preset with its weave maps copied next to it; docs/convert.md)");
   cmd->add_option("--out", *out, "output directory (created)")->required();
   cmd->add_option("-j,--jobs", *jobs, "worker threads (0: all cores)")->check(CLI::Range(0, 1024));
   cmd->add_option("--shard", *shard,

@@ -25,7 +25,7 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 using render::ModelKind;
 
-const std::vector<std::string> kTargets = {"preset", "threejs", "gltf", "filament"};
+const std::vector<std::string> kTargets = {"preset", "threejs", "gltf", "filament", "preset-maps"};
 const std::set<std::string> kInputExt = {".json", ".gltf", ".glb", ".binary", ".merl"};
 
 struct Fnv {
@@ -110,7 +110,15 @@ std::string OptionsKey(const ConvertOptions& o) {
   return k;
 }
 
-std::vector<std::string> OutputsFor(const ConvertOptions& o, const std::string& stem) {
+// A physical-aniso preset with weave maps, for the three.js or glTF target: the maps are baked
+// into PNG textures (fit/convert/weave_textures.h) that both outputs reference.
+bool BakesWeaveTextures(const ConvertOptions& o, const SourceMaterial& m) {
+  return m.analytic && m.analytic->model == ModelKind::kPhysicalAniso && m.weave_maps &&
+         (Wants(o, "threejs") || Wants(o, "gltf"));
+}
+
+std::vector<std::string> OutputsFor(const ConvertOptions& o, const std::string& stem,
+                                    const SourceMaterial& m) {
   std::vector<std::string> out;
   const fs::path d(o.out_dir);
   if (Wants(o, "preset")) out.push_back((d / (stem + ".preset.json")).string());
@@ -120,6 +128,15 @@ std::vector<std::string> OutputsFor(const ConvertOptions& o, const std::string& 
   }
   if (Wants(o, "gltf")) out.push_back((d / (stem + ".gltf")).string());
   if (Wants(o, "filament")) out.push_back((d / (stem + ".mat")).string());
+  if (BakesWeaveTextures(o, m)) {
+    out.push_back((d / (stem + ".basecolor.png")).string());
+    out.push_back((d / (stem + ".anisotropy.png")).string());
+  }
+  if (Wants(o, "preset-maps") && m.analytic) {  // the source preset itself, with its maps
+    out.push_back((d / (stem + ".maps.preset.json")).string());
+    if (!m.weave_maps_file.empty()) out.push_back((d / (stem + ".maps.weave.exr")).string());
+    if (!m.glint_file.empty()) out.push_back((d / (stem + ".maps.glint.exr")).string());
+  }
   return out;
 }
 
@@ -127,8 +144,8 @@ std::string RecordPath(const ConvertOptions& o, const std::string& stem) {
   return (fs::path(o.out_dir) / ".clothfit-convert" / (stem + ".json")).string();
 }
 
-bool UpToDate(const ConvertOptions& o, const std::string& stem, const std::string& hash,
-              double* error) {
+bool UpToDate(const ConvertOptions& o, const std::string& stem, const SourceMaterial& m,
+              const std::string& hash, double* error) {
   json r;
   try {
     const std::string text =
@@ -139,7 +156,7 @@ bool UpToDate(const ConvertOptions& o, const std::string& stem, const std::strin
     return false;  // an unreadable record means: convert again
   }
   if (r.value("hash", "") != hash) return false;
-  for (const std::string& f : OutputsFor(o, stem))
+  for (const std::string& f : OutputsFor(o, stem, m))
     if (!fs::exists(f)) return false;
   *error = r.value("error", -1.0);
   return true;
@@ -168,6 +185,20 @@ BrdfFitResult FitOrThrow(const BrdfSamples& s, ModelKind model, const cloth::Opt
 
 void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::string& stem,
                 const std::string& hash, ItemResult& item) {
+  // woven: no engine form (docs/convert.md, "Weave maps in glTF and three.js"): refused for
+  // the engine targets rather than silently fitted without its maps and lobes.
+  if (m.analytic && m.analytic->model == ModelKind::kWoven &&
+      (Wants(o, "gltf") || Wants(o, "threejs")))
+    throw ConvertError(
+        m.file + ": model: 'woven' (brdf/woven.h) has no exact glTF or three.js form: its two "
+        "yarn lobes (warp- and weft-aligned anisotropic GGX under the phase Fresnel f0 + (1 - f0) "
+        "exp(-2 beta LoH^2), weighted per texel by the weave maps' warp/weft channels) cannot be "
+        "written as KHR_materials_anisotropy/specular/sheen or MeshPhysicalMaterial (one "
+        "anisotropic lobe, Schlick Fresnel); use --to preset-maps (web/clothfit.js draws woven "
+        "presets) or `clothfit fit --model physical-aniso` for the nearest three.js material");
+  if (BakesWeaveTextures(o, m) && m.weave_maps->has_normals())
+    throw ConvertError(m.file + ": weave_maps: the maps carry a relief normal map (N.X, N.Y, "
+                       "N.Z), which this exporter does not bake into a normalTexture");
   const BrdfSamples s = SampleSource(m);
   Converted c;
   c.name = m.name;
@@ -221,7 +252,26 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
                     {"starts", cr.starts},
                     {"iterations", iterations}}},
                   {"notes", m.notes}};
-  const std::vector<std::string> outs = OutputsFor(o, stem);
+  const std::vector<std::string> outs = OutputsFor(o, stem, m);
+  if (BakesWeaveTextures(o, m)) {
+    c.weave = BakePhysicalAnisoTextures(*m.analytic, *m.weave_maps);
+    const WeaveTextures& w = *c.weave;
+    c.base_color_png = (fs::path(o.out_dir) / (stem + ".basecolor.png")).string();
+    c.anisotropy_png = (fs::path(o.out_dir) / (stem + ".anisotropy.png")).string();
+    WritePngFile(c.base_color_png, w.size, w.size, 3, w.base_color, true);
+    WritePngFile(c.anisotropy_png, w.size, w.size, 3, w.anisotropy, false);
+    char line[256];
+    std::snprintf(line, sizeof line,
+                  "weave maps baked to textures: base colour max error %.2e linear (%.2e "
+                  "relative), %d clipped; anisotropy strength %.2e, direction %.1e rad",
+                  w.base_max_abs_error, w.base_max_rel_error, w.clipped_texels,
+                  w.strength_max_abs_error, w.direction_max_angle_error);
+    item.notes.push_back(line);
+  } else if (m.weave_maps && (Wants(o, "preset") || Wants(o, "filament"))) {
+    item.notes.push_back("weave maps not carried by the preset/filament targets (cloth fits)");
+  }
+  if (Wants(o, "preset-maps") && !m.analytic)
+    item.notes.push_back("preset-maps: not a clothfit preset source, nothing written");
   size_t k = 0;
   if (Wants(o, "preset")) WriteClothPreset(outs[k++], c);
   if (Wants(o, "threejs")) {
@@ -230,6 +280,9 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
   }
   if (Wants(o, "gltf")) WriteGltf(outs[k++], c);
   if (Wants(o, "filament")) WriteFilamentMat(outs[k++], c);
+  if (Wants(o, "preset-maps") && m.analytic)
+    WritePresetWithMaps((fs::path(o.out_dir) / (stem + ".maps.preset.json")).string(), m,
+                        c.provenance);
   item.outputs = outs;
   const json record = {{"hash", hash},
                        {"source", m.file},
@@ -281,10 +334,10 @@ void ConvertFile(const InputFile& in, const ConvertOptions& o, std::vector<ItemR
       for (const std::string& d : m.dependencies) h.AddFile(d);
       const std::string hash = HexString(h.h);
       double err = -1.0;
-      if (UpToDate(o, r.stem, hash, &err)) {
+      if (UpToDate(o, r.stem, m, hash, &err)) {
         r.status = "skipped";
         r.error = err;
-        r.outputs = OutputsFor(o, r.stem);
+        r.outputs = OutputsFor(o, r.stem, m);
       } else {
         ConvertOne(m, o, r.stem, hash, r);
         r.status = "converted";
@@ -306,7 +359,7 @@ void CheckTargets(const std::vector<std::string>& targets) {
   for (const std::string& t : targets)
     if (std::find(kTargets.begin(), kTargets.end(), t) == kTargets.end())
       throw std::invalid_argument("--to: unknown target '" + t +
-                                  "' (valid: preset, threejs, gltf, filament)");
+                                  "' (valid: preset, threejs, gltf, filament, preset-maps)");
 }
 
 std::vector<InputFile> ExpandInputs(const std::vector<std::string>& args,

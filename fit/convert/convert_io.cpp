@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "fit/metrics/metrics.h"
+#include "fit/convert/png.h"
 #include "render/scene/gltf_tinygltf.h"
 #include "render/scene/image_io.h"
 #include "render/scene/tonemap.h"
@@ -305,6 +306,56 @@ std::vector<SourceMaterial> ReadTextureStack(const json& j, const std::string& f
   return out;
 }
 
+// A path a preset names ("uri" relative to the preset, else "file", absolute as clothfit fit
+// writes it or relative to the preset), confined like every map path (docs/reliability.md).
+std::string ResolvePresetPath(const std::string& file, const std::string& field,
+                              const std::string& value) {
+  std::string uri = value;
+  if (fs::path(value).is_absolute()) {
+    std::error_code ec;
+    const fs::path base = fs::absolute(fs::path(file), ec).parent_path();
+    const fs::path rel = fs::path(value).lexically_normal().lexically_relative(base);
+    if (!ec && !rel.empty()) uri = rel.generic_string();  // "../x" when outside: then confined
+  }
+  try {
+    return limits::ResolveConfined(file, field, uri, PolicyFor(file), limits::kMaxImageFileBytes)
+        .string();
+  } catch (const limits::InputError& e) {
+    throw ConvertError(e.what());
+  }
+}
+
+// The "weave_maps" field of a woven or physical-aniso preset: reads the EXR (and the glint
+// map), with the preset's uv_repeats, exactly as render::LoadPresetWeaveMaps does.
+void ReadPresetWeaveMaps(const std::string& file, SourceMaterial* m) {
+  const render::MaterialPreset& p = *m->analytic;
+  if (p.model != ModelKind::kWoven && p.model != ModelKind::kPhysicalAniso) return;
+  const auto it = p.extra.find("weave_maps");
+  if (it == p.extra.end() || it->is_null()) return;
+  if (!it->is_object()) Fail(file, "weave_maps", "expected an object");
+  auto path_of = [&](const char* uri_key, const char* file_key) -> std::string {
+    for (const char* k : {uri_key, file_key})
+      if (it->contains(k)) {
+        if (!(*it)[k].is_string()) Fail(file, std::string("weave_maps.") + k, "expected a string");
+        return ResolvePresetPath(file, std::string("weave_maps.") + k, (*it)[k].get<std::string>());
+      }
+    return "";
+  };
+  m->weave_maps_file = path_of("uri", "file");
+  if (m->weave_maps_file.empty()) Fail(file, "weave_maps.file", "missing");
+  m->glint_file = path_of("glint_uri", "glint_file");
+  render::MaterialPreset local = p;  // the resolved paths, for the shared reader
+  local.extra["weave_maps"]["file"] = m->weave_maps_file;
+  if (!m->glint_file.empty()) local.extra["weave_maps"]["glint_file"] = m->glint_file;
+  try {
+    m->weave_maps = render::LoadPresetWeaveMaps(local);
+  } catch (const std::exception& e) {
+    Fail(file, "weave_maps", e.what());
+  }
+  m->dependencies.push_back(m->weave_maps_file);
+  if (!m->glint_file.empty()) m->dependencies.push_back(m->glint_file);
+}
+
 std::vector<SourceMaterial> ReadPresetFile(const std::string& file) {
   SourceMaterial m;
   m.file = file;
@@ -315,6 +366,7 @@ std::vector<SourceMaterial> ReadPresetFile(const std::string& file) {
   } catch (const std::exception& e) {
     throw ConvertError(e.what());
   }
+  ReadPresetWeaveMaps(file, &m);
   return {m};
 }
 
@@ -673,6 +725,29 @@ double Value(const render::MaterialPreset& p, const char* name) {
 }
 // three.js MaterialLoader reads colours as sRGB hex (components in [0, 1]); a specular colour
 // above 1 (allowed by the parameter table) cannot be written that way.
+// What the weave textures encode and how exactly (fit/convert/weave_textures.h): written into
+// the outputs so a reader of the file sees the convention and the measured quantisation.
+json WeaveTexturesJson(const WeaveTextures& w, const char* target) {
+  return {{"target", target},
+          {"size", w.size},
+          {"uv_repeats", w.uv_repeats},
+          {"base_color",
+           "texel (8-bit sRGB) x factor = preset base_color x weave kd ratio; factor = the "
+           "smallest 8-bit sRGB value >= base_color x max ratio"},
+          {"anisotropy",
+           "R, G = direction (d + 1) / 2 in the tangent frame (warp: t, weft: b; stored axes "
+           "turned by -atan(1/255), compensated in the rotation); B = strength / its max; "
+           "anisotropy strength = preset strength x max strength"},
+          {"kd_max", Arr(w.kd_max)},
+          {"strength_max", w.strength_max},
+          {"measured_max_abs_error",
+           {{"base_color_linear", w.base_max_abs_error},
+            {"base_color_relative", w.base_max_rel_error},
+            {"anisotropy_strength", w.strength_max_abs_error},
+            {"direction_radians", w.direction_max_angle_error}}},
+          {"clipped_texels", w.clipped_texels}};
+}
+
 void CheckHexable(const Rgb<double>& c, const std::string& path, const char* field) {
   for (int k = 0; k < 3; ++k)
     if (!(c[k] >= 0.0 && c[k] <= 1.0))
@@ -707,6 +782,46 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
     CheckHexable(Colour(p, "specular_color"), path, "specular_color");
     j["specularColor"] = Hex(Colour(p, "specular_color"));
   }
+  if (c.physical_aniso && c.weave) {
+    // The weave maps (fit/convert/weave_textures.h): color = the texture's factor (an exact
+    // 8-bit sRGB value, so the hex holds it exactly), map = the kd texture, anisotropyMap =
+    // the direction/strength texture, anisotropy / anisotropyRotation = the texture's.
+    // Textures and images in ObjectLoader's format (Texture.toJSON / Source.toJSON of r187):
+    // MaterialLoader resolves "map" / "anisotropyMap" by uuid from setTextures(...), which
+    // ObjectLoader.parseImagesAsync + parseTextures build from these arrays.
+    const WeaveTextures& w = *c.weave;
+    const std::string uuid = j["uuid"].get<std::string>();
+    auto tex_uuid = [&](int k) { return uuid + (k == 0 ? "-weave-kd" : "-weave-anisotropy"); };
+    j["color"] = Hex(w.base_factor);
+    j["anisotropy"] = w.anisotropy_strength;
+    j["anisotropyRotation"] = w.anisotropy_rotation;
+    j["map"] = tex_uuid(0) + "-t";
+    j["anisotropyMap"] = tex_uuid(1) + "-t";
+    json images = json::array(), textures = json::array();
+    const std::pair<const std::string*, const char*> tex[2] = {{&c.base_color_png, "srgb"},
+                                                               {&c.anisotropy_png, ""}};
+    for (int k = 0; k < 2; ++k) {
+      images.push_back({{"uuid", tex_uuid(k) + "-i"}, {"url", Relative(*tex[k].first, path)}});
+      textures.push_back({{"uuid", tex_uuid(k) + "-t"},
+                          {"name", k == 0 ? "weave kd (base colour)" : "weave anisotropy"},
+                          {"image", tex_uuid(k) + "-i"},
+                          {"mapping", 300},  // UVMapping
+                          {"channel", 0},    // TEXCOORD_0 / uv
+                          {"repeat", {w.uv_repeats, w.uv_repeats}},
+                          {"offset", {0, 0}},
+                          {"center", {0, 0}},
+                          {"rotation", 0},
+                          {"wrap", {1000, 1000}},  // RepeatWrapping
+                          {"colorSpace", tex[k].second},  // "srgb" / NoColorSpace ""
+                          {"minFilter", 1008},            // LinearMipmapLinearFilter
+                          {"magFilter", 1006},            // LinearFilter
+                          {"anisotropy", 1},
+                          {"flipY", false},  // glTF uv convention: v = 0 at the image's top row
+                          {"generateMipmaps", true}});
+    }
+    j["textures"] = textures;
+    j["images"] = images;
+  }
   j["side"] = c.double_sided ? 2 : 0;  // THREE.DoubleSide : THREE.FrontSide (back faces culled)
   j["userData"] = {{"clothfit",
                     {{"engine", render::EngineOf(p.model)},
@@ -715,6 +830,8 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
                       "MaterialLoader decodes them to linear"},
                      {"maps", MapsJson(c, path)},
                      {"provenance", c.provenance}}}};
+  if (c.physical_aniso && c.weave)
+    j["userData"]["clothfit"]["weave_textures"] = WeaveTexturesJson(*c.weave, "three.js");
   io::WriteTextAtomic(path, j.dump(2) + "\n");
 }
 
@@ -771,6 +888,10 @@ void WriteGltf(const std::string& path, const Converted& c) {
     m["extensions"]["KHR_materials_anisotropy"] = {
         {"anisotropyStrength", Value(p, "anisotropy_strength")},
         {"anisotropyRotation", Value(p, "anisotropy_rotation")}};
+    if (c.weave) {  // fit/convert/weave_textures.h: the texture's strength and rotation
+      m["extensions"]["KHR_materials_anisotropy"]["anisotropyStrength"] = c.weave->anisotropy_strength;
+      m["extensions"]["KHR_materials_anisotropy"]["anisotropyRotation"] = c.weave->anisotropy_rotation;
+    }
     m["extensions"]["KHR_materials_specular"] = {
         {"specularFactor", Value(p, "specular_intensity")},
         {"specularColorFactor", Arr(Colour(p, "specular_color"))}};
@@ -786,12 +907,38 @@ void WriteGltf(const std::string& path, const Converted& c) {
   if (const MapRef* map = FindMap(c, "normal")) m["normalTexture"] = add(map);
   if (const MapRef* map = FindMap(c, "sheen_color"))
     m["extensions"]["KHR_materials_sheen"]["sheenColorTexture"] = add(map);
-  m["extras"] = {{"clothfit", c.provenance}};
+  json samplers = json::array();
+  if (c.physical_aniso && c.weave) {
+    // One period of the weave per texture, tiled uv_repeats times per uv unit: sampler REPEAT
+    // (10497) with trilinear minification (9987 LINEAR_MIPMAP_LINEAR) and LINEAR (9729)
+    // magnification; KHR_texture_transform scale (R, R) on each texture reference.
+    const WeaveTextures& w = *c.weave;
+    samplers.push_back({{"magFilter", 9729}, {"minFilter", 9987}, {"wrapS", 10497}, {"wrapT", 10497}});
+    auto add_weave = [&](const std::string& png) {
+      images.push_back({{"uri", Relative(png, path)}, {"mimeType", "image/png"}});
+      textures.push_back({{"source", int(images.size()) - 1}, {"sampler", 0}});
+      return json{{"index", int(textures.size()) - 1},
+                  {"texCoord", 0},
+                  {"extensions",
+                   {{"KHR_texture_transform", {{"scale", {w.uv_repeats, w.uv_repeats}}}}}}};
+    };
+    if (FindMap(c, "base_color"))
+      throw ConvertError(path + ": baseColorTexture: the preset has both a carried colour map "
+                                "and weave maps; only one base colour texture can be written");
+    m["pbrMetallicRoughness"]["baseColorFactor"] = {w.base_factor[0], w.base_factor[1],
+                                                    w.base_factor[2], 1.0};
+    m["pbrMetallicRoughness"]["baseColorTexture"] = add_weave(c.base_color_png);
+    m["extensions"]["KHR_materials_anisotropy"]["anisotropyTexture"] = add_weave(c.anisotropy_png);
+    j["extensionsUsed"].push_back("KHR_texture_transform");
+    m["extras"]["clothfit_weave_textures"] = WeaveTexturesJson(w, "glTF");
+  }
+  m["extras"]["clothfit"] = c.provenance;
   j["materials"] = json::array({m});
   if (!images.empty()) {
     j["images"] = images;
     j["textures"] = textures;
   }
+  if (!samplers.empty()) j["samplers"] = samplers;
   io::WriteTextAtomic(path, j.dump(2) + "\n");
 }
 
@@ -843,6 +990,59 @@ void WriteFilamentMat(const std::string& path, const Converted& c) {
   }
   s << "    }\n}\n";
   io::WriteTextAtomic(path, s.str());
+}
+
+void WritePngFile(const std::string& path, int width, int height, int channels,
+                  const std::vector<unsigned char>& pixels, bool srgb) {
+  std::string png;
+  try {
+    png = EncodePng(width, height, channels, pixels, srgb);
+  } catch (const std::exception& e) {
+    throw ConvertError(path + ": " + e.what());
+  }
+  io::WriteTextAtomic(path, png);
+}
+
+std::vector<std::string> WritePresetWithMaps(const std::string& path, const SourceMaterial& m,
+                                             const json& provenance) {
+  if (!m.analytic) throw ConvertError(path + ": not a preset source");
+  render::MaterialPreset p = *m.analytic;
+  std::vector<std::string> written;
+  auto copy = [&](const std::string& from, const std::string& suffix) {
+    std::string stem = path;
+    const std::string ext = ".preset.json";
+    if (stem.size() > ext.size() && stem.compare(stem.size() - ext.size(), ext.size(), ext) == 0)
+      stem.resize(stem.size() - ext.size());
+    const std::string to = stem + suffix;
+    std::string bytes;
+    try {
+      bytes = limits::ReadFileBounded(from, limits::kMaxImageFileBytes, "weave map");
+    } catch (const limits::InputError& e) {
+      throw ConvertError(e.what());
+    }
+    io::WriteTextAtomic(to, bytes);
+    written.push_back(to);
+    return to;
+  };
+  if (!m.weave_maps_file.empty()) {
+    json& f = p.extra["weave_maps"];
+    const std::string exr = copy(m.weave_maps_file, ".weave.exr");
+    f["file"] = fs::absolute(exr).lexically_normal().string();
+    f["uri"] = Relative(exr, path);
+    if (!m.glint_file.empty()) {
+      const std::string g = copy(m.glint_file, ".glint.exr");
+      f["glint_file"] = fs::absolute(g).lexically_normal().string();
+      f["glint_uri"] = Relative(g, path);
+    }
+    f["paths"] =
+        "\"file\"/\"glint_file\": absolute (render::LoadPresetWeaveMaps, clothfit render-preview); "
+        "\"uri\"/\"glint_uri\": relative to this preset (clothfit convert, web/; survive moving "
+        "the directory)";
+  }
+  p.extra["convert"] = provenance;
+  render::WritePreset(path, p);
+  written.insert(written.begin(), path);
+  return written;
 }
 
 render::MaterialPreset ReadThreejsPhysical(const std::string& path) {

@@ -25,6 +25,7 @@
 
 #include "fit/brdf_fit.h"
 #include "fit/convert/merl.h"
+#include "fit/convert/weave_textures.h"
 #include "render/reference/fabric.h"
 #include "render/scene/material.h"
 #include "render/scene/input_limits.h"
@@ -60,6 +61,11 @@ struct SourceMaterial {
   // sides, so true. The three.js outputs write it as "side" (DoubleSide 2 / FrontSide 0), the
   // glTF output as doubleSided.
   bool double_sided = true;
+  // A woven or physical-aniso preset's weave maps (top-level "weave_maps": the EXR, a relative
+  // "file" resolved against the preset's directory, confined like every map path), or null.
+  std::shared_ptr<const render::WeaveMaps> weave_maps;
+  std::string weave_maps_file;  // the resolved EXR path ("" without maps)
+  std::string glint_file;       // the resolved glint EXR ("" without one)
 };
 
 // Every input file kind, chosen by extension and, for .json, by its "schema"/"format" field.
@@ -91,6 +97,10 @@ struct Converted {
   std::vector<MapRef> maps;
   nlohmann::json provenance = nlohmann::json::object();
   bool double_sided = true;  // SourceMaterial::double_sided
+  // A physical-aniso source with weave maps: the baked textures (fit/convert/weave_textures.h)
+  // and the PNG files they were written to (absolute; the writers reference them relatively).
+  std::optional<WeaveTextures> weave;
+  std::string base_color_png, anisotropy_png;
 };
 
 void WriteClothPreset(const std::string& path, const Converted& c);
@@ -100,10 +110,23 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c);
 // The seed's MeshClothMaterial parameters (same layout, type "MeshClothMaterial").
 void WriteThreejsCloth(const std::string& path, const Converted& c);
 // glTF 2.0 (materials only) with KHR_materials_sheen; with KHR_materials_anisotropy and
-// KHR_materials_specular when `physical_aniso` is set.
+// KHR_materials_specular when `physical_aniso` is set; with `weave`, a baseColorTexture and an
+// anisotropyTexture (KHR_texture_transform scale, REPEAT, trilinear sampler).
+// WriteThreejsPhysical with `weave` adds "map" / "anisotropyMap" (texture uuids) and the
+// ObjectLoader-format "textures" / "images" arrays (docs/convert.md gives the loader snippet).
 void WriteGltf(const std::string& path, const Converted& c);
 // Filament material source (.mat) for shadingModel: cloth.
 void WriteFilamentMat(const std::string& path, const Converted& c);
+
+// Writes an 8-bit PNG atomically (fit/convert/png.h); `srgb`: with an sRGB chunk.
+void WritePngFile(const std::string& path, int width, int height, int channels,
+                  const std::vector<unsigned char>& pixels, bool srgb);
+// The `preset-maps` target: the source preset itself, its weave maps (and glint map) copied
+// next to it as <stem>.weave.exr (<stem>.glint.exr); "weave_maps" names the copies ("file":
+// absolute, what the C++ readers use; "uri": relative to the preset, what a relocated
+// directory and web/ use). Returns the files written.
+std::vector<std::string> WritePresetWithMaps(const std::string& path, const SourceMaterial& m,
+                                             const nlohmann::json& provenance);
 
 // Readers of our own outputs (round trips; the glTF reader is ReadMaterials).
 render::MaterialPreset ReadThreejsPhysical(const std::string& path);
