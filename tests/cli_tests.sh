@@ -170,6 +170,16 @@ PY
     "$BIN" convert "$TMP/nothing" --out "$TMP/x" 2>/dev/null && fail "missing input accepted"
     out=$("$BIN" --quiet bench convert --catalogue "$TMP/cat" -j 1 2>&1) || fail "bench convert: $out"
     echo "$out" | grep -q "materials/s" || fail "bench convert prints no rate: $out"
+    # A woven preset has no glTF form: refused (exit 2) naming the model; preset-maps carries it.
+    mkdir -p "$TMP/wv"
+    printf '{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {}}\n' \
+      > "$TMP/wv/w.json"
+    out=$("$BIN" --quiet convert "$TMP/wv" --to gltf --out "$TMP/wvo" 2>&1)
+    [ $? -eq 2 ] || fail "woven preset to glTF was not refused: $out"
+    echo "$out" | grep -q "w.json: model: 'woven'" || fail "woven refusal does not name the model: $out"
+    "$BIN" --quiet convert "$TMP/wv" --to preset-maps --out "$TMP/wvo" >/dev/null \
+      || fail "preset-maps on a woven preset failed"
+    grep -q '"model": "woven"' "$TMP/wvo/w.maps.preset.json" || fail "preset-maps did not write the woven preset"
     ;;
   shards)
     # render-references --shard: two shards into one cache directory produce exactly the
