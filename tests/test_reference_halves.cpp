@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <utility>
 
 #include "render/reference/path_tracer.h"
 #include "render/scene/environment.h"
@@ -28,12 +29,9 @@ namespace fs = std::filesystem;
 
 Scene HalvesScene() {
   Scene s = CameraScene(24, 24, {0, 0, 3}, {0, 0, -1}, 0.4);
+  // Lit by a constant environment only: light-tailed samples, so the ratio of sums below is
+  // not at the mercy of a few terminator pixels (a sun made it swing by +-20 %).
   s.meshes.push_back(SphereMesh(0.5, 64, 32, true, 0.f));
-  Light l;
-  l.type = Light::Type::kDirectional;
-  l.intensity = 2.0;
-  l.direction = {0.577, -0.577, -0.577};
-  s.lights.push_back(l);
   return s;
 }
 
@@ -60,16 +58,22 @@ double HalfSpreadRatio(const io::ReferenceHalves& h, const RenderResult& r) {
 
 // tolerance: for the ratio of sums, dominated by the few noisiest pixels (measured over six
 // seeds: stratified 0.96 to 1.02, i.i.d. single samples 0.88 to 1.14).
-void CheckHalves(const RenderResult& r, int expect_k, const char* label, double tolerance) {
+// Returns {sum (a - b)^2, sum predicted}; checks their ratio when tolerance > 0.
+std::pair<double, double> CheckHalves(const RenderResult& r, int expect_k, const char* label,
+                                      double tolerance) {
   SCOPED_TRACE(label);
-  ASSERT_EQ(r.batches, expect_k);
+  EXPECT_EQ(r.batches, expect_k);
+  if (r.batches != expect_k) return {0.0, 1.0};
   const io::Image img = RoundTrip(r, std::string("clothfit_halves_") + label + ".exr");
-  ASSERT_EQ(img.metadata.at("clothfit:batches"), std::to_string(expect_k));
-  ASSERT_EQ(img.metadata.at("clothfit:half_batches"), std::to_string(expect_k / 2));
+  EXPECT_EQ(img.metadata.at("clothfit:batches"), std::to_string(expect_k));
+  EXPECT_EQ(img.metadata.at("clothfit:half_batches"), std::to_string(expect_k / 2));
   const io::ReferenceHalves h = io::ReferenceHalvesFromImage(img, label);
-  ASSERT_EQ(h.batches, expect_k);
-  ASSERT_EQ(h.half_batches, expect_k / 2);
-  ASSERT_EQ(h.a.size(), r.rgb.size());
+  EXPECT_EQ(h.batches, expect_k);
+  EXPECT_EQ(h.half_batches, expect_k / 2);
+  if (h.a.size() != r.rgb.size() || h.batches != expect_k) {
+    ADD_FAILURE() << "sizes";
+    return {0.0, 1.0};
+  }
   const double K = h.batches, kA = h.half_batches, kB = K - kA;
   size_t violations = 0, noisy = 0;
   for (size_t i = 0; i < r.rgb.size(); ++i) {
@@ -82,11 +86,19 @@ void CheckHalves(const RenderResult& r, int expect_k, const char* label, double 
     if (se > 0.0) ++noisy;
   }
   EXPECT_EQ(violations, 0u);
-  ASSERT_GT(noisy, r.rgb.size() / 4);
-  const double ratio = HalfSpreadRatio(h, r);
+  EXPECT_GT(noisy, r.rgb.size() / 4);
+  double d2 = 0.0, pred = 0.0;
+  for (size_t i = 0; i < r.rgb.size(); ++i) {
+    d2 += std::pow(double(h.a[i]) - double(h.b[i]), 2);
+    pred += K * double(r.std_error[i]) * double(r.std_error[i]) * (1.0 / kA + 1.0 / kB);
+  }
+  const double ratio = d2 / pred;
   std::printf("[reference] halves %s: K %d kA %d, sum (a-b)^2 / predicted = %.3f\n", label,
               h.batches, h.half_batches, ratio);
-  EXPECT_NEAR(ratio, 1.0, tolerance);
+  if (tolerance > 0.0) {
+    EXPECT_NEAR(ratio, 1.0, tolerance);
+  }
+  return {d2, pred};
 }
 
 TEST(ReferenceHalves, HalvesAreConsistentWithTheMeanAndTheStandardError) {
@@ -104,9 +116,19 @@ TEST(ReferenceHalves, HalvesAreConsistentWithTheMeanAndTheStandardError) {
   st.spp = 256;
   st.tile_size = 8;
   st.target_error = 0.01;
-  const RenderResult ad = pt.Render(st);
-  ASSERT_FALSE(ad.tile_spp.empty());
-  CheckHalves(ad, 16, "adaptive", 0.15);
+  // Adaptive tiles at the 32-spp floor make the single-image ratio noisier (one seed gave
+  // 1.19, eight seeds 0.97 to 1.02 in aggregate): the ratio is checked over four seeds.
+  double d2 = 0.0, pred = 0.0;
+  for (uint64_t seed = 3; seed < 7; ++seed) {
+    st.seed = seed;
+    const RenderResult ad = pt.Render(st);
+    EXPECT_FALSE(ad.tile_spp.empty());
+    const auto [d, p] = CheckHalves(ad, 16, "adaptive", 0.0);
+    d2 += d;
+    pred += p;
+  }
+  std::printf("[reference] halves adaptive, four seeds: %.3f\n", d2 / pred);
+  EXPECT_NEAR(d2 / pred, 1.0, 0.15);
 }
 
 TEST(ReferenceHalves, SpreadStatisticRejectsWrongHalves) {

@@ -63,12 +63,13 @@ struct RenderSettings {
   // allocation never depends on the samples it averages (no stopping bias).
   double target_error = 0.0;
   int min_spp = 32;
-  int pilot_spp = 32;  // pilot samples per pilot pixel (every other pixel in x and y)
-  // The pilot's batches of 2 stratified samples overestimate the error of the image's longer
-  // stratified batches; its prediction is multiplied by this factor (achieved / predicted,
-  // measured 0.72 on sphere/canvas and 0.85 on swatch/twill: the larger, so the achieved
-  // error stays at or below the target; docs/reference-renderer.md).
-  double pilot_calibration = 0.85;
+  // Adaptive only: choose the first vertex's environment samples among 2, 4 and 8 from a
+  // pilot (efficiency = 1 / (error^2 x cost)); false: first_env_samples.
+  bool choose_env_samples = true;
+  int pilot_spp = 32;  // unused since version 4 (the pilot's spp follow from the target; docs)
+  // Multiplies the pilot's predicted per-tile spread (version 4: the pilot's batches are as
+  // long as the image's, so 1; docs/reference-renderer.md "Adaptive sampling, version 4").
+  double pilot_calibration = 1.0;
 };
 
 struct RenderResult {
@@ -90,6 +91,15 @@ struct RenderResult {
   std::vector<int> tile_spp;
   int tile_size = 0;
   double pilot_seconds = 0.0;
+  double predicted_error = 0.0;  // the allocation's predicted mean std error / mean value
+  double error_rate = 0.0;       // gamma: the pilot's error ~ spp^(-gamma/2) below its spp
+  int env_samples = 0;           // environment samples used at the first vertex
+  struct EnvCandidate {
+    int env_samples;
+    double relative_error;  // stage-1 pilot: mean std error / mean value at 32 spp
+    double cost;            // rays per camera sample + env_samples (the cost model)
+  };
+  std::vector<EnvCandidate> env_candidates;  // adaptive stage 1 (docs)
   double mean_spp = 0.0;  // camera samples per pixel, pilot included
   // Statistics
   double seconds = 0.0;
