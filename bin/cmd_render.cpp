@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <map>
 #include <mutex>
 #include <set>
 #include <sstream>
@@ -35,8 +36,26 @@ std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& s
     if (!quiet && said.insert(msg).second) std::fprintf(stderr, "clothfit: warning: %s\n", msg.c_str());
   };
   if (e.path != "procedural-sky" && std::filesystem::exists(e.path)) {
-    return std::make_unique<render::Environment>(
-        render::Environment::Load(e.path, e.intensity, e.rotation_y, warn));
+    // One load (decode, CDF build) per map and process: render-references and fit render
+    // several references under the same map; later ones get a copy (a memcpy of the texels and
+    // CDFs, milliseconds instead of the decode's fraction of a second). Keyed by path, size
+    // and modification time, intensity and rotation.
+    static std::mutex memo_mutex;
+    static std::map<std::string, std::shared_ptr<const render::Environment>> memo;
+    std::error_code ec;
+    const auto mtime = std::filesystem::last_write_time(e.path, ec);
+    char key_tail[96];
+    std::snprintf(key_tail, sizeof key_tail, "|%.17g|%.17g|%lld|%lld", e.intensity, e.rotation_y,
+                  (long long)(ec ? 0 : mtime.time_since_epoch().count()),
+                  (long long)std::filesystem::file_size(e.path, ec));
+    const std::string key = e.path + key_tail;
+    std::lock_guard<std::mutex> lock(memo_mutex);
+    auto it = memo.find(key);
+    if (it == memo.end())
+      it = memo.emplace(key, std::make_shared<const render::Environment>(render::Environment::Load(
+                                 e.path, e.intensity, e.rotation_y, warn)))
+               .first;
+    return std::make_unique<render::Environment>(*it->second);
   }
   if (e.path != "procedural-sky") {
     warn(scene.card.path + ": environment '" + e.path +
@@ -83,7 +102,8 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       ->check(CLI::Range(0, 1024));
   cmd->add_option("--max-depth", args->max_depth, "maximum path depth")->check(CLI::Range(1, 64));
   cmd->add_option("--env-samples", args->env_samples,
-                  "environment samples at each camera ray's hit (default: the renderer's)")
+                  "environment samples at each camera ray's hit (default: the renderer's; with "
+                  "--target-error: chosen among 2, 4, 8 by a pilot)")
       ->check(CLI::Range(1, 16));
   cmd->add_option("--target-error", args->target_error,
                   "adaptive sampling: target mean standard error / mean value (0.02 = 2 %); "
@@ -97,7 +117,10 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       st.spp = args->spp;
       st.seed = args->seed;
       st.max_depth = args->max_depth;
-      if (args->env_samples > 0) st.first_env_samples = args->env_samples;
+      if (args->env_samples > 0) {
+        st.first_env_samples = args->env_samples;
+        st.choose_env_samples = false;  // adaptive mode otherwise chooses among 2, 4, 8
+      }
       st.target_error = args->target_error;
       if (st.target_error > 0.0 && (args->spp < 32 || args->spp % 16 != 0)) {
         std::fprintf(stderr,
@@ -133,7 +156,7 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
            {"clothfit:spp", std::to_string(args->spp)},
            {"clothfit:seed", std::to_string(args->seed)},
            {"clothfit:max_depth", std::to_string(args->max_depth)},
-           {"clothfit:env_samples", std::to_string(st.first_env_samples)},
+           {"clothfit:env_samples", std::to_string(r.env_samples)},
            {"clothfit:target_error", std::to_string(st.target_error)},
            {"clothfit:mean_spp", std::to_string(r.mean_spp)},
            {"clothfit:environment", env ? env->source() : std::string("none")},
@@ -152,6 +175,17 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
         std::printf("render-reference: adaptive: target %.2f%%, mean %.1f spp (pilot included; "
                     "tiles %d..%d spp), pilot %.2f s\n",
                     100.0 * st.target_error, r.mean_spp, *lo, *hi, r.pilot_seconds);
+        std::printf("render-reference: adaptive: predicted %.2f%%, achieved %.2f%% (ratio "
+                    "%.3f); rate gamma %.2f; first-vertex env samples %d; candidates",
+                    100.0 * r.predicted_error,
+                    r.mean_value > 0 ? 100.0 * r.mean_std_error / r.mean_value : 0.0,
+                    r.predicted_error > 0 && r.mean_value > 0
+                        ? r.mean_std_error / r.mean_value / r.predicted_error
+                        : 0.0,
+                    r.error_rate, r.env_samples);
+        for (const auto& c : r.env_candidates)
+          std::printf(" %d: %.2f%% x %.1f rays", c.env_samples, 100.0 * c.relative_error, c.cost);
+        std::printf("\n");
       }
       exit_code = 0;
     } catch (const std::exception& e) {

@@ -92,13 +92,14 @@ struct SamplingPlan {
 struct PixelEstimate {
   double mean[3] = {0, 0, 0}, m2[3] = {0, 0, 0};
   double batch_sum[3] = {0, 0, 0};
+  double half[3] = {0, 0, 0};  // mean of the first half_batches batch means (see Store)
   int batch_count = 0;
   int hits = 0, fabric_hits = 0;
   double aov_n[3] = {0, 0, 0}, aov_p[3] = {0, 0, 0}, aov_t[3] = {0, 0, 0}, aov_uv[2] = {0, 0};
   double aov_z = 0.0;
 
-  // Sample m (0-based) of its batch of M.
-  void Add(const SampleOut& so, int m, int M, double max_sample_value) {
+  // Sample m (0-based) of its batch of M; half_batches: the batch count of the first half.
+  void Add(const SampleOut& so, int m, int M, int half_batches, double max_sample_value) {
     double v[3] = {so.L.r, so.L.g, so.L.b};
     for (int c = 0; c < 3; ++c) {
       if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel
@@ -114,6 +115,9 @@ struct PixelEstimate {
         m2[c] += delta * (bm - mean[c]);
         batch_sum[c] = 0.0;
       }
+      // The running mean of the first half_batches batch means: half image A.
+      if (batch_count == half_batches)
+        for (int c = 0; c < 3; ++c) half[c] = mean[c];
     }
     if (so.hit) {
       ++hits;
@@ -139,6 +143,10 @@ struct PixelEstimate {
                                        : std::numeric_limits<float>::infinity();
       const double var = K > 1 ? m2[c] / (K - 1) : 0.0;  // variance of one batch mean
       r.std_error[pix * 3 + size_t(c)] = float(std::sqrt(var / K));
+      if (!r.half.empty())
+        r.half[pix * 3 + size_t(c)] = std::abs(half[c]) <= double(std::numeric_limits<float>::max())
+                                          ? float(half[c])
+                                          : std::numeric_limits<float>::infinity();
     }
     r.coverage[pix] = float(hits) / float(spp);
     r.fabric[pix] = float(fabric_hits) / float(spp);
@@ -166,6 +174,7 @@ RenderResult AllocateResult(int W, int H, const AovSet& aovs) {
   const size_t np = size_t(W) * size_t(H);
   r.rgb.assign(np * 3, 0.f);
   r.std_error.assign(np * 3, 0.f);
+  r.half.assign(np * 3, 0.f);
   r.coverage.assign(np, 0.f);
   r.fabric.assign(np, 0.f);
   if (aovs.normal) r.normal.assign(np * 3, 0.f);
@@ -461,7 +470,7 @@ struct PathTracer::Impl {
       scene.CameraRay(x + ju, y + jv, org, dir);
       const SampleOut so =
           TracePath(V(org), V(dir), rng, M > 1 ? &first : nullptr, env_samples, st, rays);
-      est.Add(so, m, M, st.max_sample_value);
+      est.Add(so, m, M, HalfBatches(spp / M), st.max_sample_value);
     }
     return est;
   }
@@ -501,14 +510,16 @@ struct PathTracer::Impl {
     int pixels = 0;
     uint64_t rays = 0;
   };
+  // Pilot pixels: every stride-th pixel in x and y, at offset (stride - 1) / 2 in the tile;
+  // pilot_seed must differ from the image's seed (independent streams).
   PilotStats PilotTile(const RenderSettings& st, const SamplingPlan& pilot, int tile,
-                       int tiles_x) const {
+                       int tiles_x, int stride, uint64_t pilot_seed) const {
     const TileRect t = Rect(st, tile, tiles_x);
     PilotStats ps;
     BatchStrata strata({{2, 1}, {1, 1}, {2, pilot.env_samples}});
-    const uint64_t pilot_seed = st.seed ^ 0x5DEECE66D1CE4E5Bull;  // disjoint from st.seed's
-    for (int y = t.y0; y < t.y1; y += 2) {
-      for (int x = t.x0; x < t.x1; x += 2) {
+    const int off = (stride - 1) / 2;
+    for (int y = t.y0 + off; y < t.y1; y += stride) {
+      for (int x = t.x0 + off; x < t.x1; x += stride) {
         const PixelEstimate est = EstimatePixel(st, pilot_seed, pilot.K * pilot.M, pilot.M,
                                                 pilot.env_samples, x, y, strata, ps.rays);
         for (int c = 0; c < 3; ++c) {
@@ -535,33 +546,50 @@ SamplingPlan PlanFor(int spp, int env_samples) {
   return plan;
 }
 
-// Adaptive allocation (docs/reference-renderer.md, "Adaptive sampling"). Tile t has w_t
-// pixels, a per-sample spread s_t (its pilot pixels' mean standard error x sqrt(pilot spp):
-// at n samples the tile's mean standard error is about s_t / sqrt(n)) and a cost c_t (rays
-// per sample). The counts minimise the cost sum w_t c_t n_t subject to the image's mean
-// standard error sum w_t s_t / sqrt(n_t) / sum w_t <= target: n_t = lambda (s_t / c_t)^(2/3)
-// (Lagrange), clamped to [lo, hi], lambda found by bisection, then rounded up to a multiple
-// of 16. Each tile thus stops at its own standard error s_t / sqrt(n_t).
-std::vector<int> AllocateTileSpp(const std::vector<double>& w, const std::vector<double>& s,
-                                 const std::vector<double>& c, double target, int lo, int hi) {
+// Adaptive allocation (docs/reference-renderer.md, "Adaptive sampling, version 4"). Tile t
+// has w_t pixels, a mean standard error e_t measured by the pilot at n_p samples per pixel
+// (16 batches of n_p / 16) and a cost c_t per sample. Its error at n samples is modelled as
+// e_t(n) = e_t (n / n_p)^(-g/2) with g = gamma below n_p (stratification: the rate the two
+// pilot stages measured, >= 1) and g = 1 above it (never extrapolating a stratification gain
+// beyond what was measured). The counts minimise sum w_t c_t n_t subject to the image's mean
+// standard error sum w_t e_t(n_t) / sum w_t <= target: for a multiplier lambda each tile takes
+// the n minimising c_t n + lambda e_t(n) (closed form on each of the two power-law pieces),
+// lambda by bisection; clamped to [lo, hi], rounded up to a multiple of 16.
+double TileErrorModel(double e, double n, double n_p, double gamma) {
+  return e * std::pow(n / n_p, n < n_p ? -0.5 * gamma : -0.5);
+}
+double TileCountFor(double e, double c, double lambda, double n_p, double gamma, double lo,
+                    double hi) {
+  c = std::max(c, 1e-6);
+  if (!(e > 0.0)) return lo;
+  // Piece g: minimise c n + lambda e n_p^(g/2) n^(-g/2): n = (lambda e (g/2) n_p^(g/2) / c)^(1/(1+g/2)).
+  auto piece = [&](double g, double a, double b) {
+    const double n = std::pow(lambda * e * 0.5 * g * std::pow(n_p, 0.5 * g) / c, 1.0 / (1.0 + 0.5 * g));
+    return std::clamp(n, a, b);
+  };
+  const double n_lo = std::clamp(n_p, lo, hi);
+  const double n1 = piece(gamma, lo, n_lo), n2 = piece(1.0, n_lo, hi);
+  auto f = [&](double n) { return c * n + lambda * TileErrorModel(e, n, n_p, gamma); };
+  return f(n1) <= f(n2) ? n1 : n2;
+}
+std::vector<int> AllocateTileSpp(const std::vector<double>& w, const std::vector<double>& e,
+                                 const std::vector<double>& c, double n_p, double gamma,
+                                 double target, int lo, int hi) {
   const size_t n = w.size();
   double wsum = 0.0;
   for (double x : w) wsum += x;
   auto counts = [&](double lambda, std::vector<double>* out) {
     double err = 0.0;
     for (size_t t = 0; t < n; ++t) {
-      const double shape = s[t] > 0.0 ? std::cbrt((s[t] / std::max(c[t], 1e-6)) *
-                                                  (s[t] / std::max(c[t], 1e-6)))
-                                      : 0.0;
-      const double nt = std::clamp(lambda * shape, double(lo), double(hi));
+      const double nt = lambda < 0.0 ? double(hi) : TileCountFor(e[t], c[t], lambda, n_p, gamma, lo, hi);
       if (out) (*out)[t] = nt;
-      err += w[t] * s[t] / std::sqrt(nt);
+      err += w[t] * TileErrorModel(e[t], nt, n_p, gamma);
     }
     return err / wsum;
   };
   std::vector<double> nt(n, double(hi));
-  if (counts(1e30, nullptr) > target) {
-    counts(1e30, &nt);  // even the budget everywhere misses the target: use the budget
+  if (counts(-1.0, nullptr) > target) {
+    counts(-1.0, &nt);  // even the budget everywhere misses the target: use the budget
   } else {
     double a = -60.0, b = 80.0;  // log lambda
     for (int it = 0; it < 100; ++it) {
@@ -611,46 +639,126 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   // Samples per pixel of every tile: st.spp, or the adaptive allocation from a pilot.
   std::vector<int> tile_spp(static_cast<size_t>(tiles), st.spp);
   double pilot_samples = 0.0;
+  int env_samples = st.first_env_samples;
   if (adaptive) {
     if (!(st.target_error < 1e3) || st.min_spp < 32 || st.min_spp % 16 != 0 ||
-        st.spp < st.min_spp || st.pilot_spp < 32 || st.pilot_spp % 16 != 0)
+        st.spp < st.min_spp || st.first_env_samples < 1)
       throw std::invalid_argument(
-          "adaptive sampling: need target_error in (0, 1000), min_spp and pilot_spp multiples "
-          "of 16 >= 32, spp >= min_spp");
-    const SamplingPlan pilot = PlanFor(st.pilot_spp, st.first_env_samples);
-    std::vector<Impl::PilotStats> stats(static_cast<size_t>(tiles));
-    tbb::parallel_for(0, tiles, [&](int tile) {
-      stats[size_t(tile)] = impl_->PilotTile(st, pilot, tile, tiles_x);
-      total_rays += stats[size_t(tile)].rays;
-      if (tile % 4 == 0) tick(1);
-    });
+          "adaptive sampling: need target_error in (0, 1000), min_spp a multiple of 16 >= 32, "
+          "spp >= min_spp, first_env_samples >= 1");
+    // Sums of a pilot over all tiles.
+    struct PilotSum {
+      double se = 0.0, value = 0.0, pixels = 0.0, rays = 0.0;
+    };
+    auto run_pilot = [&](const SamplingPlan& plan, int stride, uint64_t pilot_seed,
+                         std::vector<Impl::PilotStats>* per_tile) {
+      std::vector<Impl::PilotStats> stats(static_cast<size_t>(tiles));
+      tbb::parallel_for(0, tiles, [&](int tile) {
+        stats[size_t(tile)] = impl_->PilotTile(st, plan, tile, tiles_x, stride, pilot_seed);
+        total_rays += stats[size_t(tile)].rays;
+      });
+      PilotSum sum;
+      for (const Impl::PilotStats& ps : stats) {
+        sum.se += ps.se_sum;
+        sum.value += ps.value_sum;
+        sum.pixels += ps.pixels;
+        sum.rays += double(ps.rays);
+      }
+      pilot_samples += sum.pixels * plan.K * plan.M;
+      if (per_tile) *per_tile = std::move(stats);
+      return sum;
+    };
+    // Stage 1 (docs/reference-renderer.md "Adaptive sampling, version 4"): every 8th pixel in
+    // x and y, 32 spp (16 batches of 2), once per candidate count of first-vertex environment
+    // samples (st.choose_env_samples: 2, 4 and 8; else st.first_env_samples). Efficiency of candidate e
+    // = 1 / (relative error^2 x cost per sample), cost = rays per camera sample + e (each
+    // environment sample's BSDF evaluation, pdf and map lookups counted as one ray: a fixed
+    // cost model, so the choice, and the image, are deterministic).
+    const std::vector<int> candidates =
+        st.choose_env_samples ? std::vector<int>{2, 4, 8}
+                              : std::vector<int>{st.first_env_samples};
+    // Pilot densities: 1/64 and 1/16 of the pixels, denser on small images (at least about
+    // 256 and 1024 pilot pixels where the image has them).
+    const double pixels = double(W) * double(H);
+    const int stride1 = pixels >= 64.0 * 256 ? 8 : pixels >= 16.0 * 256 ? 4 : 2;
+    const int stride2 = pixels >= 16.0 * 1024 ? 4 : 2;
+    double best_eff = -1.0, rel1 = 0.0;
+    for (const int e : candidates) {
+      const PilotSum p = run_pilot(PlanFor(32, e), stride1,
+                                   st.seed ^ 0x3C6EF372FE94F82Bull ^ Mix64(uint64_t(e)), nullptr);
+      if (!(p.pixels > 0.0)) continue;
+      const double err = p.se / (3.0 * p.pixels), value = p.value / (3.0 * p.pixels);
+      const double cost = p.rays / (p.pixels * 32.0) + e;
+      const double rel = value > 0.0 ? err / value : 0.0;
+      const double eff = rel > 0.0 ? 1.0 / (rel * rel * cost) : 1e300;
+      r.env_candidates.push_back({e, rel, cost});
+      if (eff > best_eff) {
+        best_eff = eff;
+        env_samples = e;
+        rel1 = rel;
+      }
+    }
+    if (best_eff < 0.0) env_samples = candidates.front();
+    // The spp the target needs by stage 1 (error ~ spp^-1/2); stage 2 measures the per-tile
+    // spread with that batch length M (16 batches of M), so the stratification the image's
+    // batches get is the one measured (a pilot with shorter batches overestimates the error).
+    const double need = 32.0 * (rel1 / st.target_error) * (rel1 / st.target_error);
+    const int m2 = std::clamp(int(std::ceil(need / 16.0 - 1e-9)), 2, st.spp / 16);
+    const SamplingPlan pilot = PlanFor(16 * m2, env_samples);
+    std::vector<Impl::PilotStats> stats;
+    const PilotSum p2 = run_pilot(pilot, stride2, st.seed ^ 0x5DEECE66D1CE4E5Bull, &stats);
+    tick(pilot_units);
     const size_t nt = static_cast<size_t>(tiles);
-    std::vector<double> w(nt), spread(nt), cost(nt);
-    double value_sum = 0.0, pilot_pixels = 0.0;
+    std::vector<double> w(nt), err(nt), cost(nt);
+    const double n_pilot = 16.0 * m2;
+    const double px2 = std::max(p2.pixels, 1.0);
+    const double mean_err = p2.se / (3.0 * px2);
+    const double mean_cost = p2.rays / (px2 * n_pilot) + env_samples;
     for (int t = 0; t < tiles; ++t) {
       const Impl::PilotStats& ps = stats[size_t(t)];
       const Impl::TileRect rc = impl_->Rect(st, t, tiles_x);
       w[size_t(t)] = double(rc.x1 - rc.x0) * double(rc.y1 - rc.y0);
-      spread[size_t(t)] = ps.se_sum / (3.0 * ps.pixels) * std::sqrt(double(st.pilot_spp));
-      cost[size_t(t)] = double(ps.rays) / (double(ps.pixels) * st.pilot_spp);
-      value_sum += ps.value_sum;
-      pilot_pixels += ps.pixels;
+      // A tile without pilot pixels (a sliver at the image's edge) takes the image's means.
+      err[size_t(t)] = (ps.pixels > 0 ? ps.se_sum / (3.0 * ps.pixels) : mean_err) *
+                       st.pilot_calibration;
+      cost[size_t(t)] = ps.pixels > 0 ? double(ps.rays) / (double(ps.pixels) * n_pilot) + env_samples
+                                      : mean_cost;
     }
-    pilot_samples = pilot_pixels * st.pilot_spp;
-    const double mean_value = value_sum / (3.0 * pilot_pixels);
-    for (double& x : spread) x *= st.pilot_calibration;
-    tile_spp = AllocateTileSpp(w, spread, cost, st.target_error * mean_value, st.min_spp, st.spp);
+    const double mean_value = p2.value / (3.0 * px2);
+    // The rate between the stages: relative error rel1 at 32 spp (batches of 2), rel2 at
+    // n_pilot (batches of m2): gamma = 2 log(rel1 / rel2) / log(n_pilot / 32), in [1, 2]
+    // (1 = plain Monte Carlo; 1 when the stages have the same spp).
+    const double rel2 = mean_value > 0.0 ? mean_err / mean_value : 0.0;
+    double gamma = 1.0;
+    if (m2 > 2 && rel1 > 0.0 && rel2 > 0.0)
+      gamma = std::clamp(2.0 * std::log(rel1 / rel2) / std::log(n_pilot / 32.0), 1.0, 2.0);
+    r.error_rate = gamma;
+    tile_spp = AllocateTileSpp(w, err, cost, n_pilot, gamma, st.target_error * mean_value,
+                               st.min_spp, st.spp);
+    double wsum = 0.0, pred = 0.0;
+    for (size_t t = 0; t < nt; ++t) {
+      wsum += w[t];
+      pred += w[t] * TileErrorModel(err[t], double(tile_spp[t]), n_pilot, gamma);
+    }
+    r.predicted_error = mean_value > 0.0 ? pred / wsum / mean_value : 0.0;
     r.pilot_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
+  r.env_samples = PlanFor(32, env_samples).env_samples;
 
   // Batches per tile (see PlanFor); r.batches is the count of the first tile (16 whenever
   // every tile's spp is a multiple of 16 >= 32, as adaptive counts always are).
-  r.batches = PlanFor(tile_spp[0], st.first_env_samples).K;
+  r.batches = PlanFor(tile_spp[0], env_samples).K;
+  // One batch count K for the whole image (so the half images' metadata is one number): a
+  // fixed spp gives one K; adaptive counts are multiples of 16 >= 32, i.e. K = 16 everywhere.
+  for (int n : tile_spp)
+    if (PlanFor(n, env_samples).K != r.batches)
+      throw std::logic_error("Render: tiles with different batch counts");
+  r.half_batches = HalfBatches(r.batches);
   tbb::parallel_for(0, tiles, [&](int tile) {
     const int spp = tile_spp[size_t(tile)];
     total_rays +=
-        impl_->RenderTile(st, PlanFor(spp, st.first_env_samples), spp, tile, tiles_x, r);
+        impl_->RenderTile(st, PlanFor(spp, env_samples), spp, tile, tiles_x, r);
     tick(1);
   });
 
@@ -697,9 +805,19 @@ void WriteRenderExr(const std::string& path, const RenderResult& r,
     planes.push_back({"uv.V", &r.uv, 2, 1});
   }
   if (!r.depth.empty()) planes.push_back({"Z", &r.depth, 1, 0});
+  // Half image A (docs/reference-renderer.md "Half images"): only with two non-empty halves.
+  const bool halves = r.half_batches >= 1 && r.batches - r.half_batches >= 1 &&
+                      r.half.size() == r.rgb.size();
+  if (halves) {
+    planes.push_back({"half.R", &r.half, 3, 0});
+    planes.push_back({"half.G", &r.half, 3, 1});
+    planes.push_back({"half.B", &r.half, 3, 2});
+  }
   const size_t np = size_t(r.width) * size_t(r.height);
   size_t nonfinite = 0;
   for (float v : r.rgb) nonfinite += std::isfinite(v) ? 0 : 1;
+  if (halves)
+    for (float v : r.half) nonfinite += std::isfinite(v) ? 0 : 1;
   if (nonfinite > 0)  // never written, so never cached as a reference
     throw io::IoError(path + ": refusing to write a render with " + std::to_string(nonfinite) +
                       " non-finite radiance values (kMaxRadiance; docs/reliability.md)");
@@ -713,6 +831,13 @@ void WriteRenderExr(const std::string& path, const RenderResult& r,
   img.metadata["clothfit:colour_space"] = "linear Rec.709 / sRGB primaries, scene-referred radiance";
   img.metadata["clothfit:stderr"] = "stderr.* = standard error of the pixel mean, sqrt(var/n)";
   img.metadata["clothfit:alpha"] = "A = fraction of camera samples that hit geometry";
+  if (r.batches > 0) img.metadata["clothfit:batches"] = std::to_string(r.batches);
+  if (halves) {
+    img.metadata["clothfit:half_batches"] = std::to_string(r.half_batches);
+    img.metadata["clothfit:half"] =
+        "half.* = mean of the first clothfit:half_batches of the clothfit:batches i.i.d. batch "
+        "means (the same K in every pixel); the other half B = (K mean - kA half) / (K - kA)";
+  }
   io::WriteExr(path, img);
 }
 

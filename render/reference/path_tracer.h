@@ -33,7 +33,15 @@ struct AovSet {
 // 2: stratified first-vertex environment/BSDF numbers and two environment samples there.
 // 3: Sadeghi evaluated through identities (same expectation, rounding-level changes) and
 //    adaptive sampling (target_error; fixed-spp images are unchanged by it).
-inline constexpr int kReferenceRendererVersion = 3;
+// 4: half images (half.R/G/B) in the EXR; per-reference environment samples and the
+//    re-planned adaptive pilot (docs/reference-renderer.md, session 6).
+inline constexpr int kReferenceRendererVersion = 4;
+
+// Half images: of a pixel's K i.i.d. batch means, half A is the mean of the first
+// HalfBatches(K) = floor(K / 2); the complement B = (K mean - kA A) / (K - kA) is the mean of
+// the others, so A and B are two independent unbiased estimates of the pixel (their difference
+// measures the noise without a second render).
+inline int HalfBatches(int batches) { return batches / 2; }
 
 struct RenderSettings {
   int spp = 64;
@@ -55,12 +63,13 @@ struct RenderSettings {
   // allocation never depends on the samples it averages (no stopping bias).
   double target_error = 0.0;
   int min_spp = 32;
-  int pilot_spp = 32;  // pilot samples per pilot pixel (every other pixel in x and y)
-  // The pilot's batches of 2 stratified samples overestimate the error of the image's longer
-  // stratified batches; its prediction is multiplied by this factor (achieved / predicted,
-  // measured 0.72 on sphere/canvas and 0.85 on swatch/twill: the larger, so the achieved
-  // error stays at or below the target; docs/reference-renderer.md).
-  double pilot_calibration = 0.85;
+  // Adaptive only: choose the first vertex's environment samples among 2, 4 and 8 from a
+  // pilot (efficiency = 1 / (error^2 x cost)); false: first_env_samples.
+  bool choose_env_samples = true;
+  int pilot_spp = 32;  // unused since version 4 (the pilot's spp follow from the target; docs)
+  // Multiplies the pilot's predicted per-tile spread (version 4: the pilot's batches are as
+  // long as the image's, so 1; docs/reference-renderer.md "Adaptive sampling, version 4").
+  double pilot_calibration = 1.0;
 };
 
 struct RenderResult {
@@ -68,7 +77,9 @@ struct RenderResult {
   std::vector<float> rgb;        // mean radiance, linear, 3 per pixel, top row first
   std::vector<float> std_error;  // standard error of the pixel mean per channel, from the
                                  // spread of `batches` i.i.d. batch means (see Render)
-  int batches = 0;
+  int batches = 0;                // K, the same in every pixel (see Render)
+  std::vector<float> half;        // half image A, 3 per pixel (HalfBatches)
+  int half_batches = 0;           // kA = HalfBatches(batches)
   std::vector<float> coverage;   // fraction of camera samples hitting geometry (alpha)
   std::vector<float> fabric;     // fraction of camera samples hitting the fabric material
   // AOVs (first-hit, averaged over the pixel's samples that hit; empty unless requested)
@@ -80,6 +91,15 @@ struct RenderResult {
   std::vector<int> tile_spp;
   int tile_size = 0;
   double pilot_seconds = 0.0;
+  double predicted_error = 0.0;  // the allocation's predicted mean std error / mean value
+  double error_rate = 0.0;       // gamma: the pilot's error ~ spp^(-gamma/2) below its spp
+  int env_samples = 0;           // environment samples used at the first vertex
+  struct EnvCandidate {
+    int env_samples;
+    double relative_error;  // stage-1 pilot: mean std error / mean value at 32 spp
+    double cost;            // rays per camera sample + env_samples (the cost model)
+  };
+  std::vector<EnvCandidate> env_candidates;  // adaptive stage 1 (docs)
   double mean_spp = 0.0;  // camera samples per pixel, pilot included
   // Statistics
   double seconds = 0.0;
@@ -103,7 +123,8 @@ class PathTracer {
   std::unique_ptr<Impl> impl_;
 };
 
-// Writes the result as one EXR: R, G, B, A (coverage), fabric, stderr.R/G/B, and the
+// Writes the result as one EXR: R, G, B, A (coverage), fabric, stderr.R/G/B, half.R/G/B (with
+// metadata clothfit:batches and clothfit:half_batches; when K >= 2), and the
 // requested AOVs (N.X/Y/Z, P.X/Y/Z, T.X/Y/Z, uv.U/V, Z), with metadata `extra`.
 void WriteRenderExr(const std::string& path, const RenderResult& r,
                     const std::vector<std::pair<std::string, std::string>>& extra);
