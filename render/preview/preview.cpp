@@ -327,6 +327,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       continue;
     }
     const SurfaceAttributes a = x.bvh.Attributes(h);
+    std::array<double, 2> uv{a.uv[0], a.uv[1]};  // where the weave maps are read
     PrimaryHit hit;
     hit.v = d * -1.0;
     hit.n = V(a.normal);
@@ -346,6 +347,11 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
         hit.n = Normalize(v3(m.normals[idx[0]]) * b[0] + v3(m.normals[idx[1]]) * b[1] +
                           v3(m.normals[idx[2]]) * b[2]);
         hit.v = Normalize(V(x.scene.camera.position) - (P[0] * b[0] + P[1] * b[1] + P[2] * b[2]));
+        if (!m.uvs.empty())  // TEXCOORD_0 as the GPU interpolates it (the weave maps' uv)
+          for (int k = 0; k < 2; ++k)
+            uv[size_t(k)] = double(m.uvs[idx[0]][size_t(k)]) * b[0] +
+                            double(m.uvs[idx[1]][size_t(k)]) * b[1] +
+                            double(m.uvs[idx[2]][size_t(k)]) * b[2];
       }
       // three.js (normal_fragment_begin, DoubleSide): normal *= faceDirection, i.e. flipped on
       // back faces by the triangle's winding (gl_FrontFacing), not by the shading normal; a
@@ -371,20 +377,20 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       const WeaveMaps& wm = *x.opt.weave_maps;
       const std::array<double, 4> duv = UvDerivatives(x.scene, h, px + 0.5, y + 0.5);
       const double lod = wm.Lod(duv, x.opt.weave_footprint_scale);
-      const auto s = wm.Sample(a.uv[0], a.uv[1], lod);
+      const auto s = wm.Sample(uv[0], uv[1], lod);
       for (int k = 0; k < WeaveMaps::kChannels; ++k) weave[size_t(k)] = float(s[size_t(k)]);
       if (wm.has_glint()) {  // the glint multiplies both yarn lobes: fold it into their weights
-        const double g = wm.SampleGlint(a.uv[0], a.uv[1], duv, x.opt.weave_footprint_scale);
+        const double g = wm.SampleGlint(uv[0], uv[1], duv, x.opt.weave_footprint_scale);
         weave[0] = float(s[0] * g);
         weave[1] = float(s[1] * g);
       }
       if (x.opt.model == ModelKind::kPhysicalAniso) {  // the anisotropyMap sample (AnisoFromWeave)
-        const auto av = wm.SampleAnisotropy(a.uv[0], a.uv[1], lod);
+        const auto av = wm.SampleAnisotropy(uv[0], uv[1], lod);
         weave[0] = float(kAnisoAcrossYarn ? av[1] : av[0]);
         weave[1] = float(kAnisoAcrossYarn ? av[0] : av[1]);
       }
       if (wm.has_normals()) {
-        const auto nm = wm.SampleNormal(a.uv[0], a.uv[1], lod);
+        const auto nm = wm.SampleNormal(uv[0], uv[1], lod);
         const Vec3d np = Normalize(hit.t * nm[0] + hit.b * nm[1] + hit.n * nm[2]);
         hit.n = np;
         hit.NoV = Dot(hit.n, hit.v);
