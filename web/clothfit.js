@@ -311,8 +311,8 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
 }
 
 // ---------------------------------------------------------------------------------------------
-// MeshWovenMaterial: clothfit's real-time woven-cloth model (brdf/woven.h), the UNIFORM material
-// (no weave maps yet: wovenWeaveSample() below is the hook where per-pixel maps plug in).
+// MeshWovenMaterial: clothfit's real-time woven-cloth model (brdf/woven.h), uniform or with the
+// preset's weave maps (setWeaveMaps; read per fragment into wovenWeaveSample(), see below).
 // Written from brdf/woven.h and brdf/terms.h; every clamp and constant is the C++ one:
 //   frame: t = the mesh tangent (TANGENT attribute, +u = WARP) Gram-Schmidt'd against the shading
 //     normal (after three.js's DoubleSide flip), b = tangent.w (n x t) (+v = WEFT);
@@ -929,7 +929,7 @@ registerClothfitModel('cloth', {
 });
 
 registerClothfitModel('woven', {
-  engine: 'clothfit MeshWovenMaterial (brdf/woven.h, uniform; weave maps: hook wovenWeaveSample)',
+  engine: 'clothfit MeshWovenMaterial (brdf/woven.h; weave maps as GPU textures)',
   defaults: WOVEN_DEFAULTS,
   make: (p, preset) => {
     const w = wovenOptions(preset.woven);
