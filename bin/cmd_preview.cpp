@@ -8,6 +8,7 @@
 #include "render/scene/image_io.h"
 #include "render/scene/material.h"
 #include "render/preview/preview.h"
+#include "render/preview/weave_maps.h"
 #include "render/scene/tonemap.h"
 #include "render/scene/input_limits.h"
 
@@ -121,6 +122,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       o.model = preset.model;
       o.cloth = preset.cloth;
       o.woven = preset.woven;
+      o.weave_maps = render::LoadPresetWeaveMaps(preset);  // "weave_maps" (woven, physical-aniso)
       o.shadows = args->shadows;
       if (preset.model == render::ModelKind::kPhysicalAniso)  // brdf/physical_aniso.h FromFlat
         o.anisotropy_rotation = preset.values.at(10);

@@ -27,6 +27,7 @@ import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { EXRLoader } from 'three/addons/loaders/EXRLoader.js';
 import { HDRLoader } from 'three/addons/loaders/HDRLoader.js';
+import { parseExr } from './exr.js';
 
 const HERE = new URL('.', import.meta.url);
 
@@ -310,8 +311,8 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
 }
 
 // ---------------------------------------------------------------------------------------------
-// MeshWovenMaterial: clothfit's real-time woven-cloth model (brdf/woven.h), the UNIFORM material
-// (no weave maps yet: wovenWeaveSample() below is the hook where per-pixel maps plug in).
+// MeshWovenMaterial: clothfit's real-time woven-cloth model (brdf/woven.h), uniform or with the
+// preset's weave maps (setWeaveMaps; read per fragment into wovenWeaveSample(), see below).
 // Written from brdf/woven.h and brdf/terms.h; every clamp and constant is the C++ one:
 //   frame: t = the mesh tangent (TANGENT attribute, +u = WARP) Gram-Schmidt'd against the shading
 //     normal (after three.js's DoubleSide flip), b = tangent.w (n x t) (+v = WEFT);
@@ -388,10 +389,17 @@ attribute vec4 tangent;
 #endif
 varying vec3 vWovenTangent;
 varying float vWovenTangentSign;
+#if defined( WOVEN_WEAVE_MAPS )
+uniform mat3 wovenWeaveTransform;
+varying vec2 vWovenWeaveUv;
+#endif
 `;
 const WOVEN_VERTEX = /* glsl */ `
 vWovenTangent = ( modelViewMatrix * vec4( tangent.xyz, 0.0 ) ).xyz;
 vWovenTangentSign = tangent.w < 0.0 ? -1.0 : 1.0;
+#if defined( WOVEN_WEAVE_MAPS )
+vWovenWeaveUv = ( wovenWeaveTransform * vec3( uv, 1.0 ) ).xy;
+#endif
 `;
 
 const WOVEN_PARS = /* glsl */ `
@@ -415,10 +423,19 @@ varying vec3 vWovenTangent;
 varying float vWovenTangentSign;
 
 // Per-pixel weave sample (woven::WeaveSample): lobe weight ratios, diffuse ratio, glint.
-// HOOK for weave maps: define WOVEN_WEAVE_SAMPLE and a wovenWeaveSample() of your own (e.g.
-// reading weave textures at vMapUv) before this chunk; the uniform material is all ones.
+// With weave maps (WOVEN_WEAVE_MAPS, a preset's "weave_maps"): the two textures are read ONCE
+// per fragment in main (WOVEN_ROUGHNESS below, in uniform control flow, so the GPU's implicit
+// LOD from the quad's uv derivatives applies: trilinear, REPEAT, as render/preview/weave_maps.h
+// emulates) into wovenWS. Another source may define WOVEN_WEAVE_SAMPLE and its own
+// wovenWeaveSample() before this chunk; the uniform material is all ones.
 struct WovenWeave { float warp; float weft; vec3 kd; float glint; };
-#ifndef WOVEN_WEAVE_SAMPLE
+#if defined( WOVEN_WEAVE_MAPS )
+uniform sampler2D wovenWeaveWeights;
+uniform sampler2D wovenWeaveKd;
+varying vec2 vWovenWeaveUv;
+WovenWeave wovenWS;
+WovenWeave wovenWeaveSample() { return wovenWS; }
+#elif !defined( WOVEN_WEAVE_SAMPLE )
 WovenWeave wovenWeaveSample() { return WovenWeave( 1.0, 1.0, vec3( 1.0 ), 1.0 ); }
 #endif
 
@@ -550,6 +567,12 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 // After three.js's roughness set-up: the IBL radiance three.js fetches is at r_e.
 const WOVEN_ROUGHNESS = /* glsl */ `
 material.roughness = wovenRE;
+#if defined( WOVEN_WEAVE_MAPS )
+{
+	vec2 wovenW = texture2D( wovenWeaveWeights, vWovenWeaveUv ).rg;
+	wovenWS = WovenWeave( wovenW.x, wovenW.y, texture2D( wovenWeaveKd, vWovenWeaveUv ).rgb, 1.0 );
+}
+#endif
 `;
 
 /**
@@ -575,7 +598,10 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       wovenCr: { value: 1 }, wovenSr: { value: 0 }, wovenF0: { value: 0 }, wovenBeta: { value: 0 },
       wovenM: { value: 0 }, wovenPhaseK: { value: 0 }, wovenPhaseT: { value: 0 },
       wovenPhase: { value: wovenPhaseTexture }, clothDG: { value: clothDGTexture },
+      wovenWeaveWeights: { value: null }, wovenWeaveKd: { value: null },
+      wovenWeaveTransform: { value: new THREE.Matrix3() },
     };
+    this.weaveMaps = null;  // a WeaveMaps (weaveMapsFromExr) or null: the uniform material
     this._updateWovenUniforms();
     if (!wovenPhaseTexture) wovenPhaseTable().then(() => { this.needsUpdate = true; });
     if (!clothDGTexture) clothDGTable().then(() => { this.needsUpdate = true; });
@@ -593,6 +619,18 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     u.wovenF0.value = lb.f0; u.wovenBeta.value = lb.beta; u.wovenM.value = lb.m;
     u.wovenPhaseK.value = lb.phaseK; u.wovenPhaseT.value = lb.phaseT;
     u.wovenPhase.value = wovenPhaseTexture; u.clothDG.value = clothDGTexture;
+    const wm = this.weaveMaps;
+    u.wovenWeaveWeights.value = wm ? wm.weightsTexture : null;
+    u.wovenWeaveKd.value = wm ? wm.kdTexture : null;
+    if (wm) u.wovenWeaveTransform.value.copy(wm.uvTransform);
+  }
+
+  /** Attaches weave maps (weaveMapsFromExr) or removes them (null); recompiles the program. */
+  setWeaveMaps(maps) {
+    this.weaveMaps = maps ?? null;
+    this._updateWovenUniforms();
+    this.needsUpdate = true;
+    return this;
   }
 
   onBeforeRender(renderer, scene, camera, geometry) {
@@ -604,14 +642,15 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     Object.assign(shader.uniforms, this._wovenUniforms);
     const defs = [];
     if (this.yarnLayer === 'albedo-scaled') defs.push('#define WOVEN_ALBEDO_SCALED');
+    if (this.weaveMaps) defs.push('#define WOVEN_WEAVE_MAPS');
     injectPhysicalChunks(shader, 'MeshWovenMaterial', defs.join('\n') + '\nuniform float wovenRE;\n', WOVEN_PARS, WOVEN_ROUGHNESS);
     const vs = shader.vertexShader;
     if (!vs.includes('void main() {') || !vs.includes('#include <project_vertex>')) throw new Error('MeshWovenMaterial: unexpected three.js vertex shader');
-    shader.vertexShader = vs.replace('void main() {', WOVEN_VERTEX_PARS + 'void main() {')
+    shader.vertexShader = (this.weaveMaps ? '#define WOVEN_WEAVE_MAPS\n' : '') + vs.replace('void main() {', WOVEN_VERTEX_PARS + 'void main() {')
       .replace('#include <project_vertex>', '#include <project_vertex>\n' + WOVEN_VERTEX);
   }
 
-  customProgramCacheKey() { return ['woven', this.yarnLayer].join(':'); }
+  customProgramCacheKey() { return ['woven', this.yarnLayer, this.weaveMaps ? 'maps' : 'uniform'].join(':'); }
 
   copy(source) {
     super.copy(source);
@@ -620,6 +659,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       this.yarnLayer = source.yarnLayer;
       this.tintWarp = source.tintWarp.clone();
       this.tintWeft = source.tintWeft.clone();
+      this.weaveMaps = source.weaveMaps;
       this._wovenUniforms = THREE.UniformsUtils.clone(source._wovenUniforms);
       this._updateWovenUniforms();
     }
@@ -633,6 +673,173 @@ const WOVEN_DEFAULTS = Object.freeze({
   twist: 0, warp_share: 0.5, specular_f0: 0.05, forward_scattering: 2, sheen_color: [0, 0, 0],
   sheen_roughness: 0.6,
 });
+
+// ---------------------------------------------------------------------------------------------
+// Weave maps (issue 12; the C++ side: render/preview/weave_maps.h, docs/fitting.md "Weave maps").
+// A woven or physical-aniso preset may name, in its top-level "weave_maps", a float EXR of one
+// weave period: channels warp, weft, kd.R, kd.G, kd.B, all LINEAR ratios to the tile mean.
+// Convention (the C++ one): texel (i, j), i = column from the left, j = row from the TOP of the
+// image, covers TEXCOORD_0 [i, i+1) / (size R) x [j, j+1) / (size R), R = uv_repeats (the
+// preset's value wins over the file's clothfit:uv_repeats), texel centres at +0.5, REPEAT.
+// In three.js: a DataTexture whose data row 0 is the image's top row with flipY = false puts
+// that row at t = 0, i.e. at TEXCOORD_0 v = 0 (glTF's v runs down from the top, GLTFLoader does
+// not flip), and the uv transform scales by R (texture.repeat = (R, R), offset 0, the same
+// matrix three.js builds for a map's uvTransform). Filtering is the GPU's own: RepeatWrapping,
+// LinearFilter / LinearMipmapLinearFilter, isotropic (anisotropy 1), implicit LOD from the
+// quad's uv derivatives. The mip chain is NOT generated by the GPU (gl.generateMipmap's filter
+// is implementation-defined): it is built here, 2 x 2 box averages down to 1 x 1, in double and
+// rounded to float32 exactly as WeaveMaps::FromLevel0 / BuildBoxMips do, and uploaded level by
+// level; level 0 is renormalised to a tile mean of 1 per channel as the C++ reader does. The
+// textures are 32-bit float (RG32F weights, RGBA32F kd with alpha 1), filtered with
+// OES_texture_float_linear (SwiftShader and desktop GPUs expose it); without that extension they
+// fall back to HALF floats (rounding each texel to 11 significant bits, about 5e-4 relative).
+// Not drawn by web/ (refused with a clear error): a relief normal map (channels N.X/N.Y/N.Z,
+// `--weave-maps relief`) and a glint map ("glint_file", `--weave-maps glint`).
+
+export const WEAVE_MAP_CHANNELS = Object.freeze(['warp', 'weft', 'kd.R', 'kd.G', 'kd.B']);
+
+function boxMip(src, s, nc) {  // s = the source side; returns side s/2
+  const h = s >> 1, out = new Float32Array(h * h * nc);
+  for (let j = 0; j < h; ++j) {
+    for (let i = 0; i < h; ++i) {
+      for (let c = 0; c < nc; ++c) {
+        const at = (ii, jj) => src[(jj * s + ii) * nc + c];
+        out[(j * h + i) * nc + c] = 0.25 * (at(2 * i, 2 * j) + at(2 * i + 1, 2 * j) + at(2 * i, 2 * j + 1) + at(2 * i + 1, 2 * j + 1));
+      }
+    }
+  }
+  return out;
+}
+
+function weaveTexture(levels, size, nc, format, type) {
+  const mipmaps = [];
+  for (let l = 0, s = size; l < levels.length; ++l, s >>= 1) mipmaps.push({ data: levels[l], width: s, height: s });
+  const t = new THREE.DataTexture(levels[0], size, size, format, type);
+  t.mipmaps = mipmaps;
+  t.generateMipmaps = false;
+  t.wrapS = THREE.RepeatWrapping;
+  t.wrapT = THREE.RepeatWrapping;
+  t.magFilter = THREE.LinearFilter;
+  t.minFilter = THREE.LinearMipmapLinearFilter;
+  t.anisotropy = 1;
+  t.flipY = false;
+  t.colorSpace = THREE.NoColorSpace;
+  t.needsUpdate = true;
+  return t;
+}
+
+/**
+ * Weave maps from an EXR (ArrayBuffer) as clothfit writes them. `field` is the preset's
+ * "weave_maps" object (its uv_repeats wins), `name` names the file in errors. Returns
+ * {size, uvRepeats, levels: [Float32Array size_l^2 x 5 (warp, weft, kd.R, kd.G, kd.B)],
+ * weightsTexture (RG: warp, weft), kdTexture (RGBA: kd, 1), uvTransform (THREE.Matrix3),
+ * anisotropyTexture(), dispose()}.
+ */
+export function weaveMapsFromExr(buffer, { field = {}, name = 'weave maps', halfFloat = false } = {}) {
+  const fail = (msg) => { throw new Error(`${name}: weave maps: ${msg}`); };
+  const img = parseExr(buffer, name);
+  if (img.width !== img.height) fail('not square');
+  const size = img.width;
+  if (size < 1 || size > 4096 || (size & (size - 1))) fail(`size ${size} is not a power of two in [1, 4096]`);
+  for (const c of WEAVE_MAP_CHANNELS) if (!img.channels[c]) fail(`no channel ${c}`);
+  if (img.channels['N.X'] || img.channels['N.Y'] || img.channels['N.Z']) fail('relief normal channels N.X/N.Y/N.Z are not drawn by web/ (fit with --weave-maps auto or indicator)');
+  let uvRepeats = Number(img.attributes['clothfit:uv_repeats']);
+  if (field.uv_repeats !== undefined) {
+    if (typeof field.uv_repeats !== 'number' || !(field.uv_repeats > 0) || !Number.isFinite(field.uv_repeats)) fail('weave_maps.uv_repeats: expected a positive number');
+    uvRepeats = field.uv_repeats;
+  }
+  if (!(uvRepeats > 0) || !Number.isFinite(uvRepeats)) fail('no clothfit:uv_repeats metadata (and none in the preset)');
+  const n = size * size, nc = WEAVE_MAP_CHANNELS.length;
+  const l0 = new Float32Array(n * nc);
+  WEAVE_MAP_CHANNELS.forEach((c, k) => {
+    const src = img.channels[c];
+    let mean = 0;
+    for (let t = 0; t < n; ++t) {
+      const x = src[t];
+      if (!Number.isFinite(x) || x < 0) fail(`channel ${c} has a negative or non-finite texel`);
+      mean += x;
+    }
+    mean /= n;
+    if (!(mean > 0)) fail(`channel ${c} has a zero mean`);
+    for (let t = 0; t < n; ++t) l0[t * nc + k] = src[t] / mean;  // Float32Array rounds as float(double / double)
+  });
+  const levels = [l0];
+  for (let s = size; s > 1; s >>= 1) levels.push(boxMip(levels[levels.length - 1], s, nc));
+  const type = halfFloat ? THREE.HalfFloatType : THREE.FloatType;
+  const pack = (f) => levels.map((lv) => {
+    const m = lv.length / nc, out = f(m);
+    return out;
+  });
+  const weights = pack((m) => new Float32Array(m * 2)), kd = pack((m) => new Float32Array(m * 4));
+  levels.forEach((lv, l) => {
+    for (let t = 0; t < lv.length / nc; ++t) {
+      weights[l][t * 2] = lv[t * nc]; weights[l][t * 2 + 1] = lv[t * nc + 1];
+      for (let c = 0; c < 3; ++c) kd[l][t * 4 + c] = lv[t * nc + 2 + c];
+      kd[l][t * 4 + 3] = 1;
+    }
+  });
+  const toHalf = (arrs) => (halfFloat ? arrs.map((a) => Uint16Array.from(a, (x) => THREE.DataUtils.toHalfFloat(x))) : arrs);
+  const maps = {
+    size, uvRepeats, levels, field,
+    weightsTexture: weaveTexture(toHalf(weights), size, 2, THREE.RGFormat, type),
+    kdTexture: weaveTexture(toHalf(kd), size, 4, THREE.RGBAFormat, type),
+    // TEXCOORD_0 -> weave-texture coordinates: scale by R (Texture.setUvTransform(0, 0, R, R, 0, 0, 0)).
+    uvTransform: new THREE.Matrix3().setUvTransform(0, 0, uvRepeats, uvRepeats, 0, 0, 0),
+    _aniso: null,
+    // three.js anisotropyMap for physical-aniso (see anisotropyFromWeave): made on first use.
+    anisotropyTexture() {
+      if (!this._aniso) {
+        const a = [anisotropyFromWeave(l0, size)];
+        for (let s = size; s > 1; s >>= 1) a.push(boxMip(a[a.length - 1], s, 4));
+        this._aniso = weaveTexture(toHalf(a), size, 4, THREE.RGBAFormat, type);
+      }
+      return this._aniso;
+    },
+    dispose() { this.weightsTexture.dispose(); this.kdTexture.dispose(); this._aniso?.dispose(); },
+  };
+  maps.kdTexture.repeat.set(uvRepeats, uvRepeats);
+  return maps;
+}
+
+// The anisotropyMap texel a weave-map texel stands for (render/preview/preview.cpp
+// AnisoFromWeave, the issue's along-the-yarn mapping): direction t (+u, warp) where the warp
+// weight dominates (warp >= weft), b (+v, weft) otherwise; strength |warp - weft| / (warp + weft).
+// three.js encoding (KHR_materials_anisotropy): RG = direction * 0.5 + 0.5, B = strength; A = 1.
+export function anisotropyFromWeave(level0, size) {
+  const nc = WEAVE_MAP_CHANNELS.length, n = size * size, out = new Float32Array(n * 4);
+  for (let t = 0; t < n; ++t) {
+    const wa = level0[t * nc], wb = level0[t * nc + 1];
+    const warp = wa >= wb;
+    out[t * 4] = warp ? 1 : 0.5;
+    out[t * 4 + 1] = warp ? 0.5 : 1;
+    out[t * 4 + 2] = wa + wb > 0 ? Math.abs(wa - wb) / (wa + wb) : 0;
+    out[t * 4 + 3] = 1;
+  }
+  return out;
+}
+
+// Where a preset's weave-map file is fetched from: "file" is absolute (the fit writes the
+// absolute path) or relative; a relative one resolves against the preset's URL, an absolute one
+// becomes its base name next to the preset (the fit writes <stem>.weave.exr next to <stem>.json).
+// options.resolveWeaveMapPath(file, presetUrl) overrides this (e.g. a server that maps file paths).
+export function weaveMapUrl(file, presetUrl, options = {}) {
+  if (options.resolveWeaveMapPath) return options.resolveWeaveMapPath(file, presetUrl);
+  const base = new URL(presetUrl, globalThis.location?.href ?? 'file:///');
+  if (file.startsWith('/') || /^[A-Za-z]:[\\/]/.test(file)) return new URL(file.split(/[\\/]/).pop(), base).href;
+  return new URL(file, base).href;
+}
+
+/** Fetches and parses the weave maps a preset's "weave_maps" field names (or null if none). */
+export async function fetchWeaveMaps(preset, presetUrl, options = {}) {
+  const field = preset?.weave_maps;
+  if (field === undefined || field === null) return null;
+  if (typeof field !== 'object' || typeof field.file !== 'string') throw new Error('weave_maps: expected an object with a string "file"');
+  if (field.glint_file !== undefined) throw new Error('weave_maps.glint_file: glint maps are not drawn by web/ (fit with --weave-maps auto or indicator)');
+  const url = weaveMapUrl(field.file, presetUrl, options);
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(`weave_maps.file: ${url}: HTTP ${r.status}`);
+  return weaveMapsFromExr(await r.arrayBuffer(), { field, name: field.file, halfFloat: options.halfFloat });
+}
 
 // ---------------------------------------------------------------------------------------------
 // Presets (docs/preset-format.md). One factory per model name; parameters not in the preset take
@@ -669,8 +876,12 @@ registerClothfitModel('physical-sheen', {
 // ---- physical-aniso (brdf/physical_aniso.h; issue 12's honest baseline) ----------------------
 // MeshPhysicalMaterial with sheen + anisotropy + specular, every parameter the C++ one
 // (specular_color is three.js specularColor, linear, may exceed 1; anisotropy_rotation radians).
-// The preset's weave maps (top-level "weave_maps", an EXR) are NOT loaded here yet: the
-// material is the uniform one (no colour map, anisotropy along the mesh tangent).
+// With weave maps (the preset's top-level "weave_maps", the same EXR as a woven preset's; the
+// C++ preview's reading, render/preview/preview.cpp): the kd ratio is three.js's own `map`
+// (diffuseColor *= texel, linear, no colour-space decode) and the warp/weft weights give an
+// `anisotropyMap` (anisotropyFromWeave: direction along the dominant yarn, strength
+// |warp - weft| / (warp + weft)), both with the weave uv transform (repeat R) and the GPU's
+// trilinear filtering. Without maps: no colour map, anisotropy along the mesh tangent.
 registerClothfitModel('physical-aniso', {
   engine: 'three.js r187 MeshPhysicalMaterial (sheen + anisotropy + specular)',
   defaults: {
@@ -682,6 +893,12 @@ registerClothfitModel('physical-aniso', {
     sheen: 1, sheenColor: linear(p.sheen_color), sheenRoughness: p.sheen_roughness,
     anisotropy: p.anisotropy_strength, anisotropyRotation: p.anisotropy_rotation,
     specularIntensity: p.specular_intensity, specularColor: linear(p.specular_color) }),
+  weaveMaps: (m, maps) => {
+    m.map = maps.kdTexture;
+    m.anisotropyMap = maps.anisotropyTexture();
+    for (const t of [m.map, m.anisotropyMap]) { t.repeat.set(maps.uvRepeats, maps.uvRepeats); t.offset.set(0, 0); }
+    m.needsUpdate = true;
+  },
 });
 // ---- end physical-aniso ---------------------------------------------------------------------
 
@@ -712,7 +929,7 @@ registerClothfitModel('cloth', {
 });
 
 registerClothfitModel('woven', {
-  engine: 'clothfit MeshWovenMaterial (brdf/woven.h, uniform; weave maps: hook wovenWeaveSample)',
+  engine: 'clothfit MeshWovenMaterial (brdf/woven.h; weave maps as GPU textures)',
   defaults: WOVEN_DEFAULTS,
   make: (p, preset) => {
     const w = wovenOptions(preset.woven);
@@ -722,6 +939,7 @@ registerClothfitModel('woven', {
       tintWeft: linear(w.tint_weft),
     });
   },
+  weaveMaps: (m, maps) => m.setWeaveMaps(maps),
 });
 
 // A woven preset's "woven" object, checked as the C++ reader checks it (render/scene/material.cpp
@@ -758,8 +976,11 @@ export function wovenOptions(w) {
  * A clothfit preset (object or JSON text) -> a three.js material. Throws on an unknown model or
  * parameter name (as the C++ reader does). The material's userData.clothfit keeps the preset.
  * `side` ('front' | 'back' | 'double' or three.js's 0/1/2) is honoured when present.
+ * A preset naming "weave_maps" (woven, physical-aniso) needs options.weaveMaps: the parsed maps
+ * (fetchWeaveMaps / weaveMapsFromExr), or null to draw the uniform material on purpose;
+ * fetchClothfitPreset(url) fetches them next to the preset.
  */
-export function loadClothfitPreset(json) {
+export function loadClothfitPreset(json, options = {}) {
   const preset = typeof json === 'string' ? JSON.parse(json) : json;
   if (preset?.metadata?.type === 'Material') return fromThreejsJson(preset);
   if (preset?.schema !== 'clothfit.preset') throw new Error('loadClothfitPreset: schema is not "clothfit.preset"');
@@ -772,7 +993,12 @@ export function loadClothfitPreset(json) {
   }
   if (preset.woven !== undefined && preset.model !== 'woven') throw new Error('loadClothfitPreset: woven: only allowed with model "woven"');
   const p = { ...model.defaults, ...given };
+  if (preset.weave_maps !== undefined && preset.weave_maps !== null) {
+    if (!model.weaveMaps) throw new Error(`loadClothfitPreset: weave_maps: not used by model '${preset.model}' (woven, physical-aniso)`);
+    if (options.weaveMaps === undefined) throw new Error(`loadClothfitPreset: weave_maps: the preset names weave maps (${preset.weave_maps?.file}); load it with fetchClothfitPreset(url), or pass {weaveMaps} (fetchWeaveMaps / weaveMapsFromExr; null = the uniform material)`);
+  }
   const m = model.make(p, preset);
+  if (options.weaveMaps && model.weaveMaps) model.weaveMaps(m, options.weaveMaps);
   if (preset.side !== undefined) m.side = typeof preset.side === 'number' ? preset.side : SIDES[preset.side];
   m.name = preset.name ?? preset.provenance?.fabric ?? preset.model;
   m.userData.clothfit = preset;
@@ -804,12 +1030,15 @@ function fromThreejsJson(j) {
   return m;
 }
 
-export async function fetchClothfitPreset(url) {
+// options.resolveWeaveMapPath(file, presetUrl): where the preset's weave-map file is fetched
+// from (default weaveMapUrl: relative to the preset, an absolute path by its base name).
+export async function fetchClothfitPreset(url, options = {}) {
   const r = await fetch(url);
   if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
   const j = await r.json();
   try {
-    return loadClothfitPreset(j);
+    const weaveMaps = j?.schema === 'clothfit.preset' ? await fetchWeaveMaps(j, url, options) : null;
+    return loadClothfitPreset(j, { weaveMaps });
   } catch (e) {
     throw new Error(`${url}: ${e.message}`);  // name the file, as the C++ reader does
   }

@@ -59,7 +59,10 @@ async function main() {
   document.getElementById('env').onchange = (e) => setEnv(e.target.value);
   document.getElementById('file').onchange = async (e) => {
     const { loadClothfitPreset } = await import('./clothfit.js');
-    setPreset(loadClothfitPreset(await e.target.files[0].text()));
+    // A local file cannot fetch the weave maps it names: drawn uniform (open it by URL instead).
+    const j = JSON.parse(await e.target.files[0].text());
+    if (j.weave_maps) console.warn(`viewer: ${e.target.files[0].name} names weave maps (${j.weave_maps.file}); a local file cannot fetch them, drawing the uniform material (open it with ?preset=URL)`);
+    setPreset(loadClothfitPreset(j, { weaveMaps: null }));
   };
 
   let shot = q.has('shot');

@@ -229,16 +229,17 @@ constexpr int kAnisoBentNodes = 5;
 // Both measured in docs/fitting.md, "The honest baseline".
 constexpr bool kAnisoAcrossYarn = false;
 
-// The anisotropyMap texel a weave-map sample stands for (docs/fitting.md): direction t where
-// the warp lobe weight dominates, b where the weft does; strength |warp - weft| / (warp + weft).
+// physical-aniso with weave maps: the cache's weave[0..1] hold the three.js anisotropyMap
+// sample (WeaveMaps::SampleAnisotropy: the map of direction t where the warp weight dominates,
+// b where the weft does, strength |warp - weft| / (warp + weft), filtered as the GPU filters that
+// texture, decoded (vx, vy) = normalize(2 rg - 1) b), swapped to (vy, vx) when kAnisoAcrossYarn.
 template <typename T>
 physical_aniso::AnisoSample<T> AnisoFromWeave(const float* wv) {
   physical_aniso::AnisoSample<T> s;
-  const double wa = double(wv[0]), wb = double(wv[1]);
-  const bool warp = wa >= wb;
-  s.dx = Const<T>(warp != kAnisoAcrossYarn ? 1.0 : 0.0);
-  s.dy = Const<T>(warp != kAnisoAcrossYarn ? 0.0 : 1.0);
-  s.b = Const<T>(wa + wb > 0.0 ? std::abs(wa - wb) / (wa + wb) : 0.0);
+  const double vx = double(wv[0]), vy = double(wv[1]);
+  s.dx = Const<T>(vx);
+  s.dy = Const<T>(vy);
+  s.b = Const<T>(std::hypot(vx, vy));  // MakeFrame: direction (vx, vy) / |v|, strength x |v|
   return s;
 }
 
@@ -246,11 +247,11 @@ void FillAnisoRadianceTables(const PixelContext& x, const PrimaryHit& hit, const
                              PixelData* pd) {
   const int K = x.opt.roughness_nodes;
   pd->rad.resize(size_t(K) * kAnisoBentNodes * 3);
-  const bool weft = weave && weave[1] > weave[0];
-  const bool along_b = weave && (weft != kAnisoAcrossYarn);  // direction (0, 1)
-  // The map direction (dx, dy) = (1, 0) or (0, 1), rotated by the preset's rotation as
-  // physical_aniso::MakeFrame does: (ux, uy) = R(rot) (dx, dy); B = b ux - t uy.
-  const double dx = along_b ? 0.0 : 1.0, dy = along_b ? 1.0 : 0.0;
+  // The map direction (AnisoFromWeave; (1, 0) without maps or where the sample is 0, as three.js
+  // takes it), rotated by the preset's rotation as physical_aniso::MakeFrame does:
+  // (ux, uy) = R(rot) (dx, dy); B = b ux - t uy.
+  const double vl = weave ? std::hypot(double(weave[0]), double(weave[1])) : 0.0;
+  const double dx = vl > 0.0 ? double(weave[0]) / vl : 1.0, dy = vl > 0.0 ? double(weave[1]) / vl : 0.0;
   const double cr = std::cos(x.opt.anisotropy_rotation), sr = std::sin(x.opt.anisotropy_rotation);
   const double ux = cr * dx - sr * dy, uy = sr * dx + cr * dy;
   const Vec3d B = hit.b * ux - hit.t * uy;
@@ -326,6 +327,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       continue;
     }
     const SurfaceAttributes a = x.bvh.Attributes(h);
+    std::array<double, 2> uv{a.uv[0], a.uv[1]};  // where the weave maps are read
     PrimaryHit hit;
     hit.v = d * -1.0;
     hit.n = V(a.normal);
@@ -345,6 +347,11 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
         hit.n = Normalize(v3(m.normals[idx[0]]) * b[0] + v3(m.normals[idx[1]]) * b[1] +
                           v3(m.normals[idx[2]]) * b[2]);
         hit.v = Normalize(V(x.scene.camera.position) - (P[0] * b[0] + P[1] * b[1] + P[2] * b[2]));
+        if (!m.uvs.empty())  // TEXCOORD_0 as the GPU interpolates it (the weave maps' uv)
+          for (int k = 0; k < 2; ++k)
+            uv[size_t(k)] = double(m.uvs[idx[0]][size_t(k)]) * b[0] +
+                            double(m.uvs[idx[1]][size_t(k)]) * b[1] +
+                            double(m.uvs[idx[2]][size_t(k)]) * b[2];
       }
       // three.js (normal_fragment_begin, DoubleSide): normal *= faceDirection, i.e. flipped on
       // back faces by the triangle's winding (gl_FrontFacing), not by the shading normal; a
@@ -370,15 +377,20 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       const WeaveMaps& wm = *x.opt.weave_maps;
       const std::array<double, 4> duv = UvDerivatives(x.scene, h, px + 0.5, y + 0.5);
       const double lod = wm.Lod(duv, x.opt.weave_footprint_scale);
-      const auto s = wm.Sample(a.uv[0], a.uv[1], lod);
+      const auto s = wm.Sample(uv[0], uv[1], lod);
       for (int k = 0; k < WeaveMaps::kChannels; ++k) weave[size_t(k)] = float(s[size_t(k)]);
       if (wm.has_glint()) {  // the glint multiplies both yarn lobes: fold it into their weights
-        const double g = wm.SampleGlint(a.uv[0], a.uv[1], duv, x.opt.weave_footprint_scale);
+        const double g = wm.SampleGlint(uv[0], uv[1], duv, x.opt.weave_footprint_scale);
         weave[0] = float(s[0] * g);
         weave[1] = float(s[1] * g);
       }
+      if (x.opt.model == ModelKind::kPhysicalAniso) {  // the anisotropyMap sample (AnisoFromWeave)
+        const auto av = wm.SampleAnisotropy(uv[0], uv[1], lod);
+        weave[0] = float(kAnisoAcrossYarn ? av[1] : av[0]);
+        weave[1] = float(kAnisoAcrossYarn ? av[0] : av[1]);
+      }
       if (wm.has_normals()) {
-        const auto nm = wm.SampleNormal(a.uv[0], a.uv[1], lod);
+        const auto nm = wm.SampleNormal(uv[0], uv[1], lod);
         const Vec3d np = Normalize(hit.t * nm[0] + hit.b * nm[1] + hit.n * nm[2]);
         hit.n = np;
         hit.NoV = Dot(hit.n, hit.v);

@@ -100,7 +100,35 @@ WeaveMaps WeaveMaps::FromLevel0(int size, double uv_repeats, std::vector<float> 
   m.uv_repeats = uv_repeats;
   m.levels.push_back(std::move(level0));
   BuildBoxMips<kChannels>(size, &m.levels);
+  std::vector<float> an(n * 3);
+  for (size_t t = 0; t < n; ++t) {
+    const double wa = m.levels[0][t * kChannels], wb = m.levels[0][t * kChannels + 1];
+    const bool warp = wa >= wb;
+    an[t * 3] = warp ? 1.f : 0.5f;
+    an[t * 3 + 1] = warp ? 0.5f : 1.f;
+    an[t * 3 + 2] = float(wa + wb > 0.0 ? std::abs(wa - wb) / (wa + wb) : 0.0);
+  }
+  m.aniso_levels.push_back(std::move(an));
+  BuildBoxMips<3>(size, &m.aniso_levels);
   return m;
+}
+
+std::array<double, 2> WeaveMaps::SampleAnisotropy(double u, double v, double lambda) const {
+  if (aniso_levels.empty()) return {0.0, 0.0};
+  const double top = double(level_count() - 1);
+  const double l = std::clamp(std::isfinite(lambda) ? lambda : top, 0.0, top);
+  const int l0 = int(std::floor(l));
+  const int l1 = std::min(l0 + 1, level_count() - 1);
+  const double t = l - double(l0);
+  std::array<double, 3> a = Bilinear<3>(aniso_levels[size_t(l0)], size >> l0, uv_repeats, u, v);
+  if (t > 0.0 && l1 != l0) {
+    const auto b = Bilinear<3>(aniso_levels[size_t(l1)], size >> l1, uv_repeats, u, v);
+    for (int k = 0; k < 3; ++k) a[size_t(k)] = (1 - t) * a[size_t(k)] + t * b[size_t(k)];
+  }
+  const double dx = 2.0 * a[0] - 1.0, dy = 2.0 * a[1] - 1.0;
+  const double len = std::hypot(dx, dy);
+  if (!(len > 0.0)) return {0.0, 0.0};
+  return {dx / len * a[2], dy / len * a[2]};
 }
 
 double WeaveMaps::Lod(const std::array<double, 4>& duv, double footprint_scale) const {

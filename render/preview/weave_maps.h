@@ -64,6 +64,12 @@ struct WeaveMaps {
   // lobes), so the preview folds it into the warp and weft weights.
   int glint_size = 0;
   std::vector<std::vector<float>> glint_levels;
+  // The three.js anisotropyMap a physical-aniso preset with these maps draws with (web/clothfit.js
+  // anisotropyFromWeave; KHR_materials_anisotropy encoding), built by FromLevel0: per level-0
+  // texel RG = d * 0.5 + 0.5 with d = (1, 0) (+u, warp) where warp >= weft, else (0, 1) (+v,
+  // weft), B = |warp - weft| / (warp + weft); 3 channels, box mips. It is filtered as a GPU
+  // filters that texture (the encoded values, not warp/weft), see SampleAnisotropy.
+  std::vector<std::vector<float>> aniso_levels;
 
   // From level 0 (size^2 x 5 values): checks the size, renormalises every channel to a tile
   // mean of 1 (throws std::invalid_argument on a non-positive or non-finite mean), builds mips.
@@ -75,6 +81,10 @@ struct WeaveMaps {
   std::array<double, kChannels> Sample(double u, double v, double lambda) const;
   // Bilinear sample of one level.
   std::array<double, kChannels> SampleLevel(double u, double v, int level) const;
+  // Trilinear sample of the anisotropy map at the same uv and LOD as Sample, decoded as three.js
+  // r187 does (lights_physical_fragment): normalize(2 rg - 1) * b -> (vx, vy) in the (t, b)
+  // frame (before the preset's rotation and strength); (0, 0) where rg = (0.5, 0.5) or b = 0.
+  std::array<double, 2> SampleAnisotropy(double u, double v, double lambda) const;
   // Sets the relief normal map from level 0 (size^2 x 3, unit vectors with z > 0) and builds
   // its mips. Throws std::invalid_argument on a bad size or a non-finite value.
   void SetNormals(std::vector<float> level0);

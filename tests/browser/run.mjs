@@ -5,7 +5,8 @@
 //   node tests/browser/run.mjs --clothfit build/bin/clothfit [--work DIR] [--chromium PATH]
 //        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS]
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 11 materials (6 + 3 woven + 2 physical-aniso) x 2 environments
+// Cases: each canonical scene (datasets/scenes/*.json) x 15 materials (6 + 3 woven + 2 physical-aniso
+// + 4 with weave maps) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -86,6 +87,29 @@ const MATERIALS = {
     sheen_roughness: 0.5, anisotropy_strength: 0.6, anisotropy_rotation: 0, specular_intensity: 1, specular_color: [1, 1, 1] }),
   'physical-aniso-rot': preset('physical-aniso', { base_color: [0.15, 0.2, 0.35], roughness: 0.35, metalness: 0, sheen_color: [0.3, 0.3, 0.3],
     sheen_roughness: 0.4, anisotropy_strength: 0.8, anisotropy_rotation: 0.7, specular_intensity: 0.8, specular_color: [1.5, 1.3, 1.1] }),
+  // Weave maps (issue 12, deliverable 2): the EXRs `clothfit fit --model woven --fabric
+  // datasets/fabrics/{canvas,twill}.json --spp 128 --stride 4` baked (default `auto` maps,
+  // 64 x 64 per period, uv_repeats 60 / 40), committed in tests/browser/maps/, with that fit's
+  // parameters (rounded to 4 digits; both sides read the same preset). The browser samples them
+  // as GPU textures (web/clothfit.js weaveMapsFromExr), the C++ preview emulates that sampling
+  // (render/preview/weave_maps.h).
+  'woven-maps-canvas': preset('woven', { anisotropy: 0.7, base_color: [0.4937, 0.44, 0.3321], forward_scattering: 1.0745, roughness: 0.6769,
+    sheen_color: [0.0821, 0.0315, 0.0284], sheen_roughness: 1.0, specular_color: [0.2623, 0.2515, 0.2246], specular_f0: 0.0, twist: 0.0, warp_share: 0.0 },
+  { weave_maps: { file: path.join(here, 'maps', 'canvas.weave.exr'), size: 64, uv_repeats: 60 } }),
+  'woven-maps-twill': preset('woven', { anisotropy: 0.7, base_color: [0.0349, 0.1208, 0.0653], forward_scattering: 0.9537, roughness: 0.6475,
+    sheen_color: [0, 0, 0], sheen_roughness: 0.6, specular_color: [0.1889, 0.3585, 0.2403], specular_f0: 0.0696, twist: 0.0, warp_share: 0.8788 },
+  { weave_maps: { file: path.join(here, 'maps', 'twill.weave.exr'), size: 64, uv_repeats: 40 } }),
+  // A shinier hand-set woven preset on the canvas maps: both lobes on, twisted, so the warp AND
+  // weft maps (0 to ~30 x their mean) show in the highlights.
+  'woven-maps-shiny': preset('woven', { base_color: [0.35, 0.3, 0.25], specular_color: [0.6, 0.55, 0.5], roughness: 0.4, anisotropy: 0.8,
+    twist: 20, warp_share: 0.5, specular_f0: 0.05, forward_scattering: 2, sheen_color: [0.1, 0.1, 0.1], sheen_roughness: 0.5 },
+  { weave_maps: { file: path.join(here, 'maps', 'canvas.weave.exr'), size: 64, uv_repeats: 60 } }),
+  // physical-aniso with the twill maps: kd ratio -> three.js `map`, warp/weft -> `anisotropyMap`.
+  // The fitted strength is 0 (docs/fitting.md: the maps are worth ~0 to this baseline), which
+  // would leave the anisotropyMap unseen, so this preset sets 0.7 by hand.
+  'physical-aniso-maps': preset('physical-aniso', { base_color: [0.0524, 0.1662, 0.0914], roughness: 0.45, metalness: 0, sheen_color: [0.2, 0.3, 0.2],
+    sheen_roughness: 0.5, anisotropy_strength: 0.7, anisotropy_rotation: 0, specular_intensity: 1, specular_color: [1, 1, 1] },
+  { weave_maps: { file: path.join(here, 'maps', 'twill.weave.exr'), size: 64, uv_repeats: 40 } }),
 };
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();

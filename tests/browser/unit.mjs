@@ -3,7 +3,10 @@
 //   - `side` from `clothfit convert --to threejs` (three.js DoubleSide 2 / FrontSide 0) is
 //     honoured by loadClothfitPreset for MeshPhysicalMaterial and MeshClothMaterial JSON, and a
 //     preset's "side" ('front' | 'double' or 0 / 2) too; without one, three.js's FrontSide stays;
-//   - woven presets load as MeshWovenMaterial with the table defaults and reject unknown names.
+//   - woven presets load as MeshWovenMaterial with the table defaults and reject unknown names;
+//   - weave maps: web/exr.js reads tests/browser/maps/canvas.weave.exr as OpenImageIO does
+//     (oiiotool, when installed), tile means 1, box mips, texture settings, uv_repeats, the
+//     anisotropyMap encoding, the preset's "weave_maps" required / refused / fetched.
 // Usage: node tests/browser/unit.mjs [--clothfit build/bin/clothfit --work DIR]
 //   with --clothfit, the JSON comes from `clothfit convert --to threejs` itself.
 import assert from 'node:assert/strict';
@@ -91,5 +94,72 @@ if (args.clothfit) {
     seen++;
   }
   assert.ok(seen >= 2, `expected three.js JSON for both materials in ${out}: ${files.join(', ')}`);
+}
+
+// ---- weave maps (web/exr.js, weaveMapsFromExr; the C++ side is render/preview/weave_maps.*) ----
+{
+  const { parseExr } = await import(pathToFileURL(path.join(repo, 'web', 'exr.js')).href);
+  const { weaveMapsFromExr, anisotropyFromWeave, fetchClothfitPreset, weaveMapUrl } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+  const exrPath = path.join(here, 'maps', 'canvas.weave.exr');
+  const buf = fs.readFileSync(exrPath);
+  const img = parseExr(buf, exrPath);
+  check(() => assert.deepEqual([img.width, img.height, Object.keys(img.channels).sort().join(',')], [64, 64, 'kd.B,kd.G,kd.R,warp,weft']), 'exr channels');
+  check(() => assert.equal(Number(img.attributes['clothfit:uv_repeats']), 60), 'exr uv_repeats metadata');
+  // An independent decoder (OpenImageIO's oiiotool, if installed) on a few texels: same values,
+  // row 0 = the image's top row.
+  const oiio = spawnSync('oiiotool', ['--dumpdata', exrPath], { encoding: 'utf8' });
+  if (oiio.status === 0) {
+    const px = new Map();
+    for (const line of oiio.stdout.split('\n')) {
+      const m = /Pixel \((\d+), (\d+)\): (.*)$/.exec(line);
+      if (m) px.set(`${m[1]},${m[2]}`, m[3].trim().split(/\s+/).map(Number));
+    }
+    for (const [x, y] of [[0, 0], [5, 0], [0, 1], [17, 40], [63, 63], [31, 2]]) {
+      const ref = px.get(`${x},${y}`);  // oiiotool order: warp weft kd.R kd.G kd.B
+      ['warp', 'weft', 'kd.R', 'kd.G', 'kd.B'].forEach((c, k) => check(() => assert.ok(Math.abs(img.channels[c][y * 64 + x] - ref[k]) <= 1e-8 * Math.max(1, ref[k]), `${c} at (${x}, ${y}): ${img.channels[c][y * 64 + x]} vs oiiotool ${ref[k]}`), 'exr vs oiiotool'));
+    }
+  } else {
+    console.log('unit: oiiotool not found, EXR cross-check skipped');
+  }
+  const maps = weaveMapsFromExr(buf, { field: { uv_repeats: 60 }, name: exrPath });
+  check(() => assert.equal(maps.levels.length, 7), 'mip count 64 -> 1');
+  for (let c = 0; c < 5; ++c) {
+    let mean = 0;
+    for (let t = 0; t < 64 * 64; ++t) mean += maps.levels[0][t * 5 + c];
+    check(() => assert.ok(Math.abs(mean / 4096 - 1) < 1e-6, `channel ${c} tile mean ${mean / 4096}`), 'tile mean 1');
+    check(() => assert.ok(Math.abs(maps.levels[6][c] - 1) < 1e-6, `1x1 mip ${maps.levels[6][c]}`), '1x1 mip = mean');
+  }
+  // level 1 texel (3, 5) = the box average of level-0 texels (6..7, 10..11), in float32.
+  const at = (l, s, i, j, c) => maps.levels[l][(j * s + i) * 5 + c];
+  check(() => assert.equal(at(1, 32, 3, 5, 1), Math.fround(0.25 * (at(0, 64, 6, 10, 1) + at(0, 64, 7, 10, 1) + at(0, 64, 6, 11, 1) + at(0, 64, 7, 11, 1)))), 'box mip');
+  check(() => assert.equal(maps.weightsTexture.mipmaps.length, 7), 'texture mip chain');
+  check(() => assert.equal(maps.weightsTexture.flipY, false), 'no flip');
+  check(() => assert.equal(maps.weightsTexture.wrapS, THREE.RepeatWrapping), 'repeat');
+  check(() => assert.equal(maps.kdTexture.minFilter, THREE.LinearMipmapLinearFilter), 'trilinear');
+  check(() => assert.equal(maps.uvTransform.elements[0], 60), 'uv transform scale');
+  check(() => assert.equal(weaveMapsFromExr(buf, { field: {} }).uvRepeats, 60), 'uv_repeats from the file');
+  check(() => assert.equal(weaveMapsFromExr(buf, { field: { uv_repeats: 12 } }).uvRepeats, 12), 'preset uv_repeats wins');
+  check(() => assert.throws(() => weaveMapsFromExr(buf, { field: { uv_repeats: -1 }, name: 'x.exr' }), /x\.exr: weave maps: weave_maps\.uv_repeats/), 'bad uv_repeats');
+  check(() => assert.throws(() => parseExr(new Uint8Array(16), 'junk.exr'), /junk\.exr: not an OpenEXR file/), 'bad exr');
+  const an = anisotropyFromWeave(new Float32Array([3, 1, 1, 1, 1, 1, 3, 1, 1, 1, 0, 0, 1, 1, 1, 2, 2, 1, 1, 1]), 2);
+  check(() => assert.deepEqual(Array.from(an), [1, 0.5, 0.5, 1, 0.5, 1, 0.5, 1, 1, 0.5, 0, 1, 1, 0.5, 0, 1]), 'anisotropy encoding');
+  const wpm = (extra) => ({ schema: 'clothfit.preset', version: 1, model: 'woven', parameters: {}, weave_maps: { file: exrPath, uv_repeats: 60 }, ...extra });
+  check(() => assert.throws(() => loadClothfitPreset(wpm()), /weave_maps: the preset names weave maps/), 'maps required');
+  check(() => assert.equal(loadClothfitPreset(wpm(), { weaveMaps: null }).weaveMaps, null), 'uniform on purpose');
+  check(() => assert.equal(loadClothfitPreset(wpm(), { weaveMaps: maps }).weaveMaps, maps), 'woven maps attached');
+  check(() => assert.throws(() => loadClothfitPreset({ ...wpm(), model: 'standard' }, { weaveMaps: maps }), /weave_maps: not used by model 'standard'/), 'maps refused on standard');
+  const pa = loadClothfitPreset({ ...wpm(), model: 'physical-aniso', parameters: { anisotropy_strength: 0.5 } }, { weaveMaps: maps });
+  check(() => assert.ok(pa.map === maps.kdTexture && pa.anisotropyMap && pa.anisotropyMap.repeat.x === 60 && pa.map.repeat.y === 60), 'physical-aniso map + anisotropyMap');
+  check(() => assert.equal(weaveMapUrl('/abs/dir/x.weave.exr', 'http://h/p/x.json'), 'http://h/p/x.weave.exr'), 'absolute file -> next to the preset');
+  check(() => assert.equal(weaveMapUrl('maps/x.exr', 'http://h/p/x.json'), 'http://h/p/maps/x.exr'), 'relative file');
+  const mapsWork = fs.mkdtempSync('/tmp/clothfit-unit-maps-');
+  const presetFile = path.join(mapsWork, 'woven-maps-unit.json');
+  fs.writeFileSync(presetFile, JSON.stringify(wpm()));
+  const fm = await fetchClothfitPreset(pathToFileURL(presetFile).href, { resolveWeaveMapPath: (f) => pathToFileURL(f).href });
+  check(() => assert.ok(fm.weaveMaps && fm.weaveMaps.uvRepeats === 60), 'fetchClothfitPreset loads the maps');
+  fs.writeFileSync(presetFile, JSON.stringify(wpm({ weave_maps: { file: exrPath, glint_file: exrPath } })));
+  await assert.rejects(fetchClothfitPreset(pathToFileURL(presetFile).href, { resolveWeaveMapPath: (f) => pathToFileURL(f).href }), /woven-maps-unit\.json: weave_maps\.glint_file/);
+  checks++;
+  fs.rmSync(mapsWork, { recursive: true, force: true });
 }
 console.log(`unit: ${checks} checks passed`);

@@ -4,7 +4,7 @@
 //   POST /log   text;   POST /done   when finished (or after an error).
 // Paths in the plan and the cards are file-system paths, served by the test server under /fs.
 import * as THREE from 'three';
-import { loadSceneCard, loadClothfitPreset } from '../clothfit.js';
+import { loadSceneCard, fetchClothfitPreset } from '../clothfit.js';
 
 const post = (path, body) => fetch(path, { method: 'POST', body });
 const log = (msg) => post('/log', String(msg));
@@ -16,7 +16,7 @@ async function run() {
   const canvas = document.getElementById('c');
   const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true, powerPreference: 'high-performance' });
   const gl = renderer.getContext();
-  log(`WebGL: ${gl.getParameter(gl.VERSION)} / ${gl.getParameter(gl.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? gl.RENDERER)}`);
+  log(`WebGL: ${gl.getParameter(gl.VERSION)} / ${gl.getParameter(gl.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? gl.RENDERER)}; OES_texture_float_linear: ${renderer.extensions.has('OES_texture_float_linear')}`);
   const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
   const cards = new Map();
   for (const c of plan.cases) {
@@ -29,8 +29,10 @@ async function run() {
       } });
       cards.set(c.card, sc);
     }
-    const preset = await (await fetch(fsUrl(c.preset))).json();
-    const material = loadClothfitPreset(preset);
+    // fetchClothfitPreset: also fetches a preset's weave maps; their "file" is an absolute
+    // file-system path here, served under /fs.
+    const material = await fetchClothfitPreset(fsUrl(c.preset), { resolveWeaveMapPath: (file) => fsUrl(file) });
+    if (material.userData.clothfit?.weave_maps) log(`${c.name}: weave maps ${material.userData.clothfit.weave_maps.file}`);
     sc.setMaterial(material);
     sc.apply(renderer);
     renderer.setSize(sc.width, sc.height, false);
