@@ -143,7 +143,7 @@ struct FitArgs {
   std::string weave_period, starts, start_values, weave_maps = "auto";
   std::string target_error;  // reference adaptive sampling (TargetErrorFor)
   double loss_scale = 1.0, min_coverage = 0.5;
-  bool subsurface = false, no_floor = false;
+  bool subsurface = false, no_floor = false, second_seed = false;
   int spp = 256, stride = 0, threads = 0, max_iterations = 50;
 };
 
@@ -172,6 +172,9 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "evaluate every n-th pixel per block axis (0 = auto: at most 4 x 4 per block)")
       ->check(CLI::Range(0, 16));
   cmd->add_flag("--no-noise-floor", a.no_floor, "(--fabric) skip the second-seed references");
+  cmd->add_flag("--second-seed", a.second_seed,
+                "(--fabric) render second-seed references for the noise floor even when the "
+                "references carry half channels (default: the floor from the halves)");
   cmd->add_option("--weave-maps", a.weave_maps,
                   "woven with an Irawan --fabric: auto (bake weave maps next to --out, per-texel "
                   "fit, and fit with them; fit/weave_maps.h), indicator (analytic yarn-on-top "
@@ -282,11 +285,18 @@ FitFiles ResolveFitFiles(const FitArgs& a, const Globals& g) {
     if (!a.references.empty() || !a.scenes.empty())
       throw std::invalid_argument("--fabric and --references/--scenes are exclusive");
     f.scenes = CanonicalScenes();
+    std::vector<double> targets;
     for (const std::string& s : f.scenes) {
-      const double te = TargetErrorFor(a.target_error, a.fabric, s);
-      f.refs.push_back(CachedReference(s, a.fabric, a.spp, 1, g.quiet, 0, te));
-      if (!a.no_floor) f.refs2.push_back(CachedReference(s, a.fabric, a.spp, 2, g.quiet, 0, te));
+      targets.push_back(TargetErrorFor(a.target_error, a.fabric, s));
+      f.refs.push_back(CachedReference(s, a.fabric, a.spp, 1, g.quiet, 0, targets.back()));
     }
+    // The noise floor: from the references' own half-sample channels when every one has them
+    // (fit/metrics/reference_halves.h), else (or with --second-seed) from seed-2 renders.
+    bool halves = !a.second_seed;
+    for (size_t i = 0; halves && i < f.refs.size(); ++i) halves = fit::HasHalfChannels(f.refs[i]);
+    if (!a.no_floor && !halves)
+      for (size_t i = 0; i < f.scenes.size(); ++i)
+        f.refs2.push_back(CachedReference(f.scenes[i], a.fabric, a.spp, 2, g.quiet, 0, targets[i]));
   } else {
     f.refs = SplitList(a.references);
     f.scenes = SplitList(a.scenes);
@@ -424,7 +434,10 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
                         {"blocks_dropped_preview", e.dropped_preview},
                         {"blocks_dropped_coverage", e.dropped_coverage},
                         {"rmse", e.rmse}};
-    if (e.noise_floor >= 0) x["noise_floor"] = e.noise_floor;
+    if (e.noise_floor >= 0) {
+      x["noise_floor"] = e.noise_floor;
+      x["noise_floor_source"] = e.noise_floor_source;
+    }
     // What `clothfit report` needs: the second-seed reference (noise floor), the display
     // transform of the scene card, and the linear fitted preview written below.
     x["reference"] = fs::absolute(e.reference).lexically_normal().string();

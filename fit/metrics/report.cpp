@@ -13,6 +13,7 @@
 #include <sstream>
 #include <utility>
 
+#include "fit/metrics/reference_halves.h"
 #include "render/scene/image_io.h"
 #include "render/scene/input_limits.h"
 
@@ -77,6 +78,7 @@ std::string StringField(const nlohmann::json& j, const std::string& key, const s
 struct LoadedImage {
   metrics::RgbImage rgb;
   std::optional<metrics::Map> coverage;  // "fabric", else "A"
+  metrics::ReferenceHalves halves;       // references only (want_coverage)
 };
 
 LoadedImage Load(const std::string& path, bool want_coverage) {
@@ -93,6 +95,11 @@ LoadedImage Load(const std::string& path, bool want_coverage) {
     throw ReportError(e.what());
   }
   if (want_coverage) {
+    try {
+      out.halves = metrics::ExtractHalves(img, path);
+    } catch (const std::exception& e) {
+      throw ReportError(e.what());
+    }
     for (const char* name : {"fabric", "A"}) {
       const auto it = std::find(img.channel_names.begin(), img.channel_names.end(), name);
       if (it == img.channel_names.end()) continue;
@@ -650,6 +657,13 @@ Numbers MeanOver(const std::vector<const Numbers*>& per_scene,
   return m;
 }
 
+std::string NoiseFloorLabel(const std::string& source) {
+  if (source == kSecondReference) return "noise floor (second seed)";
+  if (source == kReferenceHalves) return "noise floor (two half-sample images of the reference)";
+  if (source == "mixed") return "noise floor (mixed: second seed / half-sample images)";
+  return "noise floor";
+}
+
 FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& options) {
   FabricReport rep;
   rep.spec = spec;
@@ -690,9 +704,18 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
                           sc.reference + " (" + std::to_string(ref.rgb.width) + "x" +
                           std::to_string(ref.rgb.height) + ")");
     }
-    std::vector<Comparison> results(paths.size());
+    // No second reference but half channels: the noise floor compares the two halves (one
+    // more comparison, after the models; same mask and HDR-FLIP range).
+    const bool use_halves = sc.reference2.empty() && ref.halves.present;
+    const size_t comparisons = paths.size() + (use_halves ? 1 : 0);
+    std::vector<Comparison> results(comparisons);
     std::vector<std::string> pictures(paths.size());
-    tbb::parallel_for(size_t(0), paths.size(), [&](size_t k) {
+    tbb::parallel_for(size_t(0), comparisons, [&](size_t k) {
+      if (k == paths.size()) {
+        results[k] = Compare(ref.halves.a, ref.halves.b, mask, sc, out.hdr_range, options,
+                             sc.reference + " (halves)");
+        return;
+      }
       results[k] = Compare(ref.rgb, tests[k].rgb, mask, sc, out.hdr_range, options, paths[k]);
       pictures[k] = DisplayPng(tests[k].rgb, sc.tone_mapping, sc.exposure, paths[k]);
     });
@@ -700,7 +723,12 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
     if (!sc.reference2.empty()) {
       out.noise_floor = results[0].numbers;
       out.noise_flip_png = results[0].flip_png;
+      out.noise_floor_source = kSecondReference;
       k = 1;
+    } else if (use_halves) {
+      out.noise_floor = results[paths.size()].numbers;
+      out.noise_flip_png = results[paths.size()].flip_png;
+      out.noise_floor_source = kReferenceHalves;
     }
     for (size_t mi = 0; mi < spec.models.size(); ++mi, ++k) {
       ModelSceneResult r;
@@ -720,10 +748,15 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
   bool all_floor = !rep.scenes.empty();
   std::vector<const Numbers*> floors;
   for (const SceneResult& s : rep.scenes) {
-    if (!s.noise_floor)
+    if (!s.noise_floor) {
       all_floor = false;
-    else
+    } else {
       floors.push_back(&*s.noise_floor);
+      if (rep.noise_floor_source.empty())
+        rep.noise_floor_source = s.noise_floor_source;
+      else if (rep.noise_floor_source != s.noise_floor_source)
+        rep.noise_floor_source = "mixed";
+    }
   }
   if (all_floor) rep.noise_floor_mean = MeanOver(floors, names);
   return rep;
@@ -766,8 +799,10 @@ void FabricPageIntro(std::ostream& h, const FabricSpec& spec) {
   h << "<p class=\"meta\">Images are tone mapped with each scene card's operator and exposure "
        "(three.js r187 display transform, sRGB). Metrics compare each fitted preview with the "
        "path-traced reference over the fabric pixels only; the noise floor compares the "
-       "reference with a second reference rendered with another seed (no fit can be expected "
-       "to beat it). Lower is better except PSNR and SSIM. See docs/report.md.</p>\n";
+       "reference with a second reference rendered with another seed or, without one, the "
+       "reference's two half-sample images (each with half the samples: a conservative floor, "
+       "its RMSE about &radic;2 &times; the two-seed one). No fit can be expected to beat it. "
+       "Lower is better except PSNR and SSIM. See docs/report.md.</p>\n";
 }
 
 // Summary: means over scenes.
@@ -775,7 +810,8 @@ void FabricPageSummary(std::ostream& h, const FabricReport& rep) {
   const FabricSpec& spec = rep.spec;
   std::vector<MetricsRowSpec> rows;
   if (rep.noise_floor_mean)
-    rows.push_back({"noise floor", &*rep.noise_floor_mean, true, "second reference"});
+    rows.push_back({NoiseFloorLabel(rep.noise_floor_source), &*rep.noise_floor_mean, true,
+                    rep.noise_floor_source == kReferenceHalves ? "second half" : "second reference"});
   for (size_t mi = 0; mi < spec.models.size(); ++mi)
     rows.push_back({ModelTitle(spec.models[mi].model), &rep.model_means[mi], false, "preview"});
   h << "<h2>Metrics, mean over " << spec.scenes.size() << " scenes</h2>\n" << MetricsTable(rows);
@@ -814,10 +850,14 @@ void ScenePictures(std::ostream& h, const FabricSpec& spec, const SceneResult& s
   }
   if (s.noise_floor)
     h << "<figure>" << Img(s.noise_flip_png, "FLIP noise floor " + sc.name)
-      << "<figcaption>FLIP: reference vs second seed<br>mean "
+      << "<figcaption>FLIP: "
+      << (s.noise_floor_source == kReferenceHalves ? "first vs second half-sample image"
+                                                   : "reference vs second seed")
+      << "<br>mean "
       << EscapeHtml(Cell(*s.noise_floor, Columns()[3])) << "</figcaption></figure>\n";
   else
-    h << "<figure><figcaption>no second reference: no noise floor</figcaption></figure>\n";
+    h << "<figure><figcaption>no second reference or half channels: no noise floor"
+         "</figcaption></figure>\n";
   for (size_t mi = 0; mi < spec.models.size(); ++mi) {
     const Numbers& n = s.models[mi].numbers;
     h << "<figure>" << Img(s.models[mi].flip_png, spec.models[mi].model + " FLIP " + sc.name)
@@ -835,7 +875,9 @@ void FabricPageScene(std::ostream& h, const FabricSpec& spec, const SceneResult&
   SceneHeading(h, s);
   ScenePictures(h, spec, s);
   std::vector<MetricsRowSpec> rows;
-  if (s.noise_floor) rows.push_back({"noise floor", &*s.noise_floor, true, "second reference"});
+  if (s.noise_floor)
+    rows.push_back({NoiseFloorLabel(s.noise_floor_source), &*s.noise_floor, true,
+                    s.noise_floor_source == kReferenceHalves ? "second half" : "second reference"});
   for (size_t mi = 0; mi < spec.models.size(); ++mi)
     rows.push_back({ModelTitle(spec.models[mi].model), &s.models[mi].numbers, false, "preview"});
   h << MetricsTable(rows);
@@ -1031,7 +1073,8 @@ std::string IndexHtml(const std::vector<FabricReport>& reports) {
   h << Header("clothfit report");
   h << "<h1>clothfit report</h1>\n<p class=\"meta\">One row per fabric and model: metrics of "
        "the fitted real-time preview against the path-traced reference, mean over the scenes, "
-       "fabric pixels only. The noise-floor rows compare two references with different seeds. "
+       "fabric pixels only. The noise-floor rows compare two references with different seeds or, "
+       "without a second seed, the reference's two half-sample images (a conservative floor). "
        "Click a column header to sort. Same numbers: <a href=\"report.json\">report.json</a>, "
        "<a href=\"report.csv\">report.csv</a>; definitions in docs/report.md.</p>\n";
   h << "<table id=\"summary\"><thead><tr><th class=\"l s\" data-t=\"s\">fabric</th>"
@@ -1052,7 +1095,8 @@ std::string IndexHtml(const std::vector<FabricReport>& reports) {
     h << "<td data-v=\"" << seconds_key << "\">" << seconds << "</td></tr>\n";
   };
   for (const FabricReport& r : reports) {
-    if (r.noise_floor_mean) row(r, "noise floor", *r.noise_floor_mean, true, "", "");
+    if (r.noise_floor_mean)
+      row(r, NoiseFloorLabel(r.noise_floor_source), *r.noise_floor_mean, true, "", "");
     for (size_t mi = 0; mi < r.spec.models.size(); ++mi) {
       const nlohmann::json fit = r.spec.models[mi].preset.value("fit", nlohmann::json::object());
       std::string sec = "n/a (missing)", key;
@@ -1115,6 +1159,8 @@ nlohmann::json ReportJson(const std::vector<FabricReport>& reports) {
     f["models"] = models;
     f["noise_floor_mean"] =
         r.noise_floor_mean ? NumbersJson(*r.noise_floor_mean) : nlohmann::json(nullptr);
+    f["noise_floor_source"] = r.noise_floor_mean ? nlohmann::json(r.noise_floor_source)
+                                                 : nlohmann::json(nullptr);
     nlohmann::json scenes = nlohmann::json::array();
     for (const SceneResult& s : r.scenes) {
       nlohmann::json sj;
@@ -1132,6 +1178,8 @@ nlohmann::json ReportJson(const std::vector<FabricReport>& reports) {
                               {"stop", s.hdr_range.stop},
                               {"automatic", s.hdr_range_automatic}};
       sj["noise_floor"] = s.noise_floor ? NumbersJson(*s.noise_floor) : nlohmann::json(nullptr);
+      sj["noise_floor_source"] =
+          s.noise_floor ? nlohmann::json(s.noise_floor_source) : nlohmann::json(nullptr);
       nlohmann::json ms = nlohmann::json::object();
       for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
         ms[r.spec.models[mi].model] = NumbersJson(s.models[mi].numbers);
@@ -1168,11 +1216,19 @@ std::string ReportCsv(const std::vector<FabricReport>& reports) {
   };
   for (const FabricReport& r : reports) {
     for (const SceneResult& sc : r.scenes) {
-      if (sc.noise_floor) row(r.spec.name, "noise-floor", sc.spec.name, *sc.noise_floor);
+      if (sc.noise_floor)
+        row(r.spec.name,
+            sc.noise_floor_source == kReferenceHalves ? "noise-floor-halves" : "noise-floor",
+            sc.spec.name, *sc.noise_floor);
       for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
         row(r.spec.name, r.spec.models[mi].model, sc.spec.name, sc.models[mi].numbers);
     }
-    if (r.noise_floor_mean) row(r.spec.name, "noise-floor", "mean", *r.noise_floor_mean);
+    if (r.noise_floor_mean)
+      row(r.spec.name,
+          r.noise_floor_source == kReferenceHalves ? "noise-floor-halves"
+          : r.noise_floor_source == "mixed"        ? "noise-floor-mixed"
+                                                   : "noise-floor",
+          "mean", *r.noise_floor_mean);
     for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
       row(r.spec.name, r.spec.models[mi].model, "mean", r.model_means[mi]);
   }
@@ -1204,12 +1260,20 @@ std::string TerminalTable(const std::vector<FabricReport>& reports) {
     s << "\n";
   };
   for (const FabricReport& r : reports) {
-    if (r.noise_floor_mean) row(r.spec.name, "noise floor", *r.noise_floor_mean);
+    if (r.noise_floor_mean)
+      row(r.spec.name, r.noise_floor_source == kReferenceHalves ? "noise (halves)" : "noise floor",
+          *r.noise_floor_mean);
     for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
       row(r.spec.name, r.spec.models[mi].model, r.model_means[mi]);
   }
   s << "(mean over scenes, fabric pixels; display values except RMSElin and HDRFLIP; dE = "
        "CIEDE2000 of the displayed colour)\n";
+  for (const FabricReport& r : reports)
+    if (r.noise_floor_mean && r.noise_floor_source != kSecondReference) {
+      s << "(noise (halves): the reference's two half-sample images compared; conservative, "
+           "RMSE about sqrt(2) x a second seed's)\n";
+      break;
+    }
   return s.str();
 }
 

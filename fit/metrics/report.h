@@ -10,7 +10,11 @@
 // each model's preview over the reference's fabric pixels (coverage channel "fabric", else
 // "A", > 0.5; every pixel when neither exists). The noise floor is the same comparison between
 // the reference and the second-seed reference: both are noisy, so its RMSE is about sqrt(2)
-// times one reference's own noise (the fit's `noise_floor` divides by sqrt(2)). One HDR-FLIP
+// times one reference's own noise (the fit's `noise_floor` divides by sqrt(2)). Without a
+// second reference, when the reference carries half channels (fit/metrics/reference_halves.h),
+// the noise floor compares its two half-sample images A and B instead: each has half the
+// samples, so this floor is conservative (its RMSE is about sqrt(2) x the two-seed floor's,
+// 2 x the reference's own noise; docs/report.md). One HDR-FLIP
 // exposure range per reference is shared by every image compared with it: the automatic range
 // of the reference over the fabric pixels, or kFallbackHdrRange when that is not finite.
 //
@@ -94,17 +98,27 @@ struct SceneResult {
   metrics::ExposureRange hdr_range;
   bool hdr_range_automatic = false;
   std::string reference_png;             // base64
-  std::optional<Numbers> noise_floor;    // absent without a second reference
-  std::string noise_flip_png;            // FLIP map reference vs second reference (base64)
+  std::optional<Numbers> noise_floor;    // absent without a second reference or halves
+  std::string noise_floor_source;        // kSecondReference, kReferenceHalves or ""
+  std::string noise_flip_png;            // FLIP map of the noise-floor pair (base64)
   std::vector<ModelSceneResult> models;  // FabricSpec::models order
 };
+
+// SceneResult::noise_floor_source values.
+inline constexpr const char* kSecondReference = "second reference";
+inline constexpr const char* kReferenceHalves = "reference halves";
 
 struct FabricReport {
   FabricSpec spec;
   std::vector<SceneResult> scenes;
   std::vector<Numbers> model_means;  // mean over scenes, per model
   std::optional<Numbers> noise_floor_mean;
+  std::string noise_floor_source;  // the scenes' common source, or "mixed"
 };
+
+// The label of a noise-floor row for a source (kSecondReference: "noise floor (second seed)",
+// kReferenceHalves: "noise floor (two half-sample images of the reference)").
+std::string NoiseFloorLabel(const std::string& source);
 
 struct ReportOptions {
   double ppd = 67.0;
