@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <utility>
@@ -657,6 +658,75 @@ Numbers MeanOver(const std::vector<const Numbers*>& per_scene,
   return m;
 }
 
+WeaveMapPictures WeaveMapThumbnails(const io::Image& img, const std::string& file, int periods) {
+  WeaveMapPictures out;
+  out.file = file;
+  out.size = img.width;
+  auto channel = [&](const std::string& name) {
+    const auto it = std::find(img.channel_names.begin(), img.channel_names.end(), name);
+    return it == img.channel_names.end() ? -1 : int(it - img.channel_names.begin());
+  };
+  const int n = std::min(img.width, 128), m = std::min(img.height, 128);
+  if (n <= 0 || m <= 0 || periods < 1) {
+    out.note = "empty map";
+    return out;
+  }
+  const size_t nc = size_t(img.channels());
+  auto texel = [&](int x, int y) {  // period texel of thumbnail pixel (x, y), nearest
+    const int sx = (x % n) * img.width / n, sy = (y % m) * img.height / m;
+    return &img.pixels[(size_t(sy) * size_t(img.width) + size_t(sx)) * nc];
+  };
+  // One picture from 1 (grey) or 3 (colour) channels. Grey (a lobe weight): value / max, so
+  // black = 0 and white = the period's maximum. Colour (kd ratio): 0.5 + 0.5 (value - 1) / s,
+  // s = max |value - 1| over the period and channels, so mid-grey = the tile mean.
+  auto picture = [&](const std::string& title, const std::vector<int>& chans) {
+    WeaveMapPictures::Picture p;
+    p.title = title;
+    p.min = std::numeric_limits<double>::infinity();
+    p.max = -p.min;
+    const bool colour = chans.size() == 3;
+    for (int y = 0; y < m; ++y)
+      for (int x = 0; x < n; ++x)
+        for (int c : chans) {
+          const float v = texel(x, y)[c];
+          if (!std::isfinite(v)) continue;
+          p.min = std::min(p.min, double(v));
+          p.max = std::max(p.max, double(v));
+        }
+    if (!(p.min <= p.max)) p.min = p.max = 0.0;  // no finite texel
+    const double spread = std::max(std::abs(p.max - 1.0), std::abs(p.min - 1.0));
+    p.scale = colour ? spread : p.max;
+    const int W = n * periods, H = m * periods;
+    std::vector<float> rgb(size_t(W) * size_t(H) * 3);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x)
+        for (size_t k = 0; k < 3; ++k) {
+          const double v = texel(x, y)[chans[colour ? k : 0]];
+          double d = 0.0;
+          if (std::isfinite(v))
+            d = colour ? (p.scale > 0.0 ? 0.5 + 0.5 * (v - 1.0) / p.scale : 0.5)
+                       : (p.scale > 0.0 ? v / p.scale : 0.0);
+          rgb[(size_t(y) * size_t(W) + size_t(x)) * 3 + k] = float(std::clamp(d, 0.0, 1.0));
+        }
+    p.png = Base64(io::EncodePng8(W, H, rgb, file));
+    out.pictures.push_back(std::move(p));
+  };
+  std::vector<std::string> missing;
+  for (const char* name : {"warp", "weft"}) {
+    const int c = channel(name);
+    if (c < 0) missing.push_back(name);
+    else picture(std::string(name) + " weight", {c});
+  }
+  const int kr = channel("kd.R"), kg = channel("kd.G"), kb = channel("kd.B");
+  if (kr < 0 || kg < 0 || kb < 0) missing.push_back("kd.R/G/B");
+  else picture("diffuse (kd) ratio, colour", {kr, kg, kb});
+  if (!missing.empty()) {
+    out.note = "no channel";
+    for (const std::string& c : missing) out.note += " " + c;
+  }
+  return out;
+}
+
 std::string NoiseFloorLabel(const std::string& source) {
   if (source == kSecondReference) return "noise floor (second seed)";
   if (source == kReferenceHalves) return "noise floor (two half-sample images of the reference)";
@@ -759,6 +829,32 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
     }
   }
   if (all_floor) rep.noise_floor_mean = MeanOver(floors, names);
+  // Weave maps (issue 12, item 5): thumbnails of each preset's maps. An unreadable map is a
+  // note on the page (the metrics do not depend on it), not a failed report.
+  for (const ModelSpec& m : spec.models) {
+    std::optional<WeaveMapPictures> w;
+    const nlohmann::json& wm = m.preset.contains("weave_maps") ? m.preset.at("weave_maps")
+                                                                : nlohmann::json();
+    if (wm.is_object()) {
+      w = WeaveMapPictures{};
+      if (!wm.contains("file") || !wm.at("file").is_string()) {
+        w->note = m.preset_path + ": weave_maps.file missing or not a string";
+      } else {
+        const std::string file = Resolve(wm.at("file").get<std::string>(), m.preset_path);
+        try {
+          *w = WeaveMapThumbnails(io::ReadImage(file), file);
+        } catch (const std::exception& e) {
+          w->file = file;
+          w->note = e.what();
+        }
+      }
+      if (wm.contains("colour_space") && wm.at("colour_space").is_string())
+        w->colour_space = wm.at("colour_space").get<std::string>();
+      if (wm.contains("uv_repeats") && wm.at("uv_repeats").is_number())
+        w->uv_repeats = wm.at("uv_repeats").get<double>();
+    }
+    rep.weave_maps.push_back(std::move(w));
+  }
   return rep;
 }
 
@@ -1056,6 +1152,50 @@ std::string ViewerLink(const std::string& report_dir, const std::string& scene_p
   return href;
 }
 
+namespace {
+
+// The weave maps of the presets that have them (issue 12, item 5).
+void FabricPageWeaveMaps(std::ostream& h, const FabricReport& rep) {
+  bool any = false;
+  for (const auto& w : rep.weave_maps) any = any || w.has_value();
+  if (!any) return;
+  h << "<h2>Weave maps</h2>\n<p class=\"meta\">The per-texel maps the preview samples "
+       "(fit/weave_maps.h): one weave period per map, shown tiled 2 &times; 2 periods (nearest "
+       "texel, at most 128 texels per period). <b>Encoding</b>: every channel is a linear ratio "
+       "to its tile mean (mean 1); warp and weft weight the yarn lobes, kd scales the diffuse "
+       "colour per channel (linear sRGB). <b>Display</b> (8-bit values, no sRGB encoding): a weight "
+       "as value / max, black = 0 and white = the period's maximum; the kd ratio as "
+       "0.5 + 0.5 (value &minus; 1) / s per channel, s = the largest |value &minus; 1| in the "
+       "period, so mid-grey is the tile mean. Ranges are over one period.</p>\n";
+  for (size_t mi = 0; mi < rep.weave_maps.size() && mi < rep.spec.models.size(); ++mi) {
+    if (!rep.weave_maps[mi]) continue;
+    const WeaveMapPictures& w = *rep.weave_maps[mi];
+    const std::string& model = rep.spec.models[mi].model;
+    h << "<h3>" << EscapeHtml(ModelTitle(model)) << " <span class=\"meta\">(model <code>"
+      << EscapeHtml(model) << "</code>)</span></h3>\n<p class=\"meta\">maps <code>"
+      << EscapeHtml(w.file) << "</code>";
+    if (w.size > 0) h << "; " << w.size << "&times;" << w.size << " texels per period";
+    if (w.uv_repeats > 0) h << "; " << FormatNumber(w.uv_repeats, 2) << " periods per UV unit";
+    if (!w.colour_space.empty()) h << "; preset: &ldquo;" << EscapeHtml(w.colour_space) << "&rdquo;";
+    h << "</p>\n";
+    if (!w.note.empty()) h << "<p class=\"meta na\">n/a (" << EscapeHtml(w.note) << ")</p>\n";
+    if (w.pictures.empty()) continue;
+    h << "<div class=\"grid\" style=\"--cols:" << w.pictures.size() << "\">\n";
+    for (const WeaveMapPictures::Picture& p : w.pictures)
+      h << "<figure><img style=\"image-rendering:pixelated;width:192px\" alt=\""
+        << EscapeHtml(model + " " + p.title) << "\" src=\"data:image/png;base64," << p.png
+        << "\"><figcaption>" << EscapeHtml(p.title) << "<br>range [" << FormatNumber(p.min, 2)
+        << ", " << FormatNumber(p.max, 2) << "] &times; tile mean"
+        << (p.title.find("colour") != std::string::npos
+                ? "<br>mid-grey = 1, s = " + FormatNumber(p.scale, 3)
+                : "<br>white = " + FormatNumber(p.scale, 2))
+        << "</figcaption></figure>\n";
+    h << "</div>\n";
+  }
+}
+
+}  // namespace
+
 std::string FabricHtml(const FabricReport& rep, const std::string& report_dir) {
   const FabricSpec& spec = rep.spec;
   std::ostringstream h;
@@ -1063,6 +1203,7 @@ std::string FabricHtml(const FabricReport& rep, const std::string& report_dir) {
   FabricPageSummary(h, rep);
   for (const SceneResult& s : rep.scenes) FabricPageScene(h, spec, s);
   FabricPageParameters(h, spec, report_dir);
+  FabricPageWeaveMaps(h, rep);
   FabricPageSolver(h, spec);
   h << "</body></html>\n";
   return h.str();

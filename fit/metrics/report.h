@@ -33,6 +33,7 @@
 #include <vector>
 
 #include "fit/metrics/metrics.h"
+#include "render/scene/image_io.h"
 #include "render/scene/tonemap.h"
 
 namespace clothfit::report {
@@ -104,6 +105,30 @@ struct SceneResult {
   std::vector<ModelSceneResult> models;  // FabricSpec::models order
 };
 
+// Thumbnails of a preset's weave maps (its top-level "weave_maps": woven, physical-aniso).
+struct WeaveMapPictures {
+  std::string file;          // the map EXR as resolved
+  std::string note;          // why there are no pictures (unreadable file, missing channels)
+  std::string colour_space;  // the preset's weave_maps.colour_space (untrusted text)
+  int size = 0;              // texels per period (the EXR's width)
+  double uv_repeats = 0.0;
+  struct Picture {
+    std::string title;  // e.g. "warp weight"
+    std::string png;    // base64, 2 x 2 periods
+    double min = 0.0, max = 0.0;  // of the channel(s) over one period
+    double scale = 0.0;           // display normalisation (see WeaveMapThumbnails)
+  };
+  std::vector<Picture> pictures;
+};
+
+// Tiles `periods` x `periods` copies of one period of the maps in `image` (channels warp, weft,
+// kd.R/G/B; the others are ignored) into pictures, stored as 8-bit values without sRGB
+// encoding: a weight (warp, weft) as value / max over the period (Picture::scale = max); the kd
+// ratio as 0.5 + 0.5 (value - 1) / s per channel, s = max |value - 1| over the period and
+// channels (Picture::scale = s; mid-grey = the tile mean). A period larger than 128 texels is
+// subsampled (nearest) to 128. Missing channels give fewer pictures and a note.
+WeaveMapPictures WeaveMapThumbnails(const io::Image& image, const std::string& file, int periods = 2);
+
 // SceneResult::noise_floor_source values.
 inline constexpr const char* kSecondReference = "second reference";
 inline constexpr const char* kReferenceHalves = "reference halves";
@@ -114,6 +139,8 @@ struct FabricReport {
   std::vector<Numbers> model_means;  // mean over scenes, per model
   std::optional<Numbers> noise_floor_mean;
   std::string noise_floor_source;  // the scenes' common source, or "mixed"
+  // Per model (FabricSpec::models order): its weave maps; absent without "weave_maps".
+  std::vector<std::optional<WeaveMapPictures>> weave_maps;
 };
 
 // The label of a noise-floor row for a source (kSecondReference: "noise floor (second seed)",
