@@ -92,13 +92,14 @@ struct SamplingPlan {
 struct PixelEstimate {
   double mean[3] = {0, 0, 0}, m2[3] = {0, 0, 0};
   double batch_sum[3] = {0, 0, 0};
+  double half[3] = {0, 0, 0};  // mean of the first half_batches batch means (see Store)
   int batch_count = 0;
   int hits = 0, fabric_hits = 0;
   double aov_n[3] = {0, 0, 0}, aov_p[3] = {0, 0, 0}, aov_t[3] = {0, 0, 0}, aov_uv[2] = {0, 0};
   double aov_z = 0.0;
 
-  // Sample m (0-based) of its batch of M.
-  void Add(const SampleOut& so, int m, int M, double max_sample_value) {
+  // Sample m (0-based) of its batch of M; half_batches: the batch count of the first half.
+  void Add(const SampleOut& so, int m, int M, int half_batches, double max_sample_value) {
     double v[3] = {so.L.r, so.L.g, so.L.b};
     for (int c = 0; c < 3; ++c) {
       if (!std::isfinite(v[c])) v[c] = 0.0;  // never let one bad sample poison a pixel
@@ -114,6 +115,9 @@ struct PixelEstimate {
         m2[c] += delta * (bm - mean[c]);
         batch_sum[c] = 0.0;
       }
+      // The running mean of the first half_batches batch means: half image A.
+      if (batch_count == half_batches)
+        for (int c = 0; c < 3; ++c) half[c] = mean[c];
     }
     if (so.hit) {
       ++hits;
@@ -139,6 +143,10 @@ struct PixelEstimate {
                                        : std::numeric_limits<float>::infinity();
       const double var = K > 1 ? m2[c] / (K - 1) : 0.0;  // variance of one batch mean
       r.std_error[pix * 3 + size_t(c)] = float(std::sqrt(var / K));
+      if (!r.half.empty())
+        r.half[pix * 3 + size_t(c)] = std::abs(half[c]) <= double(std::numeric_limits<float>::max())
+                                          ? float(half[c])
+                                          : std::numeric_limits<float>::infinity();
     }
     r.coverage[pix] = float(hits) / float(spp);
     r.fabric[pix] = float(fabric_hits) / float(spp);
@@ -166,6 +174,7 @@ RenderResult AllocateResult(int W, int H, const AovSet& aovs) {
   const size_t np = size_t(W) * size_t(H);
   r.rgb.assign(np * 3, 0.f);
   r.std_error.assign(np * 3, 0.f);
+  r.half.assign(np * 3, 0.f);
   r.coverage.assign(np, 0.f);
   r.fabric.assign(np, 0.f);
   if (aovs.normal) r.normal.assign(np * 3, 0.f);
@@ -461,7 +470,7 @@ struct PathTracer::Impl {
       scene.CameraRay(x + ju, y + jv, org, dir);
       const SampleOut so =
           TracePath(V(org), V(dir), rng, M > 1 ? &first : nullptr, env_samples, st, rays);
-      est.Add(so, m, M, st.max_sample_value);
+      est.Add(so, m, M, HalfBatches(spp / M), st.max_sample_value);
     }
     return est;
   }
@@ -647,6 +656,12 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   // Batches per tile (see PlanFor); r.batches is the count of the first tile (16 whenever
   // every tile's spp is a multiple of 16 >= 32, as adaptive counts always are).
   r.batches = PlanFor(tile_spp[0], st.first_env_samples).K;
+  // One batch count K for the whole image (so the half images' metadata is one number): a
+  // fixed spp gives one K; adaptive counts are multiples of 16 >= 32, i.e. K = 16 everywhere.
+  for (int n : tile_spp)
+    if (PlanFor(n, st.first_env_samples).K != r.batches)
+      throw std::logic_error("Render: tiles with different batch counts");
+  r.half_batches = HalfBatches(r.batches);
   tbb::parallel_for(0, tiles, [&](int tile) {
     const int spp = tile_spp[size_t(tile)];
     total_rays +=
@@ -697,9 +712,19 @@ void WriteRenderExr(const std::string& path, const RenderResult& r,
     planes.push_back({"uv.V", &r.uv, 2, 1});
   }
   if (!r.depth.empty()) planes.push_back({"Z", &r.depth, 1, 0});
+  // Half image A (docs/reference-renderer.md "Half images"): only with two non-empty halves.
+  const bool halves = r.half_batches >= 1 && r.batches - r.half_batches >= 1 &&
+                      r.half.size() == r.rgb.size();
+  if (halves) {
+    planes.push_back({"half.R", &r.half, 3, 0});
+    planes.push_back({"half.G", &r.half, 3, 1});
+    planes.push_back({"half.B", &r.half, 3, 2});
+  }
   const size_t np = size_t(r.width) * size_t(r.height);
   size_t nonfinite = 0;
   for (float v : r.rgb) nonfinite += std::isfinite(v) ? 0 : 1;
+  if (halves)
+    for (float v : r.half) nonfinite += std::isfinite(v) ? 0 : 1;
   if (nonfinite > 0)  // never written, so never cached as a reference
     throw io::IoError(path + ": refusing to write a render with " + std::to_string(nonfinite) +
                       " non-finite radiance values (kMaxRadiance; docs/reliability.md)");
@@ -713,6 +738,13 @@ void WriteRenderExr(const std::string& path, const RenderResult& r,
   img.metadata["clothfit:colour_space"] = "linear Rec.709 / sRGB primaries, scene-referred radiance";
   img.metadata["clothfit:stderr"] = "stderr.* = standard error of the pixel mean, sqrt(var/n)";
   img.metadata["clothfit:alpha"] = "A = fraction of camera samples that hit geometry";
+  if (r.batches > 0) img.metadata["clothfit:batches"] = std::to_string(r.batches);
+  if (halves) {
+    img.metadata["clothfit:half_batches"] = std::to_string(r.half_batches);
+    img.metadata["clothfit:half"] =
+        "half.* = mean of the first clothfit:half_batches of the clothfit:batches i.i.d. batch "
+        "means (the same K in every pixel); the other half B = (K mean - kA half) / (K - kA)";
+  }
   io::WriteExr(path, img);
 }
 

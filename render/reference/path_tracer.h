@@ -33,7 +33,15 @@ struct AovSet {
 // 2: stratified first-vertex environment/BSDF numbers and two environment samples there.
 // 3: Sadeghi evaluated through identities (same expectation, rounding-level changes) and
 //    adaptive sampling (target_error; fixed-spp images are unchanged by it).
-inline constexpr int kReferenceRendererVersion = 3;
+// 4: half images (half.R/G/B) in the EXR; per-reference environment samples and the
+//    re-planned adaptive pilot (docs/reference-renderer.md, session 6).
+inline constexpr int kReferenceRendererVersion = 4;
+
+// Half images: of a pixel's K i.i.d. batch means, half A is the mean of the first
+// HalfBatches(K) = floor(K / 2); the complement B = (K mean - kA A) / (K - kA) is the mean of
+// the others, so A and B are two independent unbiased estimates of the pixel (their difference
+// measures the noise without a second render).
+inline int HalfBatches(int batches) { return batches / 2; }
 
 struct RenderSettings {
   int spp = 64;
@@ -68,7 +76,9 @@ struct RenderResult {
   std::vector<float> rgb;        // mean radiance, linear, 3 per pixel, top row first
   std::vector<float> std_error;  // standard error of the pixel mean per channel, from the
                                  // spread of `batches` i.i.d. batch means (see Render)
-  int batches = 0;
+  int batches = 0;                // K, the same in every pixel (see Render)
+  std::vector<float> half;        // half image A, 3 per pixel (HalfBatches)
+  int half_batches = 0;           // kA = HalfBatches(batches)
   std::vector<float> coverage;   // fraction of camera samples hitting geometry (alpha)
   std::vector<float> fabric;     // fraction of camera samples hitting the fabric material
   // AOVs (first-hit, averaged over the pixel's samples that hit; empty unless requested)
@@ -103,7 +113,8 @@ class PathTracer {
   std::unique_ptr<Impl> impl_;
 };
 
-// Writes the result as one EXR: R, G, B, A (coverage), fabric, stderr.R/G/B, and the
+// Writes the result as one EXR: R, G, B, A (coverage), fabric, stderr.R/G/B, half.R/G/B (with
+// metadata clothfit:batches and clothfit:half_batches; when K >= 2), and the
 // requested AOVs (N.X/Y/Z, P.X/Y/Z, T.X/Y/Z, uv.U/V, Z), with metadata `extra`.
 void WriteRenderExr(const std::string& path, const RenderResult& r,
                     const std::vector<std::pair<std::string, std::string>>& extra);

@@ -374,4 +374,51 @@ void WriteTextAtomic(const std::string& path, const std::string& text) {
   RenameInto(tmp, path);
 }
 
+
+ReferenceHalves ReferenceHalvesFromImage(const Image& image, const std::string& what) {
+  auto channel = [&](const std::string& name) {
+    for (size_t i = 0; i < image.channel_names.size(); ++i)
+      if (image.channel_names[i] == name) return int(i);
+    throw IoError(what + ": no channel '" + name +
+                  "' (half images need a reference rendered by renderer version >= 4)");
+  };
+  auto field = [&](const std::string& key) {
+    const auto it = image.metadata.find(key);
+    if (it == image.metadata.end()) throw IoError(what + ": no metadata '" + key + "'");
+    size_t used = 0;
+    int v = 0;
+    try {
+      v = std::stoi(it->second, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != it->second.size())
+      throw IoError(what + ": metadata '" + key + "' = '" + it->second + "' is not an integer");
+    return v;
+  };
+  ReferenceHalves h;
+  h.width = image.width;
+  h.height = image.height;
+  h.batches = field("clothfit:batches");
+  h.half_batches = field("clothfit:half_batches");
+  if (!(h.half_batches >= 1 && h.batches - h.half_batches >= 1))
+    throw IoError(what + ": metadata clothfit:half_batches = " + std::to_string(h.half_batches) +
+                  " and clothfit:batches = " + std::to_string(h.batches) +
+                  " do not give two non-empty halves");
+  const int mean[3] = {channel("R"), channel("G"), channel("B")};
+  const int half[3] = {channel("half.R"), channel("half.G"), channel("half.B")};
+  const size_t np = size_t(image.width) * size_t(image.height), nc = image.channel_names.size();
+  h.a.resize(np * 3);
+  h.b.resize(np * 3);
+  const double K = h.batches, kA = h.half_batches;
+  for (size_t p = 0; p < np; ++p)
+    for (size_t c = 0; c < 3; ++c) {
+      const double m = image.pixels[p * nc + size_t(mean[c])];
+      const double a = image.pixels[p * nc + size_t(half[c])];
+      h.a[p * 3 + c] = float(a);
+      h.b[p * 3 + c] = float((K * m - kA * a) / (K - kA));
+    }
+  return h;
+}
+
 }  // namespace clothfit::io

@@ -62,6 +62,21 @@ void WritePng8(const std::string& path, int width, int height, const std::vector
 std::vector<unsigned char> EncodePng8(int width, int height, const std::vector<float>& rgb,
                                       const std::string& what);
 
+// The two half images of a reference EXR written by the path tracer (render/reference/
+// path_tracer.h, docs/reference-renderer.md "Half images"): of each pixel's K i.i.d. batch
+// means, a = half.R/G/B is the mean of the first kA (metadata clothfit:half_batches) and
+// b = (K mean - kA a) / (K - kA) the mean of the other K - kA (K = clothfit:batches, the same
+// in every pixel), 3 floats per pixel, top row first. a and b are independent unbiased
+// estimates of the pixel: E (a - b)^2 = sigma^2 (1/kA + 1/(K - kA)) with sigma^2 the variance
+// of one batch mean, i.e. K stderr^2 (1/kA + 1/(K - kA)) (= 4 stderr^2 for K = 16, kA = 8).
+struct ReferenceHalves {
+  int width = 0, height = 0;
+  int batches = 0, half_batches = 0;  // K, kA
+  std::vector<float> a, b;
+};
+// Throws IoError naming the file `what` and the missing channel or bad metadata field.
+ReferenceHalves ReferenceHalvesFromImage(const Image& image, const std::string& what);
+
 // Writes text atomically (temporary file + rename). Throws IoError naming the file.
 void WriteTextAtomic(const std::string& path, const std::string& text);
 
