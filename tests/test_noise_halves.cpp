@@ -75,7 +75,7 @@ class NoiseHalves : public ::testing::Test {
   fs::path dir_;
 };
 
-TEST(ReferenceHalves, ScaleFactor) {
+TEST(HalvesNoiseFloor, ScaleFactor) {
   EXPECT_DOUBLE_EQ(metrics::HalfDifferenceToFullStderr(8, 16), 0.5);
   EXPECT_DOUBLE_EQ(metrics::HalfDifferenceToFullStderr(4, 16), std::sqrt(48.0) / 16.0);
   EXPECT_DOUBLE_EQ(metrics::HalfDifferenceToFullStderr(7, 15), std::sqrt(56.0) / 15.0);
@@ -85,7 +85,7 @@ TEST(ReferenceHalves, ScaleFactor) {
 
 // B = (K mean - kA A) / (K - kA) is the other batches' mean; RMS(A - B) x scale estimates
 // sigma_full, for equal and unequal halves (a plain "/ 2" would be 15 % off at kA = 4 of 16).
-TEST(ReferenceHalves, RecoversTheSecondHalfAndTheFullStandardError) {
+TEST(HalvesNoiseFloor, RecoversTheSecondHalfAndTheFullStandardError) {
   const int w = 128, h = 96;
   const std::vector<float> truth(size_t(w) * h * 3, 0.5f), fabric(size_t(w) * h, 1.f);
   const double sb = 0.2;
@@ -112,7 +112,7 @@ TEST(ReferenceHalves, RecoversTheSecondHalfAndTheFullStandardError) {
   }
 }
 
-TEST(ReferenceHalves, BadChannelsAndMetadataAreNamedErrors) {
+TEST(HalvesNoiseFloor, BadChannelsAndMetadataAreNamedErrors) {
   const std::vector<float> truth(4 * 4 * 3, 0.5f), fabric(16, 1.f);
   io::Image img = BatchedReference(truth, fabric, 4, 4, 16, 8, 0.1, 1u);
   img.metadata.erase("clothfit:half_batches");

@@ -12,23 +12,6 @@ int Channel(const io::Image& img, const std::string& name) {
   return -1;
 }
 
-int IntMetadata(const io::Image& img, const std::string& key, const std::string& what) {
-  const auto it = img.metadata.find(key);
-  if (it == img.metadata.end())
-    throw std::invalid_argument(what + ": has half.R/G/B channels but no metadata \"" + key + "\"");
-  size_t used = 0;
-  long v = 0;
-  try {
-    v = std::stol(it->second, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != it->second.size() || v < 1 || v > (1L << 30))
-    throw std::invalid_argument(what + ": metadata \"" + key + "\" = '" + it->second +
-                                "' is not a positive integer");
-  return int(v);
-}
-
 }  // namespace
 
 double HalfDifferenceToFullStderr(int kA, int K) {
@@ -45,27 +28,21 @@ ReferenceHalves ExtractHalves(const io::Image& img, const std::string& what) {
   if (found == 0) return h;
   if (found != 3)
     throw std::invalid_argument(what + ": has some but not all of the channels half.R, half.G, half.B");
-  const int mc[3] = {Channel(img, "R"), Channel(img, "G"), Channel(img, "B")};
-  if (mc[0] < 0 || mc[1] < 0 || mc[2] < 0)
-    throw std::invalid_argument(what + ": has half.R/G/B but not R, G, B");
-  h.half_batches = IntMetadata(img, "clothfit:half_batches", what);
-  h.batches = IntMetadata(img, "clothfit:batches", what);
-  if (h.half_batches >= h.batches)
-    throw std::invalid_argument(what + ": metadata clothfit:half_batches (" +
-                                std::to_string(h.half_batches) + ") must be < clothfit:batches (" +
-                                std::to_string(h.batches) + ")");
+  // The file's halves as the renderer's reader recovers them (render/scene/image_io.h,
+  // ReferenceHalvesFromImage: B = (K mean - kA A) / (K - kA)).
+  io::ReferenceHalves r;
+  try {
+    r = io::ReferenceHalvesFromImage(img, what);
+  } catch (const io::IoError& e) {
+    throw std::invalid_argument(e.what());
+  }
   h.present = true;
+  h.half_batches = r.half_batches;
+  h.batches = r.batches;
   h.a = RgbImage(img.width, img.height);
   h.b = RgbImage(img.width, img.height);
-  const double K = h.batches, kA = h.half_batches;
-  const size_t nc = size_t(img.channels());
-  for (size_t p = 0; p < h.a.pixel_count(); ++p)
-    for (size_t c = 0; c < 3; ++c) {
-      const double mean = img.pixels[p * nc + size_t(mc[c])];
-      const double a = img.pixels[p * nc + size_t(hc[c])];
-      h.a.rgb[p * 3 + c] = float(a);
-      h.b.rgb[p * 3 + c] = float((K * mean - kA * a) / (K - kA));
-    }
+  h.a.rgb = std::move(r.a);
+  h.b.rgb = std::move(r.b);
   return h;
 }
 
