@@ -88,6 +88,7 @@ TEST_F(ReportWeaveMapPage, PageShowsTheMapsAndTheModelWithEscapedStrings) {
   img.width = img.height = 8;
   img.channel_names = {"R", "G", "B", "fabric"};
   img.pixels.assign(8 * 8 * 4, 0.5f);
+  for (size_t i = 3; i < img.pixels.size(); i += 4) img.pixels[i] = 1.0f;  // all fabric
   const std::string ref = (dir_ / "ref.exr").string(), prev = (dir_ / "prev.exr").string();
   io::WriteExr(ref, img);
   io::WriteExr(prev, img);
