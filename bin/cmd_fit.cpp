@@ -143,7 +143,7 @@ struct FitArgs {
   std::string weave_period, starts, start_values, weave_maps = "auto";
   std::string target_error;  // reference adaptive sampling (TargetErrorFor)
   double loss_scale = 1.0, min_coverage = 0.5;
-  bool subsurface = false, no_floor = false;
+  bool subsurface = false, no_floor = false, second_seed = false;
   int spp = 256, stride = 0, threads = 0, max_iterations = 50;
 };
 
@@ -172,6 +172,9 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "evaluate every n-th pixel per block axis (0 = auto: at most 4 x 4 per block)")
       ->check(CLI::Range(0, 16));
   cmd->add_flag("--no-noise-floor", a.no_floor, "(--fabric) skip the second-seed references");
+  cmd->add_flag("--second-seed", a.second_seed,
+                "(--fabric) render second-seed references for the noise floor even when the "
+                "references carry half channels (default: the floor from the halves)");
   cmd->add_option("--weave-maps", a.weave_maps,
                   "woven with an Irawan --fabric: auto (bake weave maps next to --out, per-texel "
                   "fit, and fit with them; fit/weave_maps.h), indicator (analytic yarn-on-top "
@@ -282,11 +285,18 @@ FitFiles ResolveFitFiles(const FitArgs& a, const Globals& g) {
     if (!a.references.empty() || !a.scenes.empty())
       throw std::invalid_argument("--fabric and --references/--scenes are exclusive");
     f.scenes = CanonicalScenes();
+    std::vector<double> targets;
     for (const std::string& s : f.scenes) {
-      const double te = TargetErrorFor(a.target_error, a.fabric, s);
-      f.refs.push_back(CachedReference(s, a.fabric, a.spp, 1, g.quiet, 0, te));
-      if (!a.no_floor) f.refs2.push_back(CachedReference(s, a.fabric, a.spp, 2, g.quiet, 0, te));
+      targets.push_back(TargetErrorFor(a.target_error, a.fabric, s));
+      f.refs.push_back(CachedReference(s, a.fabric, a.spp, 1, g.quiet, 0, targets.back()));
     }
+    // The noise floor: from the references' own half-sample channels when every one has them
+    // (fit/metrics/reference_halves.h), else (or with --second-seed) from seed-2 renders.
+    bool halves = !a.second_seed;
+    for (size_t i = 0; halves && i < f.refs.size(); ++i) halves = fit::HasHalfChannels(f.refs[i]);
+    if (!a.no_floor && !halves)
+      for (size_t i = 0; i < f.scenes.size(); ++i)
+        f.refs2.push_back(CachedReference(f.scenes[i], a.fabric, a.spp, 2, g.quiet, 0, targets[i]));
   } else {
     f.refs = SplitList(a.references);
     f.scenes = SplitList(a.scenes);
@@ -363,7 +373,9 @@ void CheckIsSceneCard(const std::string& path) {
 LoadedScenes LoadFitScenes(const FitFiles& f, const fit::ReferenceOptions& ro) {
   LoadedScenes l;
   for (const std::string& s : f.scenes) CheckIsSceneCard(s);
-  std::map<std::string, std::shared_ptr<render::Environment>> env_by_key;  // load once
+  // Loaded once per process (a --batch runs many fits; the key names the file and its
+  // intensity and rotation, which is all LoadSceneEnvironment reads from the card).
+  static std::map<std::string, std::shared_ptr<render::Environment>> env_by_key;
   for (size_t i = 0; i < f.scenes.size(); ++i) {
     l.sc.push_back(render::LoadScene(f.scenes[i]));
     const auto& spec = l.sc.back().card.environment;
@@ -424,7 +436,10 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
                         {"blocks_dropped_preview", e.dropped_preview},
                         {"blocks_dropped_coverage", e.dropped_coverage},
                         {"rmse", e.rmse}};
-    if (e.noise_floor >= 0) x["noise_floor"] = e.noise_floor;
+    if (e.noise_floor >= 0) {
+      x["noise_floor"] = e.noise_floor;
+      x["noise_floor_source"] = e.noise_floor_source;
+    }
     // What `clothfit report` needs: the second-seed reference (noise floor), the display
     // transform of the scene card, and the linear fitted preview written below.
     x["reference"] = fs::absolute(e.reference).lexically_normal().string();
@@ -645,18 +660,98 @@ int RunFit(const FitArgs& a, const Globals& g) {
 
 }  // namespace
 
+namespace {
+
+// One fit, as `clothfit fit` runs it: the exit status (errors printed, never thrown).
+int RunFitReporting(const FitArgs& a, const Globals& g) {
+  try {
+    return RunFit(a, g);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "clothfit fit: error: %s\n", e.what());
+    return 1;
+  }
+}
+
+// --batch FILE: one fit per non-empty line (the same options as `clothfit fit`, separated by
+// whitespace; no quoting, so no spaces in paths; '#' starts a comment line), run one after the
+// other in this process, so the process start-up (dynamic linking), the HDR environments and
+// their prefiltered chains are paid once (docs/fitting.md, "Demo pipeline (session 6)"). After
+// each job: "fit: batch job N: exit S" on stdout. Returns 0 when every job returned 0 or 3
+// (3 when some returned 3), else the first other status.
+int RunFitBatch(const std::string& list, const Globals& g) {
+  std::ifstream in(list);
+  if (!in) throw std::runtime_error(list + ": cannot read the --batch file");
+  std::vector<std::vector<std::string>> jobs;
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    std::istringstream words(line);
+    std::vector<std::string> args;
+    for (std::string w; words >> w;) args.push_back(w);
+    if (args.empty() || args[0][0] == '#') continue;
+    for (const std::string& w : args)
+      if (w.find_first_of("\"'\\") != std::string::npos || w == "--batch")
+        throw std::runtime_error(list + ": line " + std::to_string(n) +
+                                 ": quotes, backslashes and --batch are not allowed in a batch");
+    jobs.push_back(args);
+  }
+  int result = 0;
+  for (size_t j = 0; j < jobs.size(); ++j) {
+    FitArgs a;
+    CLI::App app("clothfit fit (batch job)");
+    AddFitOptions(&app, a);
+    std::vector<std::string> rev(jobs[j].rbegin(), jobs[j].rend());  // CLI11 takes them reversed
+    int status = 0;
+    try {
+      app.parse(rev);
+    } catch (const CLI::ParseError& e) {
+      std::fprintf(stderr, "clothfit fit: error: %s: job %zu: %s\n", list.c_str(), j + 1, e.what());
+      status = 1;
+    }
+    if (status == 0) status = RunFitReporting(a, g);
+    std::printf("fit: batch job %zu: exit %d\n", j + 1, status);
+    std::fflush(stdout);
+    if (status == 3 && result == 0) result = 3;
+    if (status != 0 && status != 3 && (result == 0 || result == 3)) result = status;
+  }
+  return result;
+}
+
+}  // namespace
+
 void AddFitCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto a = std::make_shared<FitArgs>();
+  auto batch = std::make_shared<std::string>();
   CLI::App* cmd = app.add_subcommand(
       "fit", "fit a material preset so the real-time preview matches the references");
   AddFitOptions(cmd, *a);
-  cmd->callback([a, &g, &exit_code]() {
-    try {
-      exit_code = RunFit(*a, g);
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit fit: error: %s\n", e.what());
-      exit_code = 1;
+  cmd->get_option("--out")->required(false);  // checked below (not with --batch)
+  cmd->add_option("--batch", *batch,
+                  "run the fits listed in FILE (one line of fit options each) in this process, "
+                  "in order; the other options must be absent");
+  cmd->callback([a, batch, cmd, &g, &exit_code]() {
+    if (!batch->empty()) {
+      bool others = false;
+      for (const CLI::Option* opt : cmd->get_options())
+        others = others || (opt->get_name() != "--batch" && opt->count() > 0);
+      if (others) {
+        std::fprintf(stderr, "clothfit fit: error: --batch takes no other fit options\n");
+        exit_code = 1;
+        return;
+      }
+      try {
+        exit_code = RunFitBatch(*batch, g);
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "clothfit fit: error: %s\n", e.what());
+        exit_code = 1;
+      }
+      return;
     }
+    if (a->out.empty()) {
+      std::fprintf(stderr, "clothfit fit: error: --out is required\n");
+      exit_code = 1;
+      return;
+    }
+    exit_code = RunFitReporting(*a, g);
   });
 }
 

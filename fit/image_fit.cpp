@@ -9,6 +9,7 @@
 #include <span>
 #include <string_view>
 
+#include "fit/metrics/reference_halves.h"
 #include "fit/reference.h"
 #include "render/scene/embree_scene.h"
 #include "render/scene/image_io.h"
@@ -57,6 +58,10 @@ struct SceneData {
   std::vector<Rgb<double>> ref_t;               // transformed reference block means
   std::vector<Rgb<double>> weight;              // per block and channel
   std::vector<Rgb<double>> second_t;            // transformed second-reference block means
+  // Without a second reference, from the reference's half channels: transformed block means
+  // of the halves A and B, and sqrt(kA (K - kA)) / K (fit/metrics/reference_halves.h).
+  std::vector<Rgb<double>> half_a_t, half_b_t;
+  double half_scale = 0.0;
   int dropped_preview = 0, dropped_coverage = 0;
   render::ToneMapping op = render::ToneMapping::kLinear;
   double exposure = 1.0;
@@ -370,16 +375,16 @@ void AddBlockTarget(SceneData& d, const Rgb<double>& sum, const Rgb<double>& var
   d.weight.push_back(w);
 }
 
-// Transformed block mean of the second reference (the noise floor), with the first
-// reference's coverage weights (sum wsum).
-Rgb<double> SecondBlockMean(const SceneData& d, const BlockGrid& g, const Reference& second,
+// Transformed block mean of another image of the reference (the second reference or one of
+// its halves: the noise floor), with the first reference's coverage weights (sum wsum).
+Rgb<double> SecondBlockMean(const SceneData& d, const BlockGrid& g, const std::vector<float>& rgb,
                             int bx, int by, double wsum) {
   Rgb<double> s2(0, 0, 0);
   for (int y = by; y < by + g.B; ++y)
     for (int x = bx; x < bx + g.B; ++x) {
       const size_t p = size_t(y) * size_t(g.width) + size_t(x);
       for (int c = 0; c < 3; ++c)
-        s2[c] += PixelWeight(g.ref, p) * double(second.rgb[p * 3 + size_t(c)]);
+        s2[c] += PixelWeight(g.ref, p) * double(rgb[p * 3 + size_t(c)]);
     }
   return Transform(s2 * (1.0 / wsum), d.space, d.op, d.exposure);
 }
@@ -419,6 +424,16 @@ std::vector<int> CollectBlocks(const SceneInput& in, const BlockGrid& g, int hei
   const Reference& ref = *in.reference;
   const double ref_mean = Mean3(ref.rgb, ref.fabric);
   const double floor_lin = 0.01 * std::max(ref_mean, 1e-6);
+  const size_t values = size_t(ref.width) * size_t(ref.height) * 3;
+  if (!in.second && (!ref.half_a.empty() || !ref.half_b.empty())) {
+    if (ref.half_a.size() != values || ref.half_b.size() != values)
+      throw FitError(ref.path + ": half images do not match the reference's size");
+    try {
+      d.half_scale = metrics::HalfDifferenceToFullStderr(ref.half_batches, ref.batches);
+    } catch (const std::invalid_argument& e) {
+      throw FitError(ref.path + ": " + e.what());
+    }
+  }
   std::vector<int> keep;
   d.block_begin.push_back(0);
   const int B = g.B, W = g.width, H = height;
@@ -431,7 +446,12 @@ std::vector<int> CollectBlocks(const SceneInput& in, const BlockGrid& g, int hei
       if (v == BlockVerdict::kLowCoverage) ++d.dropped_coverage;
       if (v != BlockVerdict::kKept) continue;
       AddBlockTarget(d, sum, var, wsum, floor_lin);
-      if (in.second) d.second_t.push_back(SecondBlockMean(d, g, *in.second, bx, by, wsum));
+      if (in.second) {
+        d.second_t.push_back(SecondBlockMean(d, g, in.second->rgb, bx, by, wsum));
+      } else if (!ref.half_a.empty()) {
+        d.half_a_t.push_back(SecondBlockMean(d, g, ref.half_a, bx, by, wsum));
+        d.half_b_t.push_back(SecondBlockMean(d, g, ref.half_b, bx, by, wsum));
+      }
       KeepBlockSamples(g, bx, by, keep, d);
       d.block_begin.push_back(int(keep.size()));
     }
@@ -730,6 +750,15 @@ void AddSceneErrors(const SceneList& data, FitResult& best) {
       for (size_t b = 0; b < d->second_t.size(); ++b)
         for (int c = 0; c < 3; ++c) s2 += std::pow(d->second_t[b][c] - d->ref_t[b][c], 2);
       e.noise_floor = std::sqrt(s2 / (3.0 * double(d->second_t.size()))) / std::sqrt(2.0);
+      e.noise_floor_source = "second reference";
+    } else if (!d->half_a_t.empty()) {
+      // E|A - B|^2 = sigma_full^2 x K^2 / (kA (K - kA)) per block and channel (linear; first
+      // order through the display transform): fit/metrics/reference_halves.h.
+      double s2 = 0.0;
+      for (size_t b = 0; b < d->half_a_t.size(); ++b)
+        for (int c = 0; c < 3; ++c) s2 += std::pow(d->half_a_t[b][c] - d->half_b_t[b][c], 2);
+      e.noise_floor = std::sqrt(s2 / (3.0 * double(d->half_a_t.size()))) * d->half_scale;
+      e.noise_floor_source = "reference halves";
     }
     best.scenes.push_back(e);
     total_se += se;

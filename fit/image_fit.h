@@ -57,6 +57,11 @@ struct Reference {
   // both sides. ReadReference(path) fills it as 1 where fabric >= 0.999, else 0.
   std::vector<float> weight;
   std::string layout, noise;  // how coverage and noise were read (printed by clothfit fit)
+  // The two independent half-sample images (fit/metrics/reference_halves.h): linear RGB per
+  // pixel like `rgb` (same coverage handling), from the first `half_batches` of `batches`
+  // batch means and from the others. Empty when the file has no half.R/G/B channels.
+  std::vector<float> half_a, half_b;
+  int half_batches = 0, batches = 0;
 };
 
 // Reads a reference with the default ReferenceOptions (fit/reference.h): channels R, G, B;
@@ -104,9 +109,13 @@ struct SceneError {
   int dropped_preview = 0;   // blocks with a pixel that is not fabric in the preview
   int dropped_coverage = 0;  // blocks whose reference coverage fraction < min_coverage
   double rmse = 0.0;         // unweighted RMSE in the fit space over the blocks
-  double noise_floor = -1.0; // RMSE(reference, second) / sqrt(2) over the same blocks and
-                             // space: one reference's own noise, which no fit can beat
-                             // (-1: no second reference given)
+  double noise_floor = -1.0; // one reference's own noise over the same blocks and space,
+                             // which no fit can beat (-1: neither a second reference nor
+                             // half channels): with a second reference (another seed)
+                             // RMSE(reference, second) / sqrt(2); else, from the reference's
+                             // halves A and B, RMSE(A, B) x sqrt(kA (K - kA)) / K
+                             // (= RMSE(A, B) / 2 for equal halves; reference_halves.h)
+  std::string noise_floor_source;  // "second reference", "reference halves" or ""
 };
 
 struct FitResult {

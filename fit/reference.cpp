@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "fit/image_fit.h"
+#include "fit/metrics/reference_halves.h"
 #include "render/scene/image_io.h"
 
 namespace clothfit::fit {
@@ -103,6 +104,28 @@ Reference ReadReference(const std::string& path, const ReferenceOptions& o) {
                    std::to_string(first % size_t(img.width)) + ", y=" +
                    std::to_string(first / size_t(img.width)) + "); refusing to fit to them");
   }
+  // Half-sample images (the noise floor without a second seed): same coverage handling as R/G/B.
+  metrics::ReferenceHalves halves;
+  try {
+    halves = metrics::ExtractHalves(img, path);
+  } catch (const std::invalid_argument& e) {
+    throw FitError(e.what());
+  }
+  if (halves.present) {
+    r.half_batches = halves.half_batches;
+    r.batches = halves.batches;
+    r.half_a.resize(np * 3);
+    r.half_b.resize(np * 3);
+    for (size_t p = 0; p < np; ++p) {
+      const float a = cov >= 0 ? r.fabric[p] : 1.f;
+      const float inv = premultiplied ? (a > 1e-4f ? 1.f / a : 0.f) : 1.f;
+      for (size_t c = 0; c < 3; ++c) {
+        const float va = halves.a.rgb[p * 3 + c], vb = halves.b.rgb[p * 3 + c];
+        r.half_a[p * 3 + c] = std::isfinite(va) ? va * inv : 0.f;
+        r.half_b[p * 3 + c] = std::isfinite(vb) ? vb * inv : 0.f;
+      }
+    }
+  }
   if (has_stderr && o.noise != NoiseMode::kImage && o.noise != NoiseMode::kNone) {
     r.noise = "stderr channels";
   } else if (o.noise == NoiseMode::kNone) {
@@ -113,6 +136,11 @@ Reference ReadReference(const std::string& path, const ReferenceOptions& o) {
     r.noise = "estimated from the image (Immerkaer 1996)";
   }
   return r;
+}
+
+bool HasHalfChannels(const std::string& path) {
+  const io::Image img = io::ReadImage(path);
+  return Channel(img, "half.R") >= 0 && Channel(img, "half.G") >= 0 && Channel(img, "half.B") >= 0;
 }
 
 double EstimateRelativeNoise(const Reference& ref, int c) {

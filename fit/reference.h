@@ -6,6 +6,9 @@
 //   premultiplied alpha (OpenEXR's rule; Cycles, Mitsuba): x = RGB / A, w = A
 //   straight alpha: x = RGB, w = A
 //   no coverage: x = RGB, w = 1
+// Optional half.R/G/B (+ metadata clothfit:half_batches, clothfit:batches): two independent
+// half-sample images, kept as Reference::half_a / half_b (fit/metrics/reference_halves.h); the
+// fit's noise floor comes from them when no second reference is given.
 // Missing stderr.*: estimated from the image (Immerkaer 1996, relative to the radiance), or
 // zero with NoiseMode::kNone.
 #pragma once
@@ -32,13 +35,18 @@ AlphaMode ParseAlphaMode(const std::string& s);  // throws std::invalid_argument
 NoiseMode ParseNoiseMode(const std::string& s);  // throws std::invalid_argument
 
 // Reads a reference (see above). Throws io::IoError naming the file on missing/corrupt files
-// and FitError on missing R/G/B, a missing named coverage channel, or NaN/Inf radiance.
+// and FitError on missing R/G/B, a missing named coverage channel, NaN/Inf radiance, or
+// inconsistent half channels / metadata.
 Reference ReadReference(const std::string& path, const ReferenceOptions& options);
 
 // Immerkaer's noise estimate (CVIU 64(2), 1996) of one channel of a reference, relative to
 // the radiance: sqrt(pi/2) / 6 x mean |Laplacian-difference response| / mean radiance, over
 // the pixels whose 3 x 3 neighbourhood has weight > 0.5. Returns 0 when no such pixel exists.
 double EstimateRelativeNoise(const Reference& ref, int channel);
+
+// True when the file has the channels half.R, half.G and half.B (reads the whole file).
+// Throws io::IoError naming the file when it cannot be read.
+bool HasHalfChannels(const std::string& path);
 
 // A weave period: a length in metres ("0.002", "2mm", "0.2cm", "0.002m") or in UV units
 // ("0.05uv"). Throws std::invalid_argument naming the flag on anything else or <= 0.

@@ -102,6 +102,19 @@ PY
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$(dirname "$0")/../datasets/scenes/sphere.gltf" --out "$TMP/f.json" 2>&1) \
       && fail "glTF accepted as a scene card"
     echo "$err" | grep -q "sphere.gltf: this is a glTF file, not a clothfit scene card" || fail "glTF as --scenes: $err"
+    # fit --batch (s6-demo): a missing list is named; other options are refused; a failing job
+    # makes the batch fail with its status, after the "batch job N: exit S" line.
+    err=$("$BIN" --quiet fit --batch "$TMP/nolist.txt" 2>&1) && fail "missing batch list accepted"
+    echo "$err" | grep -q "nolist.txt" || fail "batch error does not name the list: $err"
+    printf -- '--model standard\n' > "$TMP/list.txt"
+    err=$("$BIN" --quiet fit --batch "$TMP/list.txt" --model cloth 2>&1) && fail "--batch with other options accepted"
+    printf -- '# comment\n--references %s --scenes %s --out %s\n' "$TMP/none.exr" \
+      "$(dirname "$0")/../datasets/scenes/sphere.json" "$TMP/b.json" > "$TMP/list.txt"
+    out=$("$BIN" --quiet fit --batch "$TMP/list.txt" 2>&1) && fail "failing batch job accepted"
+    echo "$out" | grep -q "fit: batch job 1: exit 1" || fail "batch status line missing: $out"
+    echo "$out" | grep -q "none.exr" || fail "batch job error does not name the file: $out"
+    err=$("$BIN" --quiet fit --model standard 2>&1) && fail "fit without --out accepted"
+    echo "$err" | grep -q -- "--out is required" || fail "missing --out not named: $err"
     ;;
   report)
     # Small EXRs from the lut command stand in for references and previews (16x16, RGB).

@@ -9,10 +9,12 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <utility>
 
+#include "fit/metrics/reference_halves.h"
 #include "render/scene/image_io.h"
 #include "render/scene/input_limits.h"
 
@@ -77,6 +79,7 @@ std::string StringField(const nlohmann::json& j, const std::string& key, const s
 struct LoadedImage {
   metrics::RgbImage rgb;
   std::optional<metrics::Map> coverage;  // "fabric", else "A"
+  metrics::ReferenceHalves halves;       // references only (want_coverage)
 };
 
 LoadedImage Load(const std::string& path, bool want_coverage) {
@@ -93,6 +96,11 @@ LoadedImage Load(const std::string& path, bool want_coverage) {
     throw ReportError(e.what());
   }
   if (want_coverage) {
+    try {
+      out.halves = metrics::ExtractHalves(img, path);
+    } catch (const std::exception& e) {
+      throw ReportError(e.what());
+    }
     for (const char* name : {"fabric", "A"}) {
       const auto it = std::find(img.channel_names.begin(), img.channel_names.end(), name);
       if (it == img.channel_names.end()) continue;
@@ -650,6 +658,82 @@ Numbers MeanOver(const std::vector<const Numbers*>& per_scene,
   return m;
 }
 
+WeaveMapPictures WeaveMapThumbnails(const io::Image& img, const std::string& file, int periods) {
+  WeaveMapPictures out;
+  out.file = file;
+  out.size = img.width;
+  auto channel = [&](const std::string& name) {
+    const auto it = std::find(img.channel_names.begin(), img.channel_names.end(), name);
+    return it == img.channel_names.end() ? -1 : int(it - img.channel_names.begin());
+  };
+  const int n = std::min(img.width, 128), m = std::min(img.height, 128);
+  if (n <= 0 || m <= 0 || periods < 1) {
+    out.note = "empty map";
+    return out;
+  }
+  const size_t nc = size_t(img.channels());
+  auto texel = [&](int x, int y) {  // period texel of thumbnail pixel (x, y), nearest
+    const int sx = (x % n) * img.width / n, sy = (y % m) * img.height / m;
+    return &img.pixels[(size_t(sy) * size_t(img.width) + size_t(sx)) * nc];
+  };
+  // One picture from 1 (grey) or 3 (colour) channels. Grey (a lobe weight): value / max, so
+  // black = 0 and white = the period's maximum. Colour (kd ratio): 0.5 + 0.5 (value - 1) / s,
+  // s = max |value - 1| over the period and channels, so mid-grey = the tile mean.
+  auto picture = [&](const std::string& title, const std::vector<int>& chans) {
+    WeaveMapPictures::Picture p;
+    p.title = title;
+    p.min = std::numeric_limits<double>::infinity();
+    p.max = -p.min;
+    const bool colour = chans.size() == 3;
+    for (int y = 0; y < m; ++y)
+      for (int x = 0; x < n; ++x)
+        for (int c : chans) {
+          const float v = texel(x, y)[c];
+          if (!std::isfinite(v)) continue;
+          p.min = std::min(p.min, double(v));
+          p.max = std::max(p.max, double(v));
+        }
+    if (!(p.min <= p.max)) p.min = p.max = 0.0;  // no finite texel
+    const double spread = std::max(std::abs(p.max - 1.0), std::abs(p.min - 1.0));
+    p.scale = colour ? spread : p.max;
+    const int W = n * periods, H = m * periods;
+    std::vector<float> rgb(size_t(W) * size_t(H) * 3);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x)
+        for (size_t k = 0; k < 3; ++k) {
+          const double v = texel(x, y)[chans[colour ? k : 0]];
+          double d = 0.0;
+          if (std::isfinite(v))
+            d = colour ? (p.scale > 0.0 ? 0.5 + 0.5 * (v - 1.0) / p.scale : 0.5)
+                       : (p.scale > 0.0 ? v / p.scale : 0.0);
+          rgb[(size_t(y) * size_t(W) + size_t(x)) * 3 + k] = float(std::clamp(d, 0.0, 1.0));
+        }
+    p.png = Base64(io::EncodePng8(W, H, rgb, file));
+    out.pictures.push_back(std::move(p));
+  };
+  std::vector<std::string> missing;
+  for (const char* name : {"warp", "weft"}) {
+    const int c = channel(name);
+    if (c < 0) missing.push_back(name);
+    else picture(std::string(name) + " weight", {c});
+  }
+  const int kr = channel("kd.R"), kg = channel("kd.G"), kb = channel("kd.B");
+  if (kr < 0 || kg < 0 || kb < 0) missing.push_back("kd.R/G/B");
+  else picture("diffuse (kd) ratio, colour", {kr, kg, kb});
+  if (!missing.empty()) {
+    out.note = "no channel";
+    for (const std::string& c : missing) out.note += " " + c;
+  }
+  return out;
+}
+
+std::string NoiseFloorLabel(const std::string& source) {
+  if (source == kSecondReference) return "noise floor (second seed)";
+  if (source == kReferenceHalves) return "noise floor (two half-sample images of the reference)";
+  if (source == "mixed") return "noise floor (mixed: second seed / half-sample images)";
+  return "noise floor";
+}
+
 FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& options) {
   FabricReport rep;
   rep.spec = spec;
@@ -690,9 +774,18 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
                           sc.reference + " (" + std::to_string(ref.rgb.width) + "x" +
                           std::to_string(ref.rgb.height) + ")");
     }
-    std::vector<Comparison> results(paths.size());
+    // No second reference but half channels: the noise floor compares the two halves (one
+    // more comparison, after the models; same mask and HDR-FLIP range).
+    const bool use_halves = sc.reference2.empty() && ref.halves.present;
+    const size_t comparisons = paths.size() + (use_halves ? 1 : 0);
+    std::vector<Comparison> results(comparisons);
     std::vector<std::string> pictures(paths.size());
-    tbb::parallel_for(size_t(0), paths.size(), [&](size_t k) {
+    tbb::parallel_for(size_t(0), comparisons, [&](size_t k) {
+      if (k == paths.size()) {
+        results[k] = Compare(ref.halves.a, ref.halves.b, mask, sc, out.hdr_range, options,
+                             sc.reference + " (halves)");
+        return;
+      }
       results[k] = Compare(ref.rgb, tests[k].rgb, mask, sc, out.hdr_range, options, paths[k]);
       pictures[k] = DisplayPng(tests[k].rgb, sc.tone_mapping, sc.exposure, paths[k]);
     });
@@ -700,7 +793,12 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
     if (!sc.reference2.empty()) {
       out.noise_floor = results[0].numbers;
       out.noise_flip_png = results[0].flip_png;
+      out.noise_floor_source = kSecondReference;
       k = 1;
+    } else if (use_halves) {
+      out.noise_floor = results[paths.size()].numbers;
+      out.noise_flip_png = results[paths.size()].flip_png;
+      out.noise_floor_source = kReferenceHalves;
     }
     for (size_t mi = 0; mi < spec.models.size(); ++mi, ++k) {
       ModelSceneResult r;
@@ -720,12 +818,43 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
   bool all_floor = !rep.scenes.empty();
   std::vector<const Numbers*> floors;
   for (const SceneResult& s : rep.scenes) {
-    if (!s.noise_floor)
+    if (!s.noise_floor) {
       all_floor = false;
-    else
+    } else {
       floors.push_back(&*s.noise_floor);
+      if (rep.noise_floor_source.empty())
+        rep.noise_floor_source = s.noise_floor_source;
+      else if (rep.noise_floor_source != s.noise_floor_source)
+        rep.noise_floor_source = "mixed";
+    }
   }
   if (all_floor) rep.noise_floor_mean = MeanOver(floors, names);
+  // Weave maps (issue 12, item 5): thumbnails of each preset's maps. An unreadable map is a
+  // note on the page (the metrics do not depend on it), not a failed report.
+  for (const ModelSpec& m : spec.models) {
+    std::optional<WeaveMapPictures> w;
+    const nlohmann::json& wm = m.preset.contains("weave_maps") ? m.preset.at("weave_maps")
+                                                                : nlohmann::json();
+    if (wm.is_object()) {
+      w = WeaveMapPictures{};
+      if (!wm.contains("file") || !wm.at("file").is_string()) {
+        w->note = m.preset_path + ": weave_maps.file missing or not a string";
+      } else {
+        const std::string file = Resolve(wm.at("file").get<std::string>(), m.preset_path);
+        try {
+          *w = WeaveMapThumbnails(io::ReadImage(file), file);
+        } catch (const std::exception& e) {
+          w->file = file;
+          w->note = e.what();
+        }
+      }
+      if (wm.contains("colour_space") && wm.at("colour_space").is_string())
+        w->colour_space = wm.at("colour_space").get<std::string>();
+      if (wm.contains("uv_repeats") && wm.at("uv_repeats").is_number())
+        w->uv_repeats = wm.at("uv_repeats").get<double>();
+    }
+    rep.weave_maps.push_back(std::move(w));
+  }
   return rep;
 }
 
@@ -766,8 +895,10 @@ void FabricPageIntro(std::ostream& h, const FabricSpec& spec) {
   h << "<p class=\"meta\">Images are tone mapped with each scene card's operator and exposure "
        "(three.js r187 display transform, sRGB). Metrics compare each fitted preview with the "
        "path-traced reference over the fabric pixels only; the noise floor compares the "
-       "reference with a second reference rendered with another seed (no fit can be expected "
-       "to beat it). Lower is better except PSNR and SSIM. See docs/report.md.</p>\n";
+       "reference with a second reference rendered with another seed or, without one, the "
+       "reference's two half-sample images (each with half the samples: a conservative floor, "
+       "its RMSE about &radic;2 &times; the two-seed one). No fit can be expected to beat it. "
+       "Lower is better except PSNR and SSIM. See docs/report.md.</p>\n";
 }
 
 // Summary: means over scenes.
@@ -775,7 +906,8 @@ void FabricPageSummary(std::ostream& h, const FabricReport& rep) {
   const FabricSpec& spec = rep.spec;
   std::vector<MetricsRowSpec> rows;
   if (rep.noise_floor_mean)
-    rows.push_back({"noise floor", &*rep.noise_floor_mean, true, "second reference"});
+    rows.push_back({NoiseFloorLabel(rep.noise_floor_source), &*rep.noise_floor_mean, true,
+                    rep.noise_floor_source == kReferenceHalves ? "second half" : "second reference"});
   for (size_t mi = 0; mi < spec.models.size(); ++mi)
     rows.push_back({ModelTitle(spec.models[mi].model), &rep.model_means[mi], false, "preview"});
   h << "<h2>Metrics, mean over " << spec.scenes.size() << " scenes</h2>\n" << MetricsTable(rows);
@@ -814,10 +946,14 @@ void ScenePictures(std::ostream& h, const FabricSpec& spec, const SceneResult& s
   }
   if (s.noise_floor)
     h << "<figure>" << Img(s.noise_flip_png, "FLIP noise floor " + sc.name)
-      << "<figcaption>FLIP: reference vs second seed<br>mean "
+      << "<figcaption>FLIP: "
+      << (s.noise_floor_source == kReferenceHalves ? "first vs second half-sample image"
+                                                   : "reference vs second seed")
+      << "<br>mean "
       << EscapeHtml(Cell(*s.noise_floor, Columns()[3])) << "</figcaption></figure>\n";
   else
-    h << "<figure><figcaption>no second reference: no noise floor</figcaption></figure>\n";
+    h << "<figure><figcaption>no second reference or half channels: no noise floor"
+         "</figcaption></figure>\n";
   for (size_t mi = 0; mi < spec.models.size(); ++mi) {
     const Numbers& n = s.models[mi].numbers;
     h << "<figure>" << Img(s.models[mi].flip_png, spec.models[mi].model + " FLIP " + sc.name)
@@ -835,7 +971,9 @@ void FabricPageScene(std::ostream& h, const FabricSpec& spec, const SceneResult&
   SceneHeading(h, s);
   ScenePictures(h, spec, s);
   std::vector<MetricsRowSpec> rows;
-  if (s.noise_floor) rows.push_back({"noise floor", &*s.noise_floor, true, "second reference"});
+  if (s.noise_floor)
+    rows.push_back({NoiseFloorLabel(s.noise_floor_source), &*s.noise_floor, true,
+                    s.noise_floor_source == kReferenceHalves ? "second half" : "second reference"});
   for (size_t mi = 0; mi < spec.models.size(); ++mi)
     rows.push_back({ModelTitle(spec.models[mi].model), &s.models[mi].numbers, false, "preview"});
   h << MetricsTable(rows);
@@ -1014,6 +1152,50 @@ std::string ViewerLink(const std::string& report_dir, const std::string& scene_p
   return href;
 }
 
+namespace {
+
+// The weave maps of the presets that have them (issue 12, item 5).
+void FabricPageWeaveMaps(std::ostream& h, const FabricReport& rep) {
+  bool any = false;
+  for (const auto& w : rep.weave_maps) any = any || w.has_value();
+  if (!any) return;
+  h << "<h2>Weave maps</h2>\n<p class=\"meta\">The per-texel maps the preview samples "
+       "(fit/weave_maps.h): one weave period per map, shown tiled 2 &times; 2 periods (nearest "
+       "texel, at most 128 texels per period). <b>Encoding</b>: every channel is a linear ratio "
+       "to its tile mean (mean 1); warp and weft weight the yarn lobes, kd scales the diffuse "
+       "colour per channel (linear sRGB). <b>Display</b> (8-bit values, no sRGB encoding): a weight "
+       "as value / max, black = 0 and white = the period's maximum; the kd ratio as "
+       "0.5 + 0.5 (value &minus; 1) / s per channel, s = the largest |value &minus; 1| in the "
+       "period, so mid-grey is the tile mean. Ranges are over one period.</p>\n";
+  for (size_t mi = 0; mi < rep.weave_maps.size() && mi < rep.spec.models.size(); ++mi) {
+    if (!rep.weave_maps[mi]) continue;
+    const WeaveMapPictures& w = *rep.weave_maps[mi];
+    const std::string& model = rep.spec.models[mi].model;
+    h << "<h3>" << EscapeHtml(ModelTitle(model)) << " <span class=\"meta\">(model <code>"
+      << EscapeHtml(model) << "</code>)</span></h3>\n<p class=\"meta\">maps <code>"
+      << EscapeHtml(w.file) << "</code>";
+    if (w.size > 0) h << "; " << w.size << "&times;" << w.size << " texels per period";
+    if (w.uv_repeats > 0) h << "; " << FormatNumber(w.uv_repeats, 2) << " periods per UV unit";
+    if (!w.colour_space.empty()) h << "; preset: &ldquo;" << EscapeHtml(w.colour_space) << "&rdquo;";
+    h << "</p>\n";
+    if (!w.note.empty()) h << "<p class=\"meta na\">n/a (" << EscapeHtml(w.note) << ")</p>\n";
+    if (w.pictures.empty()) continue;
+    h << "<div class=\"grid\" style=\"--cols:" << w.pictures.size() << "\">\n";
+    for (const WeaveMapPictures::Picture& p : w.pictures)
+      h << "<figure><img style=\"image-rendering:pixelated;width:192px\" alt=\""
+        << EscapeHtml(model + " " + p.title) << "\" src=\"data:image/png;base64," << p.png
+        << "\"><figcaption>" << EscapeHtml(p.title) << "<br>range [" << FormatNumber(p.min, 2)
+        << ", " << FormatNumber(p.max, 2) << "] &times; tile mean"
+        << (p.title.find("colour") != std::string::npos
+                ? "<br>mid-grey = 1, s = " + FormatNumber(p.scale, 3)
+                : "<br>white = " + FormatNumber(p.scale, 2))
+        << "</figcaption></figure>\n";
+    h << "</div>\n";
+  }
+}
+
+}  // namespace
+
 std::string FabricHtml(const FabricReport& rep, const std::string& report_dir) {
   const FabricSpec& spec = rep.spec;
   std::ostringstream h;
@@ -1021,6 +1203,7 @@ std::string FabricHtml(const FabricReport& rep, const std::string& report_dir) {
   FabricPageSummary(h, rep);
   for (const SceneResult& s : rep.scenes) FabricPageScene(h, spec, s);
   FabricPageParameters(h, spec, report_dir);
+  FabricPageWeaveMaps(h, rep);
   FabricPageSolver(h, spec);
   h << "</body></html>\n";
   return h.str();
@@ -1031,7 +1214,8 @@ std::string IndexHtml(const std::vector<FabricReport>& reports) {
   h << Header("clothfit report");
   h << "<h1>clothfit report</h1>\n<p class=\"meta\">One row per fabric and model: metrics of "
        "the fitted real-time preview against the path-traced reference, mean over the scenes, "
-       "fabric pixels only. The noise-floor rows compare two references with different seeds. "
+       "fabric pixels only. The noise-floor rows compare two references with different seeds or, "
+       "without a second seed, the reference's two half-sample images (a conservative floor). "
        "Click a column header to sort. Same numbers: <a href=\"report.json\">report.json</a>, "
        "<a href=\"report.csv\">report.csv</a>; definitions in docs/report.md.</p>\n";
   h << "<table id=\"summary\"><thead><tr><th class=\"l s\" data-t=\"s\">fabric</th>"
@@ -1052,7 +1236,8 @@ std::string IndexHtml(const std::vector<FabricReport>& reports) {
     h << "<td data-v=\"" << seconds_key << "\">" << seconds << "</td></tr>\n";
   };
   for (const FabricReport& r : reports) {
-    if (r.noise_floor_mean) row(r, "noise floor", *r.noise_floor_mean, true, "", "");
+    if (r.noise_floor_mean)
+      row(r, NoiseFloorLabel(r.noise_floor_source), *r.noise_floor_mean, true, "", "");
     for (size_t mi = 0; mi < r.spec.models.size(); ++mi) {
       const nlohmann::json fit = r.spec.models[mi].preset.value("fit", nlohmann::json::object());
       std::string sec = "n/a (missing)", key;
@@ -1115,6 +1300,8 @@ nlohmann::json ReportJson(const std::vector<FabricReport>& reports) {
     f["models"] = models;
     f["noise_floor_mean"] =
         r.noise_floor_mean ? NumbersJson(*r.noise_floor_mean) : nlohmann::json(nullptr);
+    f["noise_floor_source"] = r.noise_floor_mean ? nlohmann::json(r.noise_floor_source)
+                                                 : nlohmann::json(nullptr);
     nlohmann::json scenes = nlohmann::json::array();
     for (const SceneResult& s : r.scenes) {
       nlohmann::json sj;
@@ -1132,6 +1319,8 @@ nlohmann::json ReportJson(const std::vector<FabricReport>& reports) {
                               {"stop", s.hdr_range.stop},
                               {"automatic", s.hdr_range_automatic}};
       sj["noise_floor"] = s.noise_floor ? NumbersJson(*s.noise_floor) : nlohmann::json(nullptr);
+      sj["noise_floor_source"] =
+          s.noise_floor ? nlohmann::json(s.noise_floor_source) : nlohmann::json(nullptr);
       nlohmann::json ms = nlohmann::json::object();
       for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
         ms[r.spec.models[mi].model] = NumbersJson(s.models[mi].numbers);
@@ -1168,11 +1357,19 @@ std::string ReportCsv(const std::vector<FabricReport>& reports) {
   };
   for (const FabricReport& r : reports) {
     for (const SceneResult& sc : r.scenes) {
-      if (sc.noise_floor) row(r.spec.name, "noise-floor", sc.spec.name, *sc.noise_floor);
+      if (sc.noise_floor)
+        row(r.spec.name,
+            sc.noise_floor_source == kReferenceHalves ? "noise-floor-halves" : "noise-floor",
+            sc.spec.name, *sc.noise_floor);
       for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
         row(r.spec.name, r.spec.models[mi].model, sc.spec.name, sc.models[mi].numbers);
     }
-    if (r.noise_floor_mean) row(r.spec.name, "noise-floor", "mean", *r.noise_floor_mean);
+    if (r.noise_floor_mean)
+      row(r.spec.name,
+          r.noise_floor_source == kReferenceHalves ? "noise-floor-halves"
+          : r.noise_floor_source == "mixed"        ? "noise-floor-mixed"
+                                                   : "noise-floor",
+          "mean", *r.noise_floor_mean);
     for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
       row(r.spec.name, r.spec.models[mi].model, "mean", r.model_means[mi]);
   }
@@ -1204,12 +1401,20 @@ std::string TerminalTable(const std::vector<FabricReport>& reports) {
     s << "\n";
   };
   for (const FabricReport& r : reports) {
-    if (r.noise_floor_mean) row(r.spec.name, "noise floor", *r.noise_floor_mean);
+    if (r.noise_floor_mean)
+      row(r.spec.name, r.noise_floor_source == kReferenceHalves ? "noise (halves)" : "noise floor",
+          *r.noise_floor_mean);
     for (size_t mi = 0; mi < r.spec.models.size(); ++mi)
       row(r.spec.name, r.spec.models[mi].model, r.model_means[mi]);
   }
   s << "(mean over scenes, fabric pixels; display values except RMSElin and HDRFLIP; dE = "
        "CIEDE2000 of the displayed colour)\n";
+  for (const FabricReport& r : reports)
+    if (r.noise_floor_mean && r.noise_floor_source != kSecondReference) {
+      s << "(noise (halves): the reference's two half-sample images compared; conservative, "
+           "RMSE about sqrt(2) x a second seed's)\n";
+      break;
+    }
   return s.str();
 }
 

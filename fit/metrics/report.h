@@ -10,7 +10,11 @@
 // each model's preview over the reference's fabric pixels (coverage channel "fabric", else
 // "A", > 0.5; every pixel when neither exists). The noise floor is the same comparison between
 // the reference and the second-seed reference: both are noisy, so its RMSE is about sqrt(2)
-// times one reference's own noise (the fit's `noise_floor` divides by sqrt(2)). One HDR-FLIP
+// times one reference's own noise (the fit's `noise_floor` divides by sqrt(2)). Without a
+// second reference, when the reference carries half channels (fit/metrics/reference_halves.h),
+// the noise floor compares its two half-sample images A and B instead: each has half the
+// samples, so this floor is conservative (its RMSE is about sqrt(2) x the two-seed floor's,
+// 2 x the reference's own noise; docs/report.md). One HDR-FLIP
 // exposure range per reference is shared by every image compared with it: the automatic range
 // of the reference over the fabric pixels, or kFallbackHdrRange when that is not finite.
 //
@@ -29,6 +33,7 @@
 #include <vector>
 
 #include "fit/metrics/metrics.h"
+#include "render/scene/image_io.h"
 #include "render/scene/tonemap.h"
 
 namespace clothfit::report {
@@ -94,17 +99,53 @@ struct SceneResult {
   metrics::ExposureRange hdr_range;
   bool hdr_range_automatic = false;
   std::string reference_png;             // base64
-  std::optional<Numbers> noise_floor;    // absent without a second reference
-  std::string noise_flip_png;            // FLIP map reference vs second reference (base64)
+  std::optional<Numbers> noise_floor;    // absent without a second reference or halves
+  std::string noise_floor_source;        // kSecondReference, kReferenceHalves or ""
+  std::string noise_flip_png;            // FLIP map of the noise-floor pair (base64)
   std::vector<ModelSceneResult> models;  // FabricSpec::models order
 };
+
+// Thumbnails of a preset's weave maps (its top-level "weave_maps": woven, physical-aniso).
+struct WeaveMapPictures {
+  std::string file;          // the map EXR as resolved
+  std::string note;          // why there are no pictures (unreadable file, missing channels)
+  std::string colour_space;  // the preset's weave_maps.colour_space (untrusted text)
+  int size = 0;              // texels per period (the EXR's width)
+  double uv_repeats = 0.0;
+  struct Picture {
+    std::string title;  // e.g. "warp weight"
+    std::string png;    // base64, 2 x 2 periods
+    double min = 0.0, max = 0.0;  // of the channel(s) over one period
+    double scale = 0.0;           // display normalisation (see WeaveMapThumbnails)
+  };
+  std::vector<Picture> pictures;
+};
+
+// Tiles `periods` x `periods` copies of one period of the maps in `image` (channels warp, weft,
+// kd.R/G/B; the others are ignored) into pictures, stored as 8-bit values without sRGB
+// encoding: a weight (warp, weft) as value / max over the period (Picture::scale = max); the kd
+// ratio as 0.5 + 0.5 (value - 1) / s per channel, s = max |value - 1| over the period and
+// channels (Picture::scale = s; mid-grey = the tile mean). A period larger than 128 texels is
+// subsampled (nearest) to 128. Missing channels give fewer pictures and a note.
+WeaveMapPictures WeaveMapThumbnails(const io::Image& image, const std::string& file, int periods = 2);
+
+// SceneResult::noise_floor_source values.
+inline constexpr const char* kSecondReference = "second reference";
+inline constexpr const char* kReferenceHalves = "reference halves";
 
 struct FabricReport {
   FabricSpec spec;
   std::vector<SceneResult> scenes;
   std::vector<Numbers> model_means;  // mean over scenes, per model
   std::optional<Numbers> noise_floor_mean;
+  std::string noise_floor_source;  // the scenes' common source, or "mixed"
+  // Per model (FabricSpec::models order): its weave maps; absent without "weave_maps".
+  std::vector<std::optional<WeaveMapPictures>> weave_maps;
 };
+
+// The label of a noise-floor row for a source (kSecondReference: "noise floor (second seed)",
+// kReferenceHalves: "noise floor (two half-sample images of the reference)").
+std::string NoiseFloorLabel(const std::string& source);
 
 struct ReportOptions {
   double ppd = 67.0;

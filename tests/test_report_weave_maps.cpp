@@ -1,0 +1,134 @@
+// Report pages show a preset's weave maps (issue 12, item 5; fit/metrics/report.h,
+// WeaveMapThumbnails): thumbnails tile the period, the display normalisation is the documented
+// one, untrusted strings stay escaped, and a missing map is a note, not a failed report.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "fit/metrics/report.h"
+#include "render/scene/image_io.h"
+
+namespace clothfit::report {
+namespace {
+namespace fs = std::filesystem;
+
+// Decodes nothing: the thumbnails are checked through a second encoding of the expected pixels
+// (EncodePng8 is deterministic), so the test compares the exact picture.
+std::string ExpectedPng(int w, int h, const std::vector<float>& rgb) {
+  return Base64(io::EncodePng8(w, h, rgb, "expected"));
+}
+
+io::Image Maps(int n) {
+  io::Image img;
+  img.width = img.height = n;
+  img.channel_names = {"warp", "weft", "kd.R", "kd.G", "kd.B"};
+  img.pixels.resize(size_t(n) * n * 5);
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      float* p = &img.pixels[(size_t(y) * n + x) * 5];
+      p[0] = float(x);          // warp: 0 .. n-1, max n-1
+      p[1] = float(y) * 2.0f;   // weft: 0 .. 2(n-1)
+      p[2] = 1.0f + 0.1f * float(x == 0);  // kd.R: 1.1 in the first column
+      p[3] = 1.0f - 0.2f * float(y == 0);  // kd.G: 0.8 in the first row -> s = 0.2
+      p[4] = 1.0f;
+    }
+  return img;
+}
+
+TEST(ReportWeaveMaps, ThumbnailsTileThePeriodWithTheDocumentedNormalisation) {
+  const int n = 4;
+  const WeaveMapPictures w = WeaveMapThumbnails(Maps(n), "maps.exr", 2);
+  EXPECT_TRUE(w.note.empty()) << w.note;
+  ASSERT_EQ(w.pictures.size(), 3u);
+  EXPECT_EQ(w.pictures[0].title, "warp weight");
+  EXPECT_DOUBLE_EQ(w.pictures[0].max, 3.0);
+  EXPECT_DOUBLE_EQ(w.pictures[0].scale, 3.0);
+  EXPECT_DOUBLE_EQ(w.pictures[1].max, 6.0);
+  EXPECT_NEAR(w.pictures[2].scale, 0.2, 1e-6);
+  // Expected pixels: 2 x 2 periods of n x n.
+  std::vector<float> warp(size_t(2 * n) * (2 * n) * 3), kd(warp.size());
+  for (int y = 0; y < 2 * n; ++y)
+    for (int x = 0; x < 2 * n; ++x) {
+      const size_t i = (size_t(y) * (2 * n) + x) * 3;
+      for (int k = 0; k < 3; ++k) warp[i + k] = float(x % n) / 3.0f;
+      const float r = 1.0f + 0.1f * float(x % n == 0), g = 1.0f - 0.2f * float(y % n == 0);
+      const double s = w.pictures[2].scale;
+      kd[i] = float(0.5 + 0.5 * (double(r) - 1.0) / s);
+      kd[i + 1] = float(0.5 + 0.5 * (double(g) - 1.0) / s);
+      kd[i + 2] = 0.5f;
+    }
+  EXPECT_EQ(w.pictures[0].png, ExpectedPng(2 * n, 2 * n, warp));
+  EXPECT_EQ(w.pictures[2].png, ExpectedPng(2 * n, 2 * n, kd));
+
+  io::Image partial = Maps(n);
+  partial.channel_names[1] = "other";
+  const WeaveMapPictures p = WeaveMapThumbnails(partial, "maps.exr", 2);
+  EXPECT_EQ(p.pictures.size(), 2u);
+  EXPECT_NE(p.note.find("weft"), std::string::npos);
+}
+
+class ReportWeaveMapPage : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("clothfit_test_report_maps_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+TEST_F(ReportWeaveMapPage, PageShowsTheMapsAndTheModelWithEscapedStrings) {
+  io::Image img;
+  img.width = img.height = 8;
+  img.channel_names = {"R", "G", "B", "fabric"};
+  img.pixels.assign(8 * 8 * 4, 0.5f);
+  for (size_t i = 3; i < img.pixels.size(); i += 4) img.pixels[i] = 1.0f;  // all fabric
+  const std::string ref = (dir_ / "ref.exr").string(), prev = (dir_ / "prev.exr").string();
+  io::WriteExr(ref, img);
+  io::WriteExr(prev, img);
+  io::WriteExr((dir_ / "m.weave.exr").string(), Maps(8));
+  auto preset = [&](const std::string& model, const nlohmann::json& maps) {
+    nlohmann::json j = {
+        {"schema", "clothfit.preset"}, {"version", 1}, {"model", model},
+        {"parameters", {{"roughness", 0.5}}},
+        {"fit", {{"scenes", {{{"scene", "s.json"}, {"reference", ref}, {"tone_mapping", "Linear"},
+                              {"exposure", 1.0}, {"preview", prev}}}}}},
+        {"provenance", {{"fabric", "datasets/fabrics/canvas.json"}}}};
+    if (!maps.is_null()) j["weave_maps"] = maps;
+    const std::string p = (dir_ / (model + ".json")).string();
+    std::ofstream(p) << j.dump();
+    return p;
+  };
+  const std::vector<std::string> presets = {
+      preset("standard", nullptr),
+      preset("woven", {{"file", "m.weave.exr"}, {"colour_space", "<script>x</script>"},
+                       {"uv_repeats", 60.0}}),
+      preset("physical-aniso", {{"file", "missing<b>.exr"}})};
+  const auto fabrics = FabricsFromPresets(presets);
+  const FabricReport rep = BuildFabricReport(fabrics.at(0));
+  ASSERT_EQ(rep.weave_maps.size(), 3u);
+  EXPECT_FALSE(rep.weave_maps[0].has_value());  // standard: no maps, no section entry
+  ASSERT_TRUE(rep.weave_maps[1].has_value());
+  EXPECT_EQ(rep.weave_maps[1]->pictures.size(), 3u);
+  ASSERT_TRUE(rep.weave_maps[2].has_value());
+  EXPECT_TRUE(rep.weave_maps[2]->pictures.empty());
+  EXPECT_NE(rep.weave_maps[2]->note.find("missing<b>.exr"), std::string::npos);
+  const std::string html = FabricHtml(rep);
+  EXPECT_NE(html.find("<h2>Weave maps</h2>"), std::string::npos);
+  EXPECT_NE(html.find("(model <code>woven</code>)"), std::string::npos);
+  EXPECT_NE(html.find("(model <code>physical-aniso</code>)"), std::string::npos);
+  EXPECT_NE(html.find("alt=\"woven warp weight\""), std::string::npos);
+  EXPECT_NE(html.find("linear ratio to its tile mean"), std::string::npos);
+  EXPECT_EQ(html.find("<script>x"), std::string::npos);
+  EXPECT_NE(html.find("&lt;script&gt;x"), std::string::npos);
+  EXPECT_EQ(html.find("missing<b>"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace clothfit::report
