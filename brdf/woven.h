@@ -68,6 +68,7 @@
 #include <array>
 #include <cmath>
 #include <string_view>
+#include <type_traits>
 
 #include "brdf/lut.h"
 #include "brdf/math.h"
@@ -292,6 +293,182 @@ inline WovenIblWeights<T> EvalIbl(const Params<T>& p, const Options& o, const T&
                                   const WeaveSample<T>& ws, const Table2D& dfg,
                                   const Table2D& phase) {
   return EvalIbl(p, o, PrepareLobes(p), NoV, ws, dfg, phase);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Split evaluation for renderers (render/preview's frame kernel). EvalDirect and EvalIbl above
+// stay the definition; the functions below evaluate the SAME expressions in the same order,
+// grouped by what they depend on: per frame (parameters only: FrameTerms), per pixel (view and
+// weave sample: ViewTerms) and per light (EvalDirectLight). So a renderer does the view work
+// once per pixel instead of once per light, and the parameter work once per frame.
+//   - The cosines are of type G = T for float / double and double for a ceres::Jet: they carry
+//     no derivative, and a Jet times a double is exactly the Jet times a constant Jet (value and
+//     derivative; only the sign of a zero derivative can differ), at half the cost.
+//   - Exact skips: with sheen_color exactly 0 (value and every derivative) the sheen lobe is
+//     0 x finite = 0 and S(mu) = 1 - 0 = 1 exactly, so both are left out; with the additive
+//     yarn layer Y = 1 exactly, so the multiplication by it is left out. A fit stage with the
+//     sheen free (a non-zero derivative) evaluates the full sheen path.
+// tests/test_woven_preview.cpp checks the results against EvalDirect / EvalIbl (bit equality in
+// double and in the Jet's value and derivatives, sheen off and on).
+
+// Geometry scalar type: T for float / double, double for a Jet.
+template <typename T>
+using GeomT = std::conditional_t<std::is_arithmetic_v<T>, T, double>;
+
+// c (x) s for a geometry scalar s: for a Jet the scalar product (= times a constant Jet).
+template <typename T>
+inline Rgb<T> ScaleRgb(const Rgb<T>& c, const GeomT<T>& s) {
+  return {c.r * s, c.g * s, c.b * s};
+}
+
+// Whether x is exactly zero, derivatives included.
+template <typename T>
+inline bool ExactlyZero(const T& x) {
+  if constexpr (std::is_arithmetic_v<T>) {
+    return x == T(0);
+  } else {
+    if (!(x.a == 0.0)) return false;
+    for (int k = 0; k < x.v.size(); ++k)
+      if (!(x.v[k] == 0.0)) return false;
+    return true;
+  }
+}
+
+template <typename T>
+struct FrameTerms {
+  Lobes<T> lb;
+  T ac, aa;          // D_GGX_Anisotropic's floored alphas (across = its t, along = its b)
+  T a2, inv_pi_a2;   // ac aa and kInvPi ac aa (D = kInvPi a2 Sq(a2 / q2) evaluates this first)
+  T minus_2_beta;    // -2 beta (F_Phase evaluates this first)
+  T one_minus_f0;
+  T one_minus_m;
+  Rgb<T> tint_w, tint_f;
+  bool sheen_off;    // sheen_color exactly 0, derivatives included
+  bool additive;     // o.yarn_layer == kAdditive: Y = 1
+};
+
+template <typename T>
+inline FrameTerms<T> PrepareFrame(const Params<T>& p, const Options& o) {
+  FrameTerms<T> f;
+  f.lb = PrepareLobes(p);
+  f.ac = Max(f.lb.alpha_c, Const<T>(kMinAlpha));
+  f.aa = Max(f.lb.alpha_a, Const<T>(kMinAlpha));
+  f.a2 = f.ac * f.aa;
+  f.inv_pi_a2 = Const<T>(kInvPi) * f.a2;
+  f.minus_2_beta = Const<T>(-2.0) * f.lb.beta;
+  f.one_minus_f0 = Const<T>(1.0) - f.lb.f0;
+  f.one_minus_m = Const<T>(1.0) - f.lb.m;
+  f.tint_w = CastRgb<T>(o.tint_warp);
+  f.tint_f = CastRgb<T>(o.tint_weft);
+  f.sheen_off = ExactlyZero(p.sheen_color.r) && ExactlyZero(p.sheen_color.g) &&
+                ExactlyZero(p.sheen_color.b);
+  f.additive = o.yarn_layer == YarnLayer::kAdditive;
+  return f;
+}
+
+template <typename T>
+struct ViewTerms {
+  GeomT<T> NoV;       // clamped to [kMinNoV, 1]
+  T AoV, CoV;         // view cosines against the warp fibre axis a_w and across axis c_w
+  T lv_w, lv_f;       // view halves of the anisotropic Smith V, warp and weft lobes
+  T s_v;              // SheenScaling(NoV) (1 with the sheen off)
+  T y_v;              // YarnScaling(NoV)
+  T mw, mf;           // m ws.warp, (1 - m) ws.weft
+  Rgb<T> base_kd;     // base (x) ws.kd
+  Rgb<T> diffuse;     // base (x) ws.kd / pi
+};
+
+template <typename T>
+inline ViewTerms<T> PrepareView(const Params<T>& p, const Options& o, const FrameTerms<T>& f,
+                                const GeomT<T>& NoV_raw, const GeomT<T>& ToV,
+                                const GeomT<T>& BoV, const WeaveSample<T>& ws,
+                                const Table2D& dfg, const Table2D& phase) {
+  using std::sqrt;
+  using G = GeomT<T>;
+  const Lobes<T>& lb = f.lb;
+  ViewTerms<T> w;
+  w.NoV = Clamp(NoV_raw, G(kMinNoV), G(1.0));
+  w.AoV = lb.cr * ToV + lb.sr * BoV;
+  w.CoV = lb.cr * BoV - lb.sr * ToV;
+  const G nv2 = Sq(w.NoV);
+  // V_SmithGGXCorrelated_Anisotropic(alpha_c, alpha_a, ...): warp ToV = CoV, BoV = AoV; weft
+  // swapped (its across axis is the warp's along axis).
+  w.lv_w = sqrt(Sq(lb.alpha_c * w.CoV) + Sq(lb.alpha_a * w.AoV) + nv2 + G(1e-20));
+  w.lv_f = sqrt(Sq(lb.alpha_c * w.AoV) + Sq(lb.alpha_a * w.CoV) + nv2 + G(1e-20));
+  const T NoVt = Const<T>(double(w.NoV));
+  w.s_v = f.sheen_off ? Const<T>(1.0) : SheenScaling(p, lb, dfg, NoVt);
+  w.y_v = f.additive ? Const<T>(1.0) : YarnScaling(p, o, lb, phase, NoVt);
+  w.mw = lb.m * ws.warp;
+  w.mf = f.one_minus_m * ws.weft;
+  w.base_kd = p.base_color * ws.kd;
+  w.diffuse = w.base_kd * Fd_Lambert<T>();
+  return w;
+}
+
+// One light's reflected radiance per unit light colour (cosine included) = EvalDirect.
+template <typename T>
+inline Rgb<T> EvalDirectLight(const Params<T>& p, const Options& o, const FrameTerms<T>& f,
+                              const ViewTerms<T>& w, const WeaveSample<T>& ws,
+                              const GeomT<T>& NoL_raw, const GeomT<T>& NoH_raw,
+                              const GeomT<T>& LoH_raw, const GeomT<T>& ToL, const GeomT<T>& BoL,
+                              const GeomT<T>& ToH, const GeomT<T>& BoH, const Table2D& dfg,
+                              const Table2D& phase) {
+  using std::exp;
+  using std::sqrt;
+  using G = GeomT<T>;
+  const Lobes<T>& lb = f.lb;
+  const G NoL = Saturate(NoL_raw);
+  const G NoH = Saturate(NoH_raw);
+  const G LoH = Saturate(LoH_raw);
+  const T AoL = lb.cr * ToL + lb.sr * BoL, CoL = lb.cr * BoL - lb.sr * ToL;
+  const T AoH = lb.cr * ToH + lb.sr * BoH, CoH = lb.cr * BoH - lb.sr * ToH;
+  // D_GGX_Anisotropic(alpha_c, alpha_a, NoH, ToH, BoH): warp (ToH, BoH) = (CoH, AoH), weft
+  // (AoH, CoH).
+  const T n2 = Sq(f.a2 * NoH);
+  const T q2w = Max(Sq(f.aa * CoH) + Sq(f.ac * AoH) + n2, Const<T>(1e-12));
+  const T q2f = Max(Sq(f.aa * AoH) + Sq(f.ac * CoH) + n2, Const<T>(1e-12));
+  const T Dw = f.inv_pi_a2 * Sq(f.a2 / q2w);
+  const T Df = f.inv_pi_a2 * Sq(f.a2 / q2f);
+  const G nl2 = Sq(NoL);
+  const T llw = sqrt(Sq(lb.alpha_c * CoL) + Sq(lb.alpha_a * AoL) + nl2 + G(1e-20));
+  const T llf = sqrt(Sq(lb.alpha_c * AoL) + Sq(lb.alpha_a * CoL) + nl2 + G(1e-20));
+  const T Vw = Const<T>(0.5) / Max(NoL * w.lv_w + w.NoV * llw, Const<T>(1e-6));
+  const T Vf = Const<T>(0.5) / Max(NoL * w.lv_f + w.NoV * llf, Const<T>(1e-6));
+  const T ww = w.mw * (Dw * Vw);
+  const T wf = w.mf * (Df * Vf);
+  const Rgb<T> lobes = f.tint_w * ww + f.tint_f * wf;
+  const T Fp = lb.f0 + f.one_minus_f0 * exp(f.minus_2_beta * Sq(LoH));
+  const Rgb<T> yarn = p.specular_color * lobes * (Fp * ws.glint);
+  Rgb<T> inner = yarn;
+  if (!f.additive) {
+    const T y = Min(w.y_v, YarnScaling(p, o, lb, phase, Const<T>(double(NoL))));
+    inner = yarn + w.diffuse * y;
+  } else {
+    inner = yarn + w.diffuse;  // y = Min(1, 1) = 1 exactly
+  }
+  if (f.sheen_off) return ScaleRgb(inner, NoL);
+  const T NoLt = Const<T>(double(NoL));
+  const T s = Min(w.s_v, SheenScaling(p, lb, dfg, NoLt));
+  const T NoVt = Const<T>(double(w.NoV));
+  const T dv = D_Charlie(lb.r_s * lb.r_s, Const<T>(double(NoH))) * V_Neubelt(NoVt, NoLt);
+  return ScaleRgb(p.sheen_color * dv + inner * s, NoL);
+}
+
+// The IBL weights = EvalIbl, from the view terms (sheen weight 0 and untouched with the sheen
+// off: the caller skips the sheen radiance then).
+template <typename T>
+inline WovenIblWeights<T> EvalIblView(const Params<T>& p, const FrameTerms<T>& f,
+                                      const ViewTerms<T>& w, const WeaveSample<T>& ws,
+                                      const Table2D& dfg, const Table2D& phase) {
+  const Lobes<T>& lb = f.lb;
+  const T NoVt = Const<T>(double(w.NoV));
+  const Rgb<T> yarn = p.specular_color * (w.s_v * ws.glint * YarnAlbedo(lb, phase, NoVt));
+  WovenIblWeights<T> r;
+  r.warp = yarn * f.tint_w * w.mw;
+  r.weft = yarn * f.tint_f * w.mf;
+  if (!f.sheen_off) r.sheen = p.sheen_color * dfg.Sample(NoVt, lb.r_s, 2);
+  r.diffuse = w.base_kd * (w.s_v * w.y_v);
+  return r;
 }
 
 // Tangent cosines for callers that only have the four isotropic cosines (legacy flat
