@@ -334,6 +334,59 @@ inline bool ExactlyZero(const T& x) {
   }
 }
 
+// Table2D::Sample(u, v, c) split for a constant u (a cosine) and a v fixed per frame (a
+// roughness): the row lookup (LocateRow) once per frame, the column lookup and the u blend in
+// the geometry type per call. The same arithmetic as Table2D::Sample and its Locate.
+template <typename T>
+struct TableRow {
+  int j0 = 0, j1 = 0;
+  T fv, one_minus_fv;
+};
+
+template <typename T>
+inline TableRow<T> LocateRow(const Table2D& t, const T& v) {
+  TableRow<T> r;
+  const T x = v * Const<T>(double(t.height)) - Const<T>(0.5);
+  const double xs = ScalarPart(x);
+  if (!(xs > 0.0)) {
+    r.j0 = 0;
+    r.fv = Const<T>(0.0);
+  } else if (xs >= double(t.height - 1)) {
+    r.j0 = t.height - 1;
+    r.fv = Const<T>(0.0);
+  } else {
+    r.j0 = int(std::floor(xs));
+    r.fv = x - Const<T>(double(r.j0));
+  }
+  r.j1 = r.j0 + 1 < t.height ? r.j0 + 1 : r.j0;
+  r.one_minus_fv = Const<T>(1.0) - r.fv;
+  return r;
+}
+
+template <typename T>
+inline T SampleRow(const Table2D& t, const GeomT<T>& u, const TableRow<T>& r, int c) {
+  using G = GeomT<T>;
+  const G x = u * G(double(t.width)) - G(0.5);
+  const double xs = double(x);
+  int i0;
+  G fu;
+  if (!(xs > 0.0)) {
+    i0 = 0;
+    fu = G(0.0);
+  } else if (xs >= double(t.width - 1)) {
+    i0 = t.width - 1;
+    fu = G(0.0);
+  } else {
+    i0 = int(std::floor(xs));
+    fu = x - G(double(i0));
+  }
+  const int i1 = i0 + 1 < t.width ? i0 + 1 : i0;
+  const G one = G(1.0);
+  const G a = G(double(t.at(i0, r.j0, c))) * (one - fu) + G(double(t.at(i1, r.j0, c))) * fu;
+  const G b = G(double(t.at(i0, r.j1, c))) * (one - fu) + G(double(t.at(i1, r.j1, c))) * fu;
+  return a * r.one_minus_fv + b * r.fv;
+}
+
 template <typename T>
 struct FrameTerms {
   Lobes<T> lb;
@@ -345,10 +398,20 @@ struct FrameTerms {
   Rgb<T> tint_w, tint_f;
   bool sheen_off;    // sheen_color exactly 0, derivatives included
   bool additive;     // o.yarn_layer == kAdditive: Y = 1
+  // Table rows at the frame's roughnesses: the phase table at r_e, the DFG (Charlie albedo,
+  // channel 2) at r_s; the phase table's beta nodes k, k + 1 and the blend t (PhaseAlbedo).
+  TableRow<T> row_e, row_s;
+  int phase_k = 0;
+  T phase_t;
+  T sheen_max;       // Max3(Saturate(sheen_color)) (SheenScaling)
+  T spec_max;        // Max3(specular_color) (YarnScaling)
+  T charlie_scale;   // 2 + 1 / alpha_s (D_Charlie), alpha_s = Max(r_s^2, kMinAlpha)
+  T charlie_exp;     // (1 / alpha_s) 0.5
 };
 
 template <typename T>
-inline FrameTerms<T> PrepareFrame(const Params<T>& p, const Options& o) {
+inline FrameTerms<T> PrepareFrame(const Params<T>& p, const Options& o, const Table2D& dfg,
+                                  const Table2D& phase) {
   FrameTerms<T> f;
   f.lb = PrepareLobes(p);
   f.ac = Max(f.lb.alpha_c, Const<T>(kMinAlpha));
@@ -363,7 +426,41 @@ inline FrameTerms<T> PrepareFrame(const Params<T>& p, const Options& o) {
   f.sheen_off = ExactlyZero(p.sheen_color.r) && ExactlyZero(p.sheen_color.g) &&
                 ExactlyZero(p.sheen_color.b);
   f.additive = o.yarn_layer == YarnLayer::kAdditive;
+  f.row_e = LocateRow(phase, f.lb.r_e);
+  f.row_s = LocateRow(dfg, f.lb.r_s);
+  {  // PhaseAlbedo's node search and blend
+    const auto& b = lut::kWovenPhaseBetas;
+    const double bs = ScalarPart(f.lb.beta);
+    int k = 0;
+    while (k + 2 < int(b.size()) && !(bs < b[size_t(k) + 1])) ++k;
+    f.phase_k = k;
+    f.phase_t = Clamp((f.lb.beta - Const<T>(b[size_t(k)])) /
+                          Const<T>(b[size_t(k) + 1] - b[size_t(k)]),
+                      Const<T>(0.0), Const<T>(1.0));
+  }
+  f.sheen_max = Max3(Saturate(p.sheen_color));
+  f.spec_max = Max3(p.specular_color);
+  const T alpha_s = Max(f.lb.r_s * f.lb.r_s, Const<T>(kMinAlpha));
+  const T inv_alpha = Const<T>(1.0) / alpha_s;
+  f.charlie_scale = Const<T>(2.0) + inv_alpha;
+  f.charlie_exp = inv_alpha * Const<T>(0.5);
   return f;
+}
+
+// YarnAlbedo (f0 PT_0 + (1 - f0) PT_beta) at a constant mu, from the frame's rows.
+template <typename T>
+inline T YarnAlbedoAt(const FrameTerms<T>& f, const Table2D& phase, const GeomT<T>& mu) {
+  const T p0 = SampleRow(phase, mu, f.row_e, f.phase_k);
+  const T p1 = SampleRow(phase, mu, f.row_e, f.phase_k + 1);
+  return f.lb.f0 * SampleRow(phase, mu, f.row_e, 0) + f.one_minus_f0 * (p0 + (p1 - p0) * f.phase_t);
+}
+template <typename T>
+inline T SheenScalingAt(const FrameTerms<T>& f, const Table2D& dfg, const GeomT<T>& mu) {
+  return Saturate(Const<T>(1.0) - f.sheen_max * SampleRow(dfg, mu, f.row_s, 2));
+}
+template <typename T>
+inline T YarnScalingAt(const FrameTerms<T>& f, const Table2D& phase, const GeomT<T>& mu) {
+  return Saturate(Const<T>(1.0) - f.spec_max * YarnAlbedoAt(f, phase, mu));
 }
 
 template <typename T>
@@ -373,13 +470,15 @@ struct ViewTerms {
   T lv_w, lv_f;       // view halves of the anisotropic Smith V, warp and weft lobes
   T s_v;              // SheenScaling(NoV) (1 with the sheen off)
   T y_v;              // YarnScaling(NoV)
+  T es_v;             // Es(NoV) = DFG.z(NoV, r_s) (0 with the sheen off)
+  T ya_v;             // YarnAlbedo(NoV)
   T mw, mf;           // m ws.warp, (1 - m) ws.weft
   Rgb<T> base_kd;     // base (x) ws.kd
   Rgb<T> diffuse;     // base (x) ws.kd / pi
 };
 
 template <typename T>
-inline ViewTerms<T> PrepareView(const Params<T>& p, const Options& o, const FrameTerms<T>& f,
+inline ViewTerms<T> PrepareView(const Params<T>& p, const FrameTerms<T>& f,
                                 const GeomT<T>& NoV_raw, const GeomT<T>& ToV,
                                 const GeomT<T>& BoV, const WeaveSample<T>& ws,
                                 const Table2D& dfg, const Table2D& phase) {
@@ -395,9 +494,10 @@ inline ViewTerms<T> PrepareView(const Params<T>& p, const Options& o, const Fram
   // swapped (its across axis is the warp's along axis).
   w.lv_w = sqrt(Sq(lb.alpha_c * w.CoV) + Sq(lb.alpha_a * w.AoV) + nv2 + G(1e-20));
   w.lv_f = sqrt(Sq(lb.alpha_c * w.AoV) + Sq(lb.alpha_a * w.CoV) + nv2 + G(1e-20));
-  const T NoVt = Const<T>(double(w.NoV));
-  w.s_v = f.sheen_off ? Const<T>(1.0) : SheenScaling(p, lb, dfg, NoVt);
-  w.y_v = f.additive ? Const<T>(1.0) : YarnScaling(p, o, lb, phase, NoVt);
+  w.es_v = f.sheen_off ? Const<T>(0.0) : SampleRow(dfg, w.NoV, f.row_s, 2);
+  w.s_v = f.sheen_off ? Const<T>(1.0) : Saturate(Const<T>(1.0) - f.sheen_max * w.es_v);
+  w.ya_v = YarnAlbedoAt(f, phase, w.NoV);
+  w.y_v = f.additive ? Const<T>(1.0) : Saturate(Const<T>(1.0) - f.spec_max * w.ya_v);
   w.mw = lb.m * ws.warp;
   w.mf = f.one_minus_m * ws.weft;
   w.base_kd = p.base_color * ws.kd;
@@ -407,7 +507,7 @@ inline ViewTerms<T> PrepareView(const Params<T>& p, const Options& o, const Fram
 
 // One light's reflected radiance per unit light colour (cosine included) = EvalDirect.
 template <typename T>
-inline Rgb<T> EvalDirectLight(const Params<T>& p, const Options& o, const FrameTerms<T>& f,
+inline Rgb<T> EvalDirectLight(const Params<T>& p, const FrameTerms<T>& f,
                               const ViewTerms<T>& w, const WeaveSample<T>& ws,
                               const GeomT<T>& NoL_raw, const GeomT<T>& NoH_raw,
                               const GeomT<T>& LoH_raw, const GeomT<T>& ToL, const GeomT<T>& BoL,
@@ -441,16 +541,20 @@ inline Rgb<T> EvalDirectLight(const Params<T>& p, const Options& o, const FrameT
   const Rgb<T> yarn = p.specular_color * lobes * (Fp * ws.glint);
   Rgb<T> inner = yarn;
   if (!f.additive) {
-    const T y = Min(w.y_v, YarnScaling(p, o, lb, phase, Const<T>(double(NoL))));
+    const T y = Min(w.y_v, YarnScalingAt(f, phase, NoL));
     inner = yarn + w.diffuse * y;
   } else {
     inner = yarn + w.diffuse;  // y = Min(1, 1) = 1 exactly
   }
   if (f.sheen_off) return ScaleRgb(inner, NoL);
-  const T NoLt = Const<T>(double(NoL));
-  const T s = Min(w.s_v, SheenScaling(p, lb, dfg, NoLt));
-  const T NoVt = Const<T>(double(w.NoV));
-  const T dv = D_Charlie(lb.r_s * lb.r_s, Const<T>(double(NoH))) * V_Neubelt(NoVt, NoLt);
+  using std::pow;
+  const T s = Min(w.s_v, SheenScalingAt(f, dfg, NoL));
+  // D_Charlie(r_s^2, NoH) (engine clamp) x V_Neubelt(NoV, NoL) (kNone), the cosine parts in G
+  const G sin2h = Max(G(1.0) - NoH * NoH, G(kCharlieMinSin2h));
+  const T D = f.charlie_scale * pow(sin2h, f.charlie_exp) * Const<T>(0.5 * kInvPi);
+  const G den = Max(G(4.0) * (NoL + w.NoV - NoL * w.NoV), G(1e-12));
+  const G Vn = G(1.0) / den;
+  const T dv = D * Vn;
   return ScaleRgb(p.sheen_color * dv + inner * s, NoL);
 }
 
@@ -458,15 +562,12 @@ inline Rgb<T> EvalDirectLight(const Params<T>& p, const Options& o, const FrameT
 // off: the caller skips the sheen radiance then).
 template <typename T>
 inline WovenIblWeights<T> EvalIblView(const Params<T>& p, const FrameTerms<T>& f,
-                                      const ViewTerms<T>& w, const WeaveSample<T>& ws,
-                                      const Table2D& dfg, const Table2D& phase) {
-  const Lobes<T>& lb = f.lb;
-  const T NoVt = Const<T>(double(w.NoV));
-  const Rgb<T> yarn = p.specular_color * (w.s_v * ws.glint * YarnAlbedo(lb, phase, NoVt));
+                                      const ViewTerms<T>& w, const WeaveSample<T>& ws) {
+  const Rgb<T> yarn = p.specular_color * (w.s_v * ws.glint * w.ya_v);
   WovenIblWeights<T> r;
   r.warp = yarn * f.tint_w * w.mw;
   r.weft = yarn * f.tint_f * w.mf;
-  if (!f.sheen_off) r.sheen = p.sheen_color * dfg.Sample(NoVt, lb.r_s, 2);
+  if (!f.sheen_off) r.sheen = p.sheen_color * w.es_v;
   r.diffuse = w.base_kd * (w.s_v * w.y_v);
   return r;
 }

@@ -120,7 +120,7 @@ void CheckSplitEvaluation(int free_from, int free_count, const std::array<double
       ws.kd = Rgb<T>(Const<T>(0.5 + U(rng)), Const<T>(0.5 + U(rng)), Const<T>(0.5 + U(rng)));
     }
     const woven::Params<T> p = woven::FromFlat(x.data());
-    const woven::FrameTerms<T> f = woven::PrepareFrame(p, o);
+    const woven::FrameTerms<T> f = woven::PrepareFrame(p, o, dfg, phase);
     // Random directions in the frame (t, b, n) = (x, y, z); v above, l anywhere near the top.
     auto dir = [&](double zmin) {
       const double z = zmin + (1 - zmin) * U(rng), ph = 2 * kPi * U(rng);
@@ -137,14 +137,14 @@ void CheckSplitEvaluation(int free_from, int free_count, const std::array<double
     const TangentCosines<T> tc{Const<T>(fl(td.ToV)), Const<T>(fl(td.BoV)), Const<T>(fl(td.ToL)),
                                Const<T>(fl(td.BoL)), Const<T>(fl(td.ToH)), Const<T>(fl(td.BoH))};
     const Rgb<T> ref = woven::EvalDirect(p, o, f.lb, c, tc, ws, dfg, phase);
-    const woven::ViewTerms<T> vt = woven::PrepareView(p, o, f, G(fl(cd.NoV)), G(fl(td.ToV)),
+    const woven::ViewTerms<T> vt = woven::PrepareView(p, f, G(fl(cd.NoV)), G(fl(td.ToV)),
                                                       G(fl(td.BoV)), ws, dfg, phase);
-    const Rgb<T> got = woven::EvalDirectLight(p, o, f, vt, ws, G(fl(cd.NoL)), G(fl(cd.NoH)),
+    const Rgb<T> got = woven::EvalDirectLight(p, f, vt, ws, G(fl(cd.NoL)), G(fl(cd.NoH)),
                                               G(fl(cd.LoH)), G(fl(td.ToL)), G(fl(td.BoL)),
                                               G(fl(td.ToH)), G(fl(td.BoH)), dfg, phase);
     for (int ch = 0; ch < 3; ++ch) ExpectSame(got[ch], ref[ch], "direct", trial);
     const woven::WovenIblWeights<T> wi = woven::EvalIbl(p, o, f.lb, c.NoV, ws, dfg, phase);
-    const woven::WovenIblWeights<T> wv = woven::EvalIblView(p, f, vt, ws, dfg, phase);
+    const woven::WovenIblWeights<T> wv = woven::EvalIblView(p, f, vt, ws);
     for (int ch = 0; ch < 3; ++ch) {
       ExpectSame(wv.warp[ch], wi.warp[ch], "ibl warp", trial);
       ExpectSame(wv.weft[ch], wi.weft[ch], "ibl weft", trial);
@@ -168,9 +168,9 @@ TEST(WovenPreview, SplitEvaluationEqualsEvalDirectAndEvalIbl) {
   }
   // The exact skip is taken only when it is exact.
   woven::Params<Jet> p;
-  EXPECT_TRUE(woven::PrepareFrame(p, {}).sheen_off);
+  EXPECT_TRUE(woven::PrepareFrame(p, {}, lut::DefaultDfg(), lut::DefaultWovenPhase()).sheen_off);
   p.sheen_color.g = Jet(0.0, 3);
-  EXPECT_FALSE(woven::PrepareFrame(p, {}).sheen_off);
+  EXPECT_FALSE(woven::PrepareFrame(p, {}, lut::DefaultDfg(), lut::DefaultWovenPhase()).sheen_off);
 }
 
 // The preview's fast woven kernel gives the generic per-light kernel's frame (woven::EvalDirect

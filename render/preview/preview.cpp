@@ -588,14 +588,14 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   out.resize(n);
   const woven::Options& wo = c.options.woven;
   const woven::Params<T> wp = woven::FromFlat(x);
-  const woven::FrameTerms<T> f = woven::PrepareFrame(wp, wo);
+  const Table2D& dfg = *c.dfg;
+  const Table2D& phase = *c.woven_phase;
+  const woven::FrameTerms<T> f = woven::PrepareFrame(wp, wo, dfg, phase);
   TableWeights<T> tw_e, tw_s;
   if constexpr (kIbl) {
     tw_e = MakeTableWeights(K, f.lb.r_e);
     if (!f.sheen_off) tw_s = MakeTableWeights(K, f.lb.r_s);
   }
-  const Table2D& dfg = *c.dfg;
-  const Table2D& phase = *c.woven_phase;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& br) {
     for (size_t i = br.begin(); i != br.end(); ++i) {
       woven::WeaveSample<T> ws{};
@@ -607,7 +607,7 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
       }
       const float* tv = &c.tangent_v[i * 2];
       const woven::ViewTerms<T> vt =
-          woven::PrepareView(wp, wo, f, G(double(c.NoV[i])), G(double(tv[0])), G(double(tv[1])),
+          woven::PrepareView(wp, f, G(double(c.NoV[i])), G(double(tv[0])), G(double(tv[1])),
                              ws, dfg, phase);
       Rgb<T> L(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
       if constexpr (kDirect) {
@@ -615,14 +615,14 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
           const PreviewLightSample& q = c.light_samples[size_t(s)];
           const float* lt = &c.light_tangent[size_t(s) * 4];
           const Rgb<T> fl = woven::EvalDirectLight(
-              wp, wo, f, vt, ws, G(double(q.NoL)), G(double(q.NoH)), G(double(q.LoH)),
+              wp, f, vt, ws, G(double(q.NoL)), G(double(q.NoH)), G(double(q.LoH)),
               G(double(lt[0])), G(double(lt[1])), G(double(lt[2])), G(double(lt[3])), dfg, phase);
           L += TimesConstRgb(fl, q.irradiance);
         }
       }
       if constexpr (kIbl) {
         const float* rad = &c.radiance[i * size_t(K) * 3];
-        const woven::WovenIblWeights<T> w = woven::EvalIblView(wp, f, vt, ws, dfg, phase);
+        const woven::WovenIblWeights<T> w = woven::EvalIblView(wp, f, vt, ws);
         Rgb<T> ibl = (w.warp + w.weft) * ApplyTableWeights(rad, tw_e);
         if (!f.sheen_off) ibl = ibl + w.sheen * ApplyTableWeights(rad, tw_s);
         L += ibl + TimesConstRgb(w.diffuse, &c.irradiance[i * 3]);
