@@ -91,6 +91,7 @@ void BM_Model(benchmark::State& state, ModelId m) {
 struct PreviewSet {
   std::string name;
   std::unique_ptr<render::PreviewCache> cache;
+  bool sheen = false;  // woven: evaluate with a non-zero sheen colour (the full sheen path)
 };
 
 std::vector<PreviewSet>& PreviewSets() {
@@ -116,7 +117,8 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
                       {"direct+ibl", &scene, env.get(), false, false},
                       {"direct only (no environment)", &scene, nullptr, false, false},
                       {"ibl only (no lights)", &no_lights, env.get(), false, false},
-                      {"woven direct+ibl", &scene, env.get(), false, false}};
+                      {"woven direct+ibl", &scene, env.get(), false, false},
+                      {"woven direct+ibl, sheen on", &scene, env.get(), false, false}};
   for (const Def& d : defs) {
     render::PreviewOptions o;
     o.model = std::string_view(d.name).starts_with("woven") ? render::ModelKind::kWoven
@@ -126,17 +128,24 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
     auto cache = render::PreviewCache::Build(*d.s, d.e, o);
     std::fprintf(stderr, "bench preview: cache '%s': %zu fabric pixels, %zu light samples, built in %.3f s\n",
                  d.name, cache->pixels.size(), cache->light_samples.size(), cache->build_seconds);
-    PreviewSets().push_back({d.name, std::move(cache)});
+    PreviewSets().push_back(
+        {d.name, std::move(cache), std::string_view(d.name).ends_with("sheen on")});
   }
 }
 
 template <typename T>
-void BM_Preview(benchmark::State& state, const render::PreviewCache* cache) {
-  // cloth: 10 parameters; woven: 16 (a canvas-like fit), the first 10 differentiated.
+void BM_Preview(benchmark::State& state, const render::PreviewCache* cache, bool sheen) {
+  // cloth: 10 parameters; woven: 16 (a canvas-like fit: the stage-1 fit has the sheen off, the
+  // "sheen on" set uses the fitted canvas sheen (0.08, 0.03, 0.03)), the first 10 differentiated.
   const bool woven = cache->options.model == render::ModelKind::kWoven;
   const std::array<double, 16> cloth_values{0.6, 0.4, 0.3, 0.8, 0.7, 0.6, 0.55, 0.2, 0.1, 0.05};
-  const std::array<double, 16> woven_values{0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75,
-                                            -9.0, 0.54, 0.07, 1.6, 0.0, 0.0, 0.0, 0.6};
+  std::array<double, 16> woven_values{0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75,
+                                      -9.0, 0.54, 0.07, 1.6, 0.0, 0.0, 0.0, 0.6};
+  if (sheen) {
+    woven_values[12] = 0.08;
+    woven_values[13] = 0.03;
+    woven_values[14] = 0.03;
+  }
   const auto& values = woven ? woven_values : cloth_values;
   const int n = woven ? woven::kParameterCount : 10;
   std::array<T, 16> x{};
@@ -372,12 +381,13 @@ void RegisterBrdfBenchmarks() {
 void RegisterPreviewBenchmarks() {
   for (const PreviewSet& set : PreviewSets()) {
     const render::PreviewCache* c = set.cache.get();
+    const bool sh = set.sheen;
     benchmark::RegisterBenchmark(("preview/" + set.name + "/double").c_str(),
-                                 [c](benchmark::State& s) { BM_Preview<double>(s, c); })
+                                 [c, sh](benchmark::State& s) { BM_Preview<double>(s, c, sh); })
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
     benchmark::RegisterBenchmark(("preview/" + set.name + "/jet10").c_str(),
-                                 [c](benchmark::State& s) { BM_Preview<Jet10>(s, c); })
+                                 [c, sh](benchmark::State& s) { BM_Preview<Jet10>(s, c, sh); })
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
   }

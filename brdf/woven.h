@@ -68,6 +68,7 @@
 #include <array>
 #include <cmath>
 #include <string_view>
+#include <type_traits>
 
 #include "brdf/lut.h"
 #include "brdf/math.h"
@@ -292,6 +293,283 @@ inline WovenIblWeights<T> EvalIbl(const Params<T>& p, const Options& o, const T&
                                   const WeaveSample<T>& ws, const Table2D& dfg,
                                   const Table2D& phase) {
   return EvalIbl(p, o, PrepareLobes(p), NoV, ws, dfg, phase);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Split evaluation for renderers (render/preview's frame kernel). EvalDirect and EvalIbl above
+// stay the definition; the functions below evaluate the SAME expressions in the same order,
+// grouped by what they depend on: per frame (parameters only: FrameTerms), per pixel (view and
+// weave sample: ViewTerms) and per light (EvalDirectLight). So a renderer does the view work
+// once per pixel instead of once per light, and the parameter work once per frame.
+//   - The cosines are of type G = T for float / double and double for a ceres::Jet: they carry
+//     no derivative, and a Jet times a double is exactly the Jet times a constant Jet (value and
+//     derivative; only the sign of a zero derivative can differ), at half the cost.
+//   - Exact skips: with sheen_color exactly 0 (value and every derivative) the sheen lobe is
+//     0 x finite = 0 and S(mu) = 1 - 0 = 1 exactly, so both are left out; with the additive
+//     yarn layer Y = 1 exactly, so the multiplication by it is left out. A fit stage with the
+//     sheen free (a non-zero derivative) evaluates the full sheen path.
+// tests/test_woven_preview.cpp checks the results against EvalDirect / EvalIbl (bit equality in
+// double and in the Jet's value and derivatives, sheen off and on).
+
+// Geometry scalar type: T for float / double, double for a Jet.
+template <typename T>
+using GeomT = std::conditional_t<std::is_arithmetic_v<T>, T, double>;
+
+// c (x) s for a geometry scalar s: for a Jet the scalar product (= times a constant Jet).
+template <typename T>
+inline Rgb<T> ScaleRgb(const Rgb<T>& c, const GeomT<T>& s) {
+  return {c.r * s, c.g * s, c.b * s};
+}
+
+// Whether x is exactly zero, derivatives included.
+template <typename T>
+inline bool ExactlyZero(const T& x) {
+  if constexpr (std::is_arithmetic_v<T>) {
+    return x == T(0);
+  } else {
+    if (!(x.a == 0.0)) return false;
+    for (int k = 0; k < x.v.size(); ++k)
+      if (!(x.v[k] == 0.0)) return false;
+    return true;
+  }
+}
+
+// Table2D::Sample(u, v, c) split for a constant u (a cosine) and a v fixed per frame (a
+// roughness): the row lookup (LocateRow) once per frame, the column lookup and the u blend in
+// the geometry type per call. The same arithmetic as Table2D::Sample and its Locate.
+template <typename T>
+struct TableRow {
+  int j0 = 0, j1 = 0;
+  T fv, one_minus_fv;
+};
+
+template <typename T>
+inline TableRow<T> LocateRow(const Table2D& t, const T& v) {
+  TableRow<T> r;
+  const T x = v * Const<T>(double(t.height)) - Const<T>(0.5);
+  const double xs = ScalarPart(x);
+  if (!(xs > 0.0)) {
+    r.j0 = 0;
+    r.fv = Const<T>(0.0);
+  } else if (xs >= double(t.height - 1)) {
+    r.j0 = t.height - 1;
+    r.fv = Const<T>(0.0);
+  } else {
+    r.j0 = int(std::floor(xs));
+    r.fv = x - Const<T>(double(r.j0));
+  }
+  r.j1 = r.j0 + 1 < t.height ? r.j0 + 1 : r.j0;
+  r.one_minus_fv = Const<T>(1.0) - r.fv;
+  return r;
+}
+
+template <typename T>
+inline T SampleRow(const Table2D& t, const GeomT<T>& u, const TableRow<T>& r, int c) {
+  using G = GeomT<T>;
+  const G x = u * G(double(t.width)) - G(0.5);
+  const double xs = double(x);
+  int i0;
+  G fu;
+  if (!(xs > 0.0)) {
+    i0 = 0;
+    fu = G(0.0);
+  } else if (xs >= double(t.width - 1)) {
+    i0 = t.width - 1;
+    fu = G(0.0);
+  } else {
+    i0 = int(std::floor(xs));
+    fu = x - G(double(i0));
+  }
+  const int i1 = i0 + 1 < t.width ? i0 + 1 : i0;
+  const G one = G(1.0);
+  const G a = G(double(t.at(i0, r.j0, c))) * (one - fu) + G(double(t.at(i1, r.j0, c))) * fu;
+  const G b = G(double(t.at(i0, r.j1, c))) * (one - fu) + G(double(t.at(i1, r.j1, c))) * fu;
+  return a * r.one_minus_fv + b * r.fv;
+}
+
+template <typename T>
+struct FrameTerms {
+  Lobes<T> lb;
+  T ac, aa;          // D_GGX_Anisotropic's floored alphas (across = its t, along = its b)
+  T a2, inv_pi_a2;   // ac aa and kInvPi ac aa (D = kInvPi a2 Sq(a2 / q2) evaluates this first)
+  T minus_2_beta;    // -2 beta (F_Phase evaluates this first)
+  T one_minus_f0;
+  T one_minus_m;
+  Rgb<T> tint_w, tint_f;
+  bool sheen_off;    // sheen_color exactly 0, derivatives included
+  bool additive;     // o.yarn_layer == kAdditive: Y = 1
+  // Table rows at the frame's roughnesses: the phase table at r_e, the DFG (Charlie albedo,
+  // channel 2) at r_s; the phase table's beta nodes k, k + 1 and the blend t (PhaseAlbedo).
+  TableRow<T> row_e, row_s;
+  int phase_k = 0;
+  T phase_t;
+  T sheen_max;       // Max3(Saturate(sheen_color)) (SheenScaling)
+  T spec_max;        // Max3(specular_color) (YarnScaling)
+  T charlie_scale;   // 2 + 1 / alpha_s (D_Charlie), alpha_s = Max(r_s^2, kMinAlpha)
+  T charlie_exp;     // (1 / alpha_s) 0.5
+};
+
+template <typename T>
+inline FrameTerms<T> PrepareFrame(const Params<T>& p, const Options& o, const Table2D& dfg,
+                                  const Table2D& phase) {
+  FrameTerms<T> f;
+  f.lb = PrepareLobes(p);
+  f.ac = Max(f.lb.alpha_c, Const<T>(kMinAlpha));
+  f.aa = Max(f.lb.alpha_a, Const<T>(kMinAlpha));
+  f.a2 = f.ac * f.aa;
+  f.inv_pi_a2 = Const<T>(kInvPi) * f.a2;
+  f.minus_2_beta = Const<T>(-2.0) * f.lb.beta;
+  f.one_minus_f0 = Const<T>(1.0) - f.lb.f0;
+  f.one_minus_m = Const<T>(1.0) - f.lb.m;
+  f.tint_w = CastRgb<T>(o.tint_warp);
+  f.tint_f = CastRgb<T>(o.tint_weft);
+  f.sheen_off = ExactlyZero(p.sheen_color.r) && ExactlyZero(p.sheen_color.g) &&
+                ExactlyZero(p.sheen_color.b);
+  f.additive = o.yarn_layer == YarnLayer::kAdditive;
+  f.row_e = LocateRow(phase, f.lb.r_e);
+  f.row_s = LocateRow(dfg, f.lb.r_s);
+  {  // PhaseAlbedo's node search and blend
+    const auto& b = lut::kWovenPhaseBetas;
+    const double bs = ScalarPart(f.lb.beta);
+    int k = 0;
+    while (k + 2 < int(b.size()) && !(bs < b[size_t(k) + 1])) ++k;
+    f.phase_k = k;
+    f.phase_t = Clamp((f.lb.beta - Const<T>(b[size_t(k)])) /
+                          Const<T>(b[size_t(k) + 1] - b[size_t(k)]),
+                      Const<T>(0.0), Const<T>(1.0));
+  }
+  f.sheen_max = Max3(Saturate(p.sheen_color));
+  f.spec_max = Max3(p.specular_color);
+  const T alpha_s = Max(f.lb.r_s * f.lb.r_s, Const<T>(kMinAlpha));
+  const T inv_alpha = Const<T>(1.0) / alpha_s;
+  f.charlie_scale = Const<T>(2.0) + inv_alpha;
+  f.charlie_exp = inv_alpha * Const<T>(0.5);
+  return f;
+}
+
+// YarnAlbedo (f0 PT_0 + (1 - f0) PT_beta) at a constant mu, from the frame's rows.
+template <typename T>
+inline T YarnAlbedoAt(const FrameTerms<T>& f, const Table2D& phase, const GeomT<T>& mu) {
+  const T p0 = SampleRow(phase, mu, f.row_e, f.phase_k);
+  const T p1 = SampleRow(phase, mu, f.row_e, f.phase_k + 1);
+  return f.lb.f0 * SampleRow(phase, mu, f.row_e, 0) + f.one_minus_f0 * (p0 + (p1 - p0) * f.phase_t);
+}
+template <typename T>
+inline T SheenScalingAt(const FrameTerms<T>& f, const Table2D& dfg, const GeomT<T>& mu) {
+  return Saturate(Const<T>(1.0) - f.sheen_max * SampleRow(dfg, mu, f.row_s, 2));
+}
+template <typename T>
+inline T YarnScalingAt(const FrameTerms<T>& f, const Table2D& phase, const GeomT<T>& mu) {
+  return Saturate(Const<T>(1.0) - f.spec_max * YarnAlbedoAt(f, phase, mu));
+}
+
+template <typename T>
+struct ViewTerms {
+  GeomT<T> NoV;       // clamped to [kMinNoV, 1]
+  T AoV, CoV;         // view cosines against the warp fibre axis a_w and across axis c_w
+  T lv_w, lv_f;       // view halves of the anisotropic Smith V, warp and weft lobes
+  T s_v;              // SheenScaling(NoV) (1 with the sheen off)
+  T y_v;              // YarnScaling(NoV)
+  T es_v;             // Es(NoV) = DFG.z(NoV, r_s) (0 with the sheen off)
+  T ya_v;             // YarnAlbedo(NoV)
+  T mw, mf;           // m ws.warp, (1 - m) ws.weft
+  Rgb<T> base_kd;     // base (x) ws.kd
+  Rgb<T> diffuse;     // base (x) ws.kd / pi
+};
+
+template <typename T>
+inline ViewTerms<T> PrepareView(const Params<T>& p, const FrameTerms<T>& f,
+                                const GeomT<T>& NoV_raw, const GeomT<T>& ToV,
+                                const GeomT<T>& BoV, const WeaveSample<T>& ws,
+                                const Table2D& dfg, const Table2D& phase) {
+  using std::sqrt;
+  using G = GeomT<T>;
+  const Lobes<T>& lb = f.lb;
+  ViewTerms<T> w;
+  w.NoV = Clamp(NoV_raw, G(kMinNoV), G(1.0));
+  w.AoV = lb.cr * ToV + lb.sr * BoV;
+  w.CoV = lb.cr * BoV - lb.sr * ToV;
+  const G nv2 = Sq(w.NoV);
+  // V_SmithGGXCorrelated_Anisotropic(alpha_c, alpha_a, ...): warp ToV = CoV, BoV = AoV; weft
+  // swapped (its across axis is the warp's along axis).
+  w.lv_w = sqrt(Sq(lb.alpha_c * w.CoV) + Sq(lb.alpha_a * w.AoV) + nv2 + G(1e-20));
+  w.lv_f = sqrt(Sq(lb.alpha_c * w.AoV) + Sq(lb.alpha_a * w.CoV) + nv2 + G(1e-20));
+  w.es_v = f.sheen_off ? Const<T>(0.0) : SampleRow(dfg, w.NoV, f.row_s, 2);
+  w.s_v = f.sheen_off ? Const<T>(1.0) : Saturate(Const<T>(1.0) - f.sheen_max * w.es_v);
+  w.ya_v = YarnAlbedoAt(f, phase, w.NoV);
+  w.y_v = f.additive ? Const<T>(1.0) : Saturate(Const<T>(1.0) - f.spec_max * w.ya_v);
+  w.mw = lb.m * ws.warp;
+  w.mf = f.one_minus_m * ws.weft;
+  w.base_kd = p.base_color * ws.kd;
+  w.diffuse = w.base_kd * Fd_Lambert<T>();
+  return w;
+}
+
+// One light's reflected radiance per unit light colour (cosine included) = EvalDirect.
+template <typename T>
+inline Rgb<T> EvalDirectLight(const Params<T>& p, const FrameTerms<T>& f,
+                              const ViewTerms<T>& w, const WeaveSample<T>& ws,
+                              const GeomT<T>& NoL_raw, const GeomT<T>& NoH_raw,
+                              const GeomT<T>& LoH_raw, const GeomT<T>& ToL, const GeomT<T>& BoL,
+                              const GeomT<T>& ToH, const GeomT<T>& BoH, const Table2D& dfg,
+                              const Table2D& phase) {
+  using std::exp;
+  using std::sqrt;
+  using G = GeomT<T>;
+  const Lobes<T>& lb = f.lb;
+  const G NoL = Saturate(NoL_raw);
+  const G NoH = Saturate(NoH_raw);
+  const G LoH = Saturate(LoH_raw);
+  const T AoL = lb.cr * ToL + lb.sr * BoL, CoL = lb.cr * BoL - lb.sr * ToL;
+  const T AoH = lb.cr * ToH + lb.sr * BoH, CoH = lb.cr * BoH - lb.sr * ToH;
+  // D_GGX_Anisotropic(alpha_c, alpha_a, NoH, ToH, BoH): warp (ToH, BoH) = (CoH, AoH), weft
+  // (AoH, CoH).
+  const T n2 = Sq(f.a2 * NoH);
+  const T q2w = Max(Sq(f.aa * CoH) + Sq(f.ac * AoH) + n2, Const<T>(1e-12));
+  const T q2f = Max(Sq(f.aa * AoH) + Sq(f.ac * CoH) + n2, Const<T>(1e-12));
+  const T Dw = f.inv_pi_a2 * Sq(f.a2 / q2w);
+  const T Df = f.inv_pi_a2 * Sq(f.a2 / q2f);
+  const G nl2 = Sq(NoL);
+  const T llw = sqrt(Sq(lb.alpha_c * CoL) + Sq(lb.alpha_a * AoL) + nl2 + G(1e-20));
+  const T llf = sqrt(Sq(lb.alpha_c * AoL) + Sq(lb.alpha_a * CoL) + nl2 + G(1e-20));
+  const T Vw = Const<T>(0.5) / Max(NoL * w.lv_w + w.NoV * llw, Const<T>(1e-6));
+  const T Vf = Const<T>(0.5) / Max(NoL * w.lv_f + w.NoV * llf, Const<T>(1e-6));
+  const T ww = w.mw * (Dw * Vw);
+  const T wf = w.mf * (Df * Vf);
+  const Rgb<T> lobes = f.tint_w * ww + f.tint_f * wf;
+  const T Fp = lb.f0 + f.one_minus_f0 * exp(f.minus_2_beta * Sq(LoH));
+  const Rgb<T> yarn = p.specular_color * lobes * (Fp * ws.glint);
+  Rgb<T> inner = yarn;
+  if (!f.additive) {
+    const T y = Min(w.y_v, YarnScalingAt(f, phase, NoL));
+    inner = yarn + w.diffuse * y;
+  } else {
+    inner = yarn + w.diffuse;  // y = Min(1, 1) = 1 exactly
+  }
+  if (f.sheen_off) return ScaleRgb(inner, NoL);
+  using std::pow;
+  const T s = Min(w.s_v, SheenScalingAt(f, dfg, NoL));
+  // D_Charlie(r_s^2, NoH) (engine clamp) x V_Neubelt(NoV, NoL) (kNone), the cosine parts in G
+  const G sin2h = Max(G(1.0) - NoH * NoH, G(kCharlieMinSin2h));
+  const T D = f.charlie_scale * pow(sin2h, f.charlie_exp) * Const<T>(0.5 * kInvPi);
+  const G den = Max(G(4.0) * (NoL + w.NoV - NoL * w.NoV), G(1e-12));
+  const G Vn = G(1.0) / den;
+  const T dv = D * Vn;
+  return ScaleRgb(p.sheen_color * dv + inner * s, NoL);
+}
+
+// The IBL weights = EvalIbl, from the view terms (sheen weight 0 and untouched with the sheen
+// off: the caller skips the sheen radiance then).
+template <typename T>
+inline WovenIblWeights<T> EvalIblView(const Params<T>& p, const FrameTerms<T>& f,
+                                      const ViewTerms<T>& w, const WeaveSample<T>& ws) {
+  const Rgb<T> yarn = p.specular_color * (w.s_v * ws.glint * w.ya_v);
+  WovenIblWeights<T> r;
+  r.warp = yarn * f.tint_w * w.mw;
+  r.weft = yarn * f.tint_f * w.mf;
+  if (!f.sheen_off) r.sheen = p.sheen_color * w.es_v;
+  r.diffuse = w.base_kd * (w.s_v * w.y_v);
+  return r;
 }
 
 // Tangent cosines for callers that only have the four isotropic cosines (legacy flat

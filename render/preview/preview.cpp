@@ -529,6 +529,121 @@ Rgb<T> LoadRgb(const float* p) {
   return {Const<T>(double(p[0])), Const<T>(double(p[1])), Const<T>(double(p[2]))};
 }
 
+// The K-node table interpolation of TableRadiance split in two: the Catmull-Rom weights depend
+// only on r, i.e. on the parameters (once per frame for the woven model), and the per-pixel
+// part multiplies them by the table's constants. A constant times a Jet is evaluated as the
+// Jet's scalar product: the value and derivative of Const(c) * w exactly (up to the sign of a
+// zero derivative), at half the cost. Same arithmetic as TableRadiance otherwise.
+template <typename T>
+struct TableWeights {
+  int i0 = 0, i1 = 0, i2 = 0, i3 = 0;
+  T w0, w1, w2, w3;
+};
+
+template <typename T>
+TableWeights<T> MakeTableWeights(int K, const T& r) {
+  TableWeights<T> w;
+  const T s = Clamp(r, Const<T>(0.0), Const<T>(1.0)) * Const<T>(double(K - 1));
+  w.i1 = std::clamp(int(std::floor(ScalarPart(s))), 0, K - 2);
+  w.i0 = std::max(w.i1 - 1, 0);
+  w.i2 = w.i1 + 1;
+  w.i3 = std::min(w.i1 + 2, K - 1);
+  const T t = s - Const<T>(double(w.i1));
+  const T t2 = t * t, t3 = t2 * t;
+  w.w0 = Const<T>(-0.5) * t3 + t2 - Const<T>(0.5) * t;
+  w.w1 = Const<T>(1.5) * t3 - Const<T>(2.5) * t2 + Const<T>(1.0);
+  w.w2 = Const<T>(-1.5) * t3 + Const<T>(2.0) * t2 + Const<T>(0.5) * t;
+  w.w3 = Const<T>(0.5) * t3 - Const<T>(0.5) * t2;
+  return w;
+}
+
+// Const(c) * x, as the scalar product for a Jet.
+template <typename T>
+T TimesConst(double c, const T& x) {
+  if constexpr (std::is_arithmetic_v<T>) {
+    return Const<T>(c) * x;
+  } else {
+    return x * c;
+  }
+}
+
+template <typename T>
+Rgb<T> ApplyTableWeights(const float* table, const TableWeights<T>& w) {
+  Rgb<T> out;
+  for (int ch = 0; ch < 3; ++ch) {
+    out[ch] = TimesConst(double(table[w.i0 * 3 + ch]), w.w0) +
+              TimesConst(double(table[w.i1 * 3 + ch]), w.w1) +
+              TimesConst(double(table[w.i2 * 3 + ch]), w.w2) +
+              TimesConst(double(table[w.i3 * 3 + ch]), w.w3);
+    out[ch] = Max(out[ch], Const<T>(0.0));  // cubic overshoot must not create negative light
+  }
+  return out;
+}
+
+// f (x) irradiance, the irradiance a constant (scalar product for a Jet).
+template <typename T>
+Rgb<T> TimesConstRgb(const Rgb<T>& f, const float* c) {
+  return {TimesConst(double(c[0]), f.r), TimesConst(double(c[1]), f.g),
+          TimesConst(double(c[2]), f.b)};
+}
+
+// The woven frame kernel (brdf/woven.h's split evaluation): per frame the lobe constants and
+// the radiance-table weights at r_e and r_s, per pixel the view terms, per light the rest.
+// Results equal the generic Kernel's (woven::EvalDirect / EvalIbl per light and pixel: bit
+// equal in double; tests/test_woven_preview.cpp), which PreviewOptions::woven_reference_kernel
+// still runs.
+template <typename T, bool kDirect, bool kIbl>
+void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
+  using G = woven::GeomT<T>;
+  const int K = c.options.roughness_nodes;
+  const size_t n = c.pixels.size();
+  out.resize(n);
+  const woven::Options& wo = c.options.woven;
+  const woven::Params<T> wp = woven::FromFlat(x);
+  const Table2D& dfg = *c.dfg;
+  const Table2D& phase = *c.woven_phase;
+  const woven::FrameTerms<T> f = woven::PrepareFrame(wp, wo, dfg, phase);
+  TableWeights<T> tw_e, tw_s;
+  if constexpr (kIbl) {
+    tw_e = MakeTableWeights(K, f.lb.r_e);
+    if (!f.sheen_off) tw_s = MakeTableWeights(K, f.lb.r_s);
+  }
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& br) {
+    for (size_t i = br.begin(); i != br.end(); ++i) {
+      woven::WeaveSample<T> ws{};
+      if (!c.weave.empty()) {
+        const float* wv = &c.weave[i * WeaveMaps::kChannels];
+        ws.warp = Const<T>(double(wv[0]));
+        ws.weft = Const<T>(double(wv[1]));
+        ws.kd = LoadRgb<T>(wv + 2);
+      }
+      const float* tv = &c.tangent_v[i * 2];
+      const woven::ViewTerms<T> vt =
+          woven::PrepareView(wp, f, G(double(c.NoV[i])), G(double(tv[0])), G(double(tv[1])),
+                             ws, dfg, phase);
+      Rgb<T> L(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
+      if constexpr (kDirect) {
+        for (int s = c.light_begin[i]; s < c.light_begin[i + 1]; ++s) {
+          const PreviewLightSample& q = c.light_samples[size_t(s)];
+          const float* lt = &c.light_tangent[size_t(s) * 4];
+          const Rgb<T> fl = woven::EvalDirectLight(
+              wp, f, vt, ws, G(double(q.NoL)), G(double(q.NoH)), G(double(q.LoH)),
+              G(double(lt[0])), G(double(lt[1])), G(double(lt[2])), G(double(lt[3])), dfg, phase);
+          L += TimesConstRgb(fl, q.irradiance);
+        }
+      }
+      if constexpr (kIbl) {
+        const float* rad = &c.radiance[i * size_t(K) * 3];
+        const woven::WovenIblWeights<T> w = woven::EvalIblView(wp, f, vt, ws);
+        Rgb<T> ibl = (w.warp + w.weft) * ApplyTableWeights(rad, tw_e);
+        if (!f.sheen_off) ibl = ibl + w.sheen * ApplyTableWeights(rad, tw_s);
+        L += ibl + TimesConstRgb(w.diffuse, &c.irradiance[i * 3]);
+      }
+      out[i] = L;
+    }
+  });
+}
+
 template <typename T, ModelKind M, bool kDirect, bool kIbl, bool kSub>
 void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   const int K = c.options.roughness_nodes;
@@ -660,6 +775,14 @@ template <typename T, ModelKind M>
 void DispatchFeatures(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   const PreviewFeatures& f = c.features;
   const int key = (f.direct ? 4 : 0) | (f.ibl ? 2 : 0) | (f.subsurface ? 1 : 0);
+  if constexpr (M == ModelKind::kWoven) {
+    if (!c.options.woven_reference_kernel) {
+      if (f.direct && f.ibl) return WovenKernel<T, true, true>(c, x, out);
+      if (f.direct) return WovenKernel<T, true, false>(c, x, out);
+      if (f.ibl) return WovenKernel<T, false, true>(c, x, out);
+      return WovenKernel<T, false, false>(c, x, out);
+    }
+  }
   switch (key) {
     case 0: return Kernel<T, M, false, false, false>(c, x, out);
     case 1: return Kernel<T, M, false, false, true>(c, x, out);

@@ -72,6 +72,10 @@ struct PreviewOptions {
   // Null: the uniform model (bit-identical to a preview without maps).
   std::shared_ptr<const WeaveMaps> weave_maps;
   double weave_footprint_scale = 1.0;
+  // Woven only, for tests: evaluate frames through the generic per-light kernel
+  // (woven::EvalDirect / EvalIbl at every light and pixel), the definition the fast woven kernel
+  // (brdf/woven.h's split evaluation) is checked against. false: the fast kernel.
+  bool woven_reference_kernel = false;
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
   // physical-aniso only: the anisotropy_rotation (radians) the bent-normal IBL radiance cache is
   // built for (three.js bends the normal toward B = b cos(rot) - t sin(rot)); the direct light
