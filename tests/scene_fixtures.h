@@ -47,4 +47,19 @@ inline Scene CameraScene(int w, int h, std::array<double, 3> pos, std::array<dou
   return s;
 }
 
+// A 64 x 64 fabric sphere under one directional key light (intensity 2.5, from the upper
+// right front), ACES Filmic display: the small fit scene of the foreign-reference and
+// noise-floor tests.
+inline Scene KeyLitAcesSphere() {
+  Scene s = CameraScene(64, 64, {0, 0, 3}, {0, 0, -1}, 0.4);
+  s.meshes.push_back(SphereMesh(0.5, 64, 32, true, 0.f));
+  Light key;
+  key.type = Light::Type::kDirectional;
+  key.intensity = 2.5;
+  key.direction = {0.4, -0.5, -0.768};
+  s.lights = {key};
+  s.card.tone_mapping = "ACESFilmic";
+  return s;
+}
+
 }  // namespace clothfit::render

@@ -15,17 +15,7 @@ namespace {
 namespace fs = std::filesystem;
 using render::ModelKind;
 
-render::Scene GapScene() {
-  render::Scene s = render::CameraScene(64, 64, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(render::SphereMesh(0.5, 64, 32, true, 0.f));
-  render::Light key;
-  key.type = render::Light::Type::kDirectional;
-  key.intensity = 2.5;
-  key.direction = {0.4, -0.5, -0.768};
-  s.lights = {key};
-  s.card.tone_mapping = "ACESFilmic";
-  return s;
-}
+render::Scene GapScene() { return render::KeyLitAcesSphere(); }
 
 // The preview of `truth` written in the Cycles layout: RGBA, premultiplied, transparent film
 // (background 0), no fabric or stderr channels; with `gaps`, every 3rd row and column of the

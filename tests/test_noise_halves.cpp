@@ -139,14 +139,7 @@ TEST(HalvesNoiseFloor, BadChannelsAndMetadataAreNamedErrors) {
 // in linear space matches the block-mean standard error sigma_full / sqrt(pixels per block),
 // and matches the two-seed floor computed from an independent second reference.
 TEST_F(NoiseHalves, FitFloorFromHalvesMatchesTheoryAndTheSecondSeed) {
-  render::Scene s = render::CameraScene(64, 64, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(render::SphereMesh(0.5, 64, 32, true, 0.f));
-  render::Light key;
-  key.type = render::Light::Type::kDirectional;
-  key.intensity = 2.5;
-  key.direction = {0.4, -0.5, -0.768};
-  s.lights = {key};
-  s.card.tone_mapping = "ACESFilmic";
+  render::Scene s = render::KeyLitAcesSphere();
   const render::Environment env = render::Environment::ProceduralSky(1.0, 0.7);
   render::MaterialPreset truth = render::DefaultPreset(render::ModelKind::kStandard);
   truth.values = {0.5, 0.3, 0.2, 0.45, 0.0};
