@@ -44,8 +44,8 @@ io::Image RoundTrip(const RenderResult& r, const std::string& name) {
   return img;
 }
 
-// sum (a - b)^2 / sum K se^2 (1 / kA + 1 / kB) over pixel-channels with se > 0.
-double HalfSpreadRatio(const io::ReferenceHalves& h, const RenderResult& r) {
+// {sum (a - b)^2, sum K se^2 (1 / kA + 1 / kB)} over the pixel-channels.
+std::pair<double, double> HalfSpreadSums(const io::ReferenceHalves& h, const RenderResult& r) {
   const double K = h.batches, kA = h.half_batches, kB = K - kA;
   double d2 = 0.0, pred = 0.0;
   for (size_t i = 0; i < r.rgb.size(); ++i) {
@@ -53,8 +53,21 @@ double HalfSpreadRatio(const io::ReferenceHalves& h, const RenderResult& r) {
     d2 += std::pow(double(h.a[i]) - double(h.b[i]), 2);
     pred += K * se * se * (1.0 / kA + 1.0 / kB);
   }
+  return {d2, pred};
+}
+
+double HalfSpreadRatio(const io::ReferenceHalves& h, const RenderResult& r) {
+  const auto [d2, pred] = HalfSpreadSums(h, r);
   return d2 / pred;
 }
+
+// A Lambert sphere under a constant environment (HalvesScene), ready to render.
+struct HalvesTracer {
+  Scene scene = HalvesScene();
+  Environment env = Environment::Constant({0.8, 0.8, 0.8});
+  LambertBsdf fabric{Rgbd(0.6, 0.5, 0.4)};
+  PathTracer pt{scene, fabric, &env};
+};
 
 // tolerance: for the ratio of sums, dominated by the few noisiest pixels (measured over six
 // seeds: stratified 0.96 to 1.02, i.i.d. single samples 0.88 to 1.14).
@@ -87,11 +100,7 @@ std::pair<double, double> CheckHalves(const RenderResult& r, int expect_k, const
   }
   EXPECT_EQ(violations, 0u);
   EXPECT_GT(noisy, r.rgb.size() / 4);
-  double d2 = 0.0, pred = 0.0;
-  for (size_t i = 0; i < r.rgb.size(); ++i) {
-    d2 += std::pow(double(h.a[i]) - double(h.b[i]), 2);
-    pred += K * double(r.std_error[i]) * double(r.std_error[i]) * (1.0 / kA + 1.0 / kB);
-  }
+  const auto [d2, pred] = HalfSpreadSums(h, r);
   const double ratio = d2 / pred;
   std::printf("[reference] halves %s: K %d kA %d, sum (a-b)^2 / predicted = %.3f\n", label,
               h.batches, h.half_batches, ratio);
@@ -102,10 +111,8 @@ std::pair<double, double> CheckHalves(const RenderResult& r, int expect_k, const
 }
 
 TEST(ReferenceHalves, HalvesAreConsistentWithTheMeanAndTheStandardError) {
-  Scene s = HalvesScene();
-  const Environment env = Environment::Constant({0.8, 0.8, 0.8});
-  LambertBsdf fabric(Rgbd(0.6, 0.5, 0.4));
-  PathTracer pt(s, fabric, &env);
+  HalvesTracer t;
+  PathTracer& pt = t.pt;
   RenderSettings st;
   st.seed = 3;
   st.spp = 64;  // K = 16 stratified batches of 4
@@ -133,10 +140,8 @@ TEST(ReferenceHalves, HalvesAreConsistentWithTheMeanAndTheStandardError) {
 
 TEST(ReferenceHalves, SpreadStatisticRejectsWrongHalves) {
   // Negative controls for the statistic above: it must be able to fail.
-  Scene s = HalvesScene();
-  const Environment env = Environment::Constant({0.8, 0.8, 0.8});
-  LambertBsdf fabric(Rgbd(0.6, 0.5, 0.4));
-  PathTracer pt(s, fabric, &env);
+  HalvesTracer t;
+  PathTracer& pt = t.pt;
   RenderSettings st;
   st.seed = 3;
   st.spp = 64;
