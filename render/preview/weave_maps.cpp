@@ -67,6 +67,27 @@ void BuildBoxMips(int size, std::vector<std::vector<float>>* levels) {
   }
 }
 
+// Trilinear sample of an N-channel mip chain (level 0 of side `size`) at level l in
+// [0, levels - 1]: bilinear in levels floor(l) and floor(l) + 1, blended by the fraction.
+template <int N>
+std::array<double, N> Trilinear(const std::vector<std::vector<float>>& levels, int size,
+                                double uv_repeats, double u, double v, double l) {
+  const int l0 = int(std::floor(l));
+  const int l1 = std::min(l0 + 1, int(levels.size()) - 1);
+  const double t = l - double(l0);
+  std::array<double, N> a = Bilinear<N>(levels[size_t(l0)], size >> l0, uv_repeats, u, v);
+  if (t > 0.0 && l1 != l0) {
+    const std::array<double, N> b = Bilinear<N>(levels[size_t(l1)], size >> l1, uv_repeats, u, v);
+    for (int k = 0; k < N; ++k) a[size_t(k)] = (1 - t) * a[size_t(k)] + t * b[size_t(k)];
+  }
+  return a;
+}
+
+// A requested level of detail clamped to the chain [0, top]; NaN selects the top.
+double ClampLod(double lambda, double top) {
+  return std::clamp(std::isfinite(lambda) ? lambda : top, 0.0, top);
+}
+
 }  // namespace
 
 WeaveMaps WeaveMaps::FromLevel0(int size, double uv_repeats, std::vector<float> level0) {
@@ -115,16 +136,8 @@ WeaveMaps WeaveMaps::FromLevel0(int size, double uv_repeats, std::vector<float> 
 
 std::array<double, 2> WeaveMaps::SampleAnisotropy(double u, double v, double lambda) const {
   if (aniso_levels.empty()) return {0.0, 0.0};
-  const double top = double(level_count() - 1);
-  const double l = std::clamp(std::isfinite(lambda) ? lambda : top, 0.0, top);
-  const int l0 = int(std::floor(l));
-  const int l1 = std::min(l0 + 1, level_count() - 1);
-  const double t = l - double(l0);
-  std::array<double, 3> a = Bilinear<3>(aniso_levels[size_t(l0)], size >> l0, uv_repeats, u, v);
-  if (t > 0.0 && l1 != l0) {
-    const auto b = Bilinear<3>(aniso_levels[size_t(l1)], size >> l1, uv_repeats, u, v);
-    for (int k = 0; k < 3; ++k) a[size_t(k)] = (1 - t) * a[size_t(k)] + t * b[size_t(k)];
-  }
+  const std::array<double, 3> a = Trilinear<3>(aniso_levels, size, uv_repeats, u, v,
+                                               ClampLod(lambda, double(level_count() - 1)));
   const double dx = 2.0 * a[0] - 1.0, dy = 2.0 * a[1] - 1.0;
   const double len = std::hypot(dx, dy);
   if (!(len > 0.0)) return {0.0, 0.0};
@@ -155,16 +168,8 @@ void WeaveMaps::SetNormals(std::vector<float> level0) {
 
 std::array<double, 3> WeaveMaps::SampleNormal(double u, double v, double lambda) const {
   if (normal_levels.empty()) return {0.0, 0.0, 1.0};
-  const double top = double(level_count() - 1);
-  const double l = std::clamp(std::isfinite(lambda) ? lambda : top, 0.0, top);
-  const int l0 = int(std::floor(l));
-  const int l1 = std::min(l0 + 1, level_count() - 1);
-  const double t = l - double(l0);
-  std::array<double, 3> a = Bilinear<3>(normal_levels[size_t(l0)], size >> l0, uv_repeats, u, v);
-  if (t > 0.0 && l1 != l0) {
-    const auto b = Bilinear<3>(normal_levels[size_t(l1)], size >> l1, uv_repeats, u, v);
-    for (int k = 0; k < 3; ++k) a[size_t(k)] = (1 - t) * a[size_t(k)] + t * b[size_t(k)];
-  }
+  const std::array<double, 3> a = Trilinear<3>(normal_levels, size, uv_repeats, u, v,
+                                               ClampLod(lambda, double(level_count() - 1)));
   const double len = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
   if (!(len > 1e-9)) return {0.0, 0.0, 1.0};
   return {a[0] / len, a[1] / len, a[2] / len};
@@ -189,13 +194,7 @@ double WeaveMaps::SampleGlint(double u, double v, const std::array<double, 4>& d
   const int n = int(glint_levels.size());
   const double top = double(n - 1);
   const double l = !(rho > 1.0) ? 0.0 : std::isfinite(rho) ? std::min(std::log2(rho), top) : top;
-  const int l0 = int(std::floor(l));
-  const int l1 = std::min(l0 + 1, n - 1);
-  const double t = l - double(l0);
-  double a = Bilinear<1>(glint_levels[size_t(l0)], glint_size >> l0, 1.0, u, v)[0];
-  if (t > 0.0 && l1 != l0)
-    a = (1 - t) * a + t * Bilinear<1>(glint_levels[size_t(l1)], glint_size >> l1, 1.0, u, v)[0];
-  return a;
+  return Trilinear<1>(glint_levels, glint_size, 1.0, u, v, l)[0];
 }
 
 void WriteGlintMap(const std::string& path, const WeaveMaps& maps) {
@@ -231,17 +230,8 @@ std::array<double, WeaveMaps::kChannels> WeaveMaps::SampleLevel(double u, double
 
 std::array<double, WeaveMaps::kChannels> WeaveMaps::Sample(double u, double v,
                                                            double lambda) const {
-  const double top = double(level_count() - 1);
-  const double l = std::clamp(std::isfinite(lambda) ? lambda : top, 0.0, top);
-  const int l0 = int(std::floor(l));
-  const int l1 = std::min(l0 + 1, level_count() - 1);
-  const double t = l - double(l0);
-  std::array<double, kChannels> a = SampleLevel(u, v, l0);
-  if (t > 0.0 && l1 != l0) {
-    const std::array<double, kChannels> b = SampleLevel(u, v, l1);
-    for (int ch = 0; ch < kChannels; ++ch) a[size_t(ch)] = (1 - t) * a[size_t(ch)] + t * b[size_t(ch)];
-  }
-  return a;
+  return Trilinear<kChannels>(levels, size, uv_repeats, u, v,
+                              ClampLod(lambda, double(level_count() - 1)));
 }
 
 void WriteWeaveMaps(const std::string& path, const WeaveMaps& maps,
