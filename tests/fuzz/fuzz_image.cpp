@@ -1,6 +1,7 @@
 // Image layer (OpenImageIO through io::ReadImage), then the conversions every caller does
-// (metrics::ToRgb / ToMask). Built three times: FUZZ_EXT ".exr", ".png", ".hdr".
+// (metrics::ToRgb / ToMask, and the half-sample channels: metrics::ExtractHalves). Built three times: FUZZ_EXT ".exr", ".png", ".hdr".
 #include "fit/metrics/metrics.h"
+#include "fit/metrics/reference_halves.h"
 #include "render/scene/image_io.h"
 #include "tests/fuzz/fuzz_common.h"
 
@@ -13,6 +14,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (img.pixels.size() != need) fuzz::Bug("pixel count differs from the header", path);
     (void)metrics::ToRgb(img, path);
     (void)metrics::ToMask(img, path);
+    // A reference's half-sample channels and their metadata (the noise floor's reader).
+    (void)metrics::ExtractHalves(img, path);
   });
   return 0;
 }
