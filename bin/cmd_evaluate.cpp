@@ -20,6 +20,7 @@
 #include "bin/commands.h"
 #include "fit/image_fit.h"
 #include "fit/reference.h"
+#include "render/preview/weave_maps.h"
 #include "render/scene/input_limits.h"
 #include "render/scene/material.h"
 
@@ -39,7 +40,9 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   std::ifstream in(a.preset);
   if (!in) throw std::runtime_error(a.preset + ": cannot open the preset");
   const nlohmann::json pj = nlohmann::json::parse(in, nullptr, true);
-  const render::MaterialPreset preset = render::ReadPreset(a.preset);
+  render::MaterialPreset preset = render::ReadPreset(a.preset);
+  // weave_maps "uri" resolved against the preset file's directory (render/preview/weave_maps.h)
+  render::ResolvePresetWeaveMapPaths(&preset, a.preset);
   if (!pj.contains("fit") || !pj["fit"].is_object())
     throw std::runtime_error(a.preset + ": field 'fit': missing (evaluate needs a fitted preset)");
   const nlohmann::json& fj = pj["fit"];

@@ -24,6 +24,7 @@
 #include "render/reference/fabric.h"
 #include "render/scene/image_io.h"
 #include "render/reference/path_tracer.h"
+#include "render/preview/weave_maps.h"
 
 namespace clothfit::cli {
 namespace fs = std::filesystem;
@@ -149,9 +150,12 @@ struct FitArgs {
 
 void AddFitOptions(CLI::App* cmd, FitArgs& a) {
   cmd->add_option("--fabric", a.fabric,
-                  "fabric definition: render (or reuse cached) references on the canonical scenes");
+                  "fabric definition: render (or reuse cached) references on the canonical scenes "
+                  "(or on --scenes; with --references too, only the weave maps and period)");
   cmd->add_option("--references", a.references, "comma-separated reference EXRs");
-  cmd->add_option("--scenes", a.scenes, "comma-separated scene cards, one per reference");
+  cmd->add_option("--scenes", a.scenes,
+                  "comma-separated scene cards, one per reference (with --fabric: instead of the "
+                  "canonical cards, e.g. under another environment)");
   cmd->add_option("--model", a.model, "cloth | standard | physical-sheen | gltf-sheen");
   cmd->add_option("--space", a.space, "residual space: display (default) | linear | log");
   cmd->add_option("--lock", a.lock, "comma-separated parameters to hold at their defaults");
@@ -277,14 +281,24 @@ struct FitFiles {
   std::vector<std::string> refs, refs2, scenes;
 };
 
-// --fabric: references rendered (or reused) on the canonical scenes; else --references and
-// --scenes as given.
+// --fabric: references rendered (or reused) on the canonical scenes; --fabric --scenes S,...:
+// rendered (or reused) on those cards instead (e.g. the canonical cards under another
+// environment); --fabric --scenes S,... --references R,...: those references as given, the
+// fabric only bakes the weave maps (woven, physical-aniso) and gives the weave period for
+// --level auto; else --references and --scenes as given.
 FitFiles ResolveFitFiles(const FitArgs& a, const Globals& g) {
   FitFiles f;
-  if (!a.fabric.empty()) {
-    if (!a.references.empty() || !a.scenes.empty())
-      throw std::invalid_argument("--fabric and --references/--scenes are exclusive");
-    f.scenes = CanonicalScenes();
+  if (!a.fabric.empty() && !a.references.empty()) {
+    if (a.scenes.empty())
+      throw std::invalid_argument("--fabric --references needs --scenes (one card per reference)");
+    if (!a.target_error.empty())
+      throw std::invalid_argument("--target-error renders references: not with --references");
+  }
+  if (!a.fabric.empty() && a.references.empty()) {
+    if (!a.references2.empty())
+      throw std::invalid_argument("--references2 needs --references");
+    f.scenes = a.scenes.empty() ? CanonicalScenes() : SplitList(a.scenes);
+    if (f.scenes.empty()) throw std::invalid_argument("--scenes: no scene card given");
     std::vector<double> targets;
     for (const std::string& s : f.scenes) {
       targets.push_back(TargetErrorFor(a.target_error, a.fabric, s));
@@ -653,6 +667,9 @@ int RunFit(const FitArgs& a, const Globals& g) {
                                                             : nlohmann::json(a.fabric)}};
   // Images first, the preset last: a preset on disk means its images are complete.
   if (!a.images.empty()) WriteFitImages(a.images, files, l, preset);
+  // weave_maps: "uri" (relative to the preset; the maps are written next to it) beside the
+  // absolute "file", so the preset's directory can move (docs/preset-format.md).
+  render::AddPresetWeaveMapUris(&preset, a.out);
   render::WritePreset(a.out, preset);
   PrintFitSummary(a, o, res, preset);
   return ConvergenceStatus(o, res);

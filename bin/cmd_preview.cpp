@@ -122,7 +122,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       o.model = preset.model;
       o.cloth = preset.cloth;
       o.woven = preset.woven;
-      o.weave_maps = render::LoadPresetWeaveMaps(preset);  // "weave_maps" (woven, physical-aniso)
+      // "weave_maps" (woven, physical-aniso): "uri" relative to the preset file first
+      o.weave_maps = render::LoadPresetWeaveMaps(preset, args->material);
       o.shadows = args->shadows;
       if (preset.model == render::ModelKind::kPhysicalAniso)  // brdf/physical_aniso.h FromFlat
         o.anisotropy_rotation = preset.values.at(10);

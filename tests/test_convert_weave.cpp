@@ -371,7 +371,7 @@ TEST(ConvertWeave, PresetMapsTargetCopiesTheMapsAndSurvivesAMove) {
   EXPECT_EQ(back.model, ModelKind::kWoven);
   EXPECT_EQ(back.values, render::DefaultPreset(ModelKind::kWoven).values);
   EXPECT_EQ(back.extra.at("weave_maps").at("uri"), "woven.maps.weave.exr");
-  const auto loaded = render::LoadPresetWeaveMaps(back);
+  const auto loaded = render::LoadPresetWeaveMaps(back, out.string());  // "uri" first
   ASSERT_TRUE(loaded);
   const render::WeaveMaps orig = render::ReadWeaveMaps((d / "in" / "woven.weave.exr").string());
   EXPECT_EQ(loaded->levels[0], orig.levels[0]);

@@ -333,20 +333,26 @@ void ReadPresetWeaveMaps(const std::string& file, SourceMaterial* m) {
   const auto it = p.extra.find("weave_maps");
   if (it == p.extra.end() || it->is_null()) return;
   if (!it->is_object()) Fail(file, "weave_maps", "expected an object");
+  // "uri" first, by the preview's rules (relative, inside the preset's directory, existing:
+  // render::ResolvePresetWeaveMapPaths), else "file"; then confined like every map path.
+  render::MaterialPreset local = p;  // the resolved paths, for the shared reader
+  try {
+    render::ResolvePresetWeaveMapPaths(&local, file);
+  } catch (const std::exception& e) {
+    throw ConvertError(e.what());
+  }
+  json& lf = local.extra["weave_maps"];
   auto path_of = [&](const char* uri_key, const char* file_key) -> std::string {
-    for (const char* k : {uri_key, file_key})
-      if (it->contains(k)) {
-        if (!(*it)[k].is_string()) Fail(file, std::string("weave_maps.") + k, "expected a string");
-        return ResolvePresetPath(file, std::string("weave_maps.") + k, (*it)[k].get<std::string>());
-      }
-    return "";
+    if (!lf.contains(file_key)) return "";
+    const std::string field = std::string("weave_maps.") + (it->contains(uri_key) ? uri_key : file_key);
+    if (!lf[file_key].is_string()) Fail(file, field, "expected a string");
+    return ResolvePresetPath(file, field, lf[file_key].get<std::string>());
   };
   m->weave_maps_file = path_of("uri", "file");
   if (m->weave_maps_file.empty()) Fail(file, "weave_maps.file", "missing");
   m->glint_file = path_of("glint_uri", "glint_file");
-  render::MaterialPreset local = p;  // the resolved paths, for the shared reader
-  local.extra["weave_maps"]["file"] = m->weave_maps_file;
-  if (!m->glint_file.empty()) local.extra["weave_maps"]["glint_file"] = m->glint_file;
+  lf["file"] = m->weave_maps_file;
+  if (!m->glint_file.empty()) lf["glint_file"] = m->glint_file;
   try {
     m->weave_maps = render::LoadPresetWeaveMaps(local);
   } catch (const std::exception& e) {
@@ -1035,9 +1041,9 @@ std::vector<std::string> WritePresetWithMaps(const std::string& path, const Sour
       f["glint_uri"] = Relative(g, path);
     }
     f["paths"] =
-        "\"file\"/\"glint_file\": absolute (render::LoadPresetWeaveMaps, clothfit render-preview); "
-        "\"uri\"/\"glint_uri\": relative to this preset (clothfit convert, web/; survive moving "
-        "the directory)";
+        "\"uri\"/\"glint_uri\": relative to this preset's directory, read first by every reader "
+        "(survive moving the directory); \"file\"/\"glint_file\": absolute, read only without a "
+        "\"uri\"";
   }
   p.extra["convert"] = provenance;
   render::WritePreset(path, p);

@@ -61,8 +61,9 @@ struct SourceMaterial {
   // sides, so true. The three.js outputs write it as "side" (DoubleSide 2 / FrontSide 0), the
   // glTF output as doubleSided.
   bool double_sided = true;
-  // A woven or physical-aniso preset's weave maps (top-level "weave_maps": the EXR, a relative
-  // "file" resolved against the preset's directory, confined like every map path), or null.
+  // A woven or physical-aniso preset's weave maps (top-level "weave_maps": the EXR its "uri"
+  // names relative to the preset's directory (render::ResolvePresetWeaveMapPaths), else its
+  // "file", confined like every map path), or null.
   std::shared_ptr<const render::WeaveMaps> weave_maps;
   std::string weave_maps_file;  // the resolved EXR path ("" without maps)
   std::string glint_file;       // the resolved glint EXR ("" without one)
@@ -122,9 +123,10 @@ void WriteFilamentMat(const std::string& path, const Converted& c);
 void WritePngFile(const std::string& path, int width, int height, int channels,
                   const std::vector<unsigned char>& pixels, bool srgb);
 // The `preset-maps` target: the source preset itself, its weave maps (and glint map) copied
-// next to it as <stem>.weave.exr (<stem>.glint.exr); "weave_maps" names the copies ("file":
-// absolute, what the C++ readers use; "uri": relative to the preset, what a relocated
-// directory and web/ use). Returns the files written.
+// next to it as <stem>.weave.exr (<stem>.glint.exr); "weave_maps" names the copies ("uri":
+// relative to the preset's directory, what every C++ reader resolves first, so a relocated
+// directory loads; "file": absolute, read only without a "uri"; web/ derives the URL from
+// "file", see docs/preset-format.md). Returns the files written.
 std::vector<std::string> WritePresetWithMaps(const std::string& path, const SourceMaterial& m,
                                              const nlohmann::json& provenance);
 

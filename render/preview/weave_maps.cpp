@@ -5,9 +5,11 @@
 #include <filesystem>
 #include <limits>
 #include <stdexcept>
+#include <utility>
 
 #include "render/scene/embree_scene.h"
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 #include "render/scene/scene.h"
 
 namespace clothfit::render {
@@ -321,12 +323,107 @@ nlohmann::json WeaveMapsPresetField(const std::string& file, const WeaveMaps& ma
           {"source", source}};
 }
 
-std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& preset) {
+namespace {
+
+// The weave_maps path fields: (absolute or as given, relative to the preset's directory).
+constexpr std::array<std::pair<const char*, const char*>, 2> kPathKeys{
+    {{"file", "uri"}, {"glint_file", "glint_uri"}}};
+
+bool HasWeaveMapsField(const MaterialPreset& preset) {
   if ((preset.model != ModelKind::kWoven && preset.model != ModelKind::kPhysicalAniso) ||
       !preset.extra.is_object())
-    return nullptr;
+    return false;
   const auto it = preset.extra.find("weave_maps");
-  if (it == preset.extra.end() || it->is_null()) return nullptr;
+  return it != preset.extra.end() && !it->is_null();
+}
+
+// The file a preset's relative `uri` names (see weave_maps.h): absolute, canonical.
+std::string ResolveWeaveMapUri(const std::string& preset_path, const std::string& field,
+                               const std::string& uri) {
+  namespace fs = std::filesystem;
+  const std::string where = limits::EscapeForMessage(preset_path, 400) + ": field " + field + ": ";
+  const std::string shown = "'" + limits::EscapeForMessage(uri, 200) + "'";
+  if (uri.empty()) throw MaterialError(where + "empty path");
+  for (unsigned char c : uri)
+    if (c < 0x20 || c == 0x7F) throw MaterialError(where + shown + " contains a control byte");
+  if (uri.find("://") != std::string::npos || uri.rfind("data:", 0) == 0 ||
+      uri.rfind("file:", 0) == 0)
+    throw MaterialError(where + shown + " is a URI with a scheme; expected a path relative to "
+                        "the preset's directory");
+  const fs::path u(uri);
+  if (u.is_absolute() || u.has_root_name() || u.has_root_directory())
+    throw MaterialError(where + shown + " is an absolute path; \"uri\" is relative to the "
+                        "preset's directory (an absolute path goes in \"file\", read only "
+                        "without a \"uri\")");
+  const fs::path norm = u.lexically_normal();
+  if (norm.empty() || *norm.begin() == "..")
+    throw MaterialError(where + shown + " escapes the preset's directory (\"..\"); the maps "
+                        "must lie in the preset's directory or below it");
+  std::error_code ec;
+  const fs::path dir = fs::absolute(fs::path(preset_path), ec).parent_path();
+  if (ec) throw MaterialError(where + "cannot make the preset's path absolute: " + ec.message());
+  const fs::path joined = (dir / norm).lexically_normal();
+  if (!fs::exists(joined, ec))
+    throw MaterialError(where + shown + ": no such file (looked for " +
+                        limits::EscapeForMessage(joined.string(), 400) + ")");
+  const fs::path canon = fs::weakly_canonical(joined, ec);
+  const fs::path root = ec ? fs::path() : fs::weakly_canonical(dir, ec);
+  if (ec) throw MaterialError(where + shown + ": " + ec.message());
+  if (!limits::IsInside(canon, root))
+    throw MaterialError(where + shown + " resolves (through a symbolic link) outside the "
+                        "preset's directory");
+  if (!fs::is_regular_file(canon, ec))
+    throw MaterialError(where + shown + ": not a regular file");
+  return canon.string();
+}
+
+}  // namespace
+
+void AddPresetWeaveMapUris(MaterialPreset* preset, const std::string& preset_path) {
+  namespace fs = std::filesystem;
+  if (!HasWeaveMapsField(*preset) || !preset->extra["weave_maps"].is_object()) return;
+  nlohmann::json& f = preset->extra["weave_maps"];
+  const fs::path dir = fs::absolute(fs::path(preset_path)).parent_path().lexically_normal();
+  for (const auto& [file_key, uri_key] : kPathKeys) {
+    if (!f.contains(file_key) || !f[file_key].is_string()) continue;
+    const fs::path abs = fs::absolute(fs::path(f[file_key].get<std::string>())).lexically_normal();
+    const fs::path rel = abs.lexically_relative(dir);
+    if (rel.empty() || *rel.begin() == "..") continue;  // not inside: no uri
+    f[uri_key] = rel.generic_string();
+  }
+}
+
+void ResolvePresetWeaveMapPaths(MaterialPreset* preset, const std::string& preset_path) {
+  if (!HasWeaveMapsField(*preset)) return;
+  nlohmann::json& f = preset->extra["weave_maps"];
+  if (!f.is_object())
+    throw MaterialError(limits::EscapeForMessage(preset_path, 400) +
+                        ": field weave_maps: expected an object");
+  for (const auto& [file_key, uri_key] : kPathKeys) {
+    if (!f.contains(uri_key)) continue;
+    if (!f[uri_key].is_string())
+      throw MaterialError(limits::EscapeForMessage(preset_path, 400) + ": field weave_maps." +
+                          uri_key + ": expected a string");
+    f[file_key] = ResolveWeaveMapUri(preset_path, std::string("weave_maps.") + uri_key,
+                                     f[uri_key].get<std::string>());
+    f.erase(uri_key);
+  }
+}
+
+std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& preset,
+                                                     const std::string& preset_path) {
+  if (!HasWeaveMapsField(preset)) return nullptr;
+  MaterialPreset resolved = preset;
+  ResolvePresetWeaveMapPaths(&resolved, preset_path);
+  return LoadPresetWeaveMaps(resolved);
+}
+
+std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& preset) {
+  if (!HasWeaveMapsField(preset)) return nullptr;
+  const auto it = preset.extra.find("weave_maps");
+  if (it->is_object() && (it->contains("uri") || it->contains("glint_uri")))
+    throw MaterialError("preset field weave_maps.uri: relative to the preset file, which this "
+                        "reader was not given (render::ResolvePresetWeaveMapPaths first)");
   if (!it->is_object() || !it->contains("file") || !(*it)["file"].is_string())
     throw MaterialError("preset field weave_maps: expected an object with a string \"file\"");
   auto maps = std::make_shared<WeaveMaps>(ReadWeaveMaps((*it)["file"].get<std::string>()));

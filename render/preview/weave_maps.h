@@ -108,17 +108,37 @@ void WriteWeaveMaps(const std::string& path, const WeaveMaps& maps,
 WeaveMaps ReadWeaveMaps(const std::string& path);
 
 // The preset's top-level field (MaterialPreset::extra["weave_maps"]):
-//   {"file": "<absolute path of the EXR>", "size": 64, "uv_repeats": 40,
+//   {"file": "<absolute path of the EXR>", "uri": "<path relative to the preset's directory>",
+//    "size": 64, "uv_repeats": 40,
 //    "channels": ["warp", "weft", "kd.R", "kd.G", "kd.B"],
 //    "colour_space": "linear ratios to the tile mean (kd: linear sRGB)",
 //    "convention": "texel (i, j) covers uv [i, i+1) / (size uv_repeats) x [j, j+1) / ..., row j from the top; REPEAT",
 //    "source": {...}   (what the bake was made from; informative),
-//    "glint_file": "<absolute path>"   (optional: the glint map)}
+//    "glint_file": "<absolute path>", "glint_uri": "<relative>"   (optional: the glint map)}
+// Which path is read (docs/preset-format.md, "Weave maps"): "uri" ("glint_uri") resolved
+// against the directory of the preset FILE when present -- it must be relative, stay inside
+// that directory (after ".." and symlinks) and name an existing regular file, or the read fails
+// naming the preset file and the field; "file" ("glint_file") only when there is no "uri".
+// So a preset directory moved or copied elsewhere still loads its own copies of the maps.
 nlohmann::json WeaveMapsPresetField(const std::string& file, const WeaveMaps& maps,
                                     const nlohmann::json& source = nlohmann::json::object());
+// Adds "uri" (and "glint_uri") to a preset's weave_maps field, relative to the directory of
+// `preset_path`, when the map files lie inside that directory (as `clothfit fit` writes them:
+// <stem>.weave.exr next to <stem>.json); leaves the field alone otherwise. No-op without a field.
+void AddPresetWeaveMapUris(MaterialPreset* preset, const std::string& preset_path);
+// Resolves the field of a preset read from `preset_path` (above): afterwards "file" and
+// "glint_file" hold the paths to read (absolute) and "uri"/"glint_uri" are gone, so the
+// one-argument LoadPresetWeaveMaps reads them. Throws MaterialError naming `preset_path` and
+// the field (untrusted text escaped) on an absolute, escaping, scheme-bearing or missing uri.
+void ResolvePresetWeaveMapPaths(MaterialPreset* preset, const std::string& preset_path);
 // The maps a woven preset names, or null (no field, or not a woven preset). Throws
 // MaterialError naming the field on a malformed field, io::IoError on an unreadable file.
+// The one-argument form reads "file" and refuses a field that still has a "uri" (a preset
+// read from a file must be resolved first: the "file" beside it may be another machine's path).
 std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& preset);
+// ResolvePresetWeaveMapPaths on a copy, then the above.
+std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& preset,
+                                                     const std::string& preset_path);
 
 // Screen-space uv derivatives of the hit's triangle at pixel (px, py) (pixel centres at +0.5):
 // the triangle's uv plane evaluated where the rays through (px + 1, py) and (px, py + 1) meet
