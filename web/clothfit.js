@@ -818,10 +818,30 @@ export function anisotropyFromWeave(level0, size) {
   return out;
 }
 
-// Where a preset's weave-map file is fetched from: "file" is absolute (the fit writes the
-// absolute path) or relative; a relative one resolves against the preset's URL, an absolute one
-// becomes its base name next to the preset (the fit writes <stem>.weave.exr next to <stem>.json).
-// options.resolveWeaveMapPath(file, presetUrl) overrides this (e.g. a server that maps file paths).
+// Where a preset's weave-map file is fetched from (docs/preset-format.md "Weave maps: `uri` and
+// `file`"). "uri" is read first: a path relative to the preset's URL, generic "/" separators; an
+// absolute path, a scheme ("http:", "data:", ...), a backslash, a control character or ".."
+// that leaves the preset's directory is refused (the same rules as the C++ readers,
+// render::ResolvePresetWeaveMapPaths). Only without a "uri" is "file" used: absolute (the fit
+// writes the absolute path) or relative; a relative one resolves against the preset's URL, an
+// absolute one becomes its base name next to the preset (the fit writes <stem>.weave.exr next to
+// <stem>.json). options.resolveWeaveMapPath(file, presetUrl) overrides the "file" rule (e.g. a
+// server that maps file paths); it is not asked for a "uri".
+export function weaveMapUriUrl(uri, presetUrl, fieldName = 'weave_maps.uri') {
+  const shown = JSON.stringify(uri);
+  const bad = (why) => new Error(`${fieldName}: ${shown} ${why}`);
+  if (typeof uri !== 'string' || uri.length === 0) throw bad('must be a non-empty string');
+  if (/[\u0000-\u001f\u007f\\]/.test(uri)) throw bad('has a control character or a backslash');
+  if (uri.startsWith('/') || /^[A-Za-z][A-Za-z0-9+.-]*:/.test(uri)) throw bad('must be relative to the preset (no scheme, no leading "/")');
+  let depth = 0;
+  for (const part of uri.split('/')) {
+    if (part === '..') { if (--depth < 0) throw bad('escapes the preset\'s directory ("..")'); }
+    else if (part !== '' && part !== '.') ++depth;
+  }
+  const base = new URL(presetUrl, globalThis.location?.href ?? 'file:///');
+  return new URL(uri, base).href;
+}
+
 export function weaveMapUrl(file, presetUrl, options = {}) {
   if (options.resolveWeaveMapPath) return options.resolveWeaveMapPath(file, presetUrl);
   const base = new URL(presetUrl, globalThis.location?.href ?? 'file:///');
@@ -833,12 +853,13 @@ export function weaveMapUrl(file, presetUrl, options = {}) {
 export async function fetchWeaveMaps(preset, presetUrl, options = {}) {
   const field = preset?.weave_maps;
   if (field === undefined || field === null) return null;
-  if (typeof field !== 'object' || typeof field.file !== 'string') throw new Error('weave_maps: expected an object with a string "file"');
-  if (field.glint_file !== undefined) throw new Error('weave_maps.glint_file: glint maps are not drawn by web/ (fit with --weave-maps auto or indicator)');
-  const url = weaveMapUrl(field.file, presetUrl, options);
+  const hasUri = field !== null && typeof field === 'object' && field.uri !== undefined;
+  if (typeof field !== 'object' || (!hasUri && typeof field.file !== 'string')) throw new Error('weave_maps: expected an object with a string "uri" or "file"');
+  if (field.glint_file !== undefined || field.glint_uri !== undefined) throw new Error('weave_maps.glint_file: glint maps are not drawn by web/ (fit with --weave-maps auto or indicator)');
+  const url = hasUri ? weaveMapUriUrl(field.uri, presetUrl) : weaveMapUrl(field.file, presetUrl, options);
   const r = await fetch(url);
-  if (!r.ok) throw new Error(`weave_maps.file: ${url}: HTTP ${r.status}`);
-  return weaveMapsFromExr(await r.arrayBuffer(), { field, name: field.file, halfFloat: options.halfFloat });
+  if (!r.ok) throw new Error(`weave_maps.${hasUri ? 'uri' : 'file'}: ${url}: HTTP ${r.status}`);
+  return weaveMapsFromExr(await r.arrayBuffer(), { field, name: hasUri ? field.uri : field.file, halfFloat: options.halfFloat });
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -99,7 +99,7 @@ if (args.clothfit) {
 // ---- weave maps (web/exr.js, weaveMapsFromExr; the C++ side is render/preview/weave_maps.*) ----
 {
   const { parseExr } = await import(pathToFileURL(path.join(repo, 'web', 'exr.js')).href);
-  const { weaveMapsFromExr, anisotropyFromWeave, fetchClothfitPreset, weaveMapUrl } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+  const { weaveMapsFromExr, anisotropyFromWeave, fetchClothfitPreset, weaveMapUrl, weaveMapUriUrl } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
   const exrPath = path.join(here, 'maps', 'canvas.weave.exr');
   const buf = fs.readFileSync(exrPath);
   const img = parseExr(buf, exrPath);
@@ -159,6 +159,21 @@ if (args.clothfit) {
   check(() => assert.ok(fm.weaveMaps && fm.weaveMaps.uvRepeats === 60), 'fetchClothfitPreset loads the maps');
   fs.writeFileSync(presetFile, JSON.stringify(wpm({ weave_maps: { file: exrPath, glint_file: exrPath } })));
   await assert.rejects(fetchClothfitPreset(pathToFileURL(presetFile).href, { resolveWeaveMapPath: (f) => pathToFileURL(f).href }), /woven-maps-unit\.json: weave_maps\.glint_file/);
+  // "uri" first (docs/preset-format.md "Weave maps: `uri` and `file`"): relative to the preset,
+  // never through resolveWeaveMapPath; a decoy "file" must not be read.
+  check(() => assert.equal(weaveMapUriUrl('x.weave.exr', 'http://h/p/x.json'), 'http://h/p/x.weave.exr'), 'uri next to the preset');
+  check(() => assert.equal(weaveMapUriUrl('m/../x.exr', 'http://h/p/x.json'), 'http://h/p/x.exr'), 'uri with an inner ..');
+  for (const [bad, why] of [['../x.exr', /escapes the preset's directory/], ['a/../../x.exr', /escapes/], ['/etc/x.exr', /must be relative/],
+    ['http://evil/x.exr', /must be relative/], ['data:,x', /must be relative/], ['a\\b.exr', /backslash/], ['a\u0001.exr', /control character/], ['', /non-empty/], [7, /non-empty string/]]) {
+    check(() => assert.throws(() => weaveMapUriUrl(bad, 'http://h/p/x.json'), (e) => /^weave_maps\.uri: /.test(e.message) && why.test(e.message) && !/[\u0000-\u001f]/.test(e.message)), `bad uri ${JSON.stringify(bad)}`);
+  }
+  fs.copyFileSync(exrPath, path.join(mapsWork, 'moved.weave.exr'));
+  fs.writeFileSync(presetFile, JSON.stringify(wpm({ weave_maps: { uri: 'moved.weave.exr', file: '/nonexistent/decoy.weave.exr', uv_repeats: 60 } })));
+  const fu = await fetchClothfitPreset(pathToFileURL(presetFile).href, { resolveWeaveMapPath: () => { throw new Error('resolveWeaveMapPath asked for a uri'); } });
+  check(() => assert.ok(fu.weaveMaps && fu.weaveMaps.uvRepeats === 60 && fu.weaveMaps.size === maps.size), 'fetchClothfitPreset loads the maps by uri, not file');
+  fs.writeFileSync(presetFile, JSON.stringify(wpm({ weave_maps: { uri: '../escape.weave.exr', uv_repeats: 60 } })));
+  await assert.rejects(fetchClothfitPreset(pathToFileURL(presetFile).href), /woven-maps-unit\.json: weave_maps\.uri: "\.\.\/escape\.weave\.exr" escapes/);
+  checks++;
   checks++;
   fs.rmSync(mapsWork, { recursive: true, force: true });
 }
