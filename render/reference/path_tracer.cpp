@@ -10,6 +10,7 @@
 #include <mutex>
 #include <stdexcept>
 
+#include "render/reference/adaptive_allocation.h"
 #include "render/scene/embree_scene.h"
 #include "render/scene/image_io.h"
 #include "render/scene/lights.h"
@@ -443,6 +444,8 @@ struct PathTracer::Impl {
     // sub-pixel structure is antialiased far better than by i.i.d. jitter) and the
     // estimate of it stays honest.
     PixelEstimate est;
+    std::vector<double> ys;  // the M positions' second coordinates (stratified for any M)
+    StratifiedRadicalInverses(M, &ys);
     Pcg32 shift_rng = PixelSampler(seed ^ 0xA5A5A5A5DEADBEEFull, pix, 0);
     double shift_u = 0.0, shift_v = 0.0;
     for (int s = 0; s < spp; ++s) {
@@ -459,7 +462,7 @@ struct PathTracer::Impl {
         for (int k = 0; k < env_samples; ++k) strata.Get(2, m, k, first.env + 2 * k);
       }
       Pcg32 rng = PixelSampler(seed, pix, uint64_t(s));
-      double ju = (m + 0.5) / M + shift_u, jv = RadicalInverse2(uint32_t(m)) + shift_v;
+      double ju = (m + 0.5) / M + shift_u, jv = ys[size_t(m)] + shift_v;
       ju -= std::floor(ju);
       jv -= std::floor(jv);
       if (M == 1) {
@@ -503,31 +506,60 @@ struct PathTracer::Impl {
     return rays;
   }
 
-  // Pilot of one tile for adaptive sampling: every other pixel in x and y (the tile's corner
-  // always), pilot_spp samples each (16 batches) from streams independent of the image's.
+  // Pilot of one tile for adaptive sampling: sums over its pilot pixels, by half (a
+  // checkerboard of the pilot's cells; adaptive_allocation.h), and the rays traced.
   struct PilotStats {
-    double se_sum = 0.0, value_sum = 0.0;  // over pilot pixels and channels
-    int pixels = 0;
+    adaptive::TilePilot tp;  // weight and cost are filled in by Render
     uint64_t rays = 0;
+    int pixels() const { return tp.pixels[0] + tp.pixels[1]; }
+    double se() const { return tp.se[0] + tp.se[1]; }
+    double value() const { return tp.value[0] + tp.value[1]; }
   };
-  // Pilot pixels: every stride-th pixel in x and y, at offset (stride - 1) / 2 in the tile;
-  // pilot_seed must differ from the image's seed (independent streams).
+  // Pilot pixels: one per stride x stride cell of the tile (cells from the tile's corner; the
+  // last ones clipped by the tile). jitter false: at offset (stride - 1) / 2 in every cell
+  // (stage 1); true: at a position in the cell hashed from pilot_seed and the cell (stage 2),
+  // so the pilot pixels are a random sample of the tile's pixels, independent of the image's
+  // streams. pilot_seed must differ from the image's seed (independent streams).
   PilotStats PilotTile(const RenderSettings& st, const SamplingPlan& pilot, int tile,
-                       int tiles_x, int stride, uint64_t pilot_seed) const {
+                       int tiles_x, int stride, uint64_t pilot_seed, bool jitter) const {
     const TileRect t = Rect(st, tile, tiles_x);
     PilotStats ps;
     BatchStrata strata({{2, 1}, {1, 1}, {2, pilot.env_samples}});
     const int off = (stride - 1) / 2;
-    for (int y = t.y0 + off; y < t.y1; y += stride) {
-      for (int x = t.x0 + off; x < t.x1; x += stride) {
+    for (int cy = t.y0, iy = 0; cy < t.y1; cy += stride, ++iy) {
+      double prev_s = 0.0, prev_v = 0.0;  // the row's cell 2k, for the pair (2k, 2k + 1)
+      bool have_prev = false;
+      for (int cx = t.x0, ix = 0; cx < t.x1; cx += stride, ++ix) {
+        const int cw = std::min(stride, t.x1 - cx), ch = std::min(stride, t.y1 - cy);
+        int x = cx + off, y = cy + off;
+        if (jitter) {
+          const uint64_t h = Mix64(pilot_seed ^ Mix64(uint64_t(cy) * uint64_t(scene.card.width) +
+                                                      uint64_t(cx) + 0x9E3779B97F4A7C15ull));
+          x = cx + int((h & 0xFFFFFFFFull) % uint64_t(cw));
+          y = cy + int((h >> 32) % uint64_t(ch));
+        }
+        if (x >= t.x1 || y >= t.y1) continue;
+        const int half = (ix + iy) & 1;
         const PixelEstimate est = EstimatePixel(st, pilot_seed, pilot.K * pilot.M, pilot.M,
                                                 pilot.env_samples, x, y, strata, ps.rays);
+        double sp = 0.0, vp = 0.0;
         for (int c = 0; c < 3; ++c) {
           const double var = pilot.K > 1 ? est.m2[c] / (pilot.K - 1) : 0.0;
-          ps.se_sum += std::sqrt(var / pilot.K);
-          ps.value_sum += est.mean[c];
+          sp += std::sqrt(var / pilot.K) / 3.0;
+          vp += est.mean[c] / 3.0;
         }
-        ++ps.pixels;
+        ps.tp.se[half] += sp;
+        ps.tp.value[half] += vp;
+        ++ps.tp.pixels[half];
+        // Cell pairs (2k, 2k + 1) of a row (adaptive_allocation.h, collapsed strata).
+        if ((ix & 1) == 0) {
+          prev_s = sp, prev_v = vp, have_prev = true;
+        } else if (have_prev) {
+          have_prev = false;
+          ps.tp.se_pair2 += (sp - prev_s) * (sp - prev_s);
+          ps.tp.value_pair2 += (vp - prev_v) * (vp - prev_v);
+          ++ps.tp.pairs;
+        }
       }
     }
     return ps;
@@ -544,66 +576,6 @@ SamplingPlan PlanFor(int spp, int env_samples) {
   plan.M = spp / plan.K;
   plan.env_samples = std::clamp(env_samples, 1, kMaxFirstEnvSamples);
   return plan;
-}
-
-// Adaptive allocation (docs/reference-renderer.md, "Adaptive sampling, version 4"). Tile t
-// has w_t pixels, a mean standard error e_t measured by the pilot at n_p samples per pixel
-// (16 batches of n_p / 16) and a cost c_t per sample. Its error at n samples is modelled as
-// e_t(n) = e_t (n / n_p)^(-g/2) with g = gamma below n_p (stratification: the rate the two
-// pilot stages measured, >= 1) and g = 1 above it (never extrapolating a stratification gain
-// beyond what was measured). The counts minimise sum w_t c_t n_t subject to the image's mean
-// standard error sum w_t e_t(n_t) / sum w_t <= target: for a multiplier lambda each tile takes
-// the n minimising c_t n + lambda e_t(n) (closed form on each of the two power-law pieces),
-// lambda by bisection; clamped to [lo, hi], rounded up to a multiple of 16.
-double TileErrorModel(double e, double n, double n_p, double gamma) {
-  return e * std::pow(n / n_p, n < n_p ? -0.5 * gamma : -0.5);
-}
-double TileCountFor(double e, double c, double lambda, double n_p, double gamma, double lo,
-                    double hi) {
-  c = std::max(c, 1e-6);
-  if (!(e > 0.0)) return lo;
-  // Piece g: minimise c n + lambda e n_p^(g/2) n^(-g/2): n = (lambda e (g/2) n_p^(g/2) / c)^(1/(1+g/2)).
-  auto piece = [&](double g, double a, double b) {
-    const double n = std::pow(lambda * e * 0.5 * g * std::pow(n_p, 0.5 * g) / c, 1.0 / (1.0 + 0.5 * g));
-    return std::clamp(n, a, b);
-  };
-  const double n_lo = std::clamp(n_p, lo, hi);
-  const double n1 = piece(gamma, lo, n_lo), n2 = piece(1.0, n_lo, hi);
-  auto f = [&](double n) { return c * n + lambda * TileErrorModel(e, n, n_p, gamma); };
-  return f(n1) <= f(n2) ? n1 : n2;
-}
-std::vector<int> AllocateTileSpp(const std::vector<double>& w, const std::vector<double>& e,
-                                 const std::vector<double>& c, double n_p, double gamma,
-                                 double target, int lo, int hi) {
-  const size_t n = w.size();
-  double wsum = 0.0;
-  for (double x : w) wsum += x;
-  auto counts = [&](double lambda, std::vector<double>* out) {
-    double err = 0.0;
-    for (size_t t = 0; t < n; ++t) {
-      const double nt = lambda < 0.0 ? double(hi) : TileCountFor(e[t], c[t], lambda, n_p, gamma, lo, hi);
-      if (out) (*out)[t] = nt;
-      err += w[t] * TileErrorModel(e[t], nt, n_p, gamma);
-    }
-    return err / wsum;
-  };
-  std::vector<double> nt(n, double(hi));
-  if (counts(-1.0, nullptr) > target) {
-    counts(-1.0, &nt);  // even the budget everywhere misses the target: use the budget
-  } else {
-    double a = -60.0, b = 80.0;  // log lambda
-    for (int it = 0; it < 100; ++it) {
-      const double m = 0.5 * (a + b);
-      (counts(std::exp(m), nullptr) > target ? a : b) = m;
-    }
-    counts(std::exp(b), &nt);
-  }
-  std::vector<int> spp(n);
-  for (size_t t = 0; t < n; ++t) {
-    const int k = int(std::ceil(nt[t] / 16.0 - 1e-9));
-    spp[t] = std::clamp(16 * k, lo, hi);
-  }
-  return spp;
 }
 
 }  // namespace
@@ -650,18 +622,19 @@ RenderResult PathTracer::Render(const RenderSettings& st,
     struct PilotSum {
       double se = 0.0, value = 0.0, pixels = 0.0, rays = 0.0;
     };
-    auto run_pilot = [&](const SamplingPlan& plan, int stride, uint64_t pilot_seed,
+    auto run_pilot = [&](const SamplingPlan& plan, int stride, uint64_t pilot_seed, bool jitter,
                          std::vector<Impl::PilotStats>* per_tile) {
       std::vector<Impl::PilotStats> stats(static_cast<size_t>(tiles));
       tbb::parallel_for(0, tiles, [&](int tile) {
-        stats[size_t(tile)] = impl_->PilotTile(st, plan, tile, tiles_x, stride, pilot_seed);
+        stats[size_t(tile)] =
+            impl_->PilotTile(st, plan, tile, tiles_x, stride, pilot_seed, jitter);
         total_rays += stats[size_t(tile)].rays;
       });
-      PilotSum sum;
+      PilotSum sum;  // se and value: sums of the pixels' channel means
       for (const Impl::PilotStats& ps : stats) {
-        sum.se += ps.se_sum;
-        sum.value += ps.value_sum;
-        sum.pixels += ps.pixels;
+        sum.se += ps.se();
+        sum.value += ps.value();
+        sum.pixels += ps.pixels();
         sum.rays += double(ps.rays);
       }
       pilot_samples += sum.pixels * plan.K * plan.M;
@@ -685,9 +658,10 @@ RenderResult PathTracer::Render(const RenderSettings& st,
     double best_eff = -1.0, rel1 = 0.0;
     for (const int e : candidates) {
       const PilotSum p = run_pilot(PlanFor(32, e), stride1,
-                                   st.seed ^ 0x3C6EF372FE94F82Bull ^ Mix64(uint64_t(e)), nullptr);
+                                   st.seed ^ 0x3C6EF372FE94F82Bull ^ Mix64(uint64_t(e)), false,
+                                   nullptr);
       if (!(p.pixels > 0.0)) continue;
-      const double err = p.se / (3.0 * p.pixels), value = p.value / (3.0 * p.pixels);
+      const double err = p.se / p.pixels, value = p.value / p.pixels;
       const double cost = p.rays / (p.pixels * 32.0) + e;
       const double rel = value > 0.0 ? err / value : 0.0;
       const double eff = rel > 0.0 ? 1.0 / (rel * rel * cost) : 1e300;
@@ -706,41 +680,48 @@ RenderResult PathTracer::Render(const RenderSettings& st,
     const int m2 = std::clamp(int(std::ceil(need / 16.0 - 1e-9)), 2, st.spp / 16);
     const SamplingPlan pilot = PlanFor(16 * m2, env_samples);
     std::vector<Impl::PilotStats> stats;
-    const PilotSum p2 = run_pilot(pilot, stride2, st.seed ^ 0x5DEECE66D1CE4E5Bull, &stats);
+    const PilotSum p2 =
+        run_pilot(pilot, stride2, st.seed ^ 0x5DEECE66D1CE4E5Bull, st.robust_allocation, &stats);
     tick(pilot_units);
-    const size_t nt = static_cast<size_t>(tiles);
-    std::vector<double> w(nt), err(nt), cost(nt);
     const double n_pilot = 16.0 * m2;
-    const double px2 = std::max(p2.pixels, 1.0);
-    const double mean_err = p2.se / (3.0 * px2);
-    const double mean_cost = p2.rays / (px2 * n_pilot) + env_samples;
+    std::vector<adaptive::TilePilot> tps(static_cast<size_t>(tiles));
     for (int t = 0; t < tiles; ++t) {
       const Impl::PilotStats& ps = stats[size_t(t)];
       const Impl::TileRect rc = impl_->Rect(st, t, tiles_x);
-      w[size_t(t)] = double(rc.x1 - rc.x0) * double(rc.y1 - rc.y0);
-      // A tile without pilot pixels (a sliver at the image's edge) takes the image's means.
-      err[size_t(t)] = (ps.pixels > 0 ? ps.se_sum / (3.0 * ps.pixels) : mean_err) *
-                       st.pilot_calibration;
-      cost[size_t(t)] = ps.pixels > 0 ? double(ps.rays) / (double(ps.pixels) * n_pilot) + env_samples
-                                      : mean_cost;
+      adaptive::TilePilot& tp = tps[size_t(t)];
+      tp = ps.tp;
+      tp.weight = double(rc.x1 - rc.x0) * double(rc.y1 - rc.y0);
+      // (A tile without pilot pixels, a sliver at the image's edge, takes the image's means.)
+      tp.cost = ps.pixels() > 0
+                    ? double(ps.rays) / (double(ps.pixels()) * n_pilot) + env_samples
+                    : 0.0;
     }
-    const double mean_value = p2.value / (3.0 * px2);
     // The rate between the stages: relative error rel1 at 32 spp (batches of 2), rel2 at
     // n_pilot (batches of m2): gamma = 2 log(rel1 / rel2) / log(n_pilot / 32), in [1, 2]
     // (1 = plain Monte Carlo; 1 when the stages have the same spp).
-    const double rel2 = mean_value > 0.0 ? mean_err / mean_value : 0.0;
+    const double px2 = std::max(p2.pixels, 1.0);
+    const double mean_value = p2.value / px2;
+    const double rel2 = mean_value > 0.0 ? p2.se / px2 / mean_value : 0.0;
     double gamma = 1.0;
     if (m2 > 2 && rel1 > 0.0 && rel2 > 0.0)
       gamma = std::clamp(2.0 * std::log(rel1 / rel2) / std::log(n_pilot / 32.0), 1.0, 2.0);
     r.error_rate = gamma;
-    tile_spp = AllocateTileSpp(w, err, cost, n_pilot, gamma, st.target_error * mean_value,
-                               st.min_spp, st.spp);
-    double wsum = 0.0, pred = 0.0;
-    for (size_t t = 0; t < nt; ++t) {
-      wsum += w[t];
-      pred += w[t] * TileErrorModel(err[t], double(tile_spp[t]), n_pilot, gamma);
-    }
-    r.predicted_error = mean_value > 0.0 ? pred / wsum / mean_value : 0.0;
+    adaptive::Params ap;
+    ap.n_pilot = n_pilot;
+    ap.gamma = gamma;
+    ap.target = st.target_error;
+    ap.lo = st.min_spp;
+    ap.hi = st.spp;
+    ap.tiles_x = tiles_x;
+    ap.robust = st.robust_allocation;
+    ap.z = st.allocation_z;
+    ap.calibration = st.pilot_calibration;
+    const adaptive::Allocation al = adaptive::Allocate(tps, ap);
+    tile_spp = al.spp;
+    r.predicted_error = al.predicted;
+    r.predicted_upper = al.upper;
+    r.allocation_reliability = al.reliability;
+    r.pilot_value_rel_sd = al.value_rel_sd;
     r.pilot_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }

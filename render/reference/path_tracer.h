@@ -35,7 +35,9 @@ struct AovSet {
 //    adaptive sampling (target_error; fixed-spp images are unchanged by it).
 // 4: half images (half.R/G/B) in the EXR; per-reference environment samples and the
 //    re-planned adaptive pilot (docs/reference-renderer.md, session 6).
-inline constexpr int kReferenceRendererVersion = 4;
+// 5: adaptive allocation version 5 (shrunk per-tile errors, an upper confidence bound on the
+//    predicted error, stage-2 pilot pixels at random cell positions); fixed-spp images unchanged.
+inline constexpr int kReferenceRendererVersion = 5;
 
 // Half images: of a pixel's K i.i.d. batch means, half A is the mean of the first
 // HalfBatches(K) = floor(K / 2); the complement B = (K mean - kA A) / (K - kA) is the mean of
@@ -67,6 +69,13 @@ struct RenderSettings {
   // pilot (efficiency = 1 / (error^2 x cost)); false: first_env_samples.
   bool choose_env_samples = true;
   int pilot_spp = 32;  // unused since version 4 (the pilot's spp follow from the target; docs)
+  // Version 5 (docs "Adaptive sampling, version 5", render/reference/adaptive_allocation.h):
+  // each tile's pilot error shrunk towards its neighbours by the reliability the pilot's two
+  // halves measure, stage-2 pilot pixels at random positions in their cells, and the target
+  // met by the predicted error plus allocation_z standard deviations of that prediction.
+  // false: the version-4 rule (for comparisons; the images of a seed differ).
+  bool robust_allocation = true;
+  double allocation_z = 1.645;
   // Multiplies the pilot's predicted per-tile spread (version 4: the pilot's batches are as
   // long as the image's, so 1; docs/reference-renderer.md "Adaptive sampling, version 4").
   double pilot_calibration = 1.0;
@@ -93,6 +102,9 @@ struct RenderResult {
   double pilot_seconds = 0.0;
   double predicted_error = 0.0;  // the allocation's predicted mean std error / mean value
   double error_rate = 0.0;       // gamma: the pilot's error ~ spp^(-gamma/2) below its spp
+  double predicted_upper = 0.0;  // the bound the allocation meets (version 5; <= target)
+  double allocation_reliability = 1.0;  // R of the shrinkage (1: none)
+  double pilot_value_rel_sd = 0.0;      // relative sd of the pilot's image mean value
   int env_samples = 0;           // environment samples used at the first vertex
   struct EnvCandidate {
     int env_samples;

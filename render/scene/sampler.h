@@ -3,6 +3,7 @@
 // bit-identical image with any number of threads.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -44,11 +45,29 @@ inline double RadicalInverse2(uint32_t i) {
   return double(i) * 0x1.0p-32;
 }
 
+// Second coordinates of an n-point Hammersley set, stratified for any n: for n a power of two
+// the radical inverses of 0..n-1 themselves (their values are k / n, one per 1/n stratum);
+// otherwise (r_i + 1/2) / n with r_i the rank of RadicalInverse2(i) among the first n, which
+// keeps their order and puts one point in every 1/n stratum (the first n radical inverses of a
+// non-power of two leave gaps: for n = 6 none in [0.875, 1); docs/reference-renderer.md,
+// "Adaptive sampling, version 5").
+inline void StratifiedRadicalInverses(int n, std::vector<double>* out) {
+  out->resize(size_t(n));
+  if (n <= 0) return;
+  const bool pow2 = (n & (n - 1)) == 0;
+  for (int i = 0; i < n; ++i) (*out)[size_t(i)] = RadicalInverse2(uint32_t(i));
+  if (pow2) return;
+  std::vector<std::pair<double, int>> order(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) order[size_t(i)] = {(*out)[size_t(i)], i};
+  std::sort(order.begin(), order.end());
+  for (int r = 0; r < n; ++r) (*out)[size_t(order[size_t(r)].second)] = (r + 0.5) / n;
+}
+
 // Padded stratified points for one batch of M samples (pbrt's "padding" of low-dimensional
 // sets, Pharr et al., PBR 3rd ed. 7.3). Group g has n_g points per sample, M n_g per batch:
 // point j of sample m is point perm_g[m n_g + j] of an M n_g-point set, Cranley-Patterson
 // rotated by a shift drawn per batch and group. 2-D groups use the Hammersley set
-// ((i + 1/2) / N, radical inverse of i), 1-D groups (i + 1/2) / N. Every point is marginally
+// ((i + 1/2) / N, StratifiedRadicalInverses), 1-D groups (i + 1/2) / N. Every point is marginally
 // uniform on its unit square (the rotation), so any estimator stays unbiased; within a batch
 // a group's points are stratified; groups are decorrelated from each other by independent
 // random permutations; a batch draws everything from its own stream, so batch means stay
@@ -61,6 +80,7 @@ class BatchStrata {
   };
   explicit BatchStrata(std::vector<Group> groups) : groups_(std::move(groups)) {
     perm_.resize(groups_.size());
+    ys_.resize(groups_.size());
     shift_.resize(groups_.size() * 2, 0.0);
   }
 
@@ -75,6 +95,7 @@ class BatchStrata {
         const auto j = uint32_t((uint64_t(rng.Next()) * uint64_t(i + 1)) >> 32);
         std::swap(p[size_t(i)], p[size_t(j)]);
       }
+      if (groups_[g].dim == 2 && ys_[g].size() != size_t(n)) StratifiedRadicalInverses(n, &ys_[g]);
       shift_[2 * g] = rng.Uniform();
       shift_[2 * g + 1] = groups_[g].dim == 2 ? rng.Uniform() : 0.0;
     }
@@ -84,7 +105,7 @@ class BatchStrata {
     const std::vector<uint32_t>& p = perm_[g];
     const uint32_t i = p[size_t(m) * size_t(groups_[g].per_sample) + size_t(j)];
     out[0] = Wrap((i + 0.5) / double(p.size()) + shift_[2 * g]);
-    if (groups_[g].dim == 2) out[1] = Wrap(RadicalInverse2(i) + shift_[2 * g + 1]);
+    if (groups_[g].dim == 2) out[1] = Wrap(ys_[g][i] + shift_[2 * g + 1]);
   }
 
  private:
@@ -92,6 +113,7 @@ class BatchStrata {
   static double Wrap(double x) { return x >= 1.0 ? x - 1.0 : x; }
   std::vector<Group> groups_;
   std::vector<std::vector<uint32_t>> perm_;
+  std::vector<std::vector<double>> ys_;  // StratifiedRadicalInverses of the group's size
   std::vector<double> shift_;
 };
 
