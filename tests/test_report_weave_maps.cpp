@@ -130,5 +130,42 @@ TEST_F(ReportWeaveMapPage, PageShowsTheMapsAndTheModelWithEscapedStrings) {
   EXPECT_EQ(html.find("missing<b>"), std::string::npos);
 }
 
+// The report reads a preset's maps as every reader does: "uri" first (relative to the preset
+// file), "file" only without a "uri" (docs/preset-format.md "Weave maps: `uri` and `file`").
+TEST_F(ReportWeaveMapPage, ThumbnailsComeFromTheUriNotTheFile) {
+  io::Image img;
+  img.width = img.height = 8;
+  img.channel_names = {"R", "G", "B", "fabric"};
+  img.pixels.assign(8 * 8 * 4, 0.5f);
+  for (size_t i = 3; i < img.pixels.size(); i += 4) img.pixels[i] = 1.0f;
+  const std::string ref = (dir_ / "ref.exr").string();
+  io::WriteExr(ref, img);
+  fs::create_directories(dir_ / "p");
+  io::WriteExr((dir_ / "p" / "m.weave.exr").string(), Maps(8));
+  io::WriteExr((dir_ / "outside.weave.exr").string(), Maps(8));
+  auto preset = [&](const std::string& model, const nlohmann::json& maps) {
+    nlohmann::json j = {
+        {"schema", "clothfit.preset"}, {"version", 1}, {"model", model},
+        {"parameters", {{"roughness", 0.5}}},
+        {"fit", {{"scenes", {{{"scene", "s.json"}, {"reference", ref}, {"tone_mapping", "Linear"},
+                              {"exposure", 1.0}, {"preview", ref}}}}}},
+        {"provenance", {{"fabric", "datasets/fabrics/canvas.json"}}}, {"weave_maps", maps}};
+    const std::string p = (dir_ / "p" / (model + ".json")).string();
+    std::ofstream(p) << j.dump();
+    return p;
+  };
+  const std::vector<std::string> presets = {
+      preset("woven", {{"uri", "m.weave.exr"}, {"file", "/nonexistent/decoy.weave.exr"}}),
+      preset("physical-aniso", {{"uri", "../outside.weave.exr"}, {"file", "m.weave.exr"}})};
+  const FabricReport rep = BuildFabricReport(FabricsFromPresets(presets).at(0));
+  ASSERT_EQ(rep.weave_maps.size(), 2u);
+  ASSERT_TRUE(rep.weave_maps[0].has_value());
+  EXPECT_EQ(rep.weave_maps[0]->pictures.size(), 3u) << rep.weave_maps[0]->note;
+  ASSERT_TRUE(rep.weave_maps[1].has_value());
+  EXPECT_TRUE(rep.weave_maps[1]->pictures.empty());  // the escaping uri, not the readable file
+  EXPECT_NE(rep.weave_maps[1]->note.find("weave_maps.uri"), std::string::npos);
+  EXPECT_NE(rep.weave_maps[1]->note.find("escapes"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace clothfit::report

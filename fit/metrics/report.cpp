@@ -17,6 +17,7 @@
 #include "fit/metrics/reference_halves.h"
 #include "render/scene/image_io.h"
 #include "render/scene/input_limits.h"
+#include "render/scene/material.h"
 
 namespace clothfit::report {
 namespace fs = std::filesystem;
@@ -837,11 +838,20 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
                                                                 : nlohmann::json();
     if (wm.is_object()) {
       w = WeaveMapPictures{};
-      if (!wm.contains("file") || !wm.at("file").is_string()) {
-        w->note = m.preset_path + ": weave_maps.file missing or not a string";
+      // "uri" first (relative to the preset, render::ResolvePresetRelativeUri), "file" only
+      // without one, as every reader does (docs/preset-format.md "Weave maps: `uri` and `file`").
+      const bool has_uri = wm.contains("uri");
+      if (has_uri ? !wm.at("uri").is_string()
+                  : (!wm.contains("file") || !wm.at("file").is_string())) {
+        w->note = limits::EscapeForMessage(m.preset_path, 400) +
+                  (has_uri ? ": weave_maps.uri not a string"
+                           : ": weave_maps.file missing or not a string");
       } else {
-        const std::string file = Resolve(wm.at("file").get<std::string>(), m.preset_path);
+        std::string file;
         try {
+          file = has_uri ? render::ResolvePresetRelativeUri(m.preset_path, "weave_maps.uri",
+                                                            wm.at("uri").get<std::string>())
+                         : Resolve(wm.at("file").get<std::string>(), m.preset_path);
           *w = WeaveMapThumbnails(io::ReadImage(file), file);
         } catch (const std::exception& e) {
           w->file = file;

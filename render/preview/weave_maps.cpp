@@ -337,45 +337,6 @@ bool HasWeaveMapsField(const MaterialPreset& preset) {
   return it != preset.extra.end() && !it->is_null();
 }
 
-// The file a preset's relative `uri` names (see weave_maps.h): absolute, canonical.
-std::string ResolveWeaveMapUri(const std::string& preset_path, const std::string& field,
-                               const std::string& uri) {
-  namespace fs = std::filesystem;
-  const std::string where = limits::EscapeForMessage(preset_path, 400) + ": field " + field + ": ";
-  const std::string shown = "'" + limits::EscapeForMessage(uri, 200) + "'";
-  if (uri.empty()) throw MaterialError(where + "empty path");
-  for (unsigned char c : uri)
-    if (c < 0x20 || c == 0x7F) throw MaterialError(where + shown + " contains a control byte");
-  if (uri.find("://") != std::string::npos || uri.rfind("data:", 0) == 0 ||
-      uri.rfind("file:", 0) == 0)
-    throw MaterialError(where + shown + " is a URI with a scheme; expected a path relative to "
-                        "the preset's directory");
-  const fs::path u(uri);
-  if (u.is_absolute() || u.has_root_name() || u.has_root_directory())
-    throw MaterialError(where + shown + " is an absolute path; \"uri\" is relative to the "
-                        "preset's directory (an absolute path goes in \"file\", read only "
-                        "without a \"uri\")");
-  const fs::path norm = u.lexically_normal();
-  if (norm.empty() || *norm.begin() == "..")
-    throw MaterialError(where + shown + " escapes the preset's directory (\"..\"); the maps "
-                        "must lie in the preset's directory or below it");
-  std::error_code ec;
-  const fs::path dir = fs::absolute(fs::path(preset_path), ec).parent_path();
-  if (ec) throw MaterialError(where + "cannot make the preset's path absolute: " + ec.message());
-  const fs::path joined = (dir / norm).lexically_normal();
-  if (!fs::exists(joined, ec))
-    throw MaterialError(where + shown + ": no such file (looked for " +
-                        limits::EscapeForMessage(joined.string(), 400) + ")");
-  const fs::path canon = fs::weakly_canonical(joined, ec);
-  const fs::path root = ec ? fs::path() : fs::weakly_canonical(dir, ec);
-  if (ec) throw MaterialError(where + shown + ": " + ec.message());
-  if (!limits::IsInside(canon, root))
-    throw MaterialError(where + shown + " resolves (through a symbolic link) outside the "
-                        "preset's directory");
-  if (!fs::is_regular_file(canon, ec))
-    throw MaterialError(where + shown + ": not a regular file");
-  return canon.string();
-}
 
 }  // namespace
 
@@ -404,7 +365,7 @@ void ResolvePresetWeaveMapPaths(MaterialPreset* preset, const std::string& prese
     if (!f[uri_key].is_string())
       throw MaterialError(limits::EscapeForMessage(preset_path, 400) + ": field weave_maps." +
                           uri_key + ": expected a string");
-    f[file_key] = ResolveWeaveMapUri(preset_path, std::string("weave_maps.") + uri_key,
+    f[file_key] = ResolvePresetRelativeUri(preset_path, std::string("weave_maps.") + uri_key,
                                      f[uri_key].get<std::string>());
     f.erase(uri_key);
   }

@@ -67,4 +67,13 @@ nlohmann::json PresetToJson(const MaterialPreset& p);
 // Writes atomically; refuses non-finite values (nlohmann would write them as null).
 void WritePreset(const std::string& path, const MaterialPreset& p);
 
+// The file a preset's relative "uri" field names (docs/preset-format.md "Weave maps: `uri` and
+// `file`"): `uri` is relative to the directory of `preset_path`. Throws MaterialError naming
+// the preset and `field` when it is empty, has a control byte or a scheme, is absolute,
+// escapes the preset's directory (by "..", or by a symbolic link), is missing or is not a
+// regular file. Returns the canonical path. Used by the preview's map loader
+// (render/preview/weave_maps.cpp) and the report's map thumbnails (fit/metrics/report.cpp).
+std::string ResolvePresetRelativeUri(const std::string& preset_path, const std::string& field,
+                                     const std::string& uri);
+
 }  // namespace clothfit::render
