@@ -162,7 +162,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
               frame[size_t(cache->pixels[i]) * 3 + k] = part[size_t(cache->pixels[i]) * 3 + k];
           fabric_pixels += cache->pixels.size();
         }
-        std::printf("render-preview: exact IBL, %d directions per pixel, %zu fabric pixels\n",
+        std::printf("render-preview: exact IBL, %d directions per pixel, %zu fabric pixels in "
+                    "all chunks (the line below counts the last chunk)\n",
                     o.exact_ibl_samples, fabric_pixels);
       } else {
         cache = render::PreviewCache::Build(scene, env.get(), o);
