@@ -33,6 +33,8 @@ namespace {
 struct EvaluateArgs {
   std::string preset, references, scenes;
   int level = -1, stride = -1;
+  int exact_ibl = 0, exact_irradiance = 0;
+  unsigned exact_ibl_seed = 1;
   bool json = false;
 };
 
@@ -69,6 +71,9 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   o.space = fit::ParseSpace(fj.value("space", std::string("display")));
   o.start_roughness = {0.5};  // one "start": every parameter is locked at the preset's value
   o.init_from_reference = false;
+  o.exact_ibl_samples = a.exact_ibl;
+  o.exact_ibl_seed = a.exact_ibl_seed;
+  o.exact_irradiance_samples = a.exact_irradiance;
 
   std::vector<render::Scene> loaded;
   std::vector<std::unique_ptr<render::Environment>> envs;
@@ -96,6 +101,9 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     j["level"] = o.level;
     j["pixel_stride"] = o.pixel_stride;
     j["space"] = fit::ToString(o.space);
+    j["ibl"] = a.exact_ibl > 0 ? "exact (" + std::to_string(a.exact_ibl) + " samples, seed " +
+                                     std::to_string(a.exact_ibl_seed) + ")"
+                               : "split sum";
     j["rmse"] = r.rmse;
     if (fj.contains("rmse")) j["fit_rmse"] = fj["rmse"];
     j["scenes"] = nlohmann::json::array();
@@ -104,9 +112,15 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
                              {"rmse", s.rmse}});
     std::printf("%s\n", limits::DumpJson(j).c_str());
   } else {
-    std::printf("evaluate: %s (%s), level %d, stride %d, %s space\n", a.preset.c_str(),
+    std::printf("evaluate: %s (%s), level %d, stride %d, %s space", a.preset.c_str(),
                 render::ToString(preset.model).c_str(), o.level, o.pixel_stride,
                 fit::ToString(o.space).c_str());
+    if (a.exact_ibl > 0)
+      std::printf(", exact IBL (%d samples per pixel, seed %u)", a.exact_ibl, a.exact_ibl_seed);
+    else if (a.exact_irradiance > 0)
+      std::printf(", split sum with exact irradiance (%d samples per pixel, seed %u)",
+                  a.exact_irradiance, a.exact_ibl_seed);
+    std::printf("\n");
     for (const auto& s : r.scenes)
       std::printf("evaluate:   %s: %d blocks, block rmse %.5f\n", s.scene.c_str(), s.blocks,
                   s.rmse);
@@ -133,6 +147,16 @@ void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--level", args->level, "block level (default: the preset's fit.level)");
   cmd->add_option("--stride", args->stride,
                   "pixel stride per block axis (default: the preset's fit.pixel_stride)");
+  cmd->add_option("--exact-ibl", args->exact_ibl,
+                  "measurement: integrate the environment exactly (Monte Carlo, this many "
+                  "directions per pixel, no split sum; docs/fitting.md \"The sphere's error "
+                  "decomposed\"); 0 = the engine's split sum (default)")
+      ->check(CLI::Range(0, 65536));
+  cmd->add_option("--exact-irradiance", args->exact_irradiance,
+                  "measurement: split sum, but the diffuse irradiance integrated exactly (Monte "
+                  "Carlo, this many directions per pixel) instead of SH9")
+      ->check(CLI::Range(0, 65536));
+  cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
   cmd->add_flag("--json", args->json, "print the result as JSON");
   cmd->callback([args, &g, &exit_code]() {
     try {

@@ -146,6 +146,7 @@ struct FitArgs {
   double loss_scale = 1.0, min_coverage = 0.5;
   bool subsurface = false, no_floor = false, second_seed = false;
   int spp = 256, stride = 0, threads = 0, max_iterations = 50;
+  int exact_ibl = 0;  // s7-ibl measurement hook (docs/fitting.md "The sphere's error decomposed")
 };
 
 void AddFitOptions(CLI::App* cmd, FitArgs& a) {
@@ -206,6 +207,10 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
   cmd->add_option("--starts", a.starts, "comma-separated start roughness values (default 0.6,0.9; woven 0.6)");
   cmd->add_option("--start", a.start_values,
                   "start values: name=value,... (colours as r:g:b, e.g. base_color=0.5:0.4:0.3)");
+  cmd->add_option("--exact-ibl", a.exact_ibl,
+                  "measurement only: fit with the environment integrated exactly (Monte Carlo, "
+                  "this many directions per pixel, seed 1; no split sum); 0 = the engine (default)")
+      ->check(CLI::Range(0, 65536));
   cmd->add_option("--out", a.out, "output preset JSON")->required();
 }
 
@@ -353,6 +358,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   o.pixel_stride = a.stride;
   o.max_iterations = a.max_iterations;
   o.min_coverage = a.min_coverage;
+  o.exact_ibl_samples = a.exact_ibl;
   ApplyStarts(a, &o);
   return o;
 }
@@ -432,6 +438,7 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
   fitj["converged"] = res.converged;
   fitj["max_iterations"] = o.max_iterations;
   fitj["min_coverage"] = o.min_coverage;
+  if (o.exact_ibl_samples > 0) fitj["exact_ibl_samples"] = o.exact_ibl_samples;  // not an engine fit
   nlohmann::json ab = nlohmann::json::array();
   bool flagged_bound = false;
   for (const fit::AtBound& b : res.at_bound) {

@@ -493,6 +493,9 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   po.sample_mask = SampleMask(scene.card.width, scene.card.height, B, stride);
   po.weave_maps = render::LoadPresetWeaveMaps(opt.start);  // woven weave maps (null: none)
   po.weave_footprint_scale = stride;  // a kept pixel stands for its stride x stride cell
+  po.exact_ibl_samples = opt.exact_ibl_samples;
+  po.exact_ibl_seed = opt.exact_ibl_seed;
+  po.exact_irradiance_samples = opt.exact_irradiance_samples;
   const auto full = render::PreviewCache::Build(scene, in.environment, po);
   std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
   for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
@@ -847,6 +850,8 @@ struct PreparedScenes {
   double min_coverage = 0.0;
   render::ModelKind model = render::ModelKind::kCloth;
   nlohmann::json weave_maps;  // the start preset's "weave_maps" field (null: none)
+  int exact_ibl_samples = 0, exact_irradiance_samples = 0;
+  unsigned exact_ibl_seed = 1;
   double seconds = 0.0;
 };
 
@@ -869,6 +874,9 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->min_coverage = opt.min_coverage;
   p->model = opt.start.model;
   p->weave_maps = WeaveMapsField(opt.start);
+  p->exact_ibl_samples = opt.exact_ibl_samples;
+  p->exact_ibl_seed = opt.exact_ibl_seed;
+  p->exact_irradiance_samples = opt.exact_irradiance_samples;
   p->seconds = SecondsSince(t0);
   return p;
 }
@@ -901,7 +909,10 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->stride != opt.pixel_stride || prepared->space != opt.space ||
         prepared->min_coverage != opt.min_coverage || prepared->model != opt.start.model ||
         (opt.start.model == render::ModelKind::kCloth) ||
-        prepared->weave_maps != WeaveMapsField(opt.start))
+        prepared->weave_maps != WeaveMapsField(opt.start) ||
+        prepared->exact_ibl_samples != opt.exact_ibl_samples ||
+        prepared->exact_ibl_seed != opt.exact_ibl_seed ||
+        prepared->exact_irradiance_samples != opt.exact_irradiance_samples)
       throw FitError("fit: the prepared scenes were built with other options");
   } else {
     own = PrepareScenes(inputs, opt);

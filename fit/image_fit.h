@@ -93,6 +93,12 @@ struct FitOptions {
   // (fit/image_fit.cpp, kJetWidths; docs/fitting.md "Fit speed"). Same Jacobian up to
   // rounding; false only to compare.
   bool pack_colours = true;
+  // Exact image-based light in the preview (render/preview/preview.h PreviewOptions::
+  // exact_ibl_samples / exact_ibl_seed): a measurement tool (docs/fitting.md, "The sphere's
+  // error decomposed"); 0 = the engine's split sum (default).
+  int exact_ibl_samples = 0;
+  unsigned exact_ibl_seed = 1;
+  int exact_irradiance_samples = 0;  // PreviewOptions::exact_irradiance_samples (measurement)
 };
 
 struct SceneInput {

@@ -169,6 +169,85 @@ std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const Previe
   return ls;
 }
 
+// Exact IBL (PreviewOptions::exact_ibl_samples): the environment as a fixed set of directional
+// "lights" per fabric pixel, see preview.h. Sampling components (counts N_k, fractions of N):
+// environment luminance 1/2, cosine hemisphere 1/4, uniform hemisphere the rest (the uniform
+// component bounds the weight of every direction by 2 pi / N_uni: grazing lobes such as the
+// phase Fresnel's forward peak and a sharp Charlie sheen stay finite).
+uint64_t SplitMix64(uint64_t z) {
+  z += 0x9e3779b97f4a7c15ull;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+double ToUnit(uint64_t z) { return double(z >> 11) * (1.0 / 9007199254740992.0); }
+double RadicalInverse2(uint32_t i) {
+  i = (i << 16) | (i >> 16);
+  i = ((i & 0x00ff00ffu) << 8) | ((i & 0xff00ff00u) >> 8);
+  i = ((i & 0x0f0f0f0fu) << 4) | ((i & 0xf0f0f0f0u) >> 4);
+  i = ((i & 0x33333333u) << 2) | ((i & 0xccccccccu) >> 2);
+  i = ((i & 0x55555555u) << 1) | ((i & 0xaaaaaaaau) >> 1);
+  return double(i) * (1.0 / 4294967296.0);
+}
+
+void AppendEnvironmentSamples(const PixelContext& x, const PrimaryHit& hit, size_t pix,
+                              std::vector<PreviewLightSample>* ls,
+                              std::vector<float>* light_tangent, int N) {
+  const int n_env = N / 2, n_cos = N / 4, n_uni = N - n_env - n_cos;
+  const Vec3d& n = hit.n;
+  // Orthonormal basis around n (Frisvad-style, any completion works: the integral does not
+  // depend on it).
+  const Vec3d a = std::abs(n.x) < 0.9 ? Vec3d(1, 0, 0) : Vec3d(0, 1, 0);
+  const Vec3d e1 = Normalize(Cross(a, n)), e2 = Cross(n, e1);
+  uint64_t h = SplitMix64((uint64_t(x.opt.exact_ibl_seed) << 32) ^ uint64_t(pix));
+  double shift[6];
+  for (double& sft : shift) {
+    h = SplitMix64(h);
+    sft = ToUnit(h);
+  }
+  auto frac = [](double u) { return u - std::floor(u); };
+  auto add = [&](const Vec3d& l) {
+    const double NoL = Dot(n, l);
+    if (!(NoL > 0.0)) return;
+    const double p_env = n_env > 0 ? x.env->Pdf(l) : 0.0;
+    const double pdf = double(n_env) * p_env + double(n_cos) * NoL * kInvPi +
+                       double(n_uni) * (0.5 * kInvPi);
+    if (!(pdf > 0.0)) return;
+    const Rgb<double> L = x.env->Eval(l);
+    const Vec3d hv = Normalize(hit.v + l);
+    PreviewLightSample q;
+    q.NoL = float(NoL);
+    q.NoH = float(Dot(n, hv));
+    q.LoH = float(Dot(l, hv));
+    for (int k = 0; k < 3; ++k) q.irradiance[k] = float(L[k] / pdf);
+    ls->push_back(q);
+    if (light_tangent)
+      light_tangent->insert(light_tangent->end(),
+                            {float(Dot(hit.t, l)), float(Dot(hit.b, l)), float(Dot(hit.t, hv)),
+                             float(Dot(hit.b, hv))});
+  };
+  for (int j = 0; j < n_env; ++j) {
+    double pdf;
+    Rgb<double> L;
+    const Vec3d l = x.env->Sample(frac((j + 0.5) / n_env + shift[0]),
+                                  frac(RadicalInverse2(uint32_t(j)) + shift[1]), &pdf, &L);
+    if (pdf > 0.0) add(l);
+  }
+  for (int j = 0; j < n_cos; ++j) {  // cosine-weighted: r = sqrt(u1), phi = 2 pi u2
+    const double u1 = frac((j + 0.5) / n_cos + shift[2]);
+    const double u2 = frac(RadicalInverse2(uint32_t(j)) + shift[3]);
+    const double r = std::sqrt(u1), phi = 2.0 * kPi * u2;
+    const double z = std::sqrt(std::max(0.0, 1.0 - u1));
+    add(Normalize(e1 * (r * std::cos(phi)) + e2 * (r * std::sin(phi)) + n * z));
+  }
+  for (int j = 0; j < n_uni; ++j) {  // uniform hemisphere: z = u1
+    const double z = frac((j + 0.5) / n_uni + shift[4]);
+    const double phi = 2.0 * kPi * frac(RadicalInverse2(uint32_t(j)) + shift[5]);
+    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+    add(Normalize(e1 * (r * std::cos(phi)) + e2 * (r * std::sin(phi)) + n * z));
+  }
+}
+
 // Constant layer: MeshStandardMaterial, glTF base colour, roughness 1.
 Rgb<double> ShadeNonFabric(const PixelContext& x, const PreviewCache& c, const PrimaryHit& hit,
                            const std::vector<PreviewLightSample>& ls, const Vec3d& R,
@@ -400,8 +479,19 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     }
     std::vector<float> lt;
     std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit, woven_frame ? &lt : nullptr);
+    if (x.env && x.opt.exact_ibl_samples > 0 && hit.mesh->is_fabric)
+      AppendEnvironmentSamples(x, hit, pix, &ls, woven_frame ? &lt : nullptr,
+                               x.opt.exact_ibl_samples);
     Rgb<double> Ed(0, 0, 0);
     if (x.env) Ed = x.e.pmrem ? x.e.pmrem->IrradianceOverPi(hit.n) : IrradianceOverPi(x.e.sh, hit.n);
+    if (x.env && x.opt.exact_ibl_samples <= 0 && x.opt.exact_irradiance_samples > 0 &&
+        hit.mesh->is_fabric) {  // E_d / pi = sum_j (n.l_j) L(l_j) / (pi pdf_j)
+      std::vector<PreviewLightSample> es;
+      AppendEnvironmentSamples(x, hit, pix, &es, nullptr, x.opt.exact_irradiance_samples);
+      Ed = Rgb<double>(0, 0, 0);
+      for (const PreviewLightSample& q : es)
+        for (int k = 0; k < 3; ++k) Ed[k] += double(q.NoL) * double(q.irradiance[k]) * kInvPi;
+    }
     const Vec3d R = hit.n * (2.0 * hit.NoV) - hit.v;
     if (!hit.mesh->is_fabric) {
       const Rgb<double> out = ShadeNonFabric(x, *c, hit, ls, R, Ed);
@@ -419,9 +509,10 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     pd.lt = std::move(lt);
     pd.weave = weave;
     for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
-    if (x.env && x.opt.model == ModelKind::kPhysicalAniso)
+    const bool split_sum = x.env && x.opt.exact_ibl_samples <= 0;
+    if (split_sum && x.opt.model == ModelKind::kPhysicalAniso)
       FillAnisoRadianceTables(x, hit, x.opt.weave_maps ? weave.data() : nullptr, &pd);
-    else if (x.env)
+    else if (split_sum)
       FillRadianceTables(x, hit.n, R, &pd);
     row->push_back(std::move(pd));
   }
@@ -463,8 +554,16 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   c->width = scene.card.width;
   c->height = scene.card.height;
   c->options = opt;
-  c->features.direct = !scene.lights.empty();
-  c->features.ibl = env != nullptr;
+  if (opt.exact_irradiance_samples < 0 || opt.exact_irradiance_samples > 1 << 16)
+    throw std::invalid_argument("preview: exact_irradiance_samples " +
+                                std::to_string(opt.exact_irradiance_samples) +
+                                " not in [0, 65536]");
+  if (opt.exact_ibl_samples < 0 || opt.exact_ibl_samples > 1 << 16)
+    throw std::invalid_argument("preview: exact_ibl_samples " +
+                                std::to_string(opt.exact_ibl_samples) + " not in [0, 65536]");
+  const bool exact_ibl = env != nullptr && opt.exact_ibl_samples > 0;
+  c->features.direct = !scene.lights.empty() || exact_ibl;
+  c->features.ibl = env != nullptr && !exact_ibl;  // exact: the environment is in the lights
   c->features.subsurface = opt.model == ModelKind::kCloth && opt.cloth.subsurface;
   c->features.shadows = opt.shadows && c->features.direct;
   c->dfg = &lut::DefaultDfg();

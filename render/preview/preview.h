@@ -77,6 +77,28 @@ struct PreviewOptions {
   // (brdf/woven.h's split evaluation) is checked against. false: the fast kernel.
   bool woven_reference_kernel = false;
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
+  // Exact image-based light (a measurement tool, not an engine; docs/fitting.md "The sphere's
+  // error decomposed"): when > 0 and the scene has an environment, the split sum is replaced by
+  // a Monte Carlo integral of the environment against the model's own direct BRDF, with this
+  // many directions per fabric pixel, cached as extra "lights" (PreviewLightSample) so that a
+  // frame (and its Jacobian) is the exact integral of a fixed sample set:
+  //   L_o = sum_j f(v, l_j) (n.l_j) L_env(l_j) / (sum_k N_k p_k(l_j))
+  // (multi-sample MIS, balance heuristic; components k: the environment's luminance sampling
+  // (Environment::Sample), cosine-weighted and uniform hemisphere around the shading normal;
+  // N_k fixed counts, stratified Hammersley points under a per-pixel Cranley-Patterson shift
+  // seeded by (exact_ibl_seed, pixel index): deterministic, the same directions for a pixel in
+  // a fit's sampled cache and in a full frame). Diffuse, specular and sheen lobes all go through
+  // it: no SH irradiance, no prefiltered radiance, no DFG/phase albedo table for the fabric.
+  // Visibility is not traced (exact only on convex fabric such as the sphere). Non-fabric
+  // meshes keep the split sum.
+  int exact_ibl_samples = 0;
+  unsigned exact_ibl_seed = 1;
+  // Split sum with an exact diffuse term (measurement): when > 0 (and exact_ibl_samples == 0),
+  // the fabric's Lambert irradiance E_d(n) is the Monte Carlo integral of the environment over
+  // the hemisphere (the same sampler and seed, this many directions) instead of SH9 / the
+  // PMREM; the specular and sheen lobes keep the split sum. Separates the diffuse part of the
+  // IBL approximation from the lobes' part.
+  int exact_irradiance_samples = 0;
   // physical-aniso only: the anisotropy_rotation (radians) the bent-normal IBL radiance cache is
   // built for (three.js bends the normal toward B = b cos(rot) - t sin(rot)); the direct light
   // uses the evaluated parameter. render-preview sets it from the preset; 0: rotation 0.

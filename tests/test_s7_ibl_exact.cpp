@@ -1,0 +1,185 @@
+// The preview's exact (Monte Carlo) image-based light, PreviewOptions::exact_ibl_samples and
+// exact_irradiance_samples (render/preview/preview.h; docs/fitting.md "The sphere's error
+// decomposed"): white-furnace checks against closed forms and against the woven model's own
+// split-sum albedo table, determinism, and the fit's sampled cache giving the same pixels as a
+// full frame.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <vector>
+
+#include "brdf/lut.h"
+#include "brdf/woven.h"
+#include "render/preview/preview.h"
+#include "render/scene/environment.h"
+#include "tests/scene_fixtures.h"
+
+namespace clothfit::render {
+namespace {
+
+// A fabric sphere filling most of a 40 x 40 frame, no punctual light.
+Scene UnlitSphere() {
+  Scene s = CameraScene(40, 40, {0, 0, 3}, {0, 0, -1}, 0.4);
+  s.meshes.push_back(SphereMesh(0.5, 64, 32, true, 0.f));
+  return s;
+}
+
+// woven flat parameters (brdf/woven.h kParameterTable order).
+std::vector<double> Woven(Rgb<double> base, Rgb<double> spec, double r, double aniso, double m,
+                          double f0, double beta) {
+  return {base.r, base.g, base.b, spec.r, spec.g, spec.b, r, aniso, 0.0, m, f0, beta,
+          0.0,    0.0,    0.0,    0.6};
+}
+
+std::vector<Rgb<double>> Frame(const Scene& s, const Environment& env, const PreviewOptions& o,
+                               const std::vector<double>& x,
+                               std::unique_ptr<PreviewCache>* keep = nullptr) {
+  auto cache = PreviewCache::Build(s, &env, o);
+  std::vector<Rgb<double>> out;
+  EvaluatePreview(*cache, x.data(), out);
+  if (keep) *keep = std::move(cache);
+  return out;
+}
+
+// Lambert in a white furnace: sum_j (n.l_j / pi) L / pdf_mix(l_j) must integrate to 1, so the
+// exact IBL returns the base colour at every pixel (a wrong mixture pdf is off by a factor).
+TEST(S7ExactIbl, LambertWhiteFurnaceReturnsTheBaseColour) {
+  const Scene s = UnlitSphere();
+  const Environment env = Environment::Constant({1.0, 1.0, 1.0});
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  o.exact_ibl_samples = 1024;
+  std::unique_ptr<PreviewCache> cache;
+  const auto out = Frame(s, env, o, Woven({0.6, 0.5, 0.4}, {0, 0, 0}, 0.6, 0.7, 0.5, 0.05, 2.0),
+                         &cache);
+  ASSERT_GT(out.size(), 500u);
+  EXPECT_FALSE(cache->features.ibl);  // the split-sum path is off
+  EXPECT_TRUE(cache->features.direct);
+  EXPECT_TRUE(cache->radiance.empty());
+  double worst = 0.0;
+  for (const auto& px : out) {
+    worst = std::max({worst, std::abs(px.r / 0.6 - 1.0), std::abs(px.g / 0.5 - 1.0),
+                      std::abs(px.b / 0.4 - 1.0)});
+  }
+  EXPECT_LT(worst, 0.01) << "max relative error of the furnace over the sphere";
+}
+
+// The exact irradiance (diffuse only through Monte Carlo) in the furnace: E_d / pi = 1.
+TEST(S7ExactIbl, ExactIrradianceWhiteFurnace) {
+  const Scene s = UnlitSphere();
+  const Environment env = Environment::Constant({0.7, 0.7, 0.7});
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  o.exact_irradiance_samples = 512;
+  auto cache = PreviewCache::Build(s, &env, o);
+  ASSERT_GT(cache->pixels.size(), 500u);
+  EXPECT_TRUE(cache->features.ibl);
+  for (size_t i = 0; i < cache->pixels.size(); ++i)
+    ASSERT_NEAR(cache->irradiance[i * 3], 0.7, 0.007) << "pixel " << i;
+}
+
+// Isotropic yarn lobes (anisotropy 0, so r_e = r and the split sum's only approximation in a
+// constant environment is the albedo table): the exact integral of the woven direct BRDF must
+// equal the split-sum weight f0 PT_0 + (1 - f0) PT_beta from lut::DefaultWovenPhase() (our own
+// integrator) to the table's accuracy. Pixels with n.v > 0.2 (the table's coarse grazing rows
+// aside).
+TEST(S7ExactIbl, IsotropicYarnFurnaceMatchesThePhaseTable) {
+  const Scene s = UnlitSphere();
+  const Environment env = Environment::Constant({1.0, 1.0, 1.0});
+  const auto x = Woven({0, 0, 0}, {1, 1, 1}, 0.5, 0.0, 0.5, 0.3, 2.0);
+  PreviewOptions split;
+  split.model = ModelKind::kWoven;
+  PreviewOptions exact = split;
+  exact.exact_ibl_samples = 2048;
+  std::unique_ptr<PreviewCache> cs, ce;
+  const auto a = Frame(s, env, split, x, &cs);
+  const auto b = Frame(s, env, exact, x, &ce);
+  ASSERT_EQ(cs->pixels, ce->pixels);
+  int n = 0;
+  double sum_rel = 0.0, worst = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (cs->NoV[i] < 0.2f) continue;
+    const double rel = b[i].g / a[i].g - 1.0;
+    sum_rel += rel;
+    worst = std::max(worst, std::abs(rel));
+    ++n;
+  }
+  ASSERT_GT(n, 300);
+  EXPECT_LT(std::abs(sum_rel / n), 0.01) << "mean relative difference exact / split - 1";
+  EXPECT_LT(worst, 0.04) << "max relative difference";
+}
+
+// Anisotropic lobes (the fitted twill's shape, anisotropy 0.7): the split sum's isotropic r_e
+// is an approximation, so exact and split differ; this checks the test above could fail.
+TEST(S7ExactIbl, AnisotropicYarnFurnaceDiffersFromTheSplitSum) {
+  const Scene s = UnlitSphere();
+  const Environment env = Environment::Constant({1.0, 1.0, 1.0});
+  const auto x = Woven({0, 0, 0}, {1, 1, 1}, 0.65, 0.7, 0.88, 0.07, 0.95);
+  PreviewOptions split;
+  split.model = ModelKind::kWoven;
+  PreviewOptions exact = split;
+  exact.exact_ibl_samples = 1024;
+  const auto a = Frame(s, env, split, x);
+  const auto b = Frame(s, env, exact, x);
+  double worst = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) worst = std::max(worst, std::abs(b[i].g / a[i].g - 1.0));
+  EXPECT_GT(worst, 0.05);
+}
+
+// Same seed: bit-identical; another seed: different directions, the same integral to MC noise.
+// And the fit's sampled cache (sample_mask) gives the same pixels as the full frame: the
+// directions are seeded by the pixel index, not by the cache position.
+TEST(S7ExactIbl, DeterministicPerPixelAndSampleMaskInvariant) {
+  const Scene s = UnlitSphere();
+  const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
+  const auto x = Woven({0.4, 0.3, 0.2}, {0.3, 0.3, 0.3}, 0.6, 0.7, 0.3, 0.05, 1.5);
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  o.exact_ibl_samples = 256;
+  std::unique_ptr<PreviewCache> c1, c2, c3, cm;
+  const auto a = Frame(s, env, o, x, &c1);
+  const auto b = Frame(s, env, o, x, &c2);
+  PreviewOptions o2 = o;
+  o2.exact_ibl_seed = 7;
+  const auto c = Frame(s, env, o2, x, &c3);
+  int differ = 0;
+  double mean_a = 0.0, mean_c = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a[i].r, b[i].r);
+    ASSERT_EQ(a[i].b, b[i].b);
+    differ += a[i].r != c[i].r;
+    mean_a += a[i].g;
+    mean_c += c[i].g;
+  }
+  EXPECT_GT(differ, int(a.size()) / 2);
+  EXPECT_NEAR(mean_c / mean_a, 1.0, 0.01);
+
+  PreviewOptions om = o;
+  om.sample_mask.assign(size_t(s.card.width) * size_t(s.card.height), 0);
+  for (size_t p = 0; p < om.sample_mask.size(); p += 3) om.sample_mask[p] = 1;
+  const auto m = Frame(s, env, om, x, &cm);
+  ASSERT_GT(cm->pixels.size(), 100u);
+  std::map<int, size_t> full_index;
+  for (size_t i = 0; i < c1->pixels.size(); ++i) full_index[c1->pixels[i]] = i;
+  for (size_t i = 0; i < cm->pixels.size(); ++i) {
+    const size_t j = full_index.at(cm->pixels[i]);
+    ASSERT_EQ(m[i].r, a[j].r) << "pixel " << cm->pixels[i];
+    ASSERT_EQ(m[i].g, a[j].g);
+  }
+}
+
+TEST(S7ExactIbl, RejectsOutOfRangeSampleCounts) {
+  const Scene s = UnlitSphere();
+  const Environment env = Environment::Constant({1.0, 1.0, 1.0});
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  o.exact_ibl_samples = -1;
+  EXPECT_THROW(PreviewCache::Build(s, &env, o), std::invalid_argument);
+  o.exact_ibl_samples = 0;
+  o.exact_irradiance_samples = 70000;
+  EXPECT_THROW(PreviewCache::Build(s, &env, o), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace clothfit::render
