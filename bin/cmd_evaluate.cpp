@@ -103,7 +103,10 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     j["space"] = fit::ToString(o.space);
     j["ibl"] = a.exact_ibl > 0 ? "exact (" + std::to_string(a.exact_ibl) + " samples, seed " +
                                      std::to_string(a.exact_ibl_seed) + ")"
-                               : "split sum";
+               : a.exact_irradiance > 0
+                   ? "split sum with exact irradiance (" + std::to_string(a.exact_irradiance) +
+                         " samples, seed " + std::to_string(a.exact_ibl_seed) + ")"
+                   : "split sum";
     j["rmse"] = r.rmse;
     if (fj.contains("rmse")) j["fit_rmse"] = fj["rmse"];
     j["scenes"] = nlohmann::json::array();

@@ -36,10 +36,10 @@ void AddReportCommand(CLI::App& app, const Globals& g, int& exit_code) {
 #if defined(__GLIBC__)
     // The metrics allocate and free many 0.5 to 1.5 MB planes (FLIP, SSIM filters). Above
     // glibc's mmap threshold each one was a fresh mmap, zeroed page by page through page
-    // faults (perf: about a third of the report's CPU time in memset + faults, 6.2 of 30.6
-    // CPU s in the kernel). Keeping them on the heap (threshold 32 MB, glibc's maximum; no
-    // trimming) reuses the pages: same values (report.json bit-identical), 22.0 CPU s
-    // (docs/benchmarks.md, session 7).
+    // faults (perf: about a third of the report's CPU time in memset + faults). Keeping them
+    // on the heap (threshold 32 MB, glibc's maximum; no trimming) reuses the pages: same values
+    // (report.json bit-identical), 20.27 + 5.25 -> 15.75 + 0.42 user + system CPU s on the 15
+    // demo presets (docs/benchmarks.md "Session 7").
     mallopt(M_MMAP_THRESHOLD, 32 * 1024 * 1024);
     mallopt(M_TRIM_THRESHOLD, 1024 * 1024 * 1024);
 #endif

@@ -181,5 +181,25 @@ TEST(S7ExactIbl, RejectsOutOfRangeSampleCounts) {
   EXPECT_THROW(PreviewCache::Build(s, &env, o), std::invalid_argument);
 }
 
+// The exact IBL's cache holds N samples per sampled pixel; a frame whose total exceeds the
+// budget (2^28 samples) is refused before anything is allocated (and before light_begin's int
+// offsets could wrap). 80 x 80 pixels x 65536 samples = 2^28.6.
+TEST(S7ExactIbl, RefusesACacheOverTheSampleBudget) {
+  Scene s = CameraScene(80, 80, {0, 0, 3}, {0, 0, -1}, 0.4);
+  s.meshes.push_back(SphereMesh(0.5, 16, 8, true, 0.f));
+  const Environment env = Environment::Constant({1.0, 1.0, 1.0});
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  o.exact_ibl_samples = 1 << 16;
+  try {
+    PreviewCache::Build(s, &env, o);
+    ADD_FAILURE() << "expected invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("exact_ibl_samples 65536 x 6400 sampled pixels exceeds"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace clothfit::render

@@ -831,7 +831,7 @@ export function weaveMapUriUrl(uri, presetUrl, fieldName = 'weave_maps.uri') {
   const shown = JSON.stringify(uri);
   const bad = (why) => new Error(`${fieldName}: ${shown} ${why}`);
   if (typeof uri !== 'string' || uri.length === 0) throw bad('must be a non-empty string');
-  if (/[\u0000-\u001f\u007f\\]/.test(uri)) throw bad('has a control character or a backslash');
+  if (/[\u0000-\u001f\u007f\\%]/.test(uri)) throw bad('has a control character, a backslash or a "%" (a percent-escape could hide "..")');
   if (uri.startsWith('/') || /^[A-Za-z][A-Za-z0-9+.-]*:/.test(uri)) throw bad('must be relative to the preset (no scheme, no leading "/")');
   let depth = 0;
   for (const part of uri.split('/')) {
@@ -839,7 +839,9 @@ export function weaveMapUriUrl(uri, presetUrl, fieldName = 'weave_maps.uri') {
     else if (part !== '' && part !== '.') ++depth;
   }
   const base = new URL(presetUrl, globalThis.location?.href ?? 'file:///');
-  return new URL(uri, base).href;
+  const href = new URL(uri, base).href;
+  if (!href.startsWith(new URL('./', base).href)) throw bad('escapes the preset\'s directory');
+  return href;
 }
 
 export function weaveMapUrl(file, presetUrl, options = {}) {

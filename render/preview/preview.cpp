@@ -11,6 +11,7 @@
 #include <ceres/jet.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <chrono>
 #include <map>
 #include <mutex>
@@ -528,6 +529,7 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       c->NoV.push_back(pd.nov);
       if (ThreejsGeometryRoughnessApplies(c->options)) c->geometry_roughness.push_back(pd.gr);
       c->light_samples.insert(c->light_samples.end(), pd.lights.begin(), pd.lights.end());
+      // < 2^28 by the budget check in Build, so an int holds it.
       c->light_begin.push_back(int(c->light_samples.size()));
       c->irradiance.insert(c->irradiance.end(), pd.irr.begin(), pd.irr.end());
       c->radiance.insert(c->radiance.end(), pd.rad.begin(), pd.rad.end());
@@ -577,6 +579,24 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   if (!opt.sample_mask.empty() && opt.sample_mask.size() != np)
     throw std::invalid_argument("preview: sample_mask has " + std::to_string(opt.sample_mask.size()) +
                                 " entries for " + std::to_string(np) + " pixels");
+
+  // Validate before allocating: the exact IBL keeps N samples per covered pixel (24 B each, 40 B
+  // with a tangent), and light_begin indexes them with an int. Refuse more than 2^28 samples
+  // (about 6-11 GB) rather than exhaust memory or wrap the offsets; --stride or fewer samples
+  // (or render-preview's row chunks) bring a frame under the budget.
+  if (exact_ibl) {
+    size_t candidates = np;
+    if (!opt.sample_mask.empty())
+      candidates = size_t(std::count_if(opt.sample_mask.begin(), opt.sample_mask.end(),
+                                        [](auto m) { return m != 0; }));
+    const size_t per_pixel = size_t(opt.exact_ibl_samples) + scene.lights.size();
+    constexpr size_t kMaxLightSamples = size_t(1) << 28;
+    if (per_pixel > 0 && candidates > kMaxLightSamples / per_pixel)
+      throw std::invalid_argument(
+          "preview: exact_ibl_samples " + std::to_string(opt.exact_ibl_samples) + " x " +
+          std::to_string(candidates) + " sampled pixels exceeds the budget of 2^28 samples; use a "
+          "larger --stride or fewer samples");
+  }
 
   EmbreeScene bvh(scene);
   const double eps = 1e-5 * bvh.scale();

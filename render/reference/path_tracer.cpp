@@ -614,10 +614,13 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   int env_samples = st.first_env_samples;
   if (adaptive) {
     if (!(st.target_error < 1e3) || st.min_spp < 32 || st.min_spp % 16 != 0 ||
-        st.spp < st.min_spp || st.first_env_samples < 1)
+        st.spp < st.min_spp || st.first_env_samples < 1 ||
+        !(std::isfinite(st.allocation_z) && st.allocation_z >= 0.0) ||
+        !(std::isfinite(st.pilot_calibration) && st.pilot_calibration > 0.0))
       throw std::invalid_argument(
           "adaptive sampling: need target_error in (0, 1000), min_spp a multiple of 16 >= 32, "
-          "spp >= min_spp, first_env_samples >= 1");
+          "spp >= min_spp, first_env_samples >= 1, a finite allocation_z >= 0 and a finite "
+          "pilot_calibration > 0");
     // Sums of a pilot over all tiles.
     struct PilotSum {
       double se = 0.0, value = 0.0, pixels = 0.0, rays = 0.0;

@@ -36,7 +36,10 @@ struct AovSet {
 // 4: half images (half.R/G/B) in the EXR; per-reference environment samples and the
 //    re-planned adaptive pilot (docs/reference-renderer.md, session 6).
 // 5: adaptive allocation version 5 (shrunk per-tile errors, an upper confidence bound on the
-//    predicted error, stage-2 pilot pixels at random cell positions); fixed-spp images unchanged.
+//    predicted error, stage-2 pilot pixels at random cell positions) and the stratified second
+//    coordinate for batch lengths that are not powers of two: fixed-spp images are unchanged
+//    when every stratified set has a power-of-two size (the default environment samples 2 with
+//    spp 32..512 in powers of two); other spp or --env-samples 3, 5, 6 change them.
 inline constexpr int kReferenceRendererVersion = 5;
 
 // Half images: of a pixel's K i.i.d. batch means, half A is the mean of the first

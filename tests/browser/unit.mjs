@@ -164,7 +164,7 @@ if (args.clothfit) {
   check(() => assert.equal(weaveMapUriUrl('x.weave.exr', 'http://h/p/x.json'), 'http://h/p/x.weave.exr'), 'uri next to the preset');
   check(() => assert.equal(weaveMapUriUrl('m/../x.exr', 'http://h/p/x.json'), 'http://h/p/x.exr'), 'uri with an inner ..');
   for (const [bad, why] of [['../x.exr', /escapes the preset's directory/], ['a/../../x.exr', /escapes/], ['/etc/x.exr', /must be relative/],
-    ['http://evil/x.exr', /must be relative/], ['data:,x', /must be relative/], ['a\\b.exr', /backslash/], ['a\u0001.exr', /control character/], ['', /non-empty/], [7, /non-empty string/]]) {
+    ['http://evil/x.exr', /must be relative/], ['data:,x', /must be relative/], ['a\\b.exr', /backslash/], ['a/%2e%2e/%2e%2e/x.exr', /percent/i], ['.%2e/x.exr', /percent/i], ['a\u0001.exr', /control character/], ['', /non-empty/], [7, /non-empty string/]]) {
     check(() => assert.throws(() => weaveMapUriUrl(bad, 'http://h/p/x.json'), (e) => /^weave_maps\.uri: /.test(e.message) && why.test(e.message) && !/[\u0000-\u001f]/.test(e.message)), `bad uri ${JSON.stringify(bad)}`);
   }
   fs.copyFileSync(exrPath, path.join(mapsWork, 'moved.weave.exr'));
