@@ -4,8 +4,10 @@
 // split-sum albedo table, determinism, and the fit's sampled cache giving the same pixels as a
 // full frame.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
+#include <filesystem>
 #include <map>
 #include <vector>
 
@@ -13,6 +15,8 @@
 #include "brdf/woven.h"
 #include "render/preview/preview.h"
 #include "render/scene/environment.h"
+#include "render/scene/image_io.h"
+#include "render/scene/image_io.h"
 #include "tests/scene_fixtures.h"
 
 namespace clothfit::render {
@@ -199,6 +203,58 @@ TEST(S7ExactIbl, RefusesACacheOverTheSampleBudget) {
               std::string::npos)
         << e.what();
   }
+}
+
+// A non-uniform sky whose irradiance SH9 represents exactly: radiance 1 + 0.9 d_y (bands 0
+// and 1 only; 19:1 between zenith and nadir, so the environment sampler's pdf varies as much).
+// The exact irradiance and the exact IBL of a Lambert surface must then agree with the split
+// sum's SH9 irradiance; a Sample/Pdf mismatch (which the constant furnaces above cannot see,
+// their pdf being uniform in luminance) would bias them by the luminance ratio.
+TEST(S7ExactIbl, LinearSkyMatchesSh9Irradiance) {
+  const int W = 256, H = 128;
+  io::Image img;
+  img.width = W;
+  img.height = H;
+  img.channel_names = {"R", "G", "B"};
+  img.pixels.resize(size_t(W) * size_t(H) * 3);
+  for (int j = 0; j < H; ++j)
+    for (int i = 0; i < W; ++i) {
+      const Vec3<double> d = Environment::UvToDirection((i + 0.5) / W, (j + 0.5) / H);
+      for (int c = 0; c < 3; ++c) img.pixels[(size_t(j) * W + size_t(i)) * 3 + size_t(c)] = float(1.0 + 0.9 * d.y);
+    }
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("clothfit_s7_linear_sky_" + std::to_string(::getpid()) + ".exr"))
+                               .string();
+  io::WriteExr(path, img);
+  const Environment env = Environment::Load(path, 1.0, 0.0);
+  std::filesystem::remove(path);
+  const Scene s = UnlitSphere();
+  const auto x = Woven({0.5, 0.5, 0.5}, {0, 0, 0}, 0.6, 0.0, 0.5, 0.05, 2.0);
+  PreviewOptions split;
+  split.model = ModelKind::kWoven;
+  PreviewOptions irr = split, exact = split;
+  irr.exact_irradiance_samples = 1024;
+  exact.exact_ibl_samples = 1024;
+  auto cs = PreviewCache::Build(s, &env, split);
+  auto ci = PreviewCache::Build(s, &env, irr);
+  ASSERT_EQ(cs->pixels, ci->pixels);
+  ASSERT_GT(cs->pixels.size(), 500u);
+  double lo = 1e9, hi = 0.0, worst = 0.0;
+  for (size_t k = 0; k < cs->irradiance.size(); ++k) {
+    lo = std::min(lo, double(cs->irradiance[k]));
+    hi = std::max(hi, double(cs->irradiance[k]));
+    worst = std::max(worst, std::abs(double(ci->irradiance[k]) / double(cs->irradiance[k]) - 1.0));
+  }
+  EXPECT_GT(hi / lo, 2.0) << "the sky must light the sphere unevenly";
+  EXPECT_LT(worst, 0.02) << "exact irradiance vs SH9, max relative difference";
+  RecordProperty("irradiance_max_rel_diff", std::to_string(worst));
+  const auto a = Frame(s, env, split, x);
+  const auto b = Frame(s, env, exact, x);
+  ASSERT_EQ(a.size(), b.size());
+  double worst_frame = 0.0;
+  for (size_t k = 0; k < a.size(); ++k)
+    if (a[k].g > 1e-3) worst_frame = std::max(worst_frame, std::abs(b[k].g / a[k].g - 1.0));
+  EXPECT_LT(worst_frame, 0.03) << "exact IBL vs split sum for a Lambert surface";
 }
 
 }  // namespace
