@@ -1,7 +1,6 @@
 // clothfit report: per-fabric HTML reports, an index page, JSON and CSV from fit presets.
 #include <cstdio>
 #if defined(__GLIBC__)
-#include <malloc.h>
 #endif
 #include <filesystem>
 #include <memory>
@@ -33,16 +32,6 @@ void AddReportCommand(CLI::App& app, const Globals& g, int& exit_code) {
       ->required();
   cmd->add_option("--ppd", a->ppd, "FLIP pixels per degree")->check(CLI::Range(1.0, 1000.0));
   cmd->callback([a, &g, &exit_code]() {
-#if defined(__GLIBC__)
-    // The metrics allocate and free many 0.5 to 1.5 MB planes (FLIP, SSIM filters). Above
-    // glibc's mmap threshold each one was a fresh mmap, zeroed page by page through page
-    // faults (perf: about a third of the report's CPU time in memset + faults). Keeping them
-    // on the heap (threshold 32 MB, glibc's maximum; no trimming) reuses the pages: same values
-    // (report.json bit-identical), 20.27 + 5.25 -> 15.75 + 0.42 user + system CPU s on the 15
-    // demo presets (docs/benchmarks.md "Session 7").
-    mallopt(M_MMAP_THRESHOLD, 32 * 1024 * 1024);
-    mallopt(M_TRIM_THRESHOLD, 1024 * 1024 * 1024);
-#endif
     try {
       const std::vector<report::FabricSpec> specs = report::FabricsFromPresets(a->presets);
       std::vector<report::FabricReport> reports;

@@ -1,5 +1,5 @@
 // Material preset reader: render::ReadPreset, then the round trip the tool does when it writes
-// a preset back (PresetToJson, DumpJson).
+// a preset back (PresetToJson, DumpJson), and the weave maps' relative "uri" resolution.
 #include "render/scene/material.h"
 #include "tests/fuzz/fuzz_common.h"
 
@@ -9,6 +9,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   fuzz::Run([&] {
     const render::MaterialPreset p = render::ReadPreset(path);
     (void)limits::DumpJson(render::PresetToJson(p));
+    // The weave maps' relative "uri" (render::ResolvePresetRelativeUri, every reader's rule).
+    const auto wm = p.extra.find("weave_maps");
+    if (wm != p.extra.end() && wm->is_object())
+      for (const char* key : {"uri", "glint_uri"})
+        if (wm->contains(key) && (*wm)[key].is_string())
+          (void)render::ResolvePresetRelativeUri(path, std::string("weave_maps.") + key,
+                                                 (*wm)[key].get<std::string>());
   });
   return 0;
 }
