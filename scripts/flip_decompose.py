@@ -18,7 +18,9 @@ Usage:
   scripts/flip_decompose.py floor      --demo DIR --out DIR   (low-pass floors, noise floor)
   scripts/flip_decompose.py regions    --demo DIR --out DIR   (band / interior of the previews)
   scripts/flip_decompose.py supersample --demo DIR --out DIR --factors 1,2,4 [--models ...]
-  scripts/flip_decompose.py presets    --out DIR PRESET...    (previews named in fitted presets)
+  scripts/flip_decompose.py presets    --out DIR [--ppd P] PRESET...  (previews of fitted presets)
+  scripts/flip_decompose.py transplant --out DIR --sigmas 2,4 PRESET...  (shading vs texture)
+  scripts/flip_decompose.py tables --out DIR RESULT.json...  (markdown tables of the above)
 Common options: --clothfit BIN (default build/bin/clothfit), --fabrics canvas,twill.
 """
 import argparse
@@ -335,19 +337,80 @@ def cmd_presets(a):
             name = os.path.splitext(os.path.basename(s["scene"]))[0]
             cov = read_image(s["reference"], ["fabric"])[:, :, 0]
             fl = flip_map(a.clothfit, s["reference"], s["preview"], s["tone_mapping"],
-                          s["exposure"], a.out)
+                          s["exposure"], a.out, ppd=a.ppd)
             row = pool(fl, regions(cov))
-            row.update(fabric=os.path.basename(preset), scene=name, test=preset)
+            row.update(fabric=os.path.basename(preset), scene=name, test=preset, ppd=a.ppd or 67)
             rows.append(row)
             print("%s %s fabric %s interior %s band2 %s" % (
                 os.path.basename(preset), name, fmt(row["all"]), fmt(row["interior"]),
                 fmt(row["band2"])), flush=True)
-    json.dump(rows, open(os.path.join(a.out, "presets.json"), "w"), indent=1)
+    json.dump(rows, open(os.path.join(a.out, "presets%s.json" % (
+        "_ppd%g" % a.ppd if a.ppd else "")), "w"), indent=1)
+
+
+def cmd_transplant(a):
+    """Shading vs texture, per preview P (the presets given, their --images previews):
+      vs smooth ref : FLIP(S_s(ref2), P): P against the second-seed reference low-passed inside
+                      the fabric (Gaussian sigma s): P's error in the smooth shading alone;
+      + ref texture : FLIP(ref, S_s(P) * ref2 / S_s(ref2)): P low-passed the same way, times
+                      the reference's own texture (seed 2: independent noise): what P's shading
+                      would score with a perfect per-pixel pattern (weave, glints) on top."""
+    rows = []
+    for preset in a.presets:
+        p = json.load(open(preset))
+        tag = os.path.splitext(os.path.basename(preset))[0]
+        for s in p["fit"]["scenes"]:
+            name = os.path.splitext(os.path.basename(s["scene"]))[0]
+            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
+            masks = regions(cov)
+            r2 = read_image(s["reference2"], ["R", "G", "B"])
+            pv = read_image(s["preview"], ["R", "G", "B"])
+            for sigma in a.sigmas:
+                sr2 = smooth_inside(r2, cov, sigma)
+                sp = smooth_inside(pv, cov, sigma)
+                ratio = np.where(sr2 > 1e-6, r2 / np.maximum(sr2, 1e-6), 1.0)
+                full = (cov >= 0.999)[:, :, None]
+                tex = np.where(full, sp * ratio, pv).astype(np.float32)
+                base = os.path.join(a.out, "img", "%s_%s_s%g" % (tag, name, sigma))
+                os.makedirs(os.path.dirname(base), exist_ok=True)
+                write_exr(base + "_smoothref.exr", sr2)
+                write_exr(base + "_textured.exr", tex)
+                for what, ref, test in (("vs smooth ref", base + "_smoothref.exr", s["preview"]),
+                                        ("+ ref texture", s["reference"], base + "_textured.exr")):
+                    fl = flip_map(a.clothfit, ref, test, s["tone_mapping"], s["exposure"], a.out)
+                    row = pool(fl, masks)
+                    row.update(fabric=tag, scene=name, test="%s s%g" % (what, sigma))
+                    rows.append(row)
+                    print("%s %s %-20s fabric %s interior %s band2 %s" % (
+                        tag, name, row["test"], fmt(row["all"]), fmt(row["interior"]),
+                        fmt(row["band2"])), flush=True)
+    json.dump(rows, open(os.path.join(a.out, "transplant.json"), "w"), indent=1)
+
+
+def cmd_tables(a):
+    """Markdown tables (docs/flip.md) from the JSON files the other commands wrote: each
+    positional argument is one such file. Per (fabric or preset, test): the three scenes'
+    FLIP over the fabric mask, their mean, and the interior / band-2 means over scenes."""
+    for path in a.presets:
+        rows = json.load(open(path))
+        groups = {}
+        for r in rows:
+            groups.setdefault((r["fabric"], r["test"]), {})[r["scene"]] = r
+        print("\n%s\n" % path)
+        print("| fabric | test | sphere / drape / swatch | mean | interior | band 2 | band-2 share |")
+        print("|---|---|---|---:|---:|---:|---:|")
+        for (fab, test), sc in groups.items():
+            names = [s for s in SCENES if s in sc]
+            mean = lambda k: sum(sc[s][k] for s in names) / len(names)
+            print("| %s | %s | %s | %s | %s | %s | %.2f |" % (
+                fab, os.path.basename(str(test)), " / ".join(fmt(sc[s]["all"]) for s in names),
+                fmt(mean("all")), fmt(mean("interior")), fmt(mean("band2")),
+                mean("band2_share")))
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets"])
+    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables"])
     ap.add_argument("presets", nargs="*")
     ap.add_argument("--demo", default="/work/main/out/demo")
     ap.add_argument("--out", required=True)
@@ -357,7 +420,9 @@ def main():
     ap.add_argument("--sigmas", default="0.5,1,2,4,8")
     ap.add_argument("--blocks", default="4,16")
     ap.add_argument("--factors", default="1,2,4")
-    a = ap.parse_args()
+    ap.add_argument("--ppd", type=float, default=None,
+                    help="presets: FLIP pixels per degree (default: compare's, 67)")
+    a = ap.parse_intermixed_args()
     a.fabrics = a.fabrics.split(",")
     a.models = a.models.split(",")
     a.sigmas = [float(x) for x in a.sigmas.split(",")]
@@ -366,7 +431,7 @@ def main():
     a.clothfit = os.path.abspath(a.clothfit)
     os.makedirs(a.out, exist_ok=True)
     {"floor": cmd_floor, "regions": cmd_regions, "supersample": cmd_supersample,
-     "presets": cmd_presets}[a.command](a)
+     "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables}[a.command](a)
 
 
 if __name__ == "__main__":
