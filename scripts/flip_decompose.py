@@ -21,6 +21,7 @@ Usage:
   scripts/flip_decompose.py presets    --out DIR [--ppd P] PRESET...  (previews of fitted presets)
   scripts/flip_decompose.py transplant --out DIR --sigmas 2,4 PRESET...  (shading vs texture)
   scripts/flip_decompose.py tables --out DIR RESULT.json...  (markdown tables of the above)
+  scripts/flip_decompose.py contrast --out DIR --sigmas 4 PRESET...  (texture contrast, correlation)
 Common options: --clothfit BIN (default build/bin/clothfit), --fabrics canvas,twill.
 """
 import argparse
@@ -408,9 +409,42 @@ def cmd_tables(a):
                 mean("band2_share")))
 
 
+def cmd_contrast(a):
+    """Texture contrast: the standard deviation over the interior of L / S_s(L) - 1 (L = Rec.709
+    luminance, S_s the in-fabric Gaussian low-pass), for the reference, its second seed and each
+    preset's preview; and the correlation of the preview's texture with the reference's."""
+    rows = []
+    for preset in a.presets:
+        p = json.load(open(preset))
+        tag = os.path.splitext(os.path.basename(preset))[0]
+        for s in p["fit"]["scenes"]:
+            name = os.path.splitext(os.path.basename(s["scene"]))[0]
+            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
+            inner = regions(cov)["interior"] & (cov >= 0.999)
+            w = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+            tex = {}
+            for what, path in (("ref", s["reference"]), ("ref2", s["reference2"]),
+                               ("preview", s["preview"])):
+                img = read_image(path, ["R", "G", "B"]) @ w
+                sm = smooth_inside(img[:, :, None], cov, a.sigmas[0])[:, :, 0]
+                tex[what] = (img / np.maximum(sm, 1e-6) - 1.0)[inner]
+            corr = lambda x, y: float(np.corrcoef(x, y)[0, 1])
+            row = dict(preset=tag, scene=name, sigma=a.sigmas[0],
+                       ref=float(tex["ref"].std()), ref2=float(tex["ref2"].std()),
+                       preview=float(tex["preview"].std()),
+                       corr_ref_ref2=corr(tex["ref"], tex["ref2"]),
+                       corr_ref_preview=corr(tex["ref"], tex["preview"]))
+            rows.append(row)
+            print("%-24s %-6s texture std: ref %.3f ref2 %.3f preview %.3f; corr(ref, ref2) %.2f "
+                  "corr(ref, preview) %.2f" % (tag, name, row["ref"], row["ref2"], row["preview"],
+                                              row["corr_ref_ref2"], row["corr_ref_preview"]),
+                  flush=True)
+    json.dump(rows, open(os.path.join(a.out, "contrast.json"), "w"), indent=1)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables"])
+    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast"])
     ap.add_argument("presets", nargs="*")
     ap.add_argument("--demo", default="/work/main/out/demo")
     ap.add_argument("--out", required=True)
@@ -431,7 +465,7 @@ def main():
     a.clothfit = os.path.abspath(a.clothfit)
     os.makedirs(a.out, exist_ok=True)
     {"floor": cmd_floor, "regions": cmd_regions, "supersample": cmd_supersample,
-     "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables}[a.command](a)
+     "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables, "contrast": cmd_contrast}[a.command](a)
 
 
 if __name__ == "__main__":
