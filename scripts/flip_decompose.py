@@ -302,6 +302,8 @@ def cmd_supersample(a):
     os.makedirs(cards, exist_ok=True)
     for fabric in a.fabrics:
         for sc in demo_scenes(a.demo, fabric):
+            if a.scenes and sc["name"] not in a.scenes:
+                continue
             cov = read_image(sc["reference"], ["fabric"])[:, :, 0]
             masks = regions(cov)
             for model in a.models:
@@ -454,6 +456,7 @@ def main():
     ap.add_argument("--sigmas", default="0.5,1,2,4,8")
     ap.add_argument("--blocks", default="4,16")
     ap.add_argument("--factors", default="1,2,4")
+    ap.add_argument("--scenes", default="", help="supersample: only these scenes (sphere,drape,swatch)")
     ap.add_argument("--ppd", type=float, default=None,
                     help="presets: FLIP pixels per degree (default: compare's, 67)")
     a = ap.parse_intermixed_args()
@@ -462,6 +465,7 @@ def main():
     a.sigmas = [float(x) for x in a.sigmas.split(",")]
     a.blocks = [int(x) for x in a.blocks.split(",")]
     a.factors = [int(x) for x in a.factors.split(",")]
+    a.scenes = [x for x in a.scenes.split(",") if x]
     a.clothfit = os.path.abspath(a.clothfit)
     os.makedirs(a.out, exist_ok=True)
     {"floor": cmd_floor, "regions": cmd_regions, "supersample": cmd_supersample,
