@@ -22,6 +22,7 @@ Usage:
   scripts/flip_decompose.py transplant --out DIR --sigmas 2,4 PRESET...  (shading vs texture)
   scripts/flip_decompose.py tables --out DIR RESULT.json...  (markdown tables of the above)
   scripts/flip_decompose.py contrast --out DIR --sigmas 4 PRESET...  (texture contrast, correlation)
+  scripts/flip_decompose.py period --out DIR --sigmas 4  (texture autocorrelation on the sphere)
 Common options: --clothfit BIN (default build/bin/clothfit), --fabrics canvas,twill.
 """
 import argparse
@@ -444,9 +445,33 @@ def cmd_contrast(a):
     json.dump(rows, open(os.path.join(a.out, "contrast.json"), "w"), indent=1)
 
 
+def cmd_period(a):
+    """Texture scale: autocorrelation of the reference's texture L / S_s(L) - 1 over the central
+    64 x 64 px of the sphere (circular, via FFT), along x and y, and its highest peak outside
+    the central 5 x 5 px."""
+    for fabric in a.fabrics:
+        sc = [s for s in demo_scenes(a.demo, fabric) if s["name"] == "sphere"][0]
+        img = read_image(sc["reference"], ["R", "G", "B"]) @ np.array(
+            [0.2126, 0.7152, 0.0722], dtype=np.float32)
+        cov = read_image(sc["reference"], ["fabric"])[:, :, 0]
+        sm = smooth_inside(img[:, :, None], cov, a.sigmas[0])[:, :, 0]
+        h, w = img.shape
+        t = (img / np.maximum(sm, 1e-6) - 1.0)[h // 2 - 32:h // 2 + 32, w // 2 - 32:w // 2 + 32]
+        t = t - t.mean()
+        f = np.fft.fft2(t)
+        ac = np.fft.fftshift(np.real(np.fft.ifft2(f * np.conj(f))))
+        ac /= ac[32, 32]
+        print("%s x lag 0..15: %s" % (fabric, " ".join("%.2f" % v for v in ac[32, 32:48])))
+        print("%s y lag 0..15: %s" % (fabric, " ".join("%.2f" % v for v in ac[32:48, 32])))
+        ac[30:35, 30:35] = -9
+        i = np.unravel_index(np.argmax(ac), ac.shape)
+        print("%s highest peak at (dy, dx) = (%d, %d) px: %.2f" % (fabric, i[0] - 32, i[1] - 32,
+                                                                   ac[i]))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast"])
+    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast", "period"])
     ap.add_argument("presets", nargs="*")
     ap.add_argument("--demo", default="/work/main/out/demo")
     ap.add_argument("--out", required=True)
@@ -469,7 +494,7 @@ def main():
     a.clothfit = os.path.abspath(a.clothfit)
     os.makedirs(a.out, exist_ok=True)
     {"floor": cmd_floor, "regions": cmd_regions, "supersample": cmd_supersample,
-     "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables, "contrast": cmd_contrast}[a.command](a)
+     "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables, "contrast": cmd_contrast, "period": cmd_period}[a.command](a)
 
 
 if __name__ == "__main__":
