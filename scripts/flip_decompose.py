@@ -19,7 +19,8 @@ Usage:
   scripts/flip_decompose.py regions    --demo DIR --out DIR   (band / interior of the previews)
   scripts/flip_decompose.py supersample --demo DIR --out DIR --factors 1,2,4 [--models ...]
   scripts/flip_decompose.py presets    --out DIR [--ppd P] PRESET...  (previews of fitted presets)
-  scripts/flip_decompose.py transplant --out DIR --sigmas 2,4 PRESET...  (shading vs texture)
+  scripts/flip_decompose.py transplant --out DIR --sigmas 2,4 [--shift DY,DX] PRESET...
+                                                            (shading vs texture)
   scripts/flip_decompose.py tables --out DIR RESULT.json...  (markdown tables of the above)
   scripts/flip_decompose.py contrast --out DIR --sigmas 4 PRESET...  (texture contrast, correlation)
   scripts/flip_decompose.py period --out DIR --sigmas 4  (texture autocorrelation on the sphere)
@@ -379,8 +380,22 @@ def cmd_transplant(a):
                 os.makedirs(os.path.dirname(base), exist_ok=True)
                 write_exr(base + "_smoothref.exr", sr2)
                 write_exr(base + "_textured.exr", tex)
-                for what, ref, test in (("vs smooth ref", base + "_smoothref.exr", s["preview"]),
-                                        ("+ ref texture", s["reference"], base + "_textured.exr")):
+                tests = [("vs smooth ref", base + "_smoothref.exr", s["preview"]),
+                         ("+ ref texture", s["reference"], base + "_textured.exr")]
+                if a.shift:
+                    # The same texture moved by (dy, dx) px (circularly): the reference's texture
+                    # statistics without its phase. Its correlation with the unshifted texture
+                    # over the interior is printed.
+                    moved = np.roll(ratio, a.shift, axis=(0, 1))
+                    sh = np.where(full, sp * moved, pv).astype(np.float32)
+                    write_exr(base + "_shifted.exr", sh)
+                    inner = masks["interior"] & full[:, :, 0]
+                    lum = np.array([0.2126, 0.7152, 0.0722])
+                    c = np.corrcoef((ratio @ lum)[inner], (moved @ lum)[inner])[0, 1]
+                    print("%s %s s%g: shift %s, texture correlation %.3f" % (
+                        tag, name, sigma, a.shift, c), flush=True)
+                    tests.append(("+ shifted ref texture", s["reference"], base + "_shifted.exr"))
+                for what, ref, test in tests:
                     fl = flip_map(a.clothfit, ref, test, s["tone_mapping"], s["exposure"], a.out)
                     row = pool(fl, masks)
                     row.update(fabric=tag, scene=name, test="%s s%g" % (what, sigma))
@@ -481,6 +496,7 @@ def main():
     ap.add_argument("--sigmas", default="0.5,1,2,4,8")
     ap.add_argument("--blocks", default="4,16")
     ap.add_argument("--factors", default="1,2,4")
+    ap.add_argument("--shift", default="", help="transplant: also the texture moved by dy,dx px")
     ap.add_argument("--scenes", default="", help="supersample: only these scenes (sphere,drape,swatch)")
     ap.add_argument("--ppd", type=float, default=None,
                     help="presets: FLIP pixels per degree (default: compare's, 67)")
@@ -491,6 +507,7 @@ def main():
     a.blocks = [int(x) for x in a.blocks.split(",")]
     a.factors = [int(x) for x in a.factors.split(",")]
     a.scenes = [x for x in a.scenes.split(",") if x]
+    a.shift = tuple(int(x) for x in a.shift.split(",")) if a.shift else None
     a.clothfit = os.path.abspath(a.clothfit)
     os.makedirs(a.out, exist_ok=True)
     {"floor": cmd_floor, "regions": cmd_regions, "supersample": cmd_supersample,
