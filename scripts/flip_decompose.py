@@ -1,0 +1,518 @@
+#!/usr/bin/python3
+"""Where the per-pixel FLIP error of the demo previews is (docs/flip.md; issue 12).
+
+Measurement only. Every FLIP figure comes from `clothfit compare` (fit/metrics/flip.cpp, the
+report's own LDR-FLIP: display values with the scene card's tone mapping, PPD 67); this script
+only makes the test images (low-passed references, supersampled previews) and the pixel masks,
+and pools the per-pixel FLIP map (`compare --maps`) over them.
+
+Needs /usr/bin/python3 with numpy (Debian python3-numpy) and oiiotool (EXR <-> FITS, since no
+EXR module is installed for python). Images are 256 x 256, so everything is cheap.
+
+Regions (per scene; the report's region is the fabric mask, reference coverage > 0.5):
+  band r : fabric pixels with a non-fabric pixel within Chebyshev distance r (the silhouette)
+  interior: fabric pixels not in band 2
+A region's "share" is its part of the scene's FLIP sum over the fabric mask.
+
+Usage:
+  scripts/flip_decompose.py floor      --demo DIR --out DIR   (low-pass floors, noise floor)
+  scripts/flip_decompose.py regions    --demo DIR --out DIR   (band / interior of the previews)
+  scripts/flip_decompose.py supersample --demo DIR --out DIR --factors 1,2,4 [--models ...]
+  scripts/flip_decompose.py presets    --out DIR [--ppd P] PRESET...  (previews of fitted presets)
+  scripts/flip_decompose.py transplant --out DIR --sigmas 2,4 [--shift DY,DX] PRESET...
+                                                            (shading vs texture)
+  scripts/flip_decompose.py tables --out DIR RESULT.json...  (markdown tables of the above)
+  scripts/flip_decompose.py contrast --out DIR --sigmas 4 PRESET...  (texture contrast, correlation)
+  scripts/flip_decompose.py period --out DIR --sigmas 4  (texture autocorrelation on the sphere)
+Common options: --clothfit BIN (default build/bin/clothfit), --fabrics canvas,twill.
+"""
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+SCENES = ("sphere", "drape", "swatch")
+
+
+# ---------------------------------------------------------------- image I/O (via FITS)
+def _fits_header(path):
+    with open(path, "rb") as f:
+        data = f.read()
+    cards, off = {}, 0
+    while True:
+        block = data[off:off + 2880]
+        off += 2880
+        done = False
+        for i in range(0, 2880, 80):
+            card = block[i:i + 80].decode("ascii", "replace")
+            key = card[:8].strip()
+            if key == "END":
+                done = True
+                break
+            if card[8:10] == "= ":
+                cards.setdefault(key, card[10:].split("/")[0].strip())
+        if done:
+            return cards, data, off
+
+
+def read_image(path, channels):
+    """H x W x C float32 of the named channels of an image file (oiiotool --ch)."""
+    tmp = tempfile.mkdtemp(prefix="flipdec")
+    try:
+        f = os.path.join(tmp, "x.fits")
+        subprocess.run(["oiiotool", path, "--ch", ",".join(channels), "-d", "float", "-o", f],
+                       check=True)
+        cards, data, off = _fits_header(f)
+        n = int(cards["NAXIS"])
+        dims = [int(cards["NAXIS%d" % (k + 1)]) for k in range(n)]
+        if n == 3:  # OIIO: NAXIS1 = channels (fastest), NAXIS2 = width, NAXIS3 = height
+            c, w, h = dims
+        else:
+            c, (w, h) = 1, dims
+        # OIIO 2.4's FITS layout (measured against a TIFF of the same EXR): one padding row,
+        # then the image rows bottom-up (FITS convention).
+        row = w * c
+        a = np.frombuffer(data[off:off + 4 * row * (h + 1)], dtype=">f4").astype(np.float32)
+        return a[row:].reshape(h, w, c)[::-1].copy()
+    finally:
+        shutil.rmtree(tmp)
+
+
+def write_exr(path, a):
+    """Write H x W x 3 float32 as a linear EXR (R, G, B), the same orientation read_image reads."""
+    h, w, c = a.shape
+    tmp = tempfile.mkdtemp(prefix="flipdec")
+    try:
+        f = os.path.join(tmp, "x.fits")
+        cards = ["SIMPLE  = %20s" % "T", "BITPIX  = %20d" % -32, "NAXIS   = %20d" % 3,
+                 "NAXIS1  = %20d" % c, "NAXIS2  = %20d" % w, "NAXIS3  = %20d" % h, "END"]
+        head = "".join(x.ljust(80) for x in cards).encode("ascii")
+        head += b" " * ((-len(head)) % 2880)
+        # The layout read_image reads: one padding row, then the rows bottom-up.
+        body = np.zeros(w * c, dtype=">f4").tobytes()
+        body += np.ascontiguousarray(a[::-1], dtype=">f4").tobytes()
+        body += b"\0" * ((-len(body)) % 2880)
+        with open(f, "wb") as o:
+            o.write(head + body)
+        subprocess.run(["oiiotool", f, "--chnames", "R,G,B", "-d", "float", "-o", path],
+                       check=True)
+    finally:
+        shutil.rmtree(tmp)
+
+
+# ---------------------------------------------------------------- FLIP via clothfit compare
+def flip_map(clothfit, ref, test, tone_mapping, exposure, workdir, ppd=None):
+    """Per-pixel LDR-FLIP map (H x W) of `test` against `ref`, whole frame."""
+    maps = tempfile.mkdtemp(prefix="maps", dir=workdir)
+    try:
+        cmd = [clothfit, "--quiet", "compare", ref, test, "--tone-mapping", tone_mapping,
+               "--exposure", str(exposure), "--json", "--maps", maps]
+        if ppd:
+            cmd += ["--ppd", str(ppd)]
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        return read_image(os.path.join(maps, "flip.exr"), ["Y"])[:, :, 0]
+    finally:
+        shutil.rmtree(maps)
+
+
+# ---------------------------------------------------------------- masks and filters
+def regions(cov):
+    fabric = cov > 0.5
+    out = {"fabric": fabric}
+    bg = ~fabric
+    h, w = fabric.shape
+    for r in (1, 2, 4):
+        near = np.zeros_like(bg)
+        pad = np.pad(bg, r, mode="constant", constant_values=False)
+        for dy in range(-r, r + 1):
+            for dx in range(-r, r + 1):
+                near |= pad[r + dy:r + dy + h, r + dx:r + dx + w]
+        out["band%d" % r] = fabric & near
+    out["interior"] = fabric & ~out["band2"]
+    return out
+
+
+def gauss1d(sigma):
+    rad = int(np.ceil(3 * sigma))
+    x = np.arange(-rad, rad + 1, dtype=np.float64)
+    k = np.exp(-0.5 * (x / sigma) ** 2)
+    return k / k.sum()
+
+
+def conv_sep(a, k):
+    """Separable convolution of H x W (x C) with zero padding."""
+    r = len(k) // 2
+    out = a.astype(np.float64)
+    for axis in (0, 1):
+        pad = [(0, 0)] * out.ndim
+        pad[axis] = (r, r)
+        p = np.pad(out, pad)
+        acc = np.zeros_like(out)
+        n = out.shape[axis]
+        for i, kv in enumerate(k):
+            sl = [slice(None)] * out.ndim
+            sl[axis] = slice(i, i + n)
+            acc += kv * p[tuple(sl)]
+        out = acc
+    return out
+
+
+def smooth_inside(img, cov, sigma):
+    """Gaussian low-pass of the fabric only (normalised convolution over the fully covered
+    pixels, cov >= 0.999); the fully covered pixels are replaced, every other pixel (background,
+    partly covered silhouette pixels) keeps `img`. So the result differs from `img` only in the
+    fabric's interior texture."""
+    full = (cov >= 0.999).astype(np.float64)
+    k = gauss1d(sigma)
+    num = conv_sep(img * full[:, :, None], k)
+    den = conv_sep(full, k)[:, :, None]
+    out = img.astype(np.float64).copy()
+    sel = full > 0
+    out[sel] = (num / np.maximum(den, 1e-12))[sel]
+    return out.astype(np.float32)
+
+
+def block_inside(img, cov, b):
+    """Each b x b block's mean over its fully covered pixels, written back to those pixels
+    (nearest 'upsampling' of the block means); every other pixel keeps `img`."""
+    full = cov >= 0.999
+    out = img.copy()
+    h, w = full.shape
+    for y in range(0, h, b):
+        for x in range(0, w, b):
+            m = full[y:y + b, x:x + b]
+            if m.any():
+                blk = out[y:y + b, x:x + b]
+                blk[m] = img[y:y + b, x:x + b][m].mean(axis=0)
+    return out
+
+
+def box_down(img, f):
+    h, w, c = img.shape
+    return img.reshape(h // f, f, w // f, f, c).mean(axis=(1, 3)).astype(np.float32)
+
+
+# ---------------------------------------------------------------- demo bookkeeping
+def demo_scenes(demo, fabric, model="woven"):
+    p = json.load(open(os.path.join(demo, "%s_%s.json" % (fabric, model))))
+    out = []
+    for s in p["fit"]["scenes"]:
+        out.append(dict(name=os.path.splitext(os.path.basename(s["scene"]))[0], scene=s["scene"],
+                        reference=s["reference"], reference2=s.get("reference2"),
+                        tone_mapping=s["tone_mapping"], exposure=s["exposure"]))
+    return out
+
+
+def pool(fl, masks):
+    fab = masks["fabric"]
+    tot = fl[fab].sum()
+    row = {"all": float(fl[fab].mean())}
+    for k in ("band1", "band2", "band4", "interior"):
+        m = masks[k]
+        row[k] = float(fl[m].mean()) if m.any() else 0.0
+        row[k + "_px"] = int(m.sum())
+        row[k + "_share"] = float(fl[m].sum() / tot) if tot > 0 else 0.0
+    row["fabric_px"] = int(fab.sum())
+    return row
+
+
+def fmt(x):
+    return "%.4f" % x
+
+
+# ---------------------------------------------------------------- commands
+def cmd_floor(a):
+    """FLIP of low-passed references (a perfect smooth preview) and the noise floor."""
+    rows = []
+    for fabric in a.fabrics:
+        for sc in demo_scenes(a.demo, fabric):
+            r1 = read_image(sc["reference"], ["R", "G", "B"])
+            cov = read_image(sc["reference"], ["fabric"])[:, :, 0]
+            masks = regions(cov)
+            tests = {"noise floor (seed 2)": sc["reference2"]}
+            r2 = read_image(sc["reference2"], ["R", "G", "B"])
+            variants = []
+            for s in a.sigmas:
+                variants.append(("gauss %g of seed 1" % s, smooth_inside(r1, cov, s)))
+                variants.append(("gauss %g of seed 2" % s, smooth_inside(r2, cov, s)))
+            for b in a.blocks:
+                variants.append(("block %d of seed 2" % b, block_inside(r2, cov, b)))
+            for name, img in variants:
+                p = os.path.join(a.out, "img", "%s_%s_%s.exr" % (fabric, sc["name"],
+                                                                  name.replace(" ", "_")))
+                os.makedirs(os.path.dirname(p), exist_ok=True)
+                write_exr(p, img)
+                tests[name] = p
+            for name, p in tests.items():
+                fl = flip_map(a.clothfit, sc["reference"], p, sc["tone_mapping"], sc["exposure"],
+                              a.out)
+                row = pool(fl, masks)
+                row.update(fabric=fabric, scene=sc["name"], test=name)
+                rows.append(row)
+                print("%s %s %-24s fabric %s interior %s band2 %s" % (
+                    fabric, sc["name"], name, fmt(row["all"]), fmt(row["interior"]),
+                    fmt(row["band2"])), flush=True)
+    json.dump(rows, open(os.path.join(a.out, "floor.json"), "w"), indent=1)
+
+
+def model_previews(demo, fabric, model):
+    return {os.path.basename(p).split("_preview")[0]: os.path.join(demo, "%s_%s" % (fabric, model), p)
+            for p in os.listdir(os.path.join(demo, "%s_%s" % (fabric, model)))
+            if p.endswith("_preview.exr")}
+
+
+def cmd_regions(a):
+    rows = []
+    for fabric in a.fabrics:
+        for sc in demo_scenes(a.demo, fabric):
+            cov = read_image(sc["reference"], ["fabric"])[:, :, 0]
+            masks = regions(cov)
+            for model in a.models:
+                pv = model_previews(a.demo, fabric, model)[sc["name"]]
+                fl = flip_map(a.clothfit, sc["reference"], pv, sc["tone_mapping"], sc["exposure"],
+                              a.out)
+                row = pool(fl, masks)
+                row.update(fabric=fabric, scene=sc["name"], test=model)
+                rows.append(row)
+                print("%s %s %-16s fabric %s interior %s band2 %s (%d px, share %.2f)" % (
+                    fabric, sc["name"], model, fmt(row["all"]), fmt(row["interior"]),
+                    fmt(row["band2"]), row["band2_px"], row["band2_share"]), flush=True)
+    json.dump(rows, open(os.path.join(a.out, "regions.json"), "w"), indent=1)
+
+
+def scaled_card(scene, f, out_dir):
+    card = json.load(open(scene))
+    card["gltf"] = os.path.join(os.path.dirname(os.path.abspath(scene)), card["gltf"])
+    card["width"] *= f
+    card["height"] *= f
+    p = os.path.join(out_dir, "%s_x%d.json" % (os.path.splitext(os.path.basename(scene))[0], f))
+    json.dump(card, open(p, "w"), indent=1)
+    return p
+
+
+def cmd_supersample(a):
+    """render-preview on a copy of the scene card at f x the width and height (same camera),
+    box-downsampled by f: a preview with f^2 samples per pixel (the reference integrates each
+    pixel with stratified jitter; the preview takes one sample at the pixel centre)."""
+    rows = []
+    cards = os.path.join(a.out, "cards")
+    os.makedirs(cards, exist_ok=True)
+    for fabric in a.fabrics:
+        for sc in demo_scenes(a.demo, fabric):
+            if a.scenes and sc["name"] not in a.scenes:
+                continue
+            cov = read_image(sc["reference"], ["fabric"])[:, :, 0]
+            masks = regions(cov)
+            for model in a.models:
+                preset = os.path.join(a.demo, "%s_%s.json" % (fabric, model))
+                for f in a.factors:
+                    card = scaled_card(sc["scene"], f, cards)
+                    big = os.path.join(a.out, "img", "%s_%s_%s_x%d_full.exr" % (
+                        fabric, model, sc["name"], f))
+                    os.makedirs(os.path.dirname(big), exist_ok=True)
+                    subprocess.run(["nice", "-n", "10", a.clothfit, "--quiet", "render-preview",
+                                    "--scene", card, "--material", preset, "--out", big],
+                                   check=True)
+                    img = read_image(big, ["R", "G", "B"])
+                    small = os.path.join(a.out, "img", "%s_%s_%s_x%d.exr" % (
+                        fabric, model, sc["name"], f))
+                    write_exr(small, box_down(img, f))
+                    fl = flip_map(a.clothfit, sc["reference"], small, sc["tone_mapping"],
+                                  sc["exposure"], a.out)
+                    row = pool(fl, masks)
+                    row.update(fabric=fabric, scene=sc["name"], test="%s x%d" % (model, f))
+                    rows.append(row)
+                    print("%s %s %-20s fabric %s interior %s band2 %s" % (
+                        fabric, sc["name"], row["test"], fmt(row["all"]),
+                        fmt(row["interior"]), fmt(row["band2"])), flush=True)
+    json.dump(rows, open(os.path.join(a.out, "supersample.json"), "w"), indent=1)
+
+
+def cmd_presets(a):
+    """FLIP of the previews a fit wrote (--images) for each preset, per region."""
+    rows = []
+    for preset in a.presets:
+        p = json.load(open(preset))
+        for s in p["fit"]["scenes"]:
+            name = os.path.splitext(os.path.basename(s["scene"]))[0]
+            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
+            fl = flip_map(a.clothfit, s["reference"], s["preview"], s["tone_mapping"],
+                          s["exposure"], a.out, ppd=a.ppd)
+            row = pool(fl, regions(cov))
+            row.update(fabric=os.path.basename(preset), scene=name, test=preset, ppd=a.ppd or 67)
+            rows.append(row)
+            print("%s %s fabric %s interior %s band2 %s" % (
+                os.path.basename(preset), name, fmt(row["all"]), fmt(row["interior"]),
+                fmt(row["band2"])), flush=True)
+    json.dump(rows, open(os.path.join(a.out, "presets%s.json" % (
+        "_ppd%g" % a.ppd if a.ppd else "")), "w"), indent=1)
+
+
+def cmd_transplant(a):
+    """Shading vs texture, per preview P (the presets given, their --images previews):
+      vs smooth ref : FLIP(S_s(ref2), P): P against the second-seed reference low-passed inside
+                      the fabric (Gaussian sigma s): P's error in the smooth shading alone;
+      + ref texture : FLIP(ref, S_s(P) * ref2 / S_s(ref2)): P low-passed the same way, times
+                      the reference's own texture (seed 2: independent noise): what P's shading
+                      would score with a perfect per-pixel pattern (weave, glints) on top."""
+    rows = []
+    for preset in a.presets:
+        p = json.load(open(preset))
+        tag = os.path.splitext(os.path.basename(preset))[0]
+        for s in p["fit"]["scenes"]:
+            name = os.path.splitext(os.path.basename(s["scene"]))[0]
+            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
+            masks = regions(cov)
+            r2 = read_image(s["reference2"], ["R", "G", "B"])
+            pv = read_image(s["preview"], ["R", "G", "B"])
+            for sigma in a.sigmas:
+                sr2 = smooth_inside(r2, cov, sigma)
+                sp = smooth_inside(pv, cov, sigma)
+                ratio = np.where(sr2 > 1e-6, r2 / np.maximum(sr2, 1e-6), 1.0)
+                full = (cov >= 0.999)[:, :, None]
+                tex = np.where(full, sp * ratio, pv).astype(np.float32)
+                base = os.path.join(a.out, "img", "%s_%s_s%g" % (tag, name, sigma))
+                os.makedirs(os.path.dirname(base), exist_ok=True)
+                write_exr(base + "_smoothref.exr", sr2)
+                write_exr(base + "_textured.exr", tex)
+                tests = [("vs smooth ref", base + "_smoothref.exr", s["preview"]),
+                         ("+ ref texture", s["reference"], base + "_textured.exr")]
+                if a.shift:
+                    # The same texture moved by (dy, dx) px (circularly): the reference's texture
+                    # statistics without its phase. Its correlation with the unshifted texture
+                    # over the interior is printed.
+                    moved = np.roll(ratio, a.shift, axis=(0, 1))
+                    sh = np.where(full, sp * moved, pv).astype(np.float32)
+                    write_exr(base + "_shifted.exr", sh)
+                    inner = masks["interior"] & full[:, :, 0]
+                    lum = np.array([0.2126, 0.7152, 0.0722])
+                    c = np.corrcoef((ratio @ lum)[inner], (moved @ lum)[inner])[0, 1]
+                    print("%s %s s%g: shift %s, texture correlation %.3f" % (
+                        tag, name, sigma, a.shift, c), flush=True)
+                    tests.append(("+ shifted ref texture", s["reference"], base + "_shifted.exr"))
+                for what, ref, test in tests:
+                    fl = flip_map(a.clothfit, ref, test, s["tone_mapping"], s["exposure"], a.out)
+                    row = pool(fl, masks)
+                    row.update(fabric=tag, scene=name, test="%s s%g" % (what, sigma))
+                    rows.append(row)
+                    print("%s %s %-20s fabric %s interior %s band2 %s" % (
+                        tag, name, row["test"], fmt(row["all"]), fmt(row["interior"]),
+                        fmt(row["band2"])), flush=True)
+    json.dump(rows, open(os.path.join(a.out, "transplant.json"), "w"), indent=1)
+
+
+def cmd_tables(a):
+    """Markdown tables (docs/flip.md) from the JSON files the other commands wrote: each
+    positional argument is one such file. Per (fabric or preset, test): the three scenes'
+    FLIP over the fabric mask, their mean, and the interior / band-2 means over scenes."""
+    for path in a.presets:
+        rows = json.load(open(path))
+        groups = {}
+        for r in rows:
+            groups.setdefault((r["fabric"], r["test"]), {})[r["scene"]] = r
+        print("\n%s\n" % path)
+        print("| fabric | test | sphere / drape / swatch | mean | interior | band 2 | band-2 share |")
+        print("|---|---|---|---:|---:|---:|---:|")
+        for (fab, test), sc in groups.items():
+            names = [s for s in SCENES if s in sc]
+            mean = lambda k: sum(sc[s][k] for s in names) / len(names)
+            print("| %s | %s | %s | %s | %s | %s | %.2f |" % (
+                fab, os.path.basename(str(test)), " / ".join(fmt(sc[s]["all"]) for s in names),
+                fmt(mean("all")), fmt(mean("interior")), fmt(mean("band2")),
+                mean("band2_share")))
+
+
+def cmd_contrast(a):
+    """Texture contrast: the standard deviation over the interior of L / S_s(L) - 1 (L = Rec.709
+    luminance, S_s the in-fabric Gaussian low-pass), for the reference, its second seed and each
+    preset's preview; and the correlation of the preview's texture with the reference's."""
+    rows = []
+    for preset in a.presets:
+        p = json.load(open(preset))
+        tag = os.path.splitext(os.path.basename(preset))[0]
+        for s in p["fit"]["scenes"]:
+            name = os.path.splitext(os.path.basename(s["scene"]))[0]
+            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
+            inner = regions(cov)["interior"] & (cov >= 0.999)
+            w = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+            tex = {}
+            for what, path in (("ref", s["reference"]), ("ref2", s["reference2"]),
+                               ("preview", s["preview"])):
+                img = read_image(path, ["R", "G", "B"]) @ w
+                sm = smooth_inside(img[:, :, None], cov, a.sigmas[0])[:, :, 0]
+                tex[what] = (img / np.maximum(sm, 1e-6) - 1.0)[inner]
+            corr = lambda x, y: float(np.corrcoef(x, y)[0, 1])
+            row = dict(preset=tag, scene=name, sigma=a.sigmas[0],
+                       ref=float(tex["ref"].std()), ref2=float(tex["ref2"].std()),
+                       preview=float(tex["preview"].std()),
+                       corr_ref_ref2=corr(tex["ref"], tex["ref2"]),
+                       corr_ref_preview=corr(tex["ref"], tex["preview"]))
+            rows.append(row)
+            print("%-24s %-6s texture std: ref %.3f ref2 %.3f preview %.3f; corr(ref, ref2) %.2f "
+                  "corr(ref, preview) %.2f" % (tag, name, row["ref"], row["ref2"], row["preview"],
+                                              row["corr_ref_ref2"], row["corr_ref_preview"]),
+                  flush=True)
+    json.dump(rows, open(os.path.join(a.out, "contrast.json"), "w"), indent=1)
+
+
+def cmd_period(a):
+    """Texture scale: autocorrelation of the reference's texture L / S_s(L) - 1 over the central
+    64 x 64 px of the sphere (circular, via FFT), along x and y, and its highest peak outside
+    the central 5 x 5 px."""
+    for fabric in a.fabrics:
+        sc = [s for s in demo_scenes(a.demo, fabric) if s["name"] == "sphere"][0]
+        img = read_image(sc["reference"], ["R", "G", "B"]) @ np.array(
+            [0.2126, 0.7152, 0.0722], dtype=np.float32)
+        cov = read_image(sc["reference"], ["fabric"])[:, :, 0]
+        sm = smooth_inside(img[:, :, None], cov, a.sigmas[0])[:, :, 0]
+        h, w = img.shape
+        t = (img / np.maximum(sm, 1e-6) - 1.0)[h // 2 - 32:h // 2 + 32, w // 2 - 32:w // 2 + 32]
+        t = t - t.mean()
+        f = np.fft.fft2(t)
+        ac = np.fft.fftshift(np.real(np.fft.ifft2(f * np.conj(f))))
+        ac /= ac[32, 32]
+        print("%s x lag 0..15: %s" % (fabric, " ".join("%.2f" % v for v in ac[32, 32:48])))
+        print("%s y lag 0..15: %s" % (fabric, " ".join("%.2f" % v for v in ac[32:48, 32])))
+        ac[30:35, 30:35] = -9
+        i = np.unravel_index(np.argmax(ac), ac.shape)
+        print("%s highest peak at (dy, dx) = (%d, %d) px: %.2f" % (fabric, i[0] - 32, i[1] - 32,
+                                                                   ac[i]))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast", "period"])
+    ap.add_argument("presets", nargs="*")
+    ap.add_argument("--demo", default="/work/main/out/demo")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--clothfit", default="build/bin/clothfit")
+    ap.add_argument("--fabrics", default="canvas,twill")
+    ap.add_argument("--models", default="woven,physical-aniso,standard")
+    ap.add_argument("--sigmas", default="0.5,1,2,4,8")
+    ap.add_argument("--blocks", default="4,16")
+    ap.add_argument("--factors", default="1,2,4")
+    ap.add_argument("--shift", default="", help="transplant: also the texture moved by dy,dx px")
+    ap.add_argument("--scenes", default="", help="supersample: only these scenes (sphere,drape,swatch)")
+    ap.add_argument("--ppd", type=float, default=None,
+                    help="presets: FLIP pixels per degree (default: compare's, 67)")
+    a = ap.parse_intermixed_args()
+    a.fabrics = a.fabrics.split(",")
+    a.models = a.models.split(",")
+    a.sigmas = [float(x) for x in a.sigmas.split(",")]
+    a.blocks = [int(x) for x in a.blocks.split(",")]
+    a.factors = [int(x) for x in a.factors.split(",")]
+    a.scenes = [x for x in a.scenes.split(",") if x]
+    a.shift = tuple(int(x) for x in a.shift.split(",")) if a.shift else None
+    a.clothfit = os.path.abspath(a.clothfit)
+    os.makedirs(a.out, exist_ok=True)
+    {"floor": cmd_floor, "regions": cmd_regions, "supersample": cmd_supersample,
+     "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables, "contrast": cmd_contrast, "period": cmd_period}[a.command](a)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
