@@ -5,8 +5,8 @@
 //   node tests/browser/run.mjs --clothfit build/bin/clothfit [--work DIR] [--chromium PATH]
 //        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS]
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 15 materials (6 + 3 woven + 2 physical-aniso
-// + 4 with weave maps) x 2 environments
+// Cases: each canonical scene (datasets/scenes/*.json) x 19 materials (6 + 3 woven + 2 physical-aniso
+// + 4 with weave maps + 4 woven with FIS IBL) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -111,6 +111,17 @@ const MATERIALS = {
     sheen_roughness: 0.5, anisotropy_strength: 0.7, anisotropy_rotation: 0, specular_intensity: 1, specular_color: [1, 1, 1] },
   { weave_maps: { file: path.join(here, 'maps', 'twill.weave.exr'), size: 64, uv_repeats: 40 } }),
 };
+// Filtered importance sampling of the yarn lobe's IBL ("woven": {"ibl": "fis"}, session 8; the
+// shader in web/clothfit.js, the C++ side in render/preview): the two uniform woven presets and
+// the twill maps with the default 16 yarn taps, and one with 8 yarn taps plus 16 diffuse taps
+// (E_fis replacing three.js's top-level irradiance), so both FIS paths are compared.
+const withWoven = (name, woven) => ({ ...MATERIALS[name], woven: { ...MATERIALS[name].woven, ...woven } });
+Object.assign(MATERIALS, {
+  'woven-fis': withWoven('woven', { ibl: 'fis' }),
+  'woven-forward-fis': withWoven('woven-forward', { ibl: 'fis' }),
+  'woven-maps-twill-fis': withWoven('woven-maps-twill', { ibl: 'fis' }),
+  'woven-fis-diffuse': withWoven('woven', { ibl: 'fis', fis_taps: 8, fis_diffuse_taps: 16 }),
+});
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
 const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, rotation_y_degrees: 60 } };
@@ -147,11 +158,18 @@ function runCmd(cmd, argv) {
 // --ibl-engine threejs: every material here is drawn by three.js in the browser
 // (MeshClothMaterial uses three.js's PMREM too). --cpp-args '' drops it (older binaries).
 const cppExtra = (args['cpp-args'] ?? '--ibl-engine threejs').split(' ').filter(Boolean);
+// A case whose preview fails (e.g. a binary that does not know a preset option) is reported as
+// that case's error, not as the end of the run.
+const cppErrors = new Map();
 async function cppAll() {
   const queue = [...cases];
   const worker = async () => {
     for (let c = queue.shift(); c; c = queue.shift()) {
-      await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png, ...cppExtra]);
+      try {
+        await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png, ...cppExtra]);
+      } catch (e) {
+        cppErrors.set(c.name, String(e.message).split('\n').filter(Boolean).slice(-1)[0] ?? 'failed');
+      }
     }
   };
   await Promise.all([worker(), worker()]);
@@ -245,8 +263,13 @@ let failures = 0;
 for (const c of cases) {
   const r = results.get(c.name);
   if (!r) { rows.push({ name: c.name, error: 'no browser frame' }); failures++; continue; }
-  const ref = decodePng(c.png);
   const { w, h, body } = r;
+  // Keep the browser frame for inspection (PPM, no encoder needed).
+  const ppm = Buffer.alloc(w * h * 3);
+  for (let i = 0; i < w * h; ++i) for (let k = 0; k < 3; ++k) ppm[i * 3 + k] = body[i * 4 + k];
+  fs.writeFileSync(c.png.replace(/\.png$/, '.browser.ppm'), Buffer.concat([Buffer.from(`P6\n${w} ${h}\n255\n`), ppm]));
+  if (cppErrors.has(c.name)) { rows.push({ name: c.name, error: `C++ preview: ${cppErrors.get(c.name)}` }); failures++; continue; }
+  const ref = decodePng(c.png);
   if (ref.w !== w || ref.h !== h) { rows.push({ name: c.name, error: 'size mismatch' }); failures++; continue; }
   const mask = body.subarray(w * h * 4);
   const diffs = [];
@@ -274,10 +297,6 @@ for (const c of cases) {
   const pass = n > 0 && mean <= bound.mean && p99 <= bound.p99;
   if (!pass) failures++;
   rows.push({ name: c.name, pixels: n, mean, p99, accept, pass, bound, ms: r.ms, note: b?.note ?? '' });
-  // Keep the browser frame for inspection (PPM, no encoder needed).
-  const ppm = Buffer.alloc(w * h * 3);
-  for (let i = 0; i < w * h; ++i) for (let k = 0; k < 3; ++k) ppm[i * 3 + k] = body[i * 4 + k];
-  fs.writeFileSync(c.png.replace(/\.png$/, '.browser.ppm'), Buffer.concat([Buffer.from(`P6\n${w} ${h}\n255\n`), ppm]));
   fs.writeFileSync(c.png.replace(/\.png$/, '.mask.pgm'), Buffer.concat([Buffer.from(`P5\n${w} ${h}\n255\n`), mask]));
 }
 

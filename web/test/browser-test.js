@@ -16,6 +16,10 @@ async function run() {
   const canvas = document.getElementById('c');
   const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true, powerPreference: 'high-performance' });
   const gl = renderer.getContext();
+  // A shader that does not compile is reported through /log (three.js would only console.error).
+  renderer.debug.onShaderError = (g, program, vs, fs) => {
+    log(`shader error: ${g.getProgramInfoLog(program)}\n${g.getShaderInfoLog(fs)}\n${g.getShaderInfoLog(vs)}`.slice(0, 4000));
+  };
   log(`WebGL: ${gl.getParameter(gl.VERSION)} / ${gl.getParameter(gl.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? gl.RENDERER)}; OES_texture_float_linear: ${renderer.extensions.has('OES_texture_float_linear')}`);
   const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
   const cards = new Map();
