@@ -3,7 +3,10 @@
 // `clothfit render-preview` on the same scene card and preset.
 //
 //   node tests/browser/run.mjs --clothfit build/bin/clothfit [--work DIR] [--chromium PATH]
-//        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS]
+//        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS] [--frames N]
+//   --frames N: also time N more frames per case in the browser (mean ms per frame, each ended
+//   by a 1-pixel readPixels; SwiftShader runs on the CPU, so only ratios between cases mean
+//   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //
 // Cases: each canonical scene (datasets/scenes/*.json) x 19 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL) x 2 environments
@@ -143,7 +146,7 @@ for (const s of scenes) {
     }
   }
 }
-fs.writeFileSync(path.join(work, 'plan.json'), JSON.stringify({ hdri_dir: hdriDir, cases }, null, 1));
+fs.writeFileSync(path.join(work, 'plan.json'), JSON.stringify({ hdri_dir: hdriDir, frames: Number(args.frames ?? 0), cases }, null, 1));
 say(`${cases.length} cases, work dir ${work}`);
 
 // ---- C++ previews (in parallel with the browser; 2 at a time) -------------------------------
@@ -175,7 +178,8 @@ async function cppAll() {
   await Promise.all([worker(), worker()]);
   say('C++ previews done');
 }
-const cppPromise = cppAll();
+// With --frames the previews run after the browser, so they do not share the CPU with the timing.
+const cppPromise = Number(args.frames ?? 0) > 0 ? null : cppAll();
 
 // ---- server + chromium ----------------------------------------------------------------------
 // web/serve.mjs's server; served under /fs/<absolute path>: the repository, the work dir and
@@ -189,7 +193,7 @@ const server = await startServer({
   onPost: (url, body) => {
     if (url.pathname === '/result') {
       const name = url.searchParams.get('name');
-      results.set(name, { w: Number(url.searchParams.get('w')), h: Number(url.searchParams.get('h')), ms: Number(url.searchParams.get('ms')), body });
+      results.set(name, { w: Number(url.searchParams.get('w')), h: Number(url.searchParams.get('h')), ms: Number(url.searchParams.get('ms')), msFrame: url.searchParams.get('msFrame') || '', body });
     } else if (url.pathname === '/done') {
       finish(body.toString());
     }
@@ -217,7 +221,7 @@ say(`browser: ${outcome}, ${results.size}/${cases.length} frames in ${browserS.t
 if (outcome !== 'ok') {
   console.error(browserErr.split('\n').slice(-20).join('\n'));
 }
-await cppPromise;
+await (cppPromise ?? cppAll());
 try { fs.rmSync(profile, { recursive: true, force: true }); } catch { /* best effort */ }
 
 // ---- PNG decode (8-bit RGB/RGBA, non-interlaced; PNG spec 1.2 filters 0-4) -------------------
@@ -268,7 +272,7 @@ for (const c of cases) {
   const ppm = Buffer.alloc(w * h * 3);
   for (let i = 0; i < w * h; ++i) for (let k = 0; k < 3; ++k) ppm[i * 3 + k] = body[i * 4 + k];
   fs.writeFileSync(c.png.replace(/\.png$/, '.browser.ppm'), Buffer.concat([Buffer.from(`P6\n${w} ${h}\n255\n`), ppm]));
-  if (cppErrors.has(c.name)) { rows.push({ name: c.name, error: `C++ preview: ${cppErrors.get(c.name)}` }); failures++; continue; }
+  if (cppErrors.has(c.name)) { rows.push({ name: c.name, error: `C++ preview: ${cppErrors.get(c.name)}`, msFrame: r.msFrame }); failures++; continue; }
   const ref = decodePng(c.png);
   if (ref.w !== w || ref.h !== h) { rows.push({ name: c.name, error: 'size mismatch' }); failures++; continue; }
   const mask = body.subarray(w * h * 4);
@@ -296,15 +300,16 @@ for (const c of cases) {
   const bound = b && b.acceptance === false ? b : ACCEPT;
   const pass = n > 0 && mean <= bound.mean && p99 <= bound.p99;
   if (!pass) failures++;
-  rows.push({ name: c.name, pixels: n, mean, p99, accept, pass, bound, ms: r.ms, note: b?.note ?? '' });
+  rows.push({ name: c.name, pixels: n, mean, p99, accept, pass, bound, ms: r.ms, msFrame: r.msFrame, note: b?.note ?? '' });
   fs.writeFileSync(c.png.replace(/\.png$/, '.mask.pgm'), Buffer.concat([Buffer.from(`P5\n${w} ${h}\n255\n`), mask]));
 }
 
 const fmt = (x) => (Number.isFinite(x) ? x.toFixed(2) : String(x));
-const table = ['| case | pixels | mean abs diff | p99 | acceptance (0.5 / 2) | test bound | browser ms |', '|---|---:|---:|---:|---|---|---:|'];
+const timed = Number(args.frames ?? 0) > 0;
+const table = [`| case | pixels | mean abs diff | p99 | acceptance (0.5 / 2) | test bound | browser ms |${timed ? ' ms/frame |' : ''}`, `|---|---:|---:|---:|---|---|---:|${timed ? '---:|' : ''}`];
 for (const r of rows) {
-  if (r.error) { table.push(`| ${r.name} | | | | ERROR: ${r.error} | | |`); continue; }
-  table.push(`| ${r.name} | ${r.pixels} | ${fmt(r.mean)} | ${r.p99} | ${r.accept ? 'meets' : '**not met**'} | ${r.bound === ACCEPT ? 'acceptance' : `mean <= ${r.bound.mean}, p99 <= ${r.bound.p99}`}${r.pass ? '' : ' FAILED'} | ${r.ms} |`);
+  if (r.error) { table.push(`| ${r.name} | | | | ERROR: ${r.error} | | |${timed ? ` ${r.msFrame ?? ''} |` : ''}`); continue; }
+  table.push(`| ${r.name} | ${r.pixels} | ${fmt(r.mean)} | ${r.p99} | ${r.accept ? 'meets' : '**not met**'} | ${r.bound === ACCEPT ? 'acceptance' : `mean <= ${r.bound.mean}, p99 <= ${r.bound.p99}`}${r.pass ? '' : ' FAILED'} | ${r.ms} |${timed ? ` ${r.msFrame} |` : ''}`);
 }
 const md = table.join('\n');
 console.log(md);
