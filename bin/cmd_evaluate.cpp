@@ -36,6 +36,7 @@ struct EvaluateArgs {
   int exact_ibl = 0, exact_irradiance = 0;
   unsigned exact_ibl_seed = 1;
   bool json = false;
+  std::string ibl_engine = "preset";  // preset: the fit's recorded fit.ibl_engine (else filament)
 };
 
 int RunEvaluate(const EvaluateArgs& a, bool quiet) {
@@ -74,6 +75,22 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   o.exact_ibl_samples = a.exact_ibl;
   o.exact_ibl_seed = a.exact_ibl_seed;
   o.exact_irradiance_samples = a.exact_irradiance;
+  // The IBL engine: as the fit recorded it (fit.ibl_engine; presets before session 8 were
+  // fitted on Filament's), or --ibl-engine. The woven IBL mode is the preset's "woven" object.
+  std::string engine = a.ibl_engine;
+  if (engine == "preset") {
+    engine = "filament";
+    if (fj.contains("ibl_engine")) {
+      if (!fj["ibl_engine"].is_string() ||
+          (fj["ibl_engine"] != "threejs" && fj["ibl_engine"] != "filament"))
+        throw std::runtime_error(a.preset + ": field 'fit.ibl_engine': expected \"threejs\" or "
+                                 "\"filament\"");
+      engine = fj["ibl_engine"].get<std::string>();
+    }
+  }
+  o.ibl_engine = engine == "threejs"    ? render::IblEngine::kThreejs
+                 : engine == "filament" ? render::IblEngine::kFilament
+                                        : render::IblEngine::kAuto;
 
   std::vector<render::Scene> loaded;
   std::vector<std::unique_ptr<render::Environment>> envs;
@@ -107,6 +124,9 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
                    ? "split sum with exact irradiance (" + std::to_string(a.exact_irradiance) +
                          " samples, seed " + std::to_string(a.exact_ibl_seed) + ")"
                    : "split sum";
+    j["ibl_engine"] = engine;
+    if (preset.model == render::ModelKind::kWoven)
+      j["woven_ibl"] = std::string(woven::ToString(preset.woven.ibl));
     j["rmse"] = r.rmse;
     if (fj.contains("rmse")) j["fit_rmse"] = fj["rmse"];
     j["scenes"] = nlohmann::json::array();
@@ -115,9 +135,12 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
                              {"rmse", s.rmse}});
     std::printf("%s\n", limits::DumpJson(j).c_str());
   } else {
-    std::printf("evaluate: %s (%s), level %d, stride %d, %s space", a.preset.c_str(),
+    std::printf("evaluate: %s (%s), level %d, stride %d, %s space, %s IBL", a.preset.c_str(),
                 render::ToString(preset.model).c_str(), o.level, o.pixel_stride,
-                fit::ToString(o.space).c_str());
+                fit::ToString(o.space).c_str(), engine.c_str());
+    if (preset.model == render::ModelKind::kWoven && preset.woven.ibl == woven::IblMode::kFis)
+      std::printf(" (woven FIS, %d / %d taps)", preset.woven.fis_taps,
+                  preset.woven.fis_diffuse_taps);
     if (a.exact_ibl > 0)
       std::printf(", exact IBL (%d samples per pixel, seed %u)", a.exact_ibl, a.exact_ibl_seed);
     else if (a.exact_irradiance > 0)
@@ -160,6 +183,10 @@ void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "Carlo, this many directions per pixel) instead of SH9")
       ->check(CLI::Range(0, 65536));
   cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
+  cmd->add_option("--ibl-engine", args->ibl_engine,
+                  "whose image-based lighting: preset (default: the fit's recorded "
+                  "fit.ibl_engine, filament for presets without it), auto, threejs or filament")
+      ->check(CLI::IsMember({"preset", "auto", "threejs", "filament"}));
   cmd->add_flag("--json", args->json, "print the result as JSON");
   cmd->callback([args, &g, &exit_code]() {
     try {

@@ -24,6 +24,7 @@
 #include "render/reference/fabric.h"
 #include "render/scene/image_io.h"
 #include "render/reference/path_tracer.h"
+#include "render/preview/preview.h"
 #include "render/preview/weave_maps.h"
 
 namespace clothfit::cli {
@@ -147,7 +148,16 @@ struct FitArgs {
   bool subsurface = false, no_floor = false, second_seed = false;
   int spp = 256, stride = 0, threads = 0, max_iterations = 50;
   int exact_ibl = 0;  // s7-ibl measurement hook (docs/fitting.md "The sphere's error decomposed")
+  // Session 8: the IBL engine of the previews (auto: the engine web/ draws the model with) and
+  // woven's IBL integration (docs/fitting.md "Filtered importance sampling for woven's IBL").
+  std::string ibl_engine = "auto", woven_ibl = "auto";
+  int fis_taps = woven::kDefaultFisTaps, fis_diffuse_taps = woven::kDefaultFisDiffuseTaps;
 };
+
+// woven fits on the three.js IBL engine: the yarn lobes' IBL by filtered importance sampling
+// unless --woven-ibl split (docs/fitting.md "Filtered importance sampling for woven's IBL
+// (session 8)": measured on canvas and twill).
+constexpr woven::IblMode kDefaultWovenIbl = woven::IblMode::kFis;
 
 void AddFitOptions(CLI::App* cmd, FitArgs& a) {
   cmd->add_option("--fabric", a.fabric,
@@ -211,7 +221,29 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "measurement only: fit with the environment integrated exactly (Monte Carlo, "
                   "this many directions per pixel, seed 1; no split sum); 0 = the engine (default)")
       ->check(CLI::Range(0, 65536));
+  cmd->add_option("--ibl-engine", a.ibl_engine,
+                  "whose image-based lighting the previews reproduce: auto (default: three.js "
+                  "r187's PMREM for standard, physical-sheen, physical-aniso, woven and the "
+                  "seed cloth, as web/ draws them; Filament for the Filament cloth and "
+                  "gltf-sheen), threejs or filament")
+      ->check(CLI::IsMember({"auto", "threejs", "filament"}));
+  cmd->add_option("--woven-ibl", a.woven_ibl,
+                  "woven's yarn-lobe IBL on the three.js engine: auto (default: fis), fis "
+                  "(filtered importance sampling of the PMREM) or split (split sum)")
+      ->check(CLI::IsMember({"auto", "fis", "split"}));
+  cmd->add_option("--fis-taps", a.fis_taps, "woven FIS: yarn-lobe taps (1-64)")
+      ->check(CLI::Range(1, woven::kMaxFisTaps));
+  cmd->add_option("--fis-diffuse-taps", a.fis_diffuse_taps,
+                  "woven FIS: diffuse irradiance taps (0 = the engine's irradiance; 0-64)")
+      ->check(CLI::Range(0, woven::kMaxFisTaps));
   cmd->add_option("--out", a.out, "output preset JSON")->required();
+}
+
+render::IblEngine ParseIblEngine(const std::string& s) {
+  if (s == "auto") return render::IblEngine::kAuto;
+  if (s == "threejs") return render::IblEngine::kThreejs;
+  if (s == "filament") return render::IblEngine::kFilament;
+  throw std::invalid_argument("--ibl-engine: unknown '" + s + "' (auto, threejs, filament)");
 }
 
 // A number, or an invalid_argument naming the flag and the text.
@@ -359,6 +391,25 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   o.max_iterations = a.max_iterations;
   o.min_coverage = a.min_coverage;
   o.exact_ibl_samples = a.exact_ibl;
+  o.ibl_engine = ParseIblEngine(a.ibl_engine);
+  // woven: the IBL mode the previews (and the written preset) use. FIS exists on the three.js
+  // engine only (render/preview/preview.h UsesWovenFis).
+  if (o.start.model == render::ModelKind::kWoven) {
+    render::PreviewOptions po;
+    po.model = o.start.model;
+    po.ibl_engine = o.ibl_engine;
+    const bool threejs = render::UsesThreejsIbl(po);
+    if (a.woven_ibl == "fis" && !threejs)
+      throw std::invalid_argument("--woven-ibl fis: filtered importance sampling needs the "
+                                  "three.js IBL engine (--ibl-engine threejs or auto)");
+    const woven::IblMode mode = a.woven_ibl == "fis"     ? woven::IblMode::kFis
+                                : a.woven_ibl == "split" ? woven::IblMode::kSplit
+                                : threejs                ? kDefaultWovenIbl
+                                                         : woven::IblMode::kSplit;
+    o.start.woven.ibl = a.exact_ibl > 0 ? woven::IblMode::kSplit : mode;
+    o.start.woven.fis_taps = a.fis_taps;
+    o.start.woven.fis_diffuse_taps = a.fis_diffuse_taps;
+  }
   ApplyStarts(a, &o);
   return o;
 }
@@ -439,6 +490,13 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
   fitj["max_iterations"] = o.max_iterations;
   fitj["min_coverage"] = o.min_coverage;
   if (o.exact_ibl_samples > 0) fitj["exact_ibl_samples"] = o.exact_ibl_samples;  // not an engine fit
+  {  // the IBL engine the previews reproduced (resolved; `evaluate` defaults to it)
+    render::PreviewOptions po;
+    po.model = o.start.model;
+    po.cloth = o.start.cloth;
+    po.ibl_engine = o.ibl_engine;
+    fitj["ibl_engine"] = render::UsesThreejsIbl(po) ? "threejs" : "filament";
+  }
   nlohmann::json ab = nlohmann::json::array();
   bool flagged_bound = false;
   for (const fit::AtBound& b : res.at_bound) {
@@ -482,11 +540,11 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
 
 // Per scene: the fitted preview (display PNG and linear EXR) and the residual EXR.
 void WriteFitImages(const std::string& dir, const FitFiles& f, const LoadedScenes& l,
-                    const render::MaterialPreset& preset) {
+                    const render::MaterialPreset& preset, render::IblEngine engine) {
   fs::create_directories(dir);
   for (size_t i = 0; i < l.sc.size(); ++i) {
     const render::Scene& scene = l.sc[i];
-    std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset);
+    std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset, engine);
     // A transparent-film reference (alpha coverage) has no environment behind the geometry:
     // where it saw nothing, the preview images show nothing either, so side-by-sides and
     // residuals do not mix in background differences.
@@ -673,7 +731,7 @@ int RunFit(const FitArgs& a, const Globals& g) {
                                 {"fabric", a.fabric.empty() ? nlohmann::json(nullptr)
                                                             : nlohmann::json(a.fabric)}};
   // Images first, the preset last: a preset on disk means its images are complete.
-  if (!a.images.empty()) WriteFitImages(a.images, files, l, preset);
+  if (!a.images.empty()) WriteFitImages(a.images, files, l, preset, o.ibl_engine);
   // weave_maps: "uri" (relative to the preset; the maps are written next to it) beside the
   // absolute "file", so the preset's directory can move (docs/preset-format.md).
   render::AddPresetWeaveMapUris(&preset, a.out);

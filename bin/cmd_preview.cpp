@@ -81,7 +81,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   struct Args {
     std::string scene, material, model, out, ibl_engine = "filament";
     bool shadows = false;
-    int exact_ibl = 0;
+    int exact_ibl = 0, exact_irradiance = 0;
     unsigned exact_ibl_seed = 1;
   };
   auto args = std::make_shared<Args>();
@@ -98,11 +98,16 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_flag("--shadows", args->shadows, "ray-traced light visibility (off by default)");
   cmd->add_option("--ibl-engine", args->ibl_engine,
                   "whose image-based lighting: threejs (r187 PMREM), filament (SH + prefilter) or "
-                  "auto (three.js for standard, physical-sheen and the seed cloth); default filament")
+                  "auto (three.js for standard, physical-sheen, physical-aniso, woven and the seed "
+                  "cloth); default filament")
       ->check(CLI::IsMember({"auto", "threejs", "filament"}));
   cmd->add_option("--exact-ibl", args->exact_ibl,
                   "measurement: integrate the environment exactly on the fabric (Monte Carlo, this "
                   "many directions per pixel, no split sum, no visibility); 0 = split sum (default)")
+      ->check(CLI::Range(0, 65536));
+  cmd->add_option("--exact-irradiance", args->exact_irradiance,
+                  "measurement: the fabric's diffuse irradiance integrated exactly (Monte Carlo, "
+                  "this many directions per pixel); the lobes keep the engine's IBL")
       ->check(CLI::Range(0, 65536));
   cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
   cmd->callback([args, &g, &exit_code]() {
@@ -141,6 +146,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                                                       : render::IblEngine::kAuto;
       o.exact_ibl_samples = args->exact_ibl;
       o.exact_ibl_seed = args->exact_ibl_seed;
+      o.exact_irradiance_samples = args->exact_irradiance;
       std::unique_ptr<render::PreviewCache> cache;
       std::vector<float> frame;
       if (o.exact_ibl_samples > 0 && env) {

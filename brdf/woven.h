@@ -87,10 +87,28 @@ inline std::string_view ToString(YarnLayer y) {
   return y == YarnLayer::kAdditive ? "additive" : "albedo-scaled";
 }
 
+// How the renderer integrates the environment for the yarn lobes (and optionally the diffuse
+// term): the split sum (one prefiltered read at the dominant direction of r_e) or filtered
+// importance sampling (Colbert & Krivanek 2007, GPU Gems 3 ch. 20: fis_taps taps of the GGX
+// lobe at alpha = r_e^2, each read from the prefiltered chain at the mip of its solid angle;
+// render/preview/preview.cpp FisYarnRadiance, web/clothfit.js; spec: docs/fitting.md
+// "Filtered importance sampling for woven's IBL (session 8)"). The BRDF itself is unchanged.
+enum class IblMode { kSplit, kFis };
+inline std::string_view ToString(IblMode m) { return m == IblMode::kSplit ? "split" : "fis"; }
+inline constexpr int kMaxFisTaps = 64;
+inline constexpr int kDefaultFisTaps = 16;
+inline constexpr int kDefaultFisDiffuseTaps = 16;
+
 struct Options {
   YarnLayer yarn_layer = YarnLayer::kAdditive;
   Rgb<double> tint_warp{1.0, 1.0, 1.0};  // per-lobe specular tints (weave bake; 1 = uniform)
   Rgb<double> tint_weft{1.0, 1.0, 1.0};
+  // Renderer options (preset "woven": "ibl", "fis_taps", "fis_diffuse_taps"); the preview
+  // applies them on the three.js IBL engine only.
+  IblMode ibl = IblMode::kSplit;          // missing in a preset = split (old presets unchanged)
+  int fis_taps = kDefaultFisTaps;         // yarn-lobe taps N, 1..64 (ibl == kFis)
+  int fis_diffuse_taps = kDefaultFisDiffuseTaps;  // diffuse taps N_d, 0..64 (0: the engine's
+                                                  // irradiance; ibl == kFis)
 };
 
 // Per-pixel weave-map sample (constant during a fit). Uniform material = the defaults.

@@ -107,6 +107,11 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
     if (!full.radiance.empty())
       c->radiance.insert(c->radiance.end(), full.radiance.begin() + long(ui * KR),
                          full.radiance.begin() + long((ui + 1) * KR));
+    if (!full.yarn_radiance.empty())  // woven FIS
+      c->yarn_radiance.insert(c->yarn_radiance.end(), full.yarn_radiance.begin() + long(ui * K3),
+                              full.yarn_radiance.begin() + long((ui + 1) * K3));
+    if (!full.geometry_roughness.empty())  // three.js IBL: geometryRoughness per pixel
+      c->geometry_roughness.push_back(full.geometry_roughness[ui]);
     if (!full.sheen_radiance.empty())
       c->sheen_radiance.insert(c->sheen_radiance.end(), full.sheen_radiance.begin() + long(ui * K3),
                                full.sheen_radiance.begin() + long((ui + 1) * K3));
@@ -488,6 +493,8 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   render::PreviewOptions po;
   po.model = opt.start.model;
   po.cloth = opt.start.cloth;
+  po.woven = opt.start.woven;  // yarn layering, tints, IBL mode (split / FIS) and taps
+  po.ibl_engine = opt.ibl_engine;
   // Only the pixels a block can sample get preview cache entries (fit speed: the radiance
   // tables of the other pixels were built and thrown away); every pixel's fabric flag is kept.
   po.sample_mask = SampleMask(scene.card.width, scene.card.height, B, stride);
@@ -832,10 +839,13 @@ int AutoLevel(const std::vector<SceneInput>& inputs, double weave_period_uv, int
 }
 
 std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
-                                      const render::MaterialPreset& preset) {
+                                      const render::MaterialPreset& preset,
+                                      render::IblEngine engine) {
   render::PreviewOptions o;
   o.model = preset.model;
   o.cloth = preset.cloth;
+  o.woven = preset.woven;
+  o.ibl_engine = engine;
   o.weave_maps = render::LoadPresetWeaveMaps(preset);  // woven weave maps (null: none)
   auto cache = render::PreviewCache::Build(scene, env, o);
   std::vector<Rgb<double>> px;
@@ -852,6 +862,9 @@ struct PreparedScenes {
   nlohmann::json weave_maps;  // the start preset's "weave_maps" field (null: none)
   int exact_ibl_samples = 0, exact_irradiance_samples = 0;
   unsigned exact_ibl_seed = 1;
+  render::IblEngine ibl_engine = render::IblEngine::kFilament;
+  woven::IblMode woven_ibl = woven::IblMode::kSplit;
+  int fis_taps = 0, fis_diffuse_taps = 0;
   double seconds = 0.0;
 };
 
@@ -877,6 +890,10 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->exact_ibl_samples = opt.exact_ibl_samples;
   p->exact_ibl_seed = opt.exact_ibl_seed;
   p->exact_irradiance_samples = opt.exact_irradiance_samples;
+  p->ibl_engine = opt.ibl_engine;
+  p->woven_ibl = opt.start.woven.ibl;
+  p->fis_taps = opt.start.woven.fis_taps;
+  p->fis_diffuse_taps = opt.start.woven.fis_diffuse_taps;
   p->seconds = SecondsSince(t0);
   return p;
 }
@@ -912,7 +929,10 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->weave_maps != WeaveMapsField(opt.start) ||
         prepared->exact_ibl_samples != opt.exact_ibl_samples ||
         prepared->exact_ibl_seed != opt.exact_ibl_seed ||
-        prepared->exact_irradiance_samples != opt.exact_irradiance_samples)
+        prepared->exact_irradiance_samples != opt.exact_irradiance_samples ||
+        prepared->ibl_engine != opt.ibl_engine || prepared->woven_ibl != opt.start.woven.ibl ||
+        prepared->fis_taps != opt.start.woven.fis_taps ||
+        prepared->fis_diffuse_taps != opt.start.woven.fis_diffuse_taps)
       throw FitError("fit: the prepared scenes were built with other options");
   } else {
     own = PrepareScenes(inputs, opt);

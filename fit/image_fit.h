@@ -99,6 +99,10 @@ struct FitOptions {
   int exact_ibl_samples = 0;
   unsigned exact_ibl_seed = 1;
   int exact_irradiance_samples = 0;  // PreviewOptions::exact_irradiance_samples (measurement)
+  // Whose image-based lighting the previews reproduce (render/preview/preview.h IblEngine).
+  // kFilament here keeps library callers unchanged; `clothfit fit` defaults to kAuto (the
+  // engine web/ draws the model with). The woven IBL mode (split / FIS) is start.woven's.
+  render::IblEngine ibl_engine = render::IblEngine::kFilament;
 };
 
 struct SceneInput {
@@ -163,7 +167,10 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
                     const PreparedScenes* prepared);
 
 // The preview (linear, full frame) of a preset on a scene: for residual images and reports.
+// `engine`: the IBL engine of the fit (FitOptions::ibl_engine); the preset's woven options
+// (IBL mode and taps) apply.
 std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
-                                      const render::MaterialPreset& preset);
+                                      const render::MaterialPreset& preset,
+                                      render::IblEngine engine = render::IblEngine::kFilament);
 
 }  // namespace clothfit::fit

@@ -110,6 +110,7 @@ struct PixelData {
   std::vector<PreviewLightSample> lights;
   std::array<float, 3> irr{};
   std::vector<float> rad, srad;
+  std::vector<float> yrad;    // woven FIS: the yarn lobes' K-node table
   std::array<float, 2> tv{};  // woven: t.v, b.v
   std::vector<float> lt;      // woven: t.l, b.l, t.h, b.h per light sample
   std::array<float, WeaveMaps::kChannels> weave{};  // woven with maps: the sampled maps
@@ -124,6 +125,8 @@ struct PixelContext {
   const EnvironmentData& e;
   double eps;
   bool wrap_past_terminator;
+  const FisPattern* fis_yarn = nullptr;     // woven FIS (UsesWovenFis), else null
+  const FisPattern* fis_diffuse = nullptr;  // woven FIS with fis_diffuse_taps > 0, else null
 };
 
 // A visible surface point: position (offset off the surface), shading normal on the viewer's
@@ -292,6 +295,23 @@ void FillRadianceTables(const PixelContext& x, const Vec3d& n, const Vec3d& R, P
       const Rgb<double> L = x.e.charlie->Sample(R, r * double(x.opt.prefilter_levels - 1));
       for (int ch = 0; ch < 3; ++ch) pd->srad[size_t(k) * 3 + size_t(ch)] = float(L[ch]);
     }
+  }
+}
+
+// Woven FIS (UsesWovenFis): the yarn lobes' K-node table by filtered importance sampling of
+// the PMREM at each node's r (FisGgxRadiance, world space, n and v of the G-buffer); where no
+// tap survives (grazing), the node keeps the split-sum read of `pd->rad` (getIBLRadiance), so a
+// pixel is never black. Needs pd->rad filled first.
+void FillFisYarnTable(const PixelContext& x, const PrimaryHit& hit, PixelData* pd) {
+  const int K = x.opt.roughness_nodes;
+  pd->yrad.resize(size_t(K) * 3);
+  for (int k = 0; k < K; ++k) {
+    const double r = double(k) / double(K - 1);
+    int used = 0;
+    const Rgb<double> L = FisGgxRadiance(*x.e.pmrem, *x.fis_yarn, hit.n, hit.v, r, &used);
+    for (int ch = 0; ch < 3; ++ch)
+      pd->yrad[size_t(k) * 3 + size_t(ch)] =
+          used > 0 ? float(L[ch]) : pd->rad[size_t(k) * 3 + size_t(ch)];
   }
 }
 
@@ -485,6 +505,8 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
                                x.opt.exact_ibl_samples);
     Rgb<double> Ed(0, 0, 0);
     if (x.env) Ed = x.e.pmrem ? x.e.pmrem->IrradianceOverPi(hit.n) : IrradianceOverPi(x.e.sh, hit.n);
+    if (x.fis_diffuse && hit.mesh->is_fabric)  // woven FIS: E_fis / pi replaces the top level
+      Ed = FisIrradianceOverPi(*x.e.pmrem, *x.fis_diffuse, hit.n);
     if (x.env && x.opt.exact_ibl_samples <= 0 && x.opt.exact_irradiance_samples > 0 &&
         hit.mesh->is_fabric) {  // E_d / pi = sum_j (n.l_j) L(l_j) / (pi pdf_j)
       std::vector<PreviewLightSample> es;
@@ -515,6 +537,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       FillAnisoRadianceTables(x, hit, x.opt.weave_maps ? weave.data() : nullptr, &pd);
     else if (split_sum)
       FillRadianceTables(x, hit.n, R, &pd);
+    if (split_sum && x.fis_yarn) FillFisYarnTable(x, hit, &pd);
     row->push_back(std::move(pd));
   }
 }
@@ -534,6 +557,7 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       c->irradiance.insert(c->irradiance.end(), pd.irr.begin(), pd.irr.end());
       c->radiance.insert(c->radiance.end(), pd.rad.begin(), pd.rad.end());
       c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
+      c->yarn_radiance.insert(c->yarn_radiance.end(), pd.yrad.begin(), pd.yrad.end());
       if (c->options.model == ModelKind::kWoven ||
           c->options.model == ModelKind::kPhysicalAniso) {
         c->tangent_v.insert(c->tangent_v.end(), pd.tv.begin(), pd.tv.end());
@@ -607,7 +631,22 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   std::vector<std::vector<PixelData>> rows(static_cast<size_t>(H));
   const bool wrap_past_terminator = c->features.subsurface &&
                                     opt.cloth.variant == cloth::Variant::kFilament;
-  const PixelContext x{scene, env, opt, bvh, e, eps, wrap_past_terminator};
+  // Woven FIS (UsesWovenFis; only with an environment): the tap patterns, shared by every pixel.
+  std::unique_ptr<FisPattern> fis_yarn, fis_diffuse;
+  if (env && UsesWovenFis(opt)) {
+    if (opt.woven.fis_taps < 1 || opt.woven.fis_taps > woven::kMaxFisTaps)
+      throw std::invalid_argument("preview: woven.fis_taps " + std::to_string(opt.woven.fis_taps) +
+                                  " not in [1, " + std::to_string(woven::kMaxFisTaps) + "]");
+    if (opt.woven.fis_diffuse_taps < 0 || opt.woven.fis_diffuse_taps > woven::kMaxFisTaps)
+      throw std::invalid_argument("preview: woven.fis_diffuse_taps " +
+                                  std::to_string(opt.woven.fis_diffuse_taps) + " not in [0, " +
+                                  std::to_string(woven::kMaxFisTaps) + "]");
+    fis_yarn = std::make_unique<FisPattern>(opt.woven.fis_taps);
+    if (opt.woven.fis_diffuse_taps > 0)
+      fis_diffuse = std::make_unique<FisPattern>(opt.woven.fis_diffuse_taps);
+  }
+  const PixelContext x{scene, env, opt, bvh, e, eps, wrap_past_terminator, fis_yarn.get(),
+                       fis_diffuse.get()};
   tbb::parallel_for(0, H, [&](int y) { BuildRow(x, y, c.get(), &rows[size_t(y)]); });
 
   AssembleFabricPixels(rows, c.get());
@@ -753,8 +792,10 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
       }
       if constexpr (kIbl) {
         const float* rad = &c.radiance[i * size_t(K) * 3];
+        // yarn lobes: the FIS table when the cache has one (woven ibl "fis"), else the split sum's
+        const float* yrad = c.yarn_radiance.empty() ? rad : &c.yarn_radiance[i * size_t(K) * 3];
         const woven::WovenIblWeights<T> w = woven::EvalIblView(wp, f, vt, ws);
-        Rgb<T> ibl = (w.warp + w.weft) * ApplyTableWeights(rad, tw_e);
+        Rgb<T> ibl = (w.warp + w.weft) * ApplyTableWeights(yrad, tw_e);
         if (!f.sheen_off) ibl = ibl + w.sheen * ApplyTableWeights(rad, tw_s);
         L += ibl + TimesConstRgb(w.diffuse, &c.irradiance[i * 3]);
       }
@@ -849,7 +890,9 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
         if constexpr (M == ModelKind::kWoven) {
           const woven::WovenIblWeights<T> w =
               woven::EvalIbl(wp, c.options.woven, wl, NoV, ws, *c.dfg, *c.woven_phase);
-          L += (w.warp + w.weft) * TableRadiance(rad, K, wl.r_e) +
+          const float* yrad =
+              c.yarn_radiance.empty() ? rad : &c.yarn_radiance[i * size_t(K) * 3];  // FIS
+          L += (w.warp + w.weft) * TableRadiance(yrad, K, wl.r_e) +
                w.sheen * TableRadiance(rad, K, wl.r_s) + w.diffuse * Ed;
         } else if constexpr (M == ModelKind::kPhysicalAniso) {
           const IblWeights<T> w = physical_aniso::EvalIbl(apx, so, NoV, *c.dfg);

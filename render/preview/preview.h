@@ -57,15 +57,18 @@ class PrefilteredEnvironment;
 // Whose image-based lighting the preview reproduces: Filament's (SH9 irradiance, its GGX
 // prefilter chain and LOD mapping, the 128 x 128 DFG LUT) or three.js r187's
 // (render/preview/threejs_ibl.h: PMREM cube, irradiance from its top level, 16 x 16 DFG).
-// kAuto: three.js for standard and physical-sheen and the seed cloth variant, Filament for the
-// Filament cloth variant and gltf-sheen.
+// kAuto: three.js for what web/ draws with three.js's PMREM (standard, physical-sheen,
+// physical-aniso, woven and the seed cloth variant), Filament for the Filament cloth variant
+// and gltf-sheen (the Khronos sample viewer's chain).
 enum class IblEngine { kAuto, kFilament, kThreejs };
 
 struct PreviewOptions {
   ModelKind model = ModelKind::kCloth;
   IblEngine ibl_engine = IblEngine::kFilament;  // default: unchanged fits and previews
   cloth::Options cloth;      // model == kCloth
-  ::clothfit::woven::Options woven;  // model == kWoven (qualified: render::woven is the reference sampler)
+  ::clothfit::woven::Options woven;  // model == kWoven (qualified: render::woven is the reference sampler);
+                                     // its ibl / fis_taps / fis_diffuse_taps apply on three.js IBL
+                                     // only (UsesWovenFis); on Filament IBL the split sum is kept
   // Woven only: the weave maps (render/preview/weave_maps.h), sampled per fabric pixel at cache
   // build with the GPU's LOD times weave_footprint_scale (the image fit keeps one pixel per
   // stride x stride cell and passes the stride, so a kept pixel carries its cell's average).
@@ -121,6 +124,9 @@ struct PreviewOptions {
 
 // Whether the preview uses three.js r187's IBL for these options (see IblEngine).
 bool UsesThreejsIbl(const PreviewOptions& o);
+// Whether the woven yarn lobes use filtered importance sampling (woven, ibl == kFis, three.js
+// IBL engine, no exact IBL).
+bool UsesWovenFis(const PreviewOptions& o);
 // Whether three.js's geometryRoughness and 16 x 16 DFG table apply (MeshStandardMaterial and
 // MeshPhysicalMaterial on three.js IBL; the cloth keeps clothfit's 128 x 128 table, as
 // web/clothfit.js does).
@@ -158,6 +164,12 @@ class PreviewCache {
   std::vector<float> irradiance;          // E_d(n), 3 per fabric pixel
   std::vector<float> radiance;            // K x 3 per fabric pixel: GGX-prefiltered, node k
   std::vector<float> sheen_radiance;      // K x 3 per fabric pixel: Charlie (gltf-sheen only)
+  // Woven with options.woven.ibl == kFis on the three.js IBL engine (else empty): K x 3 per
+  // fabric pixel, the yarn lobes' radiance at node k's r by filtered importance sampling
+  // (FisGgxRadiance, options.woven.fis_taps taps; the split-sum read where no tap survives).
+  // The yarn lobes interpolate this table (Catmull-Rom in r_e, as `radiance`); the sheen lobe
+  // keeps `radiance`. With fis_diffuse_taps > 0, `irradiance` is FisIrradianceOverPi.
+  std::vector<float> yarn_radiance;
   std::vector<float> background;          // linear RGB of every pixel without fabric
   std::vector<float> fabric_mask;         // 1 where a fabric pixel is shaded
   // Woven only (empty for the other models): raw cosines against the reference renderer's

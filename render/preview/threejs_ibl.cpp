@@ -15,6 +15,7 @@
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <stdexcept>
 #include <string>
 #include <tuple>
 
@@ -331,6 +332,94 @@ Rgb<double> ThreejsPmrem::Sample(const V3& d, double mip) const {
   return {double(c[0]) * intensity_, double(c[1]) * intensity_, double(c[2]) * intensity_};
 }
 
+// ---- Filtered importance sampling (threejs_ibl.h; session-8 spec) ----
+
+namespace {
+double FisRadicalInverse2(uint32_t i) {  // Van der Corput: bit-reversed i times 2^-32
+  i = (i << 16) | (i >> 16);
+  i = ((i & 0x00ff00ffu) << 8) | ((i & 0xff00ff00u) >> 8);
+  i = ((i & 0x0f0f0f0fu) << 4) | ((i & 0xf0f0f0f0u) >> 4);
+  i = ((i & 0x33333333u) << 2) | ((i & 0xccccccccu) >> 2);
+  i = ((i & 0x55555555u) << 1) | ((i & 0xaaaaaaaau) >> 1);
+  return double(i) * (1.0 / 4294967296.0);
+}
+
+// The PMREM roughness whose lobe covers a tap of solid angle 1 / (N pdf).
+double FisTapRoughness(int n, double pdf) {
+  const double omega = 1.0 / (double(n) * pdf);
+  const double a_t = std::sqrt(omega / (4.0 * kPi));
+  return std::min(std::sqrt(a_t), 1.0);
+}
+}  // namespace
+
+FisPattern::FisPattern(int taps) : n(taps) {
+  if (taps < 1 || taps > 4096)
+    throw std::invalid_argument("FIS: " + std::to_string(taps) + " taps not in [1, 4096]");
+  u1.resize(size_t(taps));
+  cos_phi.resize(size_t(taps));
+  sin_phi.resize(size_t(taps));
+  for (int i = 0; i < taps; ++i) {
+    u1[size_t(i)] = (double(i) + 0.5) / double(taps);
+    const double phi = 2.0 * kPi * FisRadicalInverse2(uint32_t(i));
+    cos_phi[size_t(i)] = std::cos(phi);
+    sin_phi[size_t(i)] = std::sin(phi);
+  }
+}
+
+void FisFrame(const V3& n, V3* t1, V3* t2) {
+  const double s = n.z >= 0.0 ? 1.0 : -1.0;
+  const double a = -1.0 / (s + n.z);
+  const double b = n.x * n.y * a;
+  *t1 = V3(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+  *t2 = V3(b, s + n.y * n.y * a, -n.y);
+}
+
+Rgb<double> FisGgxRadiance(const ThreejsPmrem& pmrem, const FisPattern& taps, const V3& n,
+                           const V3& v, double r, int* taps_used) {
+  V3 t1, t2;
+  FisFrame(n, &t1, &t2);
+  const double alpha = std::max(r * r, 1e-3), a2 = alpha * alpha;
+  Rgb<double> sum(0, 0, 0);
+  double wsum = 0.0;
+  int used = 0;
+  for (int i = 0; i < taps.n; ++i) {
+    const double u1 = taps.u1[size_t(i)];
+    const double cos_h = std::sqrt((1.0 - u1) / (1.0 + (a2 - 1.0) * u1));
+    const double sin_h = std::sqrt(std::max(0.0, 1.0 - cos_h * cos_h));
+    const V3 h = t1 * (sin_h * taps.cos_phi[size_t(i)]) + t2 * (sin_h * taps.sin_phi[size_t(i)]) +
+                 n * cos_h;
+    const double VoH = Dot(v, h);
+    const V3 l = h * (2.0 * VoH) - v;
+    const double NoL = Dot(n, l);
+    if (NoL <= 0.0 || VoH <= 0.0) continue;
+    const double q = (a2 - 1.0) * cos_h * cos_h + 1.0;
+    const double D = a2 / (kPi * q * q);
+    const double pdf = D * cos_h / (4.0 * VoH);
+    const double r_t = FisTapRoughness(taps.n, pdf);
+    sum += pmrem.Sample(l, pmrem.MipForRoughness(r_t)) * NoL;
+    wsum += NoL;
+    ++used;
+  }
+  if (taps_used) *taps_used = used;
+  if (!(wsum > 0.0)) return Rgb<double>(0, 0, 0);
+  return sum * (1.0 / wsum);
+}
+
+Rgb<double> FisIrradianceOverPi(const ThreejsPmrem& pmrem, const FisPattern& taps, const V3& n) {
+  V3 t1, t2;
+  FisFrame(n, &t1, &t2);
+  Rgb<double> sum(0, 0, 0);
+  for (int i = 0; i < taps.n; ++i) {
+    const double u1 = taps.u1[size_t(i)];
+    const double cos_t = std::sqrt(1.0 - u1), sin_t = std::sqrt(u1);
+    const V3 l = t1 * (sin_t * taps.cos_phi[size_t(i)]) + t2 * (sin_t * taps.sin_phi[size_t(i)]) +
+                 n * cos_t;
+    const double r_t = FisTapRoughness(taps.n, cos_t * kInvPi);
+    sum += pmrem.Sample(l, pmrem.MipForRoughness(r_t));
+  }
+  return sum * (1.0 / double(taps.n));
+}
+
 namespace {
 
 // Bump when the PMREM computation changes: old cache files then no longer match.
@@ -435,9 +524,14 @@ bool UsesThreejsIbl(const PreviewOptions& o) {
     case IblEngine::kAuto: break;
   }
   if (o.model == ModelKind::kStandard || o.model == ModelKind::kPhysicalSheen ||
-      o.model == ModelKind::kPhysicalAniso)
+      o.model == ModelKind::kPhysicalAniso || o.model == ModelKind::kWoven)
     return true;
   return o.model == ModelKind::kCloth && o.cloth.variant == cloth::Variant::kSeedThreejs;
+}
+
+bool UsesWovenFis(const PreviewOptions& o) {
+  return o.model == ModelKind::kWoven && o.woven.ibl == woven::IblMode::kFis &&
+         o.exact_ibl_samples <= 0 && UsesThreejsIbl(o);
 }
 
 bool RasterBarycentrics(const Scene& scene, const std::array<V3, 3>& P, double sx, double sy,

@@ -137,6 +137,34 @@ double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int 
                                 int subpixel_bits = kSwiftShaderSubpixelBits);
 
 
+// Filtered importance sampling (FIS; Colbert & Krivanek 2007, "GPU-based importance sampling",
+// GPU Gems 3 ch. 20) of the PMREM: the session-8 spec that web/clothfit.js implements too
+// (docs/fitting.md "Filtered importance sampling for woven's IBL (session 8)"). World space;
+// n the shading normal, v the view direction (unit).
+//   Frame (Duff et al. 2017, JCGT 6(1)): s = sign(n.z) (+1 at 0), a = -1 / (s + n.z),
+//     b = n.x n.y a, t1 = (1 + s n.x^2 a, s b, -s n.x), t2 = (b, s + n.y^2 a, -n.y).
+//   Tap i of N: u1 = (i + 0.5) / N, u2 = radical inverse base 2 of i, phi = 2 pi u2.
+//   Each tap is read with Sample(l, MipForRoughness(r_t)), where the tap's solid angle
+//   Omega_s = 1 / (N pdf) is matched to the PMREM roughness whose GGX lobe (seen at v = n, peak
+//   pdf 1 / (4 pi alpha'^2)) covers it: a_t = sqrt(Omega_s / (4 pi)), r_t = min(sqrt(a_t), 1).
+struct FisPattern {
+  explicit FisPattern(int taps);  // 1 <= taps <= 4096
+  int n = 0;
+  std::vector<double> u1, cos_phi, sin_phi;
+};
+void FisFrame(const Vec3<double>& n, Vec3<double>* t1, Vec3<double>* t2);
+// GGX lobe radiance at perceptual roughness r (alpha = max(r^2, 1e-3)): half vectors from D,
+// l = reflect(-v, h), taps with n.l <= 0 or v.h <= 0 skipped, pdf(l) = D cos_h / (4 v.h);
+// returns sum (n.l) L(l) / sum (n.l). *taps_used: the taps kept (0: the result is 0 and the
+// caller falls back to the split-sum read).
+Rgb<double> FisGgxRadiance(const ThreejsPmrem& pmrem, const FisPattern& taps,
+                           const Vec3<double>& n, const Vec3<double>& v, double r,
+                           int* taps_used);
+// Diffuse irradiance / pi: cosine-weighted taps (cos_t = sqrt(1 - u1)), pdf = cos_t / pi,
+// E / pi = (1 / N) sum L(l).
+Rgb<double> FisIrradianceOverPi(const ThreejsPmrem& pmrem, const FisPattern& taps,
+                                const Vec3<double>& n);
+
 // Rounds to the nearest IEEE half (ties to even), as a GPU does when it writes RGBA16F.
 float RoundToHalf(float x);
 

@@ -166,10 +166,32 @@ void ParseWovenOptions(const json& w, const std::string& where, woven::Options* 
         if (t[int(c)] < 0.0) Fail(where, f + "[" + std::to_string(c) + "]", "must be >= 0");
       }
       (k == "tint_warp" ? o->tint_warp : o->tint_weft) = t;
+    } else if (k == "ibl") {
+      const std::string v = it->is_string() ? it->get<std::string>() : "";
+      if (v == "split") o->ibl = woven::IblMode::kSplit;
+      else if (v == "fis") o->ibl = woven::IblMode::kFis;
+      else Fail(where, f, "expected \"split\" or \"fis\"");
+    } else if (k == "fis_taps" || k == "fis_diffuse_taps") {
+      const int lo = k == "fis_taps" ? 1 : 0;
+      if (!it->is_number_integer())
+        Fail(where, f, "expected an integer in [" + std::to_string(lo) + ", " +
+                           std::to_string(woven::kMaxFisTaps) + "]");
+      const long long t = it->get<long long>();
+      if (t < lo || t > woven::kMaxFisTaps)
+        Fail(where, f, "expected an integer in [" + std::to_string(lo) + ", " +
+                           std::to_string(woven::kMaxFisTaps) + "], got " + std::to_string(t));
+      (k == "fis_taps" ? o->fis_taps : o->fis_diffuse_taps) = int(t);
     } else {
-      Fail(where, f, "unknown key (valid: yarn_layer, tint_warp, tint_weft)");
+      Fail(where, f,
+           "unknown key (valid: yarn_layer, tint_warp, tint_weft, ibl, fis_taps, "
+           "fis_diffuse_taps)");
     }
   }
+  // The tap counts belong to filtered importance sampling (docs/preset-format.md).
+  if (o->ibl != woven::IblMode::kFis)
+    for (const char* k : {"fis_taps", "fis_diffuse_taps"})
+      if (w.contains(k))
+        Fail(where, std::string("woven.") + k, "only allowed with \"ibl\": \"fis\"");
 }
 
 // One entry of "parameters": looked up in the model's table, range-checked, stored in p->values.
@@ -290,7 +312,12 @@ json PresetToJson(const MaterialPreset& p) {
     auto rgb = [](const Rgb<double>& c) { return json::array({c[0], c[1], c[2]}); };
     j["woven"] = {{"yarn_layer", std::string(woven::ToString(p.woven.yarn_layer))},
                   {"tint_warp", rgb(p.woven.tint_warp)},
-                  {"tint_weft", rgb(p.woven.tint_weft)}};
+                  {"tint_weft", rgb(p.woven.tint_weft)},
+                  {"ibl", std::string(woven::ToString(p.woven.ibl))}};
+    if (p.woven.ibl == woven::IblMode::kFis) {
+      j["woven"]["fis_taps"] = p.woven.fis_taps;
+      j["woven"]["fis_diffuse_taps"] = p.woven.fis_diffuse_taps;
+    }
   }
   j["conventions"] = {{"colour_space", "linear sRGB (Rec.709 primaries), not gamma-encoded"},
                       {"roughness", "perceptual r in [0, 1]; the models use alpha = r^2"}};
