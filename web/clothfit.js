@@ -674,7 +674,8 @@ material.roughness = wovenRE;
  * options: yarnLayer 'additive' (default) | 'albedo-scaled', tintWarp / tintWeft (THREE.Color);
  * ibl 'split' (default: the split sum, one PMREM read at r_e) | 'fis' (filtered importance
  * sampling of the yarn lobe, fisTaps taps, 1..64, default 16; fisDiffuseTaps 0..64 cosine taps
- * for the diffuse irradiance, 0 = three.js's getIBLIrradiance). Changing them recompiles.
+ * for the diffuse irradiance, default 16, 0 = three.js's getIBLIrradiance). Changing them
+ * recompiles.
  */
 export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
   constructor(parameters = {}, {
@@ -1085,11 +1086,12 @@ registerClothfitModel('woven', {
 // ParseWovenOptions; brdf/woven.h woven::Options): yarn_layer 'additive' (default) |
 // 'albedo-scaled'; tint_warp / tint_weft linear RGB, each >= 0, default [1, 1, 1]; ibl 'split'
 // (default: old presets keep their meaning) | 'fis'; fis_taps an integer in [1, 64] (default 16),
-// fis_diffuse_taps an integer in [0, 64] (0 = three.js's irradiance). Unknown keys and values
-// throw, naming the field.
+// fis_diffuse_taps an integer in [0, 64] (default 16; 0 = three.js's irradiance), both only
+// allowed with "ibl": "fis" (brdf/woven.h kDefaultFisTaps / kDefaultFisDiffuseTaps, as the C++
+// reader). Unknown keys and values throw, naming the field.
 const WOVEN_FIS_MAX_TAPS = 64;
 export const WOVEN_OPTION_DEFAULTS = Object.freeze({
-  yarn_layer: 'additive', tint_warp: [1, 1, 1], tint_weft: [1, 1, 1], ibl: 'split', fis_taps: 16, fis_diffuse_taps: 0,
+  yarn_layer: 'additive', tint_warp: [1, 1, 1], tint_weft: [1, 1, 1], ibl: 'split', fis_taps: 16, fis_diffuse_taps: 16,
 });
 export function wovenOptions(w) {
   if (w === undefined) return { ...WOVEN_OPTION_DEFAULTS };
@@ -1120,6 +1122,9 @@ export function wovenOptions(w) {
     } else {
       fail(f, 'unknown key (valid: yarn_layer, tint_warp, tint_weft, ibl, fis_taps, fis_diffuse_taps)');
     }
+  }
+  if (out.ibl !== 'fis') {
+    for (const k of ['fis_taps', 'fis_diffuse_taps']) if (k in w) fail(`woven.${k}`, 'only allowed with "ibl": "fis"');
   }
   return out;
 }
