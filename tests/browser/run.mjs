@@ -37,7 +37,8 @@ const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, all) =>
 const clothfit = path.resolve(args.clothfit ?? path.join(repo, 'build', 'bin', 'clothfit'));
 const work = path.resolve(args.work ?? fs.mkdtempSync(path.join(os.tmpdir(), 'clothfit-browser-')));
 const chromium = args.chromium ?? ['/usr/bin/chromium', '/usr/bin/chromium-browser'].find((p) => fs.existsSync(p));
-const timeoutS = Number(args.timeout ?? 300);
+// 600 s: with the 24 FIS cases the browser part took 198 s at load 9-10 on 2 cores (300 before).
+const timeoutS = Number(args.timeout ?? 600);
 const dataDir = process.env.CLOTHFIT_DATA || path.join(os.homedir(), '.cache', 'clothfit');
 const hdriDir = path.join(dataDir, 'hdri');
 const t0 = Date.now();
