@@ -602,6 +602,8 @@ vec3 wovenFisRadiance( const in vec3 nView, const in vec3 vView, const in float 
 	return wsum > 0.0 ? sum / wsum : fallback;
 }
 #if WOVEN_FIS_DIFFUSE_TAPS > 0
+// (WOVEN_FIS_DIFFUSE: so no #if elsewhere names WOVEN_FIS_DIFFUSE_TAPS when it is undefined.)
+#define WOVEN_FIS_DIFFUSE
 // E_fis(n) / pi: the mean of cosine-distributed taps (pdf cos / pi). nView: view space (unit).
 vec3 wovenFisIrradianceOverPi( const in vec3 nView ) {
 	vec3 n = transformDirectionByInverseViewMatrix( nView, viewMatrix );
@@ -639,7 +641,7 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 		vec3 sheenRadiance = getIBLRadiance( geometryViewDir, geometryNormal, wovenRS );
 		reflectedLight.indirectSpecular += wovenSheenColor * wovenTable( clothDG, 128, 0, NoV, wovenRS ) * sheenRadiance;
 	#endif
-	#if defined( WOVEN_FIS ) && defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM ) && WOVEN_FIS_DIFFUSE_TAPS > 0
+	#if defined( WOVEN_FIS_DIFFUSE )
 		vec3 wovenEd = wovenFisIrradianceOverPi( geometryNormal );
 	#else
 		vec3 wovenEd = iblIrradiance * RECIPROCAL_PI;
