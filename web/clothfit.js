@@ -328,6 +328,9 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
 //     same table as the C++ lut::DefaultWovenPhase() (web/tools/export-woven-phase.mjs), beta
 //     linear between the nodes kWovenPhaseBetas (the node and weight are computed here on the CPU,
 //     as woven::PhaseAlbedo does).
+//   IBL with the preset's "woven": {"ibl": "fis"}: the yarn lobes' radiance and (fis_diffuse_taps
+//     > 0) E_d by filtered importance sampling of the PMREM (wovenFisRadiance /
+//     wovenFisIrradianceOverPi below; docs/web.md "Filtered importance sampling").
 // No geometryRoughness (as the C++ preview for this model). A mesh without a TANGENT attribute
 // gets BufferGeometry.computeTangents() (three.js's own, not clothfit's generator: a stated
 // difference for such meshes; the canonical glTFs carry TANGENT).
