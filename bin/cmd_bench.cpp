@@ -112,17 +112,30 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
     const render::Scene* s;
     const render::Environment* e;
     bool sub, shadows;
+    render::IblEngine engine = render::IblEngine::kFilament;
+    woven::IblMode woven_ibl = woven::IblMode::kSplit;
   };
   const Def defs[] = {{"full (direct+ibl+subsurface+shadows)", &scene, env.get(), true, true},
                       {"direct+ibl", &scene, env.get(), false, false},
                       {"direct only (no environment)", &scene, nullptr, false, false},
                       {"ibl only (no lights)", &no_lights, env.get(), false, false},
                       {"woven direct+ibl", &scene, env.get(), false, false},
-                      {"woven direct+ibl, sheen on", &scene, env.get(), false, false}};
+                      {"woven direct+ibl, sheen on", &scene, env.get(), false, false},
+                      // session 8: the engine web/ draws with (three.js PMREM); woven's yarn
+                      // lobes by split sum or by FIS (default taps); frame cost vs cloth's
+                      {"threejs: cloth direct+ibl", &scene, env.get(), false, false,
+                       render::IblEngine::kThreejs},
+                      {"threejs: woven direct+ibl, split", &scene, env.get(), false, false,
+                       render::IblEngine::kThreejs},
+                      {"threejs: woven direct+ibl, fis", &scene, env.get(), false, false,
+                       render::IblEngine::kThreejs, woven::IblMode::kFis}};
   for (const Def& d : defs) {
     render::PreviewOptions o;
-    o.model = std::string_view(d.name).starts_with("woven") ? render::ModelKind::kWoven
-                                                              : render::ModelKind::kCloth;
+    o.model = std::string_view(d.name).find("woven") != std::string_view::npos
+                  ? render::ModelKind::kWoven
+                  : render::ModelKind::kCloth;
+    o.ibl_engine = d.engine;
+    o.woven.ibl = d.woven_ibl;
     o.cloth.subsurface = d.sub;
     o.shadows = d.shadows;
     auto cache = render::PreviewCache::Build(*d.s, d.e, o);

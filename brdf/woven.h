@@ -97,7 +97,9 @@ enum class IblMode { kSplit, kFis };
 inline std::string_view ToString(IblMode m) { return m == IblMode::kSplit ? "split" : "fis"; }
 inline constexpr int kMaxFisTaps = 64;
 inline constexpr int kDefaultFisTaps = 16;
-inline constexpr int kDefaultFisDiffuseTaps = 16;
+// 0: three.js's own top-level irradiance, measured closer to the exact irradiance than E_fis
+// with 16-256 taps on the demo's studio (docs/fitting.md, session 8).
+inline constexpr int kDefaultFisDiffuseTaps = 0;
 
 struct Options {
   YarnLayer yarn_layer = YarnLayer::kAdditive;

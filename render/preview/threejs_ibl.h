@@ -145,10 +145,12 @@ double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int 
 //     b = n.x n.y a, t1 = (1 + s n.x^2 a, s b, -s n.x), t2 = (b, s + n.y^2 a, -n.y).
 //   Tap i of N: u1 = (i + 0.5) / N, u2 = radical inverse base 2 of i, phi = 2 pi u2.
 //   Each tap is read with Sample(l, MipForRoughness(r_t)), where the tap's solid angle
-//   Omega_s = 1 / (N pdf) is matched to the PMREM roughness whose GGX lobe (seen at v = n, peak
+//   Omega_s = 4 / (N pdf) is matched to the PMREM roughness whose GGX lobe (seen at v = n, peak
 //   pdf 1 / (4 pi alpha'^2)) covers it: a_t = sqrt(Omega_s / (4 pi)), r_t = min(sqrt(a_t), 1).
+//   The factor 4 (GPU Gems 3's +1 LOD bias) is a measured fix of the spec's 1 / (N pdf), which
+//   under-filters (threejs_ibl.cpp kFisSolidAngleBias).
 struct FisPattern {
-  explicit FisPattern(int taps);  // 1 <= taps <= 4096
+  explicit FisPattern(int taps);  // 1 <= taps <= 2^20
   int n = 0;
   std::vector<double> u1, cos_phi, sin_phi;
 };
