@@ -570,9 +570,12 @@ void wovenFisBasis( const in vec3 n, out vec3 t1, out vec3 t2 ) {
 	t1 = vec3( 1.0 + s * n.x * n.x * a, s * b, -s * n.x );
 	t2 = vec3( b, s + n.y * n.y * a, -n.y );
 }
-// The PMREM read of one tap of the given pdf (per solid angle) out of count taps.
+// The PMREM read of one tap of the given pdf (per solid angle) out of count taps, at the
+// roughness whose lobe covers Omega_s = 4 / (count pdf): the factor 4 is Colbert & Krivanek's
+// +1 LOD bias, a measured deviation of the C++ reference from the session-8 spec's 1 / (N pdf),
+// which under-filters (render/preview/threejs_ibl.cpp kFisSolidAngleBias).
 vec3 wovenFisTap( const in vec3 l, const in float pdf, const in float count ) {
-	float omegaS = 1.0 / ( count * pdf );
+	float omegaS = 4.0 / ( count * pdf );
 	float rT = min( sqrt( sqrt( omegaS / ( 4.0 * PI ) ) ), 1.0 );
 	return textureLod( envMap, envMapRotation * l, roughnessToMip( rT ) ).rgb * envMapIntensity;
 }
@@ -679,7 +682,7 @@ material.roughness = wovenRE;
  * options: yarnLayer 'additive' (default) | 'albedo-scaled', tintWarp / tintWeft (THREE.Color);
  * ibl 'split' (default: the split sum, one PMREM read at r_e) | 'fis' (filtered importance
  * sampling of the yarn lobe, fisTaps taps, 1..64, default 16; fisDiffuseTaps 0..64 cosine taps
- * for the diffuse irradiance, default 16, 0 = three.js's getIBLIrradiance). Changing them
+ * for the diffuse irradiance, default 0 = three.js's getIBLIrradiance). Changing them
  * recompiles.
  */
 export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
@@ -1091,12 +1094,12 @@ registerClothfitModel('woven', {
 // ParseWovenOptions; brdf/woven.h woven::Options): yarn_layer 'additive' (default) |
 // 'albedo-scaled'; tint_warp / tint_weft linear RGB, each >= 0, default [1, 1, 1]; ibl 'split'
 // (default: old presets keep their meaning) | 'fis'; fis_taps an integer in [1, 64] (default 16),
-// fis_diffuse_taps an integer in [0, 64] (default 16; 0 = three.js's irradiance), both only
+// fis_diffuse_taps an integer in [0, 64] (default 0 = three.js's irradiance), both only
 // allowed with "ibl": "fis" (brdf/woven.h kDefaultFisTaps / kDefaultFisDiffuseTaps, as the C++
 // reader). Unknown keys and values throw, naming the field.
 const WOVEN_FIS_MAX_TAPS = 64;
 export const WOVEN_OPTION_DEFAULTS = Object.freeze({
-  yarn_layer: 'additive', tint_warp: [1, 1, 1], tint_weft: [1, 1, 1], ibl: 'split', fis_taps: 16, fis_diffuse_taps: 16,
+  yarn_layer: 'additive', tint_warp: [1, 1, 1], tint_weft: [1, 1, 1], ibl: 'split', fis_taps: 16, fis_diffuse_taps: 0,
 });
 export function wovenOptions(w) {
   if (w === undefined) return { ...WOVEN_OPTION_DEFAULTS };

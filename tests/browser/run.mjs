@@ -117,14 +117,15 @@ const MATERIALS = {
 };
 // Filtered importance sampling of the yarn lobe's IBL ("woven": {"ibl": "fis"}, session 8; the
 // shader in web/clothfit.js, the C++ side in render/preview): the two uniform woven presets and
-// the twill maps with the defaults (16 yarn taps, 16 diffuse taps: E_fis replaces three.js's
-// top-level irradiance), and one with 8 yarn taps and three.js's irradiance (fis_diffuse_taps 0).
+// the twill maps with the defaults (16 yarn taps, three.js's own irradiance), and one with 8 yarn
+// taps and 16 diffuse taps (E_fis replacing three.js's top-level irradiance), so both FIS paths
+// are compared.
 const withWoven = (name, woven) => ({ ...MATERIALS[name], woven: { ...MATERIALS[name].woven, ...woven } });
 Object.assign(MATERIALS, {
   'woven-fis': withWoven('woven', { ibl: 'fis' }),
   'woven-forward-fis': withWoven('woven-forward', { ibl: 'fis' }),
   'woven-maps-twill-fis': withWoven('woven-maps-twill', { ibl: 'fis' }),
-  'woven-fis-taps8': withWoven('woven', { ibl: 'fis', fis_taps: 8, fis_diffuse_taps: 0 }),
+  'woven-fis-diffuse': withWoven('woven', { ibl: 'fis', fis_taps: 8, fis_diffuse_taps: 16 }),
 });
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();

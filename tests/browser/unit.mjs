@@ -79,8 +79,7 @@ check(() => assert.throws(() => loadClothfitPreset(wp({}, 'cloth')), /woven: onl
 check(() => assert.equal(wd.ibl, 'split'), 'woven default ibl split');
 const wf = loadClothfitPreset(wp({ ibl: 'fis', fis_taps: 8, fis_diffuse_taps: 12 }));
 check(() => assert.deepEqual([wf.ibl, wf.fisTaps, wf.fisDiffuseTaps], ['fis', 8, 12]), 'woven fis options');
-check(() => assert.deepEqual([loadClothfitPreset(wp({ ibl: 'fis' })).fisTaps, loadClothfitPreset(wp({ ibl: 'fis' })).fisDiffuseTaps], [16, 16]), 'woven fis default taps 16 / 16 (brdf/woven.h)');
-check(() => assert.equal(loadClothfitPreset(wp({ ibl: 'fis', fis_diffuse_taps: 0 })).fisDiffuseTaps, 0), 'fis_diffuse_taps 0 = three.js irradiance');
+check(() => assert.deepEqual([loadClothfitPreset(wp({ ibl: 'fis' })).fisTaps, loadClothfitPreset(wp({ ibl: 'fis' })).fisDiffuseTaps], [16, 0]), 'woven fis default taps 16 / 0 (brdf/woven.h)');
 check(() => assert.notEqual(wf.customProgramCacheKey(), wd.customProgramCacheKey()), 'fis compiles another program');
 check(() => assert.notEqual(wf.customProgramCacheKey(), loadClothfitPreset(wp({ ibl: 'fis', fis_taps: 9, fis_diffuse_taps: 12 })).customProgramCacheKey()), 'tap count is in the program key');
 check(() => assert.equal(loadClothfitPreset(wp({ ibl: 'split' })).customProgramCacheKey(), wd.customProgramCacheKey()), 'explicit split = the default program');
