@@ -9,9 +9,13 @@
 //               "sheen_default": "explicit" | "sqrt-base-color" | "white",
 //               "subsurface": true | false, "platform": "desktop" | "mobile"}   (cloth only)
 //     "woven": {"yarn_layer": "additive" | "albedo-scaled",
-//               "tint_warp": [r, g, b], "tint_weft": [r, g, b]}   (woven only; brdf/woven.h
-//               woven::Options; tints linear, >= 0, default [1, 1, 1]; web/clothfit.js reads
-//               the same keys)
+//               "tint_warp": [r, g, b], "tint_weft": [r, g, b],
+//               "ibl": "split" | "fis", "fis_taps": 1..64, "fis_diffuse_taps": 0..64}
+//               (woven only; brdf/woven.h woven::Options; tints linear, >= 0, default
+//               [1, 1, 1]; "ibl" missing = "split"; the tap counts (integers; defaults 16 and
+//               0) only with "ibl": "fis" (filtered importance sampling of the three.js PMREM
+//               for the yarn lobes; the writer writes "ibl" always and the taps with "fis");
+//               web/clothfit.js reads the same keys)
 //     "conventions": {"colour_space": "linear sRGB (Rec.709 primaries)",
 //                     "roughness": "perceptual r; alpha = r^2"}          (written, informative)
 //     "parameters": {"<name>": number | [r, g, b], ...}   names from the model's parameter
