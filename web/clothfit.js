@@ -328,6 +328,9 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
 //     same table as the C++ lut::DefaultWovenPhase() (web/tools/export-woven-phase.mjs), beta
 //     linear between the nodes kWovenPhaseBetas (the node and weight are computed here on the CPU,
 //     as woven::PhaseAlbedo does).
+//   IBL with the preset's "woven": {"ibl": "fis"}: the yarn lobes' radiance and (fis_diffuse_taps
+//     > 0) E_d by filtered importance sampling of the PMREM (wovenFisRadiance /
+//     wovenFisIrradianceOverPi below; docs/web.md "Filtered importance sampling").
 // No geometryRoughness (as the C++ preview for this model). A mesh without a TANGENT attribute
 // gets BufferGeometry.computeTangents() (three.js's own, not clothfit's generator: a stated
 // difference for such meshes; the canonical glTFs carry TANGENT).
@@ -539,7 +542,95 @@ void RE_IndirectDiffuse_Woven( const in vec3 irradiance, const in vec3 geometryP
 	reflectedLight.indirectDiffuse += irradiance * material.diffuseColor * RECIPROCAL_PI;
 }
 
+// Filtered importance sampling of the environment (Colbert & Krivanek 2007, "GPU-Based
+// Importance Sampling", GPU Gems 3 ch. 20), the session-8 spec shared with the C++ preview
+// (render/preview, ThreejsPmrem): WOVEN_FIS_TAPS taps of the yarn lobe's isotropic GGX
+// (alpha = max(r_e^2, 1e-3)) replace the single split-sum read the yarn lobes multiply;
+// WOVEN_FIS_DIFFUSE_TAPS > 0 cosine taps replace three.js's irradiance (the top PMREM level).
+// Each tap is read from three.js's PMREM cube with textureLod at the mip whose roughness lobe
+// covers the tap's solid angle. Conventions: WORLD space (n, v taken out of view space with
+// transformDirectionByInverseViewMatrix, as getIBLRadiance does), the frame built from the
+// world-space n (Duff et al. 2017), then envMapRotation and envMapIntensity at the lookup.
+#if defined( WOVEN_FIS ) && defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM )
+// Van der Corput radical inverse base 2 of i (bit-reversed 32-bit i times 2^-32).
+float wovenRadicalInverse( const in int i ) {
+	uint b = uint( i );
+	b = ( b << 16u ) | ( b >> 16u );
+	b = ( ( b & 0x55555555u ) << 1u ) | ( ( b & 0xAAAAAAAAu ) >> 1u );
+	b = ( ( b & 0x33333333u ) << 2u ) | ( ( b & 0xCCCCCCCCu ) >> 2u );
+	b = ( ( b & 0x0F0F0F0Fu ) << 4u ) | ( ( b & 0xF0F0F0F0u ) >> 4u );
+	b = ( ( b & 0x00FF00FFu ) << 8u ) | ( ( b & 0xFF00FF00u ) >> 8u );
+	return float( b ) * 2.3283064365386963e-10;
+}
+// Orthonormal basis (t1, t2, n) from a unit n (Duff et al. 2017, JCGT 6(1)).
+void wovenFisBasis( const in vec3 n, out vec3 t1, out vec3 t2 ) {
+	float s = n.z >= 0.0 ? 1.0 : -1.0;
+	float a = -1.0 / ( s + n.z );
+	float b = n.x * n.y * a;
+	t1 = vec3( 1.0 + s * n.x * n.x * a, s * b, -s * n.x );
+	t2 = vec3( b, s + n.y * n.y * a, -n.y );
+}
+// The PMREM read of one tap of the given pdf (per solid angle) out of count taps, at the
+// roughness whose lobe covers Omega_s = 4 / (count pdf): the factor 4 is Colbert & Krivanek's
+// +1 LOD bias, a measured deviation of the C++ reference from the session-8 spec's 1 / (N pdf),
+// which under-filters (render/preview/threejs_ibl.cpp kFisSolidAngleBias).
+vec3 wovenFisTap( const in vec3 l, const in float pdf, const in float count ) {
+	float omegaS = 4.0 / ( count * pdf );
+	float rT = min( sqrt( sqrt( omegaS / ( 4.0 * PI ) ) ), 1.0 );
+	return textureLod( envMap, envMapRotation * l, roughnessToMip( rT ) ).rgb * envMapIntensity;
+}
+// L_fis(n, v, r): the NoL-weighted mean of the GGX taps; fallback (the split-sum read at r)
+// when no tap is above the horizon. nView, vView: view space (unit).
+vec3 wovenFisRadiance( const in vec3 nView, const in vec3 vView, const in float r, const in vec3 fallback ) {
+	vec3 n = transformDirectionByInverseViewMatrix( nView, viewMatrix );
+	vec3 v = transformDirectionByInverseViewMatrix( vView, viewMatrix );
+	vec3 t1, t2;
+	wovenFisBasis( n, t1, t2 );
+	float alpha = max( r * r, 1e-3 ), a2 = alpha * alpha;
+	vec3 sum = vec3( 0.0 );
+	float wsum = 0.0;
+	for ( int i = 0; i < WOVEN_FIS_TAPS; ++i ) {
+		float u1 = ( float( i ) + 0.5 ) / float( WOVEN_FIS_TAPS );
+		float phi = 2.0 * PI * wovenRadicalInverse( i );
+		float cosH = sqrt( ( 1.0 - u1 ) / ( 1.0 + ( a2 - 1.0 ) * u1 ) );
+		float sinH = sqrt( max( 1.0 - cosH * cosH, 0.0 ) );
+		vec3 h = t1 * ( sinH * cos( phi ) ) + t2 * ( sinH * sin( phi ) ) + n * cosH;
+		float VoH = dot( v, h );
+		vec3 l = 2.0 * VoH * h - v;
+		float NoL = dot( n, l );
+		if ( NoL <= 0.0 || VoH <= 0.0 ) continue;
+		float d = ( a2 - 1.0 ) * cosH * cosH + 1.0;
+		float D = a2 / ( PI * d * d );
+		float pdf = D * cosH / ( 4.0 * VoH );
+		sum += NoL * wovenFisTap( l, pdf, float( WOVEN_FIS_TAPS ) );
+		wsum += NoL;
+	}
+	return wsum > 0.0 ? sum / wsum : fallback;
+}
+#if WOVEN_FIS_DIFFUSE_TAPS > 0
+// (WOVEN_FIS_DIFFUSE: so no #if elsewhere names WOVEN_FIS_DIFFUSE_TAPS when it is undefined.)
+#define WOVEN_FIS_DIFFUSE
+// E_fis(n) / pi: the mean of cosine-distributed taps (pdf cos / pi). nView: view space (unit).
+vec3 wovenFisIrradianceOverPi( const in vec3 nView ) {
+	vec3 n = transformDirectionByInverseViewMatrix( nView, viewMatrix );
+	vec3 t1, t2;
+	wovenFisBasis( n, t1, t2 );
+	vec3 sum = vec3( 0.0 );
+	for ( int i = 0; i < WOVEN_FIS_DIFFUSE_TAPS; ++i ) {
+		float u1 = ( float( i ) + 0.5 ) / float( WOVEN_FIS_DIFFUSE_TAPS );
+		float phi = 2.0 * PI * wovenRadicalInverse( i );
+		float cosT = sqrt( 1.0 - u1 ), sinT = sqrt( u1 );
+		vec3 l = t1 * ( sinT * cos( phi ) ) + t2 * ( sinT * sin( phi ) ) + n * cosT;
+		sum += wovenFisTap( l, cosT * RECIPROCAL_PI, float( WOVEN_FIS_DIFFUSE_TAPS ) );
+	}
+	return sum / float( WOVEN_FIS_DIFFUSE_TAPS );
+}
+#endif
+#endif
+
 // radiance: three.js's getIBLRadiance at material.roughness = r_e; the sheen lobe's at r_s.
+// With WOVEN_FIS (preset "woven": {"ibl": "fis"}) the yarn lobes multiply wovenFisRadiance
+// instead, and with WOVEN_FIS_DIFFUSE_TAPS > 0 the diffuse E_d = wovenFisIrradianceOverPi.
 void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradiance, const in vec3 clearcoatRadiance, const in vec3 geometryPosition, const in vec3 geometryNormal, const in vec3 geometryViewDir, const in vec3 geometryClearcoatNormal, const in PhysicalMaterial material, inout ReflectedLight reflectedLight ) {
 	float NoV = clamp( dot( geometryNormal, geometryViewDir ), 1e-4, 1.0 );
 	float rE = material.roughness;
@@ -547,12 +638,21 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 	float s = wovenSheenScaling( NoV );
 	vec3 yarn = wovenSpecularColor * ( s * ws.glint * wovenYarnAlbedo( NoV, rE ) );
 	vec3 lobes = yarn * ( wovenTintWarp * ( wovenM * ws.warp ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft ) );
-	reflectedLight.indirectSpecular += lobes * radiance;
+	#if defined( WOVEN_FIS ) && defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM )
+		reflectedLight.indirectSpecular += lobes * wovenFisRadiance( geometryNormal, geometryViewDir, rE, radiance );
+	#else
+		reflectedLight.indirectSpecular += lobes * radiance;
+	#endif
 	#if defined( USE_ENVMAP ) && defined( STANDARD )
 		vec3 sheenRadiance = getIBLRadiance( geometryViewDir, geometryNormal, wovenRS );
 		reflectedLight.indirectSpecular += wovenSheenColor * wovenTable( clothDG, 128, 0, NoV, wovenRS ) * sheenRadiance;
 	#endif
-	reflectedLight.indirectDiffuse += material.diffuseColor * ws.kd * ( s * wovenYarnScaling( NoV, rE ) ) * iblIrradiance * RECIPROCAL_PI;
+	#if defined( WOVEN_FIS_DIFFUSE )
+		vec3 wovenEd = wovenFisIrradianceOverPi( geometryNormal );
+	#else
+		vec3 wovenEd = iblIrradiance * RECIPROCAL_PI;
+	#endif
+	reflectedLight.indirectDiffuse += material.diffuseColor * ws.kd * ( s * wovenYarnScaling( NoV, rE ) ) * wovenEd;
 }
 
 #undef RE_Direct
@@ -579,16 +679,29 @@ material.roughness = wovenRE;
  * MeshWovenMaterial: brdf/woven.h on three.js's MeshStandardMaterial program. Parameters are the
  * preset's (snake_case, linear colours): base_color, specular_color, roughness, anisotropy,
  * twist (degrees), warp_share, specular_f0, forward_scattering, sheen_color, sheen_roughness;
- * options: yarnLayer 'additive' (default) | 'albedo-scaled', tintWarp / tintWeft (THREE.Color).
+ * options: yarnLayer 'additive' (default) | 'albedo-scaled', tintWarp / tintWeft (THREE.Color);
+ * ibl 'split' (default: the split sum, one PMREM read at r_e) | 'fis' (filtered importance
+ * sampling of the yarn lobe, fisTaps taps, 1..64, default 16; fisDiffuseTaps 0..64 cosine taps
+ * for the diffuse irradiance, default 0 = three.js's getIBLIrradiance). Changing them
+ * recompiles.
  */
 export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
-  constructor(parameters = {}, { yarnLayer = 'additive', tintWarp = null, tintWeft = null, ...standard } = {}) {
+  constructor(parameters = {}, {
+    yarnLayer = 'additive', tintWarp = null, tintWeft = null,
+    ibl = 'split', fisTaps = WOVEN_OPTION_DEFAULTS.fis_taps, fisDiffuseTaps = WOVEN_OPTION_DEFAULTS.fis_diffuse_taps, ...standard
+  } = {}) {
     const p = { ...WOVEN_DEFAULTS, ...parameters };
     super({ metalness: 0, roughness: 1, color: linear(p.base_color), ...standard });
     this.isMeshWovenMaterial = true;
     this.woven = p;
     this.yarnLayer = yarnLayer;
     if (yarnLayer !== 'additive' && yarnLayer !== 'albedo-scaled') throw new Error(`MeshWovenMaterial: yarnLayer '${yarnLayer}' (valid: additive, albedo-scaled)`);
+    if (ibl !== 'split' && ibl !== 'fis') throw new Error(`MeshWovenMaterial: ibl '${ibl}' (valid: split, fis)`);
+    if (!Number.isInteger(fisTaps) || fisTaps < 1 || fisTaps > WOVEN_FIS_MAX_TAPS) throw new Error(`MeshWovenMaterial: fisTaps ${fisTaps} (an integer in [1, ${WOVEN_FIS_MAX_TAPS}])`);
+    if (!Number.isInteger(fisDiffuseTaps) || fisDiffuseTaps < 0 || fisDiffuseTaps > WOVEN_FIS_MAX_TAPS) throw new Error(`MeshWovenMaterial: fisDiffuseTaps ${fisDiffuseTaps} (an integer in [0, ${WOVEN_FIS_MAX_TAPS}])`);
+    this.ibl = ibl;
+    this.fisTaps = fisTaps;
+    this.fisDiffuseTaps = fisDiffuseTaps;
     this.tintWarp = tintWarp ? new THREE.Color().copy(tintWarp) : new THREE.Color(1, 1, 1);
     this.tintWeft = tintWeft ? new THREE.Color().copy(tintWeft) : new THREE.Color(1, 1, 1);
     this._wovenUniforms = {
@@ -643,6 +756,9 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     const defs = [];
     if (this.yarnLayer === 'albedo-scaled') defs.push('#define WOVEN_ALBEDO_SCALED');
     if (this.weaveMaps) defs.push('#define WOVEN_WEAVE_MAPS');
+    if (this.ibl === 'fis') {
+      defs.push('#define WOVEN_FIS', `#define WOVEN_FIS_TAPS ${this.fisTaps}`, `#define WOVEN_FIS_DIFFUSE_TAPS ${this.fisDiffuseTaps}`);
+    }
     injectPhysicalChunks(shader, 'MeshWovenMaterial', defs.join('\n') + '\nuniform float wovenRE;\n', WOVEN_PARS, WOVEN_ROUGHNESS);
     const vs = shader.vertexShader;
     if (!vs.includes('void main() {') || !vs.includes('#include <project_vertex>')) throw new Error('MeshWovenMaterial: unexpected three.js vertex shader');
@@ -650,13 +766,19 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       .replace('#include <project_vertex>', '#include <project_vertex>\n' + WOVEN_VERTEX);
   }
 
-  customProgramCacheKey() { return ['woven', this.yarnLayer, this.weaveMaps ? 'maps' : 'uniform'].join(':'); }
+  customProgramCacheKey() {
+    const ibl = this.ibl === 'fis' ? `fis${this.fisTaps}/${this.fisDiffuseTaps}` : 'split';
+    return ['woven', this.yarnLayer, this.weaveMaps ? 'maps' : 'uniform', ibl].join(':');
+  }
 
   copy(source) {
     super.copy(source);
     if (source.isMeshWovenMaterial) {
       this.woven = { ...source.woven };
       this.yarnLayer = source.yarnLayer;
+      this.ibl = source.ibl;
+      this.fisTaps = source.fisTaps;
+      this.fisDiffuseTaps = source.fisDiffuseTaps;
       this.tintWarp = source.tintWarp.clone();
       this.tintWeft = source.tintWeft.clone();
       this.weaveMaps = source.weaveMaps;
@@ -960,6 +1082,9 @@ registerClothfitModel('woven', {
       yarnLayer: w.yarn_layer,
       tintWarp: linear(w.tint_warp),
       tintWeft: linear(w.tint_weft),
+      ibl: w.ibl,
+      fisTaps: w.fis_taps,
+      fisDiffuseTaps: w.fis_diffuse_taps,
     });
   },
   weaveMaps: (m, maps) => m.setWeaveMaps(maps),
@@ -967,9 +1092,15 @@ registerClothfitModel('woven', {
 
 // A woven preset's "woven" object, checked as the C++ reader checks it (render/scene/material.cpp
 // ParseWovenOptions; brdf/woven.h woven::Options): yarn_layer 'additive' (default) |
-// 'albedo-scaled'; tint_warp / tint_weft linear RGB, each >= 0, default [1, 1, 1]. Unknown keys
-// and values throw, naming the field.
-export const WOVEN_OPTION_DEFAULTS = Object.freeze({ yarn_layer: 'additive', tint_warp: [1, 1, 1], tint_weft: [1, 1, 1] });
+// 'albedo-scaled'; tint_warp / tint_weft linear RGB, each >= 0, default [1, 1, 1]; ibl 'split'
+// (default: old presets keep their meaning) | 'fis'; fis_taps an integer in [1, 64] (default 16),
+// fis_diffuse_taps an integer in [0, 64] (default 0 = three.js's irradiance), both only
+// allowed with "ibl": "fis" (brdf/woven.h kDefaultFisTaps / kDefaultFisDiffuseTaps, as the C++
+// reader). Unknown keys and values throw, naming the field.
+const WOVEN_FIS_MAX_TAPS = 64;
+export const WOVEN_OPTION_DEFAULTS = Object.freeze({
+  yarn_layer: 'additive', tint_warp: [1, 1, 1], tint_weft: [1, 1, 1], ibl: 'split', fis_taps: 16, fis_diffuse_taps: 0,
+});
 export function wovenOptions(w) {
   if (w === undefined) return { ...WOVEN_OPTION_DEFAULTS };
   const fail = (f, msg) => { throw new Error(`loadClothfitPreset: ${f}: ${msg}`); };
@@ -988,9 +1119,20 @@ export function wovenOptions(w) {
         if (x < 0) fail(`${f}[${c}]`, 'must be >= 0');
       });
       out[k] = [...v];
+    } else if (k === 'ibl') {
+      if (v !== 'split' && v !== 'fis') fail(f, 'expected "split" or "fis"');
+      out.ibl = v;
+    } else if (k === 'fis_taps' || k === 'fis_diffuse_taps') {
+      const lo = k === 'fis_taps' ? 1 : 0;
+      if (typeof v !== 'number' || !Number.isInteger(v)) fail(f, 'expected an integer');
+      if (v < lo || v > WOVEN_FIS_MAX_TAPS) fail(f, `must be in [${lo}, ${WOVEN_FIS_MAX_TAPS}]`);
+      out[k] = v;
     } else {
-      fail(f, 'unknown key (valid: yarn_layer, tint_warp, tint_weft)');
+      fail(f, 'unknown key (valid: yarn_layer, tint_warp, tint_weft, ibl, fis_taps, fis_diffuse_taps)');
     }
+  }
+  if (out.ibl !== 'fis') {
+    for (const k of ['fis_taps', 'fis_diffuse_taps']) if (k in w) fail(`woven.${k}`, 'only allowed with "ibl": "fis"');
   }
   return out;
 }

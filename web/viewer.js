@@ -44,6 +44,7 @@ async function main() {
     sc.setMaterial(m);
     const p = m.userData.clothfit;
     info.textContent = `${sc.card.description ?? ''}\nmodel ${p.model}${p.cloth ? ` (${p.cloth.variant}${p.cloth.subsurface ? ', subsurface' : ''})` : ''}: ${JSON.stringify(p.parameters)}\n` +
+      (p.woven ? `woven options ${JSON.stringify(p.woven)} (ibl ${m.ibl ?? 'split'}${m.ibl === 'fis' ? `, ${m.fisTaps} + ${m.fisDiffuseTaps} taps` : ''})\n` : '') +
       `tone mapping ${sc.card.tone_mapping ?? 'ACESFilmic'}, exposure ${sc.exposure}, three.js r${THREE.REVISION}`;
   };
   setPreset(await fetchClothfitPreset(presetUrl));

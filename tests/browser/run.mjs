@@ -3,10 +3,13 @@
 // `clothfit render-preview` on the same scene card and preset.
 //
 //   node tests/browser/run.mjs --clothfit build/bin/clothfit [--work DIR] [--chromium PATH]
-//        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS]
+//        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS] [--frames N]
+//   --frames N: also time N more frames per case in the browser (mean ms per frame, each ended
+//   by a 1-pixel readPixels; SwiftShader runs on the CPU, so only ratios between cases mean
+//   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 15 materials (6 + 3 woven + 2 physical-aniso
-// + 4 with weave maps) x 2 environments
+// Cases: each canonical scene (datasets/scenes/*.json) x 19 materials (6 + 3 woven + 2 physical-aniso
+// + 4 with weave maps + 4 woven with FIS IBL) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -34,7 +37,8 @@ const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, all) =>
 const clothfit = path.resolve(args.clothfit ?? path.join(repo, 'build', 'bin', 'clothfit'));
 const work = path.resolve(args.work ?? fs.mkdtempSync(path.join(os.tmpdir(), 'clothfit-browser-')));
 const chromium = args.chromium ?? ['/usr/bin/chromium', '/usr/bin/chromium-browser'].find((p) => fs.existsSync(p));
-const timeoutS = Number(args.timeout ?? 300);
+// 600 s: with the 24 FIS cases the browser part took 198 s at load 9-10 on 2 cores (300 before).
+const timeoutS = Number(args.timeout ?? 600);
 const dataDir = process.env.CLOTHFIT_DATA || path.join(os.homedir(), '.cache', 'clothfit');
 const hdriDir = path.join(dataDir, 'hdri');
 const t0 = Date.now();
@@ -111,6 +115,18 @@ const MATERIALS = {
     sheen_roughness: 0.5, anisotropy_strength: 0.7, anisotropy_rotation: 0, specular_intensity: 1, specular_color: [1, 1, 1] },
   { weave_maps: { file: path.join(here, 'maps', 'twill.weave.exr'), size: 64, uv_repeats: 40 } }),
 };
+// Filtered importance sampling of the yarn lobe's IBL ("woven": {"ibl": "fis"}, session 8; the
+// shader in web/clothfit.js, the C++ side in render/preview): the two uniform woven presets and
+// the twill maps with the defaults (16 yarn taps, three.js's own irradiance), and one with 8 yarn
+// taps and 16 diffuse taps (E_fis replacing three.js's top-level irradiance), so both FIS paths
+// are compared.
+const withWoven = (name, woven) => ({ ...MATERIALS[name], woven: { ...MATERIALS[name].woven, ...woven } });
+Object.assign(MATERIALS, {
+  'woven-fis': withWoven('woven', { ibl: 'fis' }),
+  'woven-forward-fis': withWoven('woven-forward', { ibl: 'fis' }),
+  'woven-maps-twill-fis': withWoven('woven-maps-twill', { ibl: 'fis' }),
+  'woven-fis-diffuse': withWoven('woven', { ibl: 'fis', fis_taps: 8, fis_diffuse_taps: 16 }),
+});
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
 const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, rotation_y_degrees: 60 } };
@@ -132,7 +148,7 @@ for (const s of scenes) {
     }
   }
 }
-fs.writeFileSync(path.join(work, 'plan.json'), JSON.stringify({ hdri_dir: hdriDir, cases }, null, 1));
+fs.writeFileSync(path.join(work, 'plan.json'), JSON.stringify({ hdri_dir: hdriDir, frames: Number(args.frames ?? 0), cases }, null, 1));
 say(`${cases.length} cases, work dir ${work}`);
 
 // ---- C++ previews (in parallel with the browser; 2 at a time) -------------------------------
@@ -147,17 +163,25 @@ function runCmd(cmd, argv) {
 // --ibl-engine threejs: every material here is drawn by three.js in the browser
 // (MeshClothMaterial uses three.js's PMREM too). --cpp-args '' drops it (older binaries).
 const cppExtra = (args['cpp-args'] ?? '--ibl-engine threejs').split(' ').filter(Boolean);
+// A case whose preview fails (e.g. a binary that does not know a preset option) is reported as
+// that case's error, not as the end of the run.
+const cppErrors = new Map();
 async function cppAll() {
   const queue = [...cases];
   const worker = async () => {
     for (let c = queue.shift(); c; c = queue.shift()) {
-      await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png, ...cppExtra]);
+      try {
+        await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png, ...cppExtra]);
+      } catch (e) {
+        cppErrors.set(c.name, String(e.message).split('\n').filter(Boolean).slice(-1)[0] ?? 'failed');
+      }
     }
   };
   await Promise.all([worker(), worker()]);
   say('C++ previews done');
 }
-const cppPromise = cppAll();
+// With --frames the previews run after the browser, so they do not share the CPU with the timing.
+const cppPromise = Number(args.frames ?? 0) > 0 ? null : cppAll();
 
 // ---- server + chromium ----------------------------------------------------------------------
 // web/serve.mjs's server; served under /fs/<absolute path>: the repository, the work dir and
@@ -171,7 +195,7 @@ const server = await startServer({
   onPost: (url, body) => {
     if (url.pathname === '/result') {
       const name = url.searchParams.get('name');
-      results.set(name, { w: Number(url.searchParams.get('w')), h: Number(url.searchParams.get('h')), ms: Number(url.searchParams.get('ms')), body });
+      results.set(name, { w: Number(url.searchParams.get('w')), h: Number(url.searchParams.get('h')), ms: Number(url.searchParams.get('ms')), msFrame: url.searchParams.get('msFrame') || '', body });
     } else if (url.pathname === '/done') {
       finish(body.toString());
     }
@@ -199,7 +223,7 @@ say(`browser: ${outcome}, ${results.size}/${cases.length} frames in ${browserS.t
 if (outcome !== 'ok') {
   console.error(browserErr.split('\n').slice(-20).join('\n'));
 }
-await cppPromise;
+await (cppPromise ?? cppAll());
 try { fs.rmSync(profile, { recursive: true, force: true }); } catch { /* best effort */ }
 
 // ---- PNG decode (8-bit RGB/RGBA, non-interlaced; PNG spec 1.2 filters 0-4) -------------------
@@ -245,8 +269,13 @@ let failures = 0;
 for (const c of cases) {
   const r = results.get(c.name);
   if (!r) { rows.push({ name: c.name, error: 'no browser frame' }); failures++; continue; }
-  const ref = decodePng(c.png);
   const { w, h, body } = r;
+  // Keep the browser frame for inspection (PPM, no encoder needed).
+  const ppm = Buffer.alloc(w * h * 3);
+  for (let i = 0; i < w * h; ++i) for (let k = 0; k < 3; ++k) ppm[i * 3 + k] = body[i * 4 + k];
+  fs.writeFileSync(c.png.replace(/\.png$/, '.browser.ppm'), Buffer.concat([Buffer.from(`P6\n${w} ${h}\n255\n`), ppm]));
+  if (cppErrors.has(c.name)) { rows.push({ name: c.name, error: `C++ preview: ${cppErrors.get(c.name)}`, msFrame: r.msFrame }); failures++; continue; }
+  const ref = decodePng(c.png);
   if (ref.w !== w || ref.h !== h) { rows.push({ name: c.name, error: 'size mismatch' }); failures++; continue; }
   const mask = body.subarray(w * h * 4);
   const diffs = [];
@@ -273,19 +302,16 @@ for (const c of cases) {
   const bound = b && b.acceptance === false ? b : ACCEPT;
   const pass = n > 0 && mean <= bound.mean && p99 <= bound.p99;
   if (!pass) failures++;
-  rows.push({ name: c.name, pixels: n, mean, p99, accept, pass, bound, ms: r.ms, note: b?.note ?? '' });
-  // Keep the browser frame for inspection (PPM, no encoder needed).
-  const ppm = Buffer.alloc(w * h * 3);
-  for (let i = 0; i < w * h; ++i) for (let k = 0; k < 3; ++k) ppm[i * 3 + k] = body[i * 4 + k];
-  fs.writeFileSync(c.png.replace(/\.png$/, '.browser.ppm'), Buffer.concat([Buffer.from(`P6\n${w} ${h}\n255\n`), ppm]));
+  rows.push({ name: c.name, pixels: n, mean, p99, accept, pass, bound, ms: r.ms, msFrame: r.msFrame, note: b?.note ?? '' });
   fs.writeFileSync(c.png.replace(/\.png$/, '.mask.pgm'), Buffer.concat([Buffer.from(`P5\n${w} ${h}\n255\n`), mask]));
 }
 
 const fmt = (x) => (Number.isFinite(x) ? x.toFixed(2) : String(x));
-const table = ['| case | pixels | mean abs diff | p99 | acceptance (0.5 / 2) | test bound | browser ms |', '|---|---:|---:|---:|---|---|---:|'];
+const timed = Number(args.frames ?? 0) > 0;
+const table = [`| case | pixels | mean abs diff | p99 | acceptance (0.5 / 2) | test bound | browser ms |${timed ? ' ms/frame |' : ''}`, `|---|---:|---:|---:|---|---|---:|${timed ? '---:|' : ''}`];
 for (const r of rows) {
-  if (r.error) { table.push(`| ${r.name} | | | | ERROR: ${r.error} | | |`); continue; }
-  table.push(`| ${r.name} | ${r.pixels} | ${fmt(r.mean)} | ${r.p99} | ${r.accept ? 'meets' : '**not met**'} | ${r.bound === ACCEPT ? 'acceptance' : `mean <= ${r.bound.mean}, p99 <= ${r.bound.p99}`}${r.pass ? '' : ' FAILED'} | ${r.ms} |`);
+  if (r.error) { table.push(`| ${r.name} | | | | ERROR: ${r.error} | | |${timed ? ` ${r.msFrame ?? ''} |` : ''}`); continue; }
+  table.push(`| ${r.name} | ${r.pixels} | ${fmt(r.mean)} | ${r.p99} | ${r.accept ? 'meets' : '**not met**'} | ${r.bound === ACCEPT ? 'acceptance' : `mean <= ${r.bound.mean}, p99 <= ${r.bound.p99}`}${r.pass ? '' : ' FAILED'} | ${r.ms} |${timed ? ` ${r.msFrame} |` : ''}`);
 }
 const md = table.join('\n');
 console.log(md);

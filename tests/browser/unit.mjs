@@ -73,6 +73,36 @@ check(() => assert.throws(() => loadClothfitPreset(wp({ tint_warp: [1, 1] })), /
 check(() => assert.throws(() => loadClothfitPreset(wp({ tint_weft: [1, -0.1, 1] })), /woven\.tint_weft\[1\]: must be >= 0/), 'woven negative tint');
 check(() => assert.throws(() => loadClothfitPreset(wp({}, 'cloth')), /woven: only allowed with model "woven"/), 'woven block on cloth');
 
+// IBL options ("woven": ibl, fis_taps, fis_diffuse_taps; docs/web.md "Filtered importance
+// sampling"): missing = the split sum (today's program); "fis" compiles another program with the
+// tap counts as #defines; bad values refused naming the field.
+check(() => assert.equal(wd.ibl, 'split'), 'woven default ibl split');
+const wf = loadClothfitPreset(wp({ ibl: 'fis', fis_taps: 8, fis_diffuse_taps: 12 }));
+check(() => assert.deepEqual([wf.ibl, wf.fisTaps, wf.fisDiffuseTaps], ['fis', 8, 12]), 'woven fis options');
+check(() => assert.deepEqual([loadClothfitPreset(wp({ ibl: 'fis' })).fisTaps, loadClothfitPreset(wp({ ibl: 'fis' })).fisDiffuseTaps], [16, 0]), 'woven fis default taps 16 / 0 (brdf/woven.h)');
+check(() => assert.notEqual(wf.customProgramCacheKey(), wd.customProgramCacheKey()), 'fis compiles another program');
+check(() => assert.notEqual(wf.customProgramCacheKey(), loadClothfitPreset(wp({ ibl: 'fis', fis_taps: 9, fis_diffuse_taps: 12 })).customProgramCacheKey()), 'tap count is in the program key');
+check(() => assert.equal(loadClothfitPreset(wp({ ibl: 'split' })).customProgramCacheKey(), wd.customProgramCacheKey()), 'explicit split = the default program');
+{
+  // The defines the shader sees (onBeforeCompile on a stand-in of three.js r187's shader).
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n';
+  const vsrc = 'void main() {\n#include <project_vertex>\n}';
+  const compiled = (m) => { const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: vsrc }; m.onBeforeCompile(sh); return sh.fragmentShader; };
+  const ff = compiled(wf), fd = compiled(wd);
+  check(() => assert.ok(/#define WOVEN_FIS\n/.test(ff) && /#define WOVEN_FIS_TAPS 8\n/.test(ff) && /#define WOVEN_FIS_DIFFUSE_TAPS 12\n/.test(ff)), 'fis defines');
+  check(() => assert.ok(!/#define WOVEN_FIS\n/.test(fd) && !/#define WOVEN_FIS_TAPS /.test(fd) && !/#define WOVEN_FIS_DIFFUSE_TAPS /.test(fd)), 'split: no fis defines');
+}
+for (const [opt, re] of [[{ ibl: 'FIS' }, /woven\.ibl: expected "split" or "fis"/], [{ ibl: 1 }, /woven\.ibl: expected/],
+  [{ ibl: 'fis', fis_taps: 0 }, /woven\.fis_taps: must be in \[1, 64\]/], [{ ibl: 'fis', fis_taps: 65 }, /woven\.fis_taps: must be in/],
+  [{ ibl: 'fis', fis_taps: 2.5 }, /woven\.fis_taps: expected an integer/], [{ ibl: 'fis', fis_taps: '16' }, /woven\.fis_taps: expected an integer/],
+  [{ ibl: 'fis', fis_diffuse_taps: -1 }, /woven\.fis_diffuse_taps: must be in \[0, 64\]/], [{ ibl: 'fis', fis_diffuse_taps: 65 }, /woven\.fis_diffuse_taps: must be in/],
+  [{ ibl: 'fis', fis_diffuse_taps: null }, /woven\.fis_diffuse_taps: expected an integer/], [{ fis_tap: 4 }, /woven\.fis_tap: unknown key/],
+  [{ fis_taps: 8 }, /woven\.fis_taps: only allowed with "ibl": "fis"/], [{ ibl: 'split', fis_diffuse_taps: 0 }, /woven\.fis_diffuse_taps: only allowed with "ibl": "fis"/]]) {
+  check(() => assert.throws(() => loadClothfitPreset(wp(opt)), re), `bad ${JSON.stringify(opt)}`);
+}
+check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'exact' }), /MeshWovenMaterial: ibl 'exact'/), 'material ibl refused');
+check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps: 0 }), /MeshWovenMaterial: fisTaps 0/), 'material taps refused');
+
 // From the real converter: a glTF with one single-sided and one double-sided material.
 if (args.clothfit) {
   const work = path.resolve(args.work ?? fs.mkdtempSync('/tmp/clothfit-unit-'));

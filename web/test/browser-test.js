@@ -16,6 +16,10 @@ async function run() {
   const canvas = document.getElementById('c');
   const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true, powerPreference: 'high-performance' });
   const gl = renderer.getContext();
+  // A shader that does not compile is reported through /log (three.js would only console.error).
+  renderer.debug.onShaderError = (g, program, vs, fs) => {
+    log(`shader error: ${g.getProgramInfoLog(program)}\n${g.getShaderInfoLog(fs)}\n${g.getShaderInfoLog(vs)}`.slice(0, 4000));
+  };
   log(`WebGL: ${gl.getParameter(gl.VERSION)} / ${gl.getParameter(gl.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? gl.RENDERER)}; OES_texture_float_linear: ${renderer.extensions.has('OES_texture_float_linear')}`);
   const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
   const cards = new Map();
@@ -40,6 +44,18 @@ async function run() {
     const W = sc.width, H = sc.height;
     const px = new Uint8Array(W * H * 4);
     gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    // plan.frames > 0 (run.mjs --frames N): the mean wall time of N more frames of the compiled
+    // program, each finished by a 1-pixel readPixels (a GPU sync); a cost figure, not a check.
+    let msFrame = '';
+    if (plan.frames > 0) {
+      const one = new Uint8Array(4);
+      const f0 = performance.now();
+      for (let f = 0; f < plan.frames; ++f) {
+        renderer.render(sc.scene, sc.camera);
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
+      }
+      msFrame = ((performance.now() - f0) / plan.frames).toFixed(1);
+    }
     // Mask pass: fabric white, everything else black, no tone mapping, same culling.
     const saved = [];
     const white = new THREE.MeshBasicMaterial({ color: 0xffffff });
@@ -61,7 +77,7 @@ async function run() {
         out[W * H * 4 + y * W + x] = mk[(src + x) * 4] > 127 ? 255 : 0;
       }
     }
-    await post(`/result?name=${encodeURIComponent(c.name)}&w=${W}&h=${H}&ms=${(performance.now() - t0).toFixed(0)}`, out);
+    await post(`/result?name=${encodeURIComponent(c.name)}&w=${W}&h=${H}&ms=${(performance.now() - t0).toFixed(0)}&msFrame=${msFrame}`, out);
   }
   await post('/done', 'ok');
 }
