@@ -91,6 +91,25 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   o.ibl_engine = engine == "threejs"    ? render::IblEngine::kThreejs
                  : engine == "filament" ? render::IblEngine::kFilament
                                         : render::IblEngine::kAuto;
+  // What is applied (review s8): auto resolved to its engine; woven FIS only on the three.js
+  // engine and without the exact-IBL measurement (render/preview/preview.h UsesWovenFis).
+  bool fis_applied = false;
+  {
+    render::PreviewOptions po;
+    po.model = preset.model;
+    po.cloth = preset.cloth;
+    po.woven = preset.woven;
+    po.ibl_engine = o.ibl_engine;
+    engine = render::UsesThreejsIbl(po) ? "threejs" : "filament";
+    fis_applied = preset.model == render::ModelKind::kWoven && a.exact_ibl <= 0 &&
+                  render::UsesWovenFis(po);
+    if (preset.model == render::ModelKind::kWoven && preset.woven.ibl == woven::IblMode::kFis &&
+        !fis_applied && !quiet)
+      std::fprintf(stderr,
+                   "clothfit: note: %s asks for woven \"ibl\": \"fis\"; FIS exists on the three.js "
+                   "IBL engine only (and not with --exact-ibl): evaluating with the split sum\n",
+                   limits::EscapeForMessage(a.preset).c_str());
+  }
 
   std::vector<render::Scene> loaded;
   std::vector<std::unique_ptr<render::Environment>> envs;
@@ -126,7 +145,7 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
                    : "split sum";
     j["ibl_engine"] = engine;
     if (preset.model == render::ModelKind::kWoven)
-      j["woven_ibl"] = std::string(woven::ToString(preset.woven.ibl));
+      j["woven_ibl"] = fis_applied ? "fis" : "split";
     j["rmse"] = r.rmse;
     if (fj.contains("rmse")) j["fit_rmse"] = fj["rmse"];
     j["scenes"] = nlohmann::json::array();
@@ -138,7 +157,7 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     std::printf("evaluate: %s (%s), level %d, stride %d, %s space, %s IBL", a.preset.c_str(),
                 render::ToString(preset.model).c_str(), o.level, o.pixel_stride,
                 fit::ToString(o.space).c_str(), engine.c_str());
-    if (preset.model == render::ModelKind::kWoven && preset.woven.ibl == woven::IblMode::kFis)
+    if (fis_applied)
       std::printf(" (woven FIS, %d / %d taps)", preset.woven.fis_taps,
                   preset.woven.fis_diffuse_taps);
     if (a.exact_ibl > 0)

@@ -144,6 +144,13 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       o.ibl_engine = args->ibl_engine == "threejs"    ? render::IblEngine::kThreejs
                      : args->ibl_engine == "filament" ? render::IblEngine::kFilament
                                                       : render::IblEngine::kAuto;
+      if (preset.model == render::ModelKind::kWoven && preset.woven.ibl == woven::IblMode::kFis &&
+          (!render::UsesWovenFis(o) || args->exact_ibl > 0) && !g.quiet)
+        std::fprintf(stderr,
+                     "clothfit: note: %s asks for woven \"ibl\": \"fis\"; FIS exists on the "
+                     "three.js IBL engine only (--ibl-engine threejs or auto) and not with "
+                     "--exact-ibl: rendering with the split sum\n",
+                     limits::EscapeForMessage(args->material).c_str());
       o.exact_ibl_samples = args->exact_ibl;
       o.exact_ibl_seed = args->exact_ibl_seed;
       o.exact_irradiance_samples = args->exact_irradiance;

@@ -315,9 +315,13 @@ def cmd_supersample(a):
                     big = os.path.join(a.out, "img", "%s_%s_%s_x%d_full.exr" % (
                         fabric, model, sc["name"], f))
                     os.makedirs(os.path.dirname(big), exist_ok=True)
+                    # the engine the preset was fitted on (fit.ibl_engine, session 8; older
+                    # presets: Filament's, render-preview's default)
+                    with open(preset) as fp:
+                        engine = json.load(fp).get("fit", {}).get("ibl_engine", "filament")
                     subprocess.run(["nice", "-n", "10", a.clothfit, "--quiet", "render-preview",
-                                    "--scene", card, "--material", preset, "--out", big],
-                                   check=True)
+                                    "--scene", card, "--material", preset, "--ibl-engine",
+                                    engine, "--out", big], check=True)
                     img = read_image(big, ["R", "G", "B"])
                     small = os.path.join(a.out, "img", "%s_%s_%s_x%d.exr" % (
                         fabric, model, sc["name"], f))

@@ -271,10 +271,14 @@ TEST(S8Fis, SplitSumWovenPreviewUnchanged) {
       ASSERT_GT(f.size(), 300u);
       double sum = 0.0;
       for (const auto& px : f) sum += px.r + 2.0 * px.g + 3.0 * px.b;
-      EXPECT_EQ(sum, c.sum);
-      EXPECT_EQ(f[0].g, c.p0);
-      EXPECT_EQ(f[f.size() / 2].r, c.p1);
-      EXPECT_EQ(f[f.size() - 1].b, c.p2);
+      // Same-toolchain golden: bit-identical with this repository's build (Release, no
+      // -ffast-math); a relative 1e-12 leaves room for another compiler's FMA contraction
+      // only, far below any change of the shading (which moves these by > 1e-6).
+      auto near = [](double got, double want) { return std::abs(got - want) <= 1e-12 * std::abs(want); };
+      EXPECT_TRUE(near(sum, c.sum)) << sum << " vs " << c.sum;
+      EXPECT_TRUE(near(f[0].g, c.p0)) << f[0].g << " vs " << c.p0;
+      EXPECT_TRUE(near(f[f.size() / 2].r, c.p1)) << f[f.size() / 2].r << " vs " << c.p1;
+      EXPECT_TRUE(near(f[f.size() - 1].b, c.p2)) << f[f.size() - 1].b << " vs " << c.p2;
     }
   }
 }

@@ -4,7 +4,7 @@
 # preset "woven" IBL field fail with an error naming the option or field; no preset is written.
 set -uo pipefail
 BIN=$1
-SRC=$2
+SRC=$(cd "$2" && pwd)
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 fail() { echo "FAIL: $*" >&2; exit 1; }
@@ -44,4 +44,29 @@ printf '{"schema":"clothfit.preset","version":1,"model":"woven","parameters":{},
 err=$("$BIN" render-preview --scene "$SCENE" --material "$TMP/w.json" --out "$TMP/p.png" 2>&1) \
   && fail "ibl fast accepted"
 echo "$err" | grep -q "woven.ibl" || fail "error does not name woven.ibl: $err"
+# The fit's sampled caches carry the FIS table (review s8: fit/image_fit.cpp Subset copies
+# yarn_radiance and geometryRoughness; a dropped table would silently fall back to the split
+# sum): `evaluate` of a FIS preset against render-preview's FIS frame of the same preset is
+# ~0, and the split-sum preset against that frame is not. A 64 x 64 copy of the sphere card.
+sed -e "s#\"sphere.gltf\"#\"$SRC/datasets/scenes/sphere.gltf\"#" -e 's/"width": 256/"width": 64/' \
+    -e 's/"height": 256/"height": 64/' "$SCENE" > "$TMP/small.json"
+W='"parameters":{"base_color":[0.2,0.3,0.1],"specular_color":[0.6,0.55,0.5],"roughness":0.6,"anisotropy":0.7}'
+printf '{"schema":"clothfit.preset","version":1,"model":"woven",%s,"woven":{"ibl":"fis"},"fit":{"ibl_engine":"threejs"}}' "$W" > "$TMP/fis.json"
+printf '{"schema":"clothfit.preset","version":1,"model":"woven",%s,"fit":{"ibl_engine":"threejs"}}' "$W" > "$TMP/split.json"
+"$BIN" --quiet render-preview --scene "$TMP/small.json" --material "$TMP/fis.json" \
+    --ibl-engine threejs --out "$TMP/fis.exr" || fail "render-preview of the FIS preset failed"
+for stride in 1 2; do
+  out=$("$BIN" --quiet evaluate --preset "$TMP/fis.json" --references "$TMP/fis.exr" \
+        --scenes "$TMP/small.json" --stride $stride --level 0 --json) || fail "evaluate fis: $out"
+  python3 -c 'import json,sys; j=json.loads(sys.argv[1]); assert j["woven_ibl"]=="fis" and j["ibl_engine"]=="threejs", j; assert j["rmse"] < 1e-4, j["rmse"]' "$out" \
+    || fail "FIS preset vs its own FIS frame (stride $stride): $out"
+done
+out=$("$BIN" --quiet evaluate --preset "$TMP/split.json" --references "$TMP/fis.exr" \
+      --scenes "$TMP/small.json" --stride 1 --level 0 --json) || fail "evaluate split: $out"
+python3 -c 'import json,sys; j=json.loads(sys.argv[1]); assert j["woven_ibl"]=="split", j; assert j["rmse"] > 1e-3, j["rmse"]' "$out" \
+  || fail "split preset vs the FIS frame should differ: $out"
+# On Filament's engine the FIS preset is evaluated with the split sum, and evaluate says so.
+err=$("$BIN" evaluate --preset "$TMP/fis.json" --references "$TMP/fis.exr" --scenes "$TMP/small.json" \
+      --ibl-engine filament --stride 1 --level 0 --json 2>&1 >/dev/null) || fail "evaluate on filament: $err"
+echo "$err" | grep -q "split sum" || fail "evaluate on filament does not say FIS is off: $err"
 echo "PASS"
