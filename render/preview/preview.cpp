@@ -8,6 +8,8 @@
 #endif
 #include "render/preview/preview.h"
 
+#include "render/scene/sampler.h"  // RadicalInverse2
+
 #include <ceres/jet.h>
 #include <tbb/parallel_for.h>
 
@@ -185,14 +187,6 @@ uint64_t SplitMix64(uint64_t z) {
   return z ^ (z >> 31);
 }
 double ToUnit(uint64_t z) { return double(z >> 11) * (1.0 / 9007199254740992.0); }
-double RadicalInverse2(uint32_t i) {
-  i = (i << 16) | (i >> 16);
-  i = ((i & 0x00ff00ffu) << 8) | ((i & 0xff00ff00u) >> 8);
-  i = ((i & 0x0f0f0f0fu) << 4) | ((i & 0xf0f0f0f0u) >> 4);
-  i = ((i & 0x33333333u) << 2) | ((i & 0xccccccccu) >> 2);
-  i = ((i & 0x55555555u) << 1) | ((i & 0xaaaaaaaau) >> 1);
-  return double(i) * (1.0 / 4294967296.0);
-}
 
 void AppendEnvironmentSamples(const PixelContext& x, const PrimaryHit& hit, size_t pix,
                               std::vector<PreviewLightSample>* ls,

@@ -3,6 +3,8 @@
 // no three.js code is used.
 #include "render/preview/threejs_ibl.h"
 
+#include "render/scene/sampler.h"  // RadicalInverse2
+
 #include <tbb/parallel_for.h>
 #include <unistd.h>
 
@@ -335,14 +337,6 @@ Rgb<double> ThreejsPmrem::Sample(const V3& d, double mip) const {
 // ---- Filtered importance sampling (threejs_ibl.h; session-8 spec) ----
 
 namespace {
-double FisRadicalInverse2(uint32_t i) {  // Van der Corput: bit-reversed i times 2^-32
-  i = (i << 16) | (i >> 16);
-  i = ((i & 0x00ff00ffu) << 8) | ((i & 0xff00ff00u) >> 8);
-  i = ((i & 0x0f0f0f0fu) << 4) | ((i & 0xf0f0f0f0u) >> 4);
-  i = ((i & 0x33333333u) << 2) | ((i & 0xccccccccu) >> 2);
-  i = ((i & 0x55555555u) << 1) | ((i & 0xaaaaaaaau) >> 1);
-  return double(i) * (1.0 / 4294967296.0);
-}
 
 // The PMREM roughness whose lobe covers a tap of solid angle kFisSolidAngleBias / (N pdf).
 // Deviation from the session-8 spec (which had no bias): Colbert & Krivanek's +1 LOD bias, i.e.
@@ -367,7 +361,7 @@ FisPattern::FisPattern(int taps) : n(taps) {
   sin_phi.resize(size_t(taps));
   for (int i = 0; i < taps; ++i) {
     u1[size_t(i)] = (double(i) + 0.5) / double(taps);
-    const double phi = 2.0 * kPi * FisRadicalInverse2(uint32_t(i));
+    const double phi = 2.0 * kPi * RadicalInverse2(uint32_t(i));
     cos_phi[size_t(i)] = std::cos(phi);
     sin_phi[size_t(i)] = std::sin(phi);
   }
