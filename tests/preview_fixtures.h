@@ -9,6 +9,8 @@
 
 #include <array>
 #include <cstddef>
+#include <memory>
+#include <vector>
 
 #include "brdf/math.h"
 #include "render/preview/preview.h"
@@ -69,6 +71,24 @@ void ForEachPixelGeometry(const Scene& s, const PreviewCache& cache, Fn&& fn) {
                          Dot(g.b, l),   Dot(g.t, hv),  Dot(g.b, hv)};
     fn(i, g);
   }
+}
+
+// woven flat parameters (brdf/woven.h kParameterTable order), sheen off, sheen roughness 0.6.
+inline std::vector<double> WovenFlat(Rgb<double> base, Rgb<double> spec, double r, double aniso,
+                                     double m, double f0, double beta) {
+  return {base.r, base.g, base.b, spec.r, spec.g, spec.b, r,   aniso,
+          0.0,    m,      f0,     beta,   0.0,    0.0,    0.0, 0.6};
+}
+
+// Builds the preview cache of (s, env, o) and evaluates it at x; `keep` receives the cache.
+inline std::vector<Rgb<double>> PreviewFrame(const Scene& s, const Environment& env,
+                                             const PreviewOptions& o, const std::vector<double>& x,
+                                             std::unique_ptr<PreviewCache>* keep = nullptr) {
+  auto cache = PreviewCache::Build(s, &env, o);
+  std::vector<Rgb<double>> out;
+  EvaluatePreview(*cache, x.data(), out);
+  if (keep) *keep = std::move(cache);
+  return out;
 }
 
 }  // namespace clothfit::render

@@ -62,4 +62,12 @@ inline Scene KeyLitAcesSphere() {
   return s;
 }
 
+// A fabric sphere filling most of a size x size frame, no punctual light (the exact-IBL and
+// woven FIS tests light it by an environment only).
+inline Scene UnlitSphere(int size = 40) {
+  Scene s = CameraScene(size, size, {0, 0, 3}, {0, 0, -1}, 0.4);
+  s.meshes.push_back(SphereMesh(0.5, 64, 32, true, 0.f));
+  return s;
+}
+
 }  // namespace clothfit::render

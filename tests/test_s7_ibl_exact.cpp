@@ -16,35 +16,11 @@
 #include "render/preview/preview.h"
 #include "render/scene/environment.h"
 #include "render/scene/image_io.h"
-#include "render/scene/image_io.h"
+#include "tests/preview_fixtures.h"
 #include "tests/scene_fixtures.h"
 
 namespace clothfit::render {
 namespace {
-
-// A fabric sphere filling most of a 40 x 40 frame, no punctual light.
-Scene UnlitSphere() {
-  Scene s = CameraScene(40, 40, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(SphereMesh(0.5, 64, 32, true, 0.f));
-  return s;
-}
-
-// woven flat parameters (brdf/woven.h kParameterTable order).
-std::vector<double> Woven(Rgb<double> base, Rgb<double> spec, double r, double aniso, double m,
-                          double f0, double beta) {
-  return {base.r, base.g, base.b, spec.r, spec.g, spec.b, r, aniso, 0.0, m, f0, beta,
-          0.0,    0.0,    0.0,    0.6};
-}
-
-std::vector<Rgb<double>> Frame(const Scene& s, const Environment& env, const PreviewOptions& o,
-                               const std::vector<double>& x,
-                               std::unique_ptr<PreviewCache>* keep = nullptr) {
-  auto cache = PreviewCache::Build(s, &env, o);
-  std::vector<Rgb<double>> out;
-  EvaluatePreview(*cache, x.data(), out);
-  if (keep) *keep = std::move(cache);
-  return out;
-}
 
 // Lambert in a white furnace: sum_j (n.l_j / pi) L / pdf_mix(l_j) must integrate to 1, so the
 // exact IBL returns the base colour at every pixel (a wrong mixture pdf is off by a factor).
@@ -55,8 +31,8 @@ TEST(S7ExactIbl, LambertWhiteFurnaceReturnsTheBaseColour) {
   o.model = ModelKind::kWoven;
   o.exact_ibl_samples = 1024;
   std::unique_ptr<PreviewCache> cache;
-  const auto out = Frame(s, env, o, Woven({0.6, 0.5, 0.4}, {0, 0, 0}, 0.6, 0.7, 0.5, 0.05, 2.0),
-                         &cache);
+  const auto out = PreviewFrame(
+      s, env, o, WovenFlat({0.6, 0.5, 0.4}, {0, 0, 0}, 0.6, 0.7, 0.5, 0.05, 2.0), &cache);
   ASSERT_GT(out.size(), 500u);
   EXPECT_FALSE(cache->features.ibl);  // the split-sum path is off
   EXPECT_TRUE(cache->features.direct);
@@ -91,14 +67,14 @@ TEST(S7ExactIbl, ExactIrradianceWhiteFurnace) {
 TEST(S7ExactIbl, IsotropicYarnFurnaceMatchesThePhaseTable) {
   const Scene s = UnlitSphere();
   const Environment env = Environment::Constant({1.0, 1.0, 1.0});
-  const auto x = Woven({0, 0, 0}, {1, 1, 1}, 0.5, 0.0, 0.5, 0.3, 2.0);
+  const auto x = WovenFlat({0, 0, 0}, {1, 1, 1}, 0.5, 0.0, 0.5, 0.3, 2.0);
   PreviewOptions split;
   split.model = ModelKind::kWoven;
   PreviewOptions exact = split;
   exact.exact_ibl_samples = 2048;
   std::unique_ptr<PreviewCache> cs, ce;
-  const auto a = Frame(s, env, split, x, &cs);
-  const auto b = Frame(s, env, exact, x, &ce);
+  const auto a = PreviewFrame(s, env, split, x, &cs);
+  const auto b = PreviewFrame(s, env, exact, x, &ce);
   ASSERT_EQ(cs->pixels, ce->pixels);
   int n = 0;
   double sum_rel = 0.0, worst = 0.0;
@@ -119,13 +95,13 @@ TEST(S7ExactIbl, IsotropicYarnFurnaceMatchesThePhaseTable) {
 TEST(S7ExactIbl, AnisotropicYarnFurnaceDiffersFromTheSplitSum) {
   const Scene s = UnlitSphere();
   const Environment env = Environment::Constant({1.0, 1.0, 1.0});
-  const auto x = Woven({0, 0, 0}, {1, 1, 1}, 0.65, 0.7, 0.88, 0.07, 0.95);
+  const auto x = WovenFlat({0, 0, 0}, {1, 1, 1}, 0.65, 0.7, 0.88, 0.07, 0.95);
   PreviewOptions split;
   split.model = ModelKind::kWoven;
   PreviewOptions exact = split;
   exact.exact_ibl_samples = 1024;
-  const auto a = Frame(s, env, split, x);
-  const auto b = Frame(s, env, exact, x);
+  const auto a = PreviewFrame(s, env, split, x);
+  const auto b = PreviewFrame(s, env, exact, x);
   double worst = 0.0;
   for (size_t i = 0; i < a.size(); ++i) worst = std::max(worst, std::abs(b[i].g / a[i].g - 1.0));
   EXPECT_GT(worst, 0.05);
@@ -137,16 +113,16 @@ TEST(S7ExactIbl, AnisotropicYarnFurnaceDiffersFromTheSplitSum) {
 TEST(S7ExactIbl, DeterministicPerPixelAndSampleMaskInvariant) {
   const Scene s = UnlitSphere();
   const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
-  const auto x = Woven({0.4, 0.3, 0.2}, {0.3, 0.3, 0.3}, 0.6, 0.7, 0.3, 0.05, 1.5);
+  const auto x = WovenFlat({0.4, 0.3, 0.2}, {0.3, 0.3, 0.3}, 0.6, 0.7, 0.3, 0.05, 1.5);
   PreviewOptions o;
   o.model = ModelKind::kWoven;
   o.exact_ibl_samples = 256;
   std::unique_ptr<PreviewCache> c1, c2, c3, cm;
-  const auto a = Frame(s, env, o, x, &c1);
-  const auto b = Frame(s, env, o, x, &c2);
+  const auto a = PreviewFrame(s, env, o, x, &c1);
+  const auto b = PreviewFrame(s, env, o, x, &c2);
   PreviewOptions o2 = o;
   o2.exact_ibl_seed = 7;
-  const auto c = Frame(s, env, o2, x, &c3);
+  const auto c = PreviewFrame(s, env, o2, x, &c3);
   int differ = 0;
   double mean_a = 0.0, mean_c = 0.0;
   for (size_t i = 0; i < a.size(); ++i) {
@@ -162,7 +138,7 @@ TEST(S7ExactIbl, DeterministicPerPixelAndSampleMaskInvariant) {
   PreviewOptions om = o;
   om.sample_mask.assign(size_t(s.card.width) * size_t(s.card.height), 0);
   for (size_t p = 0; p < om.sample_mask.size(); p += 3) om.sample_mask[p] = 1;
-  const auto m = Frame(s, env, om, x, &cm);
+  const auto m = PreviewFrame(s, env, om, x, &cm);
   ASSERT_GT(cm->pixels.size(), 100u);
   std::map<int, size_t> full_index;
   for (size_t i = 0; i < c1->pixels.size(); ++i) full_index[c1->pixels[i]] = i;
@@ -229,7 +205,7 @@ TEST(S7ExactIbl, LinearSkyMatchesSh9Irradiance) {
   const Environment env = Environment::Load(path, 1.0, 0.0);
   std::filesystem::remove(path);
   const Scene s = UnlitSphere();
-  const auto x = Woven({0.5, 0.5, 0.5}, {0, 0, 0}, 0.6, 0.0, 0.5, 0.05, 2.0);
+  const auto x = WovenFlat({0.5, 0.5, 0.5}, {0, 0, 0}, 0.6, 0.0, 0.5, 0.05, 2.0);
   PreviewOptions split;
   split.model = ModelKind::kWoven;
   PreviewOptions irr = split, exact = split;
@@ -248,8 +224,8 @@ TEST(S7ExactIbl, LinearSkyMatchesSh9Irradiance) {
   EXPECT_GT(hi / lo, 2.0) << "the sky must light the sphere unevenly";
   EXPECT_LT(worst, 0.02) << "exact irradiance vs SH9, max relative difference";
   RecordProperty("irradiance_max_rel_diff", std::to_string(worst));
-  const auto a = Frame(s, env, split, x);
-  const auto b = Frame(s, env, exact, x);
+  const auto a = PreviewFrame(s, env, split, x);
+  const auto b = PreviewFrame(s, env, exact, x);
   ASSERT_EQ(a.size(), b.size());
   double worst_frame = 0.0;
   for (size_t k = 0; k < a.size(); ++k)

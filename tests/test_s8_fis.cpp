@@ -20,25 +20,13 @@
 #include "render/scene/environment.h"
 #include "render/scene/image_io.h"
 #include "render/scene/material.h"
+#include "tests/preview_fixtures.h"
 #include "tests/scene_fixtures.h"
 
 namespace clothfit::render {
 namespace {
 
 using V3 = Vec3<double>;
-
-Scene UnlitSphere(int size = 40) {
-  Scene s = CameraScene(size, size, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(SphereMesh(0.5, 64, 32, true, 0.f));
-  return s;
-}
-
-// woven flat parameters (brdf/woven.h kParameterTable order), sheen off.
-std::vector<double> Woven(Rgb<double> base, Rgb<double> spec, double r, double aniso, double m,
-                          double f0, double beta) {
-  return {base.r, base.g, base.b, spec.r, spec.g, spec.b, r, aniso, 0.0, m, f0, beta,
-          0.0,    0.0,    0.0,    0.6};
-}
 
 PreviewOptions WovenThreejs(woven::IblMode mode, int taps = 16, int diffuse_taps = 16) {
   PreviewOptions o;
@@ -48,16 +36,6 @@ PreviewOptions WovenThreejs(woven::IblMode mode, int taps = 16, int diffuse_taps
   o.woven.fis_taps = taps;
   o.woven.fis_diffuse_taps = diffuse_taps;
   return o;
-}
-
-std::vector<Rgb<double>> Frame(const Scene& s, const Environment& env, const PreviewOptions& o,
-                               const std::vector<double>& x,
-                               std::unique_ptr<PreviewCache>* keep = nullptr) {
-  auto cache = PreviewCache::Build(s, &env, o);
-  std::vector<Rgb<double>> out;
-  EvaluatePreview(*cache, x.data(), out);
-  if (keep) *keep = std::move(cache);
-  return out;
 }
 
 // An equirect map written to a temporary EXR and loaded as the scenes load theirs.
@@ -218,12 +196,12 @@ TEST(S8Fis, CompactSourceLobeRadianceConvergesToBruteForce) {
 TEST(S8Fis, FisTableFeedsTheYarnLobesOnly) {
   const Environment env = CompactSource();
   const Scene s = UnlitSphere(32);
-  auto yarn = Woven({0.3, 0.2, 0.1}, {0.4, 0.4, 0.4}, 0.65, 0.7, 0.5, 0.07, 0.95);
-  auto no_yarn = Woven({0.3, 0.2, 0.1}, {0, 0, 0}, 0.65, 0.7, 0.5, 0.07, 0.95);
+  auto yarn = WovenFlat({0.3, 0.2, 0.1}, {0.4, 0.4, 0.4}, 0.65, 0.7, 0.5, 0.07, 0.95);
+  auto no_yarn = WovenFlat({0.3, 0.2, 0.1}, {0, 0, 0}, 0.65, 0.7, 0.5, 0.07, 0.95);
   no_yarn[12] = no_yarn[13] = no_yarn[14] = 0.3;  // sheen on
   for (const auto* x : {&yarn, &no_yarn}) {
-    const auto a = Frame(s, env, WovenThreejs(woven::IblMode::kSplit), *x);
-    const auto b = Frame(s, env, WovenThreejs(woven::IblMode::kFis, 16, 0), *x);
+    const auto a = PreviewFrame(s, env, WovenThreejs(woven::IblMode::kSplit), *x);
+    const auto b = PreviewFrame(s, env, WovenThreejs(woven::IblMode::kFis, 16, 0), *x);
     ASSERT_EQ(a.size(), b.size());
     int differ = 0;
     for (size_t i = 0; i < a.size(); ++i)
@@ -247,7 +225,7 @@ TEST(S8Fis, SplitSumWovenPreviewUnchanged) {
   key.direction = {0.4, -0.5, -0.768};
   s.lights = {key};
   const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
-  const auto x = Woven({0.2, 0.3, 0.1}, {0.3, 0.35, 0.25}, 0.65, 0.7, 0.8, 0.07, 0.95);
+  const auto x = WovenFlat({0.2, 0.3, 0.1}, {0.3, 0.35, 0.25}, 0.65, 0.7, 0.8, 0.07, 0.95);
   struct Case {
     IblEngine engine;
     double sum, p0, p1, p2;
@@ -267,7 +245,7 @@ TEST(S8Fis, SplitSumWovenPreviewUnchanged) {
       o.model = ModelKind::kWoven;
       o.ibl_engine = c.engine;
       o.woven.ibl = mode;
-      const auto f = Frame(s, env, o, x);
+      const auto f = PreviewFrame(s, env, o, x);
       ASSERT_GT(f.size(), 300u);
       double sum = 0.0;
       for (const auto& px : f) sum += px.r + 2.0 * px.g + 3.0 * px.b;
