@@ -6,15 +6,21 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <array>
 #include <cstddef>
+#include <filesystem>
+#include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "brdf/math.h"
 #include "render/preview/preview.h"
 #include "render/scene/embree_scene.h"
+#include "render/scene/environment.h"
+#include "render/scene/image_io.h"
 #include "render/scene/lights.h"
 #include "render/scene/scene.h"
 #include "tests/scene_fixtures.h"
@@ -89,6 +95,29 @@ inline std::vector<Rgb<double>> PreviewFrame(const Scene& s, const Environment& 
   EvaluatePreview(*cache, x.data(), out);
   if (keep) *keep = std::move(cache);
   return out;
+}
+
+// An equirect map written to a temporary EXR and loaded as the scenes load theirs.
+inline Environment EnvironmentFrom(int W, int H,
+                                   const std::function<Rgb<double>(const Vec3<double>&)>& f) {
+  io::Image img;
+  img.width = W;
+  img.height = H;
+  img.channel_names = {"R", "G", "B"};
+  img.pixels.resize(size_t(W) * size_t(H) * 3);
+  for (int j = 0; j < H; ++j)
+    for (int i = 0; i < W; ++i) {
+      const Rgb<double> c = f(Environment::UvToDirection((i + 0.5) / W, (j + 0.5) / H));
+      for (int k = 0; k < 3; ++k)
+        img.pixels[(size_t(j) * size_t(W) + size_t(i)) * 3 + size_t(k)] = float(c[k]);
+    }
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("clothfit_test_env_" + std::to_string(::getpid()) + ".exr"))
+                               .string();
+  io::WriteExr(path, img);
+  Environment env = Environment::Load(path, 1.0, 0.0);
+  std::filesystem::remove(path);
+  return env;
 }
 
 }  // namespace clothfit::render

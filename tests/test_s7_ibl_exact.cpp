@@ -187,23 +187,10 @@ TEST(S7ExactIbl, RefusesACacheOverTheSampleBudget) {
 // sum's SH9 irradiance; a Sample/Pdf mismatch (which the constant furnaces above cannot see,
 // their pdf being uniform in luminance) would bias them by the luminance ratio.
 TEST(S7ExactIbl, LinearSkyMatchesSh9Irradiance) {
-  const int W = 256, H = 128;
-  io::Image img;
-  img.width = W;
-  img.height = H;
-  img.channel_names = {"R", "G", "B"};
-  img.pixels.resize(size_t(W) * size_t(H) * 3);
-  for (int j = 0; j < H; ++j)
-    for (int i = 0; i < W; ++i) {
-      const Vec3<double> d = Environment::UvToDirection((i + 0.5) / W, (j + 0.5) / H);
-      for (int c = 0; c < 3; ++c) img.pixels[(size_t(j) * W + size_t(i)) * 3 + size_t(c)] = float(1.0 + 0.9 * d.y);
-    }
-  const std::string path = (std::filesystem::temp_directory_path() /
-                            ("clothfit_s7_linear_sky_" + std::to_string(::getpid()) + ".exr"))
-                               .string();
-  io::WriteExr(path, img);
-  const Environment env = Environment::Load(path, 1.0, 0.0);
-  std::filesystem::remove(path);
+  const Environment env = EnvironmentFrom(256, 128, [](const Vec3<double>& d) {
+    const double v = 1.0 + 0.9 * d.y;
+    return Rgb<double>{v, v, v};
+  });
   const Scene s = UnlitSphere();
   const auto x = WovenFlat({0.5, 0.5, 0.5}, {0, 0, 0}, 0.6, 0.0, 0.5, 0.05, 2.0);
   PreviewOptions split;

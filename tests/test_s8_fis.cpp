@@ -38,27 +38,6 @@ PreviewOptions WovenThreejs(woven::IblMode mode, int taps = 16, int diffuse_taps
   return o;
 }
 
-// An equirect map written to a temporary EXR and loaded as the scenes load theirs.
-Environment EnvironmentFrom(int W, int H, const std::function<Rgb<double>(const V3&)>& f) {
-  io::Image img;
-  img.width = W;
-  img.height = H;
-  img.channel_names = {"R", "G", "B"};
-  img.pixels.resize(size_t(W) * size_t(H) * 3);
-  for (int j = 0; j < H; ++j)
-    for (int i = 0; i < W; ++i) {
-      const Rgb<double> c = f(Environment::UvToDirection((i + 0.5) / W, (j + 0.5) / H));
-      for (int k = 0; k < 3; ++k) img.pixels[(size_t(j) * size_t(W) + size_t(i)) * 3 + size_t(k)] = float(c[k]);
-    }
-  const std::string path = (std::filesystem::temp_directory_path() /
-                            ("clothfit_s8_fis_env_" + std::to_string(::getpid()) + ".exr"))
-                               .string();
-  io::WriteExr(path, img);
-  Environment env = Environment::Load(path, 1.0, 0.0);
-  std::filesystem::remove(path);
-  return env;
-}
-
 // A compact bright source (a disc of 6 degrees radius, radiance 40) above and in front of the
 // sphere on a dim sky (0.05): the case where one prefiltered read at the dominant direction
 // misplaces the light a rough lobe gathers.
