@@ -151,7 +151,8 @@ struct FitArgs {
   // Session 8: the IBL engine of the previews (auto: the engine web/ draws the model with) and
   // woven's IBL integration (docs/fitting.md "Filtered importance sampling for woven's IBL").
   std::string ibl_engine = "auto", woven_ibl = "auto";
-  int fis_taps = woven::kDefaultFisTaps, fis_diffuse_taps = woven::kDefaultFisDiffuseTaps;
+  // -1: not given (the FIS defaults apply). Given without --woven-ibl fis: an error, not ignored.
+  int fis_taps = -1, fis_diffuse_taps = -1;
 };
 
 // woven fits on the three.js IBL engine: the yarn lobes' IBL by the split sum unless
@@ -397,6 +398,13 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   o.ibl_engine = ParseIblEngine(a.ibl_engine);
   // woven: the IBL mode the previews (and the written preset) use. FIS exists on the three.js
   // engine only (render/preview/preview.h UsesWovenFis).
+  if (o.start.model != render::ModelKind::kWoven) {
+    if (a.woven_ibl != "auto")
+      throw std::invalid_argument("--woven-ibl " + a.woven_ibl + ": only for --model woven");
+    if (a.fis_taps >= 0 || a.fis_diffuse_taps >= 0)
+      throw std::invalid_argument(std::string(a.fis_taps >= 0 ? "--fis-taps" : "--fis-diffuse-taps") +
+                                  ": only for --model woven --woven-ibl fis");
+  }
   if (o.start.model == render::ModelKind::kWoven) {
     render::PreviewOptions po;
     po.model = o.start.model;
@@ -409,9 +417,13 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
                                 : a.woven_ibl == "split" ? woven::IblMode::kSplit
                                 : threejs                ? kDefaultWovenIbl
                                                          : woven::IblMode::kSplit;
+    if (mode != woven::IblMode::kFis && (a.fis_taps >= 0 || a.fis_diffuse_taps >= 0))
+      throw std::invalid_argument(std::string(a.fis_taps >= 0 ? "--fis-taps" : "--fis-diffuse-taps") +
+                                  ": only with --woven-ibl fis (the default is the split sum)");
     o.start.woven.ibl = a.exact_ibl > 0 ? woven::IblMode::kSplit : mode;
-    o.start.woven.fis_taps = a.fis_taps;
-    o.start.woven.fis_diffuse_taps = a.fis_diffuse_taps;
+    o.start.woven.fis_taps = a.fis_taps >= 0 ? a.fis_taps : woven::kDefaultFisTaps;
+    o.start.woven.fis_diffuse_taps =
+        a.fis_diffuse_taps >= 0 ? a.fis_diffuse_taps : woven::kDefaultFisDiffuseTaps;
   }
   ApplyStarts(a, &o);
   return o;

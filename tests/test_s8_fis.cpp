@@ -290,6 +290,9 @@ TEST(S8Fis, BadPresetValuesNameTheField) {
   ExpectError(WovenPreset({{"ibl", "fis"}, {"fis_taps", 0}}), "woven.fis_taps", "[1, 64]");
   ExpectError(WovenPreset({{"ibl", "fis"}, {"fis_taps", 65}}), "woven.fis_taps", "[1, 64]");
   ExpectError(WovenPreset({{"ibl", "fis"}, {"fis_taps", 16.5}}), "woven.fis_taps", "integer");
+  // An unsigned value above LLONG_MAX is reported as written, not wrapped to a negative number.
+  ExpectError(WovenPreset({{"ibl", "fis"}, {"fis_taps", 18446744073709551615ull}}), "woven.fis_taps",
+              "got 18446744073709551615");
   ExpectError(WovenPreset({{"ibl", "fis"}, {"fis_taps", "16"}}), "woven.fis_taps", "integer");
   ExpectError(WovenPreset({{"ibl", "fis"}, {"fis_diffuse_taps", -1}}), "woven.fis_diffuse_taps",
               "[0, 64]");

@@ -31,6 +31,17 @@ err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --model 
 echo "$err" | grep -q "three.js IBL engine" || fail "fis on filament: $err"
 [ ! -e "$TMP/f.json" ] || fail "preset written despite an error"
 
+# Options that would be ignored are errors (session 9): FIS options on another model or
+# without --woven-ibl fis.
+for args in "--model standard --woven-ibl fis" "--model standard --fis-taps 8" \
+            "--model woven --fis-taps 8" "--model woven --woven-ibl split --fis-diffuse-taps 2"; do
+  # shellcheck disable=SC2086
+  err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" $args \
+        --out "$TMP/f.json" 2>&1) && fail "fit $args accepted"
+  echo "$err" | grep -q -- "only" || fail "fit $args: $err"
+  [ ! -e "$TMP/f.json" ] || fail "preset written despite fit $args"
+done
+
 err=$("$BIN" --quiet evaluate --preset "$TMP/none.json" --ibl-engine metal 2>&1) \
   && fail "evaluate --ibl-engine metal accepted"
 echo "$err" | grep -q -- "--ibl-engine" || fail "evaluate error does not name --ibl-engine: $err"

@@ -176,6 +176,12 @@ void ParseWovenOptions(const json& w, const std::string& where, woven::Options* 
       if (!it->is_number_integer())
         Fail(where, f, "expected an integer in [" + std::to_string(lo) + ", " +
                            std::to_string(woven::kMaxFisTaps) + "]");
+      // An unsigned JSON integer above LLONG_MAX would read as a negative long long: report it
+      // as written.
+      if (it->is_number_unsigned() && it->get<unsigned long long>() > (unsigned long long)woven::kMaxFisTaps)
+        Fail(where, f, "expected an integer in [" + std::to_string(lo) + ", " +
+                           std::to_string(woven::kMaxFisTaps) + "], got " +
+                           std::to_string(it->get<unsigned long long>()));
       const long long t = it->get<long long>();
       if (t < lo || t > woven::kMaxFisTaps)
         Fail(where, f, "expected an integer in [" + std::to_string(lo) + ", " +
