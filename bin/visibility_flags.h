@@ -16,7 +16,7 @@ namespace clothfit::cli {
 
 struct VisibilityFlags {
   bool shadows = false, ao = false, indirect = false;
-  int samples = 64, hit_samples = 8;
+  int samples = 64, hit_samples = 8, bounces = 1;
   double max_distance = 0.0;
   unsigned seed = 1;
   std::string fabric_albedo;  // "r,g,b" (empty: the fabric mesh's glTF base colour)
@@ -43,6 +43,10 @@ inline void AddVisibilityFlags(CLI::App* cmd, VisibilityFlags& f) {
   cmd->add_option("--vis-hit-samples", f.hit_samples,
                   "--indirect: AO directions at each bounce hit point (default 8; 0 = none)")
       ->check(CLI::Range(0, 4096));
+  cmd->add_option("--vis-bounces", f.bounces,
+                  "--indirect: light-map bounces (default 1; each further bounce gathers over "
+                  "--vis-hit-samples directions at the hit points)")
+      ->check(CLI::Range(1, 4));
   cmd->add_option("--vis-max-distance", f.max_distance,
                   "--ao / --indirect: occluders farther than this (scene units) are ignored "
                   "(default 0 = infinite)")
@@ -62,6 +66,7 @@ inline void ApplyVisibilityFlags(const VisibilityFlags& f, fit::FitOptions* o) {
                                 : render::VisibilityOptions::Weighting::kCosine;
   o->visibility.samples = f.samples;
   o->visibility.hit_samples = f.hit_samples;
+  o->visibility.bounces = f.bounces;
   o->visibility.max_distance = f.max_distance;
   o->visibility.seed = f.seed;
   if (!f.fabric_albedo.empty()) {
@@ -95,6 +100,7 @@ inline nlohmann::json VisibilityJson(const fit::FitOptions& o) {
                             ? "environment" : "cosine";
     j["samples"] = o.visibility.samples;
     j["hit_samples"] = o.visibility.hit_samples;
+    j["bounces"] = o.visibility.bounces;
     j["max_distance"] = o.visibility.max_distance;
     j["seed"] = o.visibility.seed;
     if (o.visibility.fabric_albedo[0] >= 0)

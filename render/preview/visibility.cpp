@@ -62,7 +62,8 @@ double TFar(const VisibilityOptions& o) {
 // Lambert radiance leaving a bounce hit point q (normal nq facing the ray's origin).
 Rgb<double> BounceRadiance(const Scene& scene, const EmbreeScene& bvh, const VisibilityOptions& o,
                            const IrradianceOverPiFn& env, const RadianceFn& env_radiance,
-                           const Mesh& mesh, const Vec3d& q, const Vec3d& nq, Pcg32& rng) {
+                           const Mesh& mesh, const Vec3d& q, const Vec3d& nq, Pcg32& rng,
+                           int depth, double eps) {
   Rgb<double> kd(mesh.base_color[0], mesh.base_color[1], mesh.base_color[2]);
   if (mesh.is_fabric && o.fabric_albedo[0] >= 0.0 && o.fabric_albedo[1] >= 0.0 &&
       o.fabric_albedo[2] >= 0.0)
@@ -78,21 +79,41 @@ Rgb<double> BounceRadiance(const Scene& scene, const EmbreeScene& bvh, const Vis
       continue;
     for (int k = 0; k < 3; ++k) e[k] += s.scale * light.color[size_t(k)] * c * kInvPi;
   }
-  if (env) {
-    double ao_q = 1.0;
-    if (o.hit_samples > 0) {
-      const CosineSet dirs(nq, o.hit_samples, rng);
-      double open = 0.0, all = 0.0;
-      for (int j = 0; j < o.hit_samples; ++j) {
-        const double w = AoWeight(o, env_radiance, dirs[j]);
-        all += w;
-        if (!bvh.Occluded(A(q), A(dirs[j]), 0.0, TFar(o))) open += w;
+  // The hit_samples directions at q: the environment's occlusion there (ao_q) and, below the
+  // bounce limit, the next bounce's radiance (a path q -> q' of the same Lambert shading).
+  const bool deeper = depth + 1 < o.bounces;
+  double ao_q = 1.0;
+  Rgb<double> next(0.0, 0.0, 0.0);
+  if (o.hit_samples > 0 && (env || deeper)) {
+    const CosineSet dirs(nq, o.hit_samples, rng);
+    double open = 0.0, all = 0.0;
+    for (int j = 0; j < o.hit_samples; ++j) {
+      const Vec3d l = dirs[j];
+      const double w = AoWeight(o, env_radiance, l);
+      all += w;
+      if (!deeper) {
+        if (!bvh.Occluded(A(q), A(l), 0.0, TFar(o))) open += w;
+        continue;
       }
-      ao_q = Ratio(open, all);
+      const Hit h = bvh.Intersect(A(q), A(l), 0.0, TFar(o));
+      if (!h.valid) {
+        open += w;
+        continue;
+      }
+      const SurfaceAttributes a = bvh.Attributes(h);
+      const Vec3d wo = l * -1.0;
+      Vec3d n2 = V(a.normal);
+      if (Dot(n2, wo) < 0.0) n2 = n2 * -1.0;
+      const Vec3d g2 = V(h.ng);
+      const Vec3d q2 = V(a.position) + g2 * (Dot(g2, wo) > 0.0 ? eps : -eps);
+      next += BounceRadiance(scene, bvh, o, env, env_radiance, scene.meshes[size_t(h.mesh)], q2,
+                             n2, rng, depth + 1, eps);
     }
-    e += env(nq) * ao_q;
+    ao_q = Ratio(open, all);
+    next = next * (1.0 / double(o.hit_samples));  // E_next / pi (cosine-weighted estimate)
   }
-  return kd * e;
+  if (env) e += env(nq) * ao_q;
+  return kd * (e + next);
 }
 
 }  // namespace
@@ -119,6 +140,9 @@ void ValidateVisibilityOptions(const VisibilityOptions& o) {
   if (o.samples < 1 || o.samples > 1 << 16)
     throw std::invalid_argument("preview: visibility.samples " + std::to_string(o.samples) +
                                 " not in [1, 65536]");
+  if (o.bounces < 1 || o.bounces > 4)
+    throw std::invalid_argument("preview: visibility.bounces " + std::to_string(o.bounces) +
+                                " not in [1, 4]");
   if (o.hit_samples < 0 || o.hit_samples > 4096)
     throw std::invalid_argument("preview: visibility.hit_samples " +
                                 std::to_string(o.hit_samples) + " not in [0, 4096]");
@@ -166,7 +190,7 @@ VisibilityTerms ComputeVisibility(const Scene& scene, const EmbreeScene& bvh,
     if (Dot(nq, wo) < 0.0) nq = nq * -1.0;
     const Vec3d gq = V(h.ng);
     const Vec3d q = V(a.position) + gq * (Dot(gq, wo) > 0.0 ? eps : -eps);
-    sum += BounceRadiance(scene, bvh, o, env, env_radiance, mesh, q, nq, rng);
+    sum += BounceRadiance(scene, bvh, o, env, env_radiance, mesh, q, nq, rng, 0, eps);
   }
   t.ao = Ratio(open, all);
   if (o.indirect) t.indirect_over_pi = sum * (1.0 / double(o.samples));
