@@ -874,7 +874,8 @@ struct PreparedScenes {
 
 namespace {
 bool SameVisibility(const render::VisibilityOptions& a, const render::VisibilityOptions& b) {
-  return a.ao == b.ao && a.weighting == b.weighting && a.indirect == b.indirect && a.samples == b.samples &&
+  return a.ao == b.ao && a.weighting == b.weighting && a.indirect == b.indirect &&
+         a.samples == b.samples &&
          a.hit_samples == b.hit_samples && a.bounces == b.bounces &&
          a.max_distance == b.max_distance && a.seed == b.seed &&
          a.fabric_albedo == b.fabric_albedo;

@@ -87,7 +87,8 @@ TEST(S9Visibility, ConvexSphereIsUnoccludedAndBitIdentical) {
   const auto b = PreviewFrame(s, env, on, StandardFlat(0.4), &c1);
   ASSERT_GT(a.size(), 800u);
   ASSERT_EQ(c0->irradiance.size(), c1->irradiance.size());
-  for (size_t i = 0; i < c0->irradiance.size(); ++i) ASSERT_EQ(c0->irradiance[i], c1->irradiance[i]);
+  for (size_t i = 0; i < c0->irradiance.size(); ++i)
+    ASSERT_EQ(c0->irradiance[i], c1->irradiance[i]);
   for (size_t i = 0; i < c0->radiance.size(); ++i) ASSERT_EQ(c0->radiance[i], c1->radiance[i]);
   for (size_t i = 0; i < a.size(); ++i) {
     ASSERT_EQ(a[i].r, b[i].r) << "pixel " << i;

@@ -539,9 +539,9 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     }
     const Vec3d R = hit.n * (2.0 * hit.NoV) - hit.v;
     if (!hit.mesh->is_fabric) {
-      const Rgb<double> out =
-          ShadeNonFabric(x, *c, hit, ls, R, Ed,
-                         vis_on ? SpecularOcclusion(std::clamp(hit.NoV, 0.0, 1.0), vis.ao, 1.0) : 1.0);
+      const double so =  // three.js's specular occlusion at the layer's roughness 1
+          vis_on ? SpecularOcclusion(std::clamp(hit.NoV, 0.0, 1.0), vis.ao, 1.0) : 1.0;
+      const Rgb<double> out = ShadeNonFabric(x, *c, hit, ls, R, Ed, so);
       for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(out[k]);
       continue;
     }

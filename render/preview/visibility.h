@@ -52,12 +52,13 @@ struct VisibilityOptions {
   // so the preview gets ao * E_env + E_ind.
   bool indirect = false;
   int samples = 64;           // N directions per pixel, in [1, 65536]
-  int hit_samples = 8;        // ao_q directions at each bounce hit point, in [0, 4096] (0: ao_q = 1)
+  int hit_samples = 8;  // ao_q directions at each bounce hit point, in [0, 4096] (0: ao_q = 1)
   // Light-map bounces in [1, 4]: 1 = one bounce (L_o at the hit points is their direct and
   // environment light); b > 1 adds, at each hit point, the (b - 1)-bounce light gathered over
   // its hit_samples directions (the same Lambert shading one level deeper).
   int bounces = 1;
-  double max_distance = 0.0;  // > 0: rays hitting farther count as open (and bring no bounce); 0: infinite
+  // > 0: rays hitting farther than this count as open (and bring no bounce); 0: infinite.
+  double max_distance = 0.0;
   unsigned seed = 1;
   // Albedo of fabric hit points for the bounce (linear RGB); any component < 0: the fabric
   // mesh's glTF base colour. A scene property here (the same for every model fitted).
