@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "bin/commands.h"
+#include "bin/visibility_flags.h"
 #include "fit/image_fit.h"
 #include "fit/reference.h"
 #include "render/preview/weave_maps.h"
@@ -37,6 +38,7 @@ struct EvaluateArgs {
   unsigned exact_ibl_seed = 1;
   bool json = false;
   std::string ibl_engine = "preset";  // preset: the fit's recorded fit.ibl_engine (else filament)
+  VisibilityFlags visibility;  // --shadows, --ao, --indirect (docs/visibility.md)
 };
 
 int RunEvaluate(const EvaluateArgs& a, bool quiet) {
@@ -75,6 +77,7 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   o.exact_ibl_samples = a.exact_ibl;
   o.exact_ibl_seed = a.exact_ibl_seed;
   o.exact_irradiance_samples = a.exact_irradiance;
+  ApplyVisibilityFlags(a.visibility, &o);
   // The IBL engine: as the fit recorded it (fit.ibl_engine; presets before session 8 were
   // fitted on Filament's), or --ibl-engine. The woven IBL mode is the preset's "woven" object.
   std::string engine = a.ibl_engine;
@@ -146,6 +149,7 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     j["ibl_engine"] = engine;
     if (preset.model == render::ModelKind::kWoven)
       j["woven_ibl"] = fis_applied ? "fis" : "split";
+    if (o.shadows || o.visibility.enabled()) j["visibility"] = VisibilityJson(o);
     j["rmse"] = r.rmse;
     if (fj.contains("rmse")) j["fit_rmse"] = fj["rmse"];
     j["scenes"] = nlohmann::json::array();
@@ -165,6 +169,8 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     else if (a.exact_irradiance > 0)
       std::printf(", split sum with exact irradiance (%d samples per pixel, seed %u)",
                   a.exact_irradiance, a.exact_ibl_seed);
+    if (o.shadows || o.visibility.enabled())
+      std::printf("evaluate: visibility %s\n", VisibilityJson(o).dump().c_str());
     std::printf("\n");
     for (const auto& s : r.scenes)
       std::printf("evaluate:   %s: %d blocks, block rmse %.5f\n", s.scene.c_str(), s.blocks,
@@ -206,6 +212,7 @@ void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "whose image-based lighting: preset (default: the fit's recorded "
                   "fit.ibl_engine, filament for presets without it), auto, threejs or filament")
       ->check(CLI::IsMember({"preset", "auto", "threejs", "filament"}));
+  AddVisibilityFlags(cmd, args->visibility);
   cmd->add_flag("--json", args->json, "print the result as JSON");
   cmd->callback([args, &g, &exit_code]() {
     try {

@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include "bin/commands.h"
+#include "bin/visibility_flags.h"  // s9-vis
 #include "bin/progress.h"
 #include "fit/image_fit.h"
 #include "fit/reference.h"
@@ -153,6 +154,7 @@ struct FitArgs {
   std::string ibl_engine = "auto", woven_ibl = "auto";
   // -1: not given (the FIS defaults apply). Given without --woven-ibl fis: an error, not ignored.
   int fis_taps = -1, fis_diffuse_taps = -1;
+  VisibilityFlags visibility;  // s9-vis: --shadows, --ao, --indirect (docs/visibility.md)
 };
 
 // woven fits on the three.js IBL engine: the yarn lobes' IBL by the split sum unless
@@ -225,6 +227,7 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "measurement only: fit with the environment integrated exactly (Monte Carlo, "
                   "this many directions per pixel, seed 1; no split sum); 0 = the engine (default)")
       ->check(CLI::Range(0, 65536));
+  AddVisibilityFlags(cmd, a.visibility);  // s9-vis: measurement flags (bin/visibility_flags.h)
   cmd->add_option("--ibl-engine", a.ibl_engine,
                   "whose image-based lighting the previews reproduce: auto (default: three.js "
                   "r187's PMREM for standard, physical-sheen, physical-aniso, woven and the "
@@ -395,6 +398,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   o.max_iterations = a.max_iterations;
   o.min_coverage = a.min_coverage;
   o.exact_ibl_samples = a.exact_ibl;
+  ApplyVisibilityFlags(a.visibility, &o);  // s9-vis
   o.ibl_engine = ParseIblEngine(a.ibl_engine);
   // woven: the IBL mode the previews (and the written preset) use. FIS exists on the three.js
   // engine only (render/preview/preview.h UsesWovenFis).
@@ -505,6 +509,7 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
   fitj["max_iterations"] = o.max_iterations;
   fitj["min_coverage"] = o.min_coverage;
   if (o.exact_ibl_samples > 0) fitj["exact_ibl_samples"] = o.exact_ibl_samples;  // not an engine fit
+  if (o.shadows || o.visibility.enabled()) fitj["visibility"] = VisibilityJson(o);  // s9-vis
   {  // the IBL engine the previews reproduced (resolved; `evaluate` defaults to it)
     render::PreviewOptions po;
     po.model = o.start.model;

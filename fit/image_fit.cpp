@@ -503,6 +503,8 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   po.exact_ibl_samples = opt.exact_ibl_samples;
   po.exact_ibl_seed = opt.exact_ibl_seed;
   po.exact_irradiance_samples = opt.exact_irradiance_samples;
+  po.shadows = opt.shadows;
+  po.visibility = opt.visibility;
   const auto full = render::PreviewCache::Build(scene, in.environment, po);
   std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
   for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
@@ -862,6 +864,8 @@ struct PreparedScenes {
   nlohmann::json weave_maps;  // the start preset's "weave_maps" field (null: none)
   int exact_ibl_samples = 0, exact_irradiance_samples = 0;
   unsigned exact_ibl_seed = 1;
+  bool shadows = false;
+  render::VisibilityOptions visibility;
   render::IblEngine ibl_engine = render::IblEngine::kFilament;
   woven::IblMode woven_ibl = woven::IblMode::kSplit;
   int fis_taps = 0, fis_diffuse_taps = 0;
@@ -869,6 +873,13 @@ struct PreparedScenes {
 };
 
 namespace {
+bool SameVisibility(const render::VisibilityOptions& a, const render::VisibilityOptions& b) {
+  return a.ao == b.ao && a.weighting == b.weighting && a.indirect == b.indirect &&
+         a.samples == b.samples &&
+         a.hit_samples == b.hit_samples && a.bounces == b.bounces &&
+         a.max_distance == b.max_distance && a.seed == b.seed &&
+         a.fabric_albedo == b.fabric_albedo;
+}
 nlohmann::json WeaveMapsField(const render::MaterialPreset& p) {
   const auto it = p.extra.find("weave_maps");
   return it == p.extra.end() ? nlohmann::json() : *it;
@@ -890,6 +901,8 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->exact_ibl_samples = opt.exact_ibl_samples;
   p->exact_ibl_seed = opt.exact_ibl_seed;
   p->exact_irradiance_samples = opt.exact_irradiance_samples;
+  p->shadows = opt.shadows;
+  p->visibility = opt.visibility;
   p->ibl_engine = opt.ibl_engine;
   p->woven_ibl = opt.start.woven.ibl;
   p->fis_taps = opt.start.woven.fis_taps;
@@ -930,6 +943,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->exact_ibl_samples != opt.exact_ibl_samples ||
         prepared->exact_ibl_seed != opt.exact_ibl_seed ||
         prepared->exact_irradiance_samples != opt.exact_irradiance_samples ||
+        prepared->shadows != opt.shadows || !SameVisibility(prepared->visibility, opt.visibility) ||
         prepared->ibl_engine != opt.ibl_engine || prepared->woven_ibl != opt.start.woven.ibl ||
         prepared->fis_taps != opt.start.woven.fis_taps ||
         prepared->fis_diffuse_taps != opt.start.woven.fis_diffuse_taps)

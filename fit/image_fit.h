@@ -99,6 +99,10 @@ struct FitOptions {
   int exact_ibl_samples = 0;
   unsigned exact_ibl_seed = 1;
   int exact_irradiance_samples = 0;  // PreviewOptions::exact_irradiance_samples (measurement)
+  // Light visibility in the preview (measurement, docs/visibility.md): PreviewOptions::shadows
+  // and ::visibility (AO map, light map); every model of a comparison gets the same.
+  bool shadows = false;
+  render::VisibilityOptions visibility;
   // Whose image-based lighting the previews reproduce (render/preview/preview.h IblEngine).
   // kFilament here keeps library callers unchanged; `clothfit fit` defaults to kAuto (the
   // engine web/ draws the model with). The woven IBL mode (split / FIS) is start.woven's.

@@ -249,7 +249,7 @@ void AppendEnvironmentSamples(const PixelContext& x, const PrimaryHit& hit, size
 // Constant layer: MeshStandardMaterial, glTF base colour, roughness 1.
 Rgb<double> ShadeNonFabric(const PixelContext& x, const PreviewCache& c, const PrimaryHit& hit,
                            const std::vector<PreviewLightSample>& ls, const Vec3d& R,
-                           const Rgb<double>& Ed) {
+                           const Rgb<double>& Ed, double spec_occlusion = 1.0) {
   const double NoV = hit.NoV;
   standard::Params<double> sp;
   sp.base_color = {hit.mesh->base_color[0], hit.mesh->base_color[1], hit.mesh->base_color[2]};
@@ -265,9 +265,30 @@ Rgb<double> ShadeNonFabric(const PixelContext& x, const PreviewCache& c, const P
     const Vec3d dd = DominantDirection(ModelKind::kStandard, hit.n, R, 1.0);
     const Rgb<double> Lr = x.e.pmrem ? x.e.pmrem->Sample(dd, x.e.pmrem->MipForRoughness(1.0))
                                      : x.e.ggx->Sample(dd, x.e.ggx->LodForRoughness(1.0));
-    out += w.specular * Lr + w.diffuse * Ed;
+    out += w.specular * Lr * spec_occlusion + w.diffuse * Ed;
   }
   return out;
+}
+
+// Visibility prototype (PreviewOptions::visibility): the AO and light-map terms of a shaded
+// point, with the engine's own unoccluded irradiance for the bounce hit points. Applied as
+// three.js r187 applies aoMap and lightMap (docs/visibility.md): E_d -> ao E_d + E_ind / pi,
+// specular radiance x computeSpecularOcclusion(n.v, ao, r). Off: ao 1, no bounce.
+VisibilityTerms PointVisibility(const PixelContext& x, const PrimaryHit& hit, const Hit& h,
+                                size_t pix) {
+  IrradianceOverPiFn env;
+  if (x.env)
+    env = [&x](const Vec3d& n) {
+      return x.e.pmrem ? x.e.pmrem->IrradianceOverPi(n) : IrradianceOverPi(x.e.sh, n);
+    };
+  Vec3d ng = V(h.ng);  // the geometric normal on the shading normal's side
+  if (Dot(ng, hit.n) < 0.0) ng = ng * -1.0;
+  RadianceFn radiance;
+  if (x.env) radiance = [&x](const Vec3d& l) { return x.env->Eval(l); };
+  VisibilityTerms t = ComputeVisibility(x.scene, x.bvh, x.opt.visibility, env, hit.p, hit.n, ng,
+                                        pix, x.eps, radiance);
+  if (!x.opt.visibility.ao) t.ao = 1.0;
+  return t;
 }
 
 // The K-node radiance tables of a fabric pixel (GGX; Charlie for gltf-sheen).
@@ -509,9 +530,18 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       for (const PreviewLightSample& q : es)
         for (int k = 0; k < 3; ++k) Ed[k] += double(q.NoL) * double(q.irradiance[k]) * kInvPi;
     }
+    VisibilityTerms vis;  // visibility prototype (off: ao 1, no bounce)
+    const bool vis_on = x.opt.visibility.enabled() &&
+                        (hit.mesh->is_fabric || x.opt.sample_mask.empty());
+    if (vis_on) {
+      vis = PointVisibility(x, hit, h, pix);
+      Ed = Ed * vis.ao + vis.indirect_over_pi;
+    }
     const Vec3d R = hit.n * (2.0 * hit.NoV) - hit.v;
     if (!hit.mesh->is_fabric) {
-      const Rgb<double> out = ShadeNonFabric(x, *c, hit, ls, R, Ed);
+      const double so =  // three.js's specular occlusion at the layer's roughness 1
+          vis_on ? SpecularOcclusion(std::clamp(hit.NoV, 0.0, 1.0), vis.ao, 1.0) : 1.0;
+      const Rgb<double> out = ShadeNonFabric(x, *c, hit, ls, R, Ed, so);
       for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(out[k]);
       continue;
     }
@@ -532,6 +562,12 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     else if (split_sum)
       FillRadianceTables(x, hit.n, R, &pd);
     if (split_sum && x.fis_yarn) FillFisYarnTable(x, hit, &pd);
+    if (vis_on && vis.ao != 1.0) {  // three.js aomap_fragment: indirectSpecular x SO, sheen x ao
+      const int K = x.opt.roughness_nodes;
+      ApplySpecularOcclusion(pd.rad.data(), pd.rad.size() / (size_t(K) * 3), K, hit.NoV, vis.ao);
+      ApplySpecularOcclusion(pd.yrad.data(), pd.yrad.size() / (size_t(K) * 3), K, hit.NoV, vis.ao);
+      for (float& v : pd.srad) v = float(double(v) * vis.ao);
+    }
     row->push_back(std::move(pd));
   }
 }
@@ -578,6 +614,10 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
     throw std::invalid_argument("preview: exact_irradiance_samples " +
                                 std::to_string(opt.exact_irradiance_samples) +
                                 " not in [0, 65536]");
+  ValidateVisibilityOptions(opt.visibility);
+  if (opt.visibility.enabled() && opt.exact_ibl_samples > 0)
+    throw std::invalid_argument("preview: visibility (AO / light map) applies to the split-sum "
+                                "IBL; not with exact_ibl_samples");
   if (opt.exact_ibl_samples < 0 || opt.exact_ibl_samples > 1 << 16)
     throw std::invalid_argument("preview: exact_ibl_samples " +
                                 std::to_string(opt.exact_ibl_samples) + " not in [0, 65536]");

@@ -45,6 +45,7 @@
 #include "brdf/math.h"
 #include "brdf/table.h"
 #include "brdf/woven.h"
+#include "render/preview/visibility.h"
 #include "render/preview/weave_maps.h"
 #include "render/scene/environment.h"
 #include "render/scene/material.h"
@@ -80,6 +81,12 @@ struct PreviewOptions {
   // (brdf/woven.h's split evaluation) is checked against. false: the fast kernel.
   bool woven_reference_kernel = false;
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
+  // Visibility prototype (render/preview/visibility.h, docs/visibility.md; measurement, default
+  // off = bit-identical): a ray-traced AO map and one-bounce light map applied as three.js r187
+  // applies aoMap / lightMap, to the split-sum IBL (not with exact_ibl_samples). With a
+  // sample_mask (the fit), only fabric pixels get the terms (non-fabric pixels never enter a
+  // block).
+  VisibilityOptions visibility;
   // Exact image-based light (a measurement tool, not an engine; docs/fitting.md "The sphere's
   // error decomposed"): when > 0 and the scene has an environment, the split sum is replaced by
   // a Monte Carlo integral of the environment against the model's own direct BRDF, with this

@@ -1,0 +1,200 @@
+// render/preview/visibility.cpp: ray-traced AO and one-bounce light map for the preview
+// (conventions in visibility.h, formulas and measurements in docs/visibility.md).
+#include "render/preview/visibility.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "render/scene/embree_scene.h"
+#include "render/scene/lights.h"
+#include "render/scene/sampler.h"
+
+namespace clothfit::render {
+namespace {
+
+using Vec3d = Vec3<double>;
+
+std::array<double, 3> A(const Vec3d& v) { return {v.x, v.y, v.z}; }
+Vec3d V(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
+double Frac(double u) { return u - std::floor(u); }
+
+// N stratified cosine-weighted directions around n under the shift (s0, s1): direction j has
+// u1 = frac((j + 0.5) / N + s0), u2 = frac(radical_inverse_2(j) + s1), r = sqrt(u1),
+// phi = 2 pi u2, z = sqrt(1 - u1) (Malley's method: a uniform disc point lifted to the
+// hemisphere has pdf (n.l) / pi).
+struct CosineSet {
+  Vec3d n, e1, e2;
+  int count;
+  double s0, s1;
+  CosineSet(const Vec3d& normal, int N, Pcg32& rng) : n(normal), count(N) {
+    const Vec3d a = std::abs(n.x) < 0.9 ? Vec3d(1, 0, 0) : Vec3d(0, 1, 0);
+    e1 = Normalize(Cross(a, n));
+    e2 = Cross(n, e1);
+    s0 = rng.Uniform();
+    s1 = rng.Uniform();
+  }
+  Vec3d operator[](int j) const {
+    const double u1 = Frac((j + 0.5) / count + s0);
+    const double u2 = Frac(RadicalInverse2(uint32_t(j)) + s1);
+    const double r = std::sqrt(u1), phi = 2.0 * kPi * u2;
+    const double z = std::sqrt(std::max(0.0, 1.0 - u1));
+    return Normalize(e1 * (r * std::cos(phi)) + e2 * (r * std::sin(phi)) + n * z);
+  }
+};
+
+// Weight of direction l in the AO estimate: 1 (cosine weighting: the directions are already
+// cosine-distributed) or the environment's luminance there (Rec. 709).
+double AoWeight(const VisibilityOptions& o, const RadianceFn& env_radiance, const Vec3d& l) {
+  if (o.weighting != VisibilityOptions::Weighting::kEnvironment || !env_radiance) return 1.0;
+  const Rgb<double> L = env_radiance(l);
+  return 0.2126 * L.r + 0.7152 * L.g + 0.0722 * L.b;
+}
+
+// sum_open w / sum_all w (1 when every weight is 0).
+double Ratio(double open, double all) { return all > 0.0 ? open / all : 1.0; }
+
+double TFar(const VisibilityOptions& o) {
+  return o.max_distance > 0.0 ? o.max_distance : std::numeric_limits<double>::infinity();
+}
+
+// Lambert radiance leaving a bounce hit point q (normal nq facing the ray's origin).
+Rgb<double> BounceRadiance(const Scene& scene, const EmbreeScene& bvh, const VisibilityOptions& o,
+                           const IrradianceOverPiFn& env, const RadianceFn& env_radiance,
+                           const Mesh& mesh, const Vec3d& q, const Vec3d& nq, Pcg32& rng,
+                           int depth, double eps) {
+  Rgb<double> kd(mesh.base_color[0], mesh.base_color[1], mesh.base_color[2]);
+  if (mesh.is_fabric && o.fabric_albedo[0] >= 0.0 && o.fabric_albedo[1] >= 0.0 &&
+      o.fabric_albedo[2] >= 0.0)
+    kd = Rgb<double>(o.fabric_albedo[0], o.fabric_albedo[1], o.fabric_albedo[2]);
+  Rgb<double> e(0.0, 0.0, 0.0);  // direct irradiance over pi
+  for (const Light& light : scene.lights) {
+    const LightSample s = EvaluateLight(light, q);
+    if (s.scale <= 0.0) continue;
+    const double c = Dot(nq, s.wi);
+    if (c <= 0.0) continue;
+    if (bvh.Occluded(A(q), A(s.wi), 0.0,
+                     std::isinf(s.distance) ? s.distance : s.distance * (1 - 1e-6)))
+      continue;
+    for (int k = 0; k < 3; ++k) e[k] += s.scale * light.color[size_t(k)] * c * kInvPi;
+  }
+  // The hit_samples directions at q: the environment's occlusion there (ao_q) and, below the
+  // bounce limit, the next bounce's radiance (a path q -> q' of the same Lambert shading).
+  const bool deeper = depth + 1 < o.bounces;
+  double ao_q = 1.0;
+  Rgb<double> next(0.0, 0.0, 0.0);
+  if (o.hit_samples > 0 && (env || deeper)) {
+    const CosineSet dirs(nq, o.hit_samples, rng);
+    double open = 0.0, all = 0.0;
+    for (int j = 0; j < o.hit_samples; ++j) {
+      const Vec3d l = dirs[j];
+      const double w = AoWeight(o, env_radiance, l);
+      all += w;
+      if (!deeper) {
+        if (!bvh.Occluded(A(q), A(l), 0.0, TFar(o))) open += w;
+        continue;
+      }
+      const Hit h = bvh.Intersect(A(q), A(l), 0.0, TFar(o));
+      if (!h.valid) {
+        open += w;
+        continue;
+      }
+      const SurfaceAttributes a = bvh.Attributes(h);
+      const Vec3d wo = l * -1.0;
+      Vec3d n2 = V(a.normal);
+      if (Dot(n2, wo) < 0.0) n2 = n2 * -1.0;
+      const Vec3d g2 = V(h.ng);
+      const Vec3d q2 = V(a.position) + g2 * (Dot(g2, wo) > 0.0 ? eps : -eps);
+      next += BounceRadiance(scene, bvh, o, env, env_radiance, scene.meshes[size_t(h.mesh)], q2,
+                             n2, rng, depth + 1, eps);
+    }
+    ao_q = Ratio(open, all);
+    next = next * (1.0 / double(o.hit_samples));  // E_next / pi (cosine-weighted estimate)
+  }
+  if (env) e += env(nq) * ao_q;
+  return kd * (e + next);
+}
+
+}  // namespace
+
+double SpecularOcclusion(double dotNV, double ao, double roughness) {
+  const double v = std::pow(dotNV + ao, std::exp2(-16.0 * roughness - 1.0)) - 1.0 + ao;
+  return std::clamp(v, 0.0, 1.0);
+}
+
+void ApplySpecularOcclusion(float* tables, size_t n_tables, int K, double NoV, double ao) {
+  const double nv = std::clamp(NoV, 0.0, 1.0);
+  for (int k = 0; k < K; ++k) {
+    const double so = SpecularOcclusion(nv, ao, double(k) / double(K - 1));
+    for (size_t j = 0; j < n_tables; ++j)
+      for (int ch = 0; ch < 3; ++ch) {
+        float& v = tables[(j * size_t(K) + size_t(k)) * 3 + size_t(ch)];
+        v = float(double(v) * so);
+      }
+  }
+}
+
+void ValidateVisibilityOptions(const VisibilityOptions& o) {
+  if (!o.enabled()) return;
+  if (o.samples < 1 || o.samples > 1 << 16)
+    throw std::invalid_argument("preview: visibility.samples " + std::to_string(o.samples) +
+                                " not in [1, 65536]");
+  if (o.bounces < 1 || o.bounces > 4)
+    throw std::invalid_argument("preview: visibility.bounces " + std::to_string(o.bounces) +
+                                " not in [1, 4]");
+  if (o.hit_samples < 0 || o.hit_samples > 4096)
+    throw std::invalid_argument("preview: visibility.hit_samples " +
+                                std::to_string(o.hit_samples) + " not in [0, 4096]");
+  if (!(o.max_distance >= 0.0) || !std::isfinite(o.max_distance))
+    throw std::invalid_argument("preview: visibility.max_distance " +
+                                std::to_string(o.max_distance) + " must be finite and >= 0");
+  for (double a : o.fabric_albedo)
+    if (!std::isfinite(a) || a > 1.0)
+      throw std::invalid_argument("preview: visibility.fabric_albedo " + std::to_string(a) +
+                                  " must be finite and <= 1 (< 0: the glTF base colour)");
+}
+
+VisibilityTerms ComputeVisibility(const Scene& scene, const EmbreeScene& bvh,
+                                  const VisibilityOptions& o, const IrradianceOverPiFn& env,
+                                  const Vec3d& p, const Vec3d& n, const Vec3d& ng,
+                                  size_t pixel, double eps, const RadianceFn& env_radiance) {
+  VisibilityTerms t;
+  if (!o.enabled()) return t;
+  Pcg32 rng(uint64_t(o.seed), uint64_t(pixel));
+  const CosineSet dirs(n, o.samples, rng);
+  const double tfar = TFar(o);
+  double open = 0.0, all = 0.0;
+  Rgb<double> sum(0.0, 0.0, 0.0);
+  for (int j = 0; j < o.samples; ++j) {
+    const Vec3d l = dirs[j];
+    const double w = AoWeight(o, env_radiance, l);
+    all += w;
+    if (Dot(l, ng) <= 0.0) {  // below the flat triangle: open (see visibility.h)
+      open += w;
+      continue;
+    }
+    if (!o.indirect) {  // AO only: an any-hit query
+      if (!bvh.Occluded(A(p), A(l), 0.0, tfar)) open += w;
+      continue;
+    }
+    const Hit h = bvh.Intersect(A(p), A(l), 0.0, tfar);
+    if (!h.valid) {
+      open += w;
+      continue;
+    }
+    const SurfaceAttributes a = bvh.Attributes(h);
+    const Mesh& mesh = scene.meshes[size_t(h.mesh)];
+    const Vec3d wo = l * -1.0;  // from the hit back to p
+    Vec3d nq = V(a.normal);
+    if (Dot(nq, wo) < 0.0) nq = nq * -1.0;
+    const Vec3d gq = V(h.ng);
+    const Vec3d q = V(a.position) + gq * (Dot(gq, wo) > 0.0 ? eps : -eps);
+    sum += BounceRadiance(scene, bvh, o, env, env_radiance, mesh, q, nq, rng, 0, eps);
+  }
+  t.ao = Ratio(open, all);
+  if (o.indirect) t.indirect_over_pi = sum * (1.0 / double(o.samples));
+  return t;
+}
+
+}  // namespace clothfit::render

@@ -1,0 +1,262 @@
+// The preview's visibility prototype (render/preview/visibility.h, PreviewOptions::visibility;
+// docs/visibility.md): a ray-traced AO map and one-bounce light map applied as three.js r187
+// applies aoMap / lightMap. Checks: three.js's computeSpecularOcclusion by hand; a convex
+// object is unoccluded (AO exactly 1, the frame bit-identical to the option-off frame); a floor
+// point next to a wall matches the configuration factor of an infinitely long strip; the
+// light map's bounce off a lit wall matches its closed form; the fit's sampled cache equals the
+// full frame at its pixels; options off (whatever the other fields) leave the frame unchanged.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <vector>
+
+#include "render/preview/preview.h"
+#include "render/preview/visibility.h"
+#include "render/scene/embree_scene.h"
+#include "render/scene/environment.h"
+#include "tests/preview_fixtures.h"
+#include "tests/scene_fixtures.h"
+
+namespace clothfit::render {
+namespace {
+
+using Vec3d = Vec3<double>;
+
+// An axis-aligned quad mesh with the given corners (counter-clockwise seen from `normal`).
+Mesh Quad(const std::array<Vec3d, 4>& c, const Vec3d& normal, bool fabric, float albedo) {
+  Mesh m;
+  m.name = "quad";
+  m.is_fabric = fabric;
+  m.base_color = {albedo, albedo, albedo};
+  for (int k = 0; k < 4; ++k) {
+    m.positions.push_back({float(c[size_t(k)].x), float(c[size_t(k)].y), float(c[size_t(k)].z)});
+    m.normals.push_back({float(normal.x), float(normal.y), float(normal.z)});
+    m.uvs.push_back({float(k == 1 || k == 2), float(k >= 2)});
+    m.tangents.push_back({1.f, 0.f, 0.f, 1.f});
+  }
+  m.indices = {0, 1, 2, 0, 2, 3};
+  return m;
+}
+
+// standard flat parameters: base colour, roughness, metalness.
+std::vector<double> StandardFlat(double r) { return {0.5, 0.4, 0.3, r, 0.0}; }
+
+// A fabric sphere resting on a grey floor (non-fabric), a directional key light: the lower
+// part of the sphere and the floor around it are occluded.
+Scene SphereOnFloor(int size) {
+  Scene s = CameraScene(size, size, {0, 0.3, 3}, {0, -0.1, -1}, 0.5);
+  s.meshes.push_back(SphereMesh(0.5, 96, 48, true, 0.f));
+  s.meshes.push_back(Quad({Vec3d(-5, -0.5, 5), Vec3d(5, -0.5, 5), Vec3d(5, -0.5, -5),
+                           Vec3d(-5, -0.5, -5)},
+                          Vec3d(0, 1, 0), false, 0.5f));
+  Light key;
+  key.type = Light::Type::kDirectional;
+  key.intensity = 2.0;
+  key.direction = {0.3, -0.8, -0.5};
+  s.lights = {key};
+  return s;
+}
+
+// three.js r187 lights_physical_pars_fragment:
+// saturate(pow(dotNV + ao, exp2(-16 roughness - 1)) - 1 + ao), evaluated by hand.
+TEST(S9Visibility, SpecularOcclusionIsThreejsFormula) {
+  EXPECT_DOUBLE_EQ(SpecularOcclusion(0.5, 0.5, 0.0), 0.5);           // pow(1, 0.5) - 0.5
+  EXPECT_NEAR(SpecularOcclusion(0.5, 0.3, 0.0), std::sqrt(0.8) - 0.7, 1e-15);
+  EXPECT_NEAR(SpecularOcclusion(0.2, 0.6, 0.25), std::pow(0.8, 1.0 / 32.0) - 0.4, 1e-15);
+  EXPECT_DOUBLE_EQ(SpecularOcclusion(0.7, 1.0, 0.4), 1.0);           // saturate: no occlusion
+  EXPECT_DOUBLE_EQ(SpecularOcclusion(0.1, 0.0, 0.0), 0.0);           // saturate(pow(0.1, .5) - 1)
+  // At r = 1 it is ao up to (n.v + ao)^(2^-17) - 1 ~ 7.6e-6 ln(n.v + ao).
+  EXPECT_NEAR(SpecularOcclusion(0.5, 0.4, 1.0), 0.4, 1e-5);
+}
+
+// A convex object alone: every direction of the shading normal's hemisphere that is above the
+// flat triangle leaves the scene, so ao = 1 exactly, the bounce is 0, and the frame equals
+// the option-off frame bit for bit (also the non-fabric shading path, which has none here).
+TEST(S9Visibility, ConvexSphereIsUnoccludedAndBitIdentical) {
+  const Scene s = SphereWithLight(48);
+  const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
+  PreviewOptions off;
+  off.model = ModelKind::kStandard;
+  PreviewOptions on = off;
+  on.visibility.ao = true;
+  on.visibility.indirect = true;
+  on.visibility.samples = 256;
+  std::unique_ptr<PreviewCache> c0, c1;
+  const auto a = PreviewFrame(s, env, off, StandardFlat(0.4), &c0);
+  const auto b = PreviewFrame(s, env, on, StandardFlat(0.4), &c1);
+  ASSERT_GT(a.size(), 800u);
+  ASSERT_EQ(c0->irradiance.size(), c1->irradiance.size());
+  for (size_t i = 0; i < c0->irradiance.size(); ++i)
+    ASSERT_EQ(c0->irradiance[i], c1->irradiance[i]);
+  for (size_t i = 0; i < c0->radiance.size(); ++i) ASSERT_EQ(c0->radiance[i], c1->radiance[i]);
+  for (size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a[i].r, b[i].r) << "pixel " << i;
+    ASSERT_EQ(a[i].g, b[i].g);
+    ASSERT_EQ(a[i].b, b[i].b);
+  }
+  EXPECT_EQ(c0->background, c1->background);
+}
+
+// A point on a floor (normal +z) at distance d from a wall x = 0 of height h, infinitely long
+// in y. In the cross-section the configuration factor from a differential planar element to
+// an infinitely long strip is F = (sin t2 - sin t1) / 2, t measured from the element's normal
+// (Howell, "A Catalog of Radiation Heat Transfer Configuration Factors", case B-2; Siegel &
+// Howell, Thermal Radiation Heat Transfer, the "crossed-strings" 2D form). The wall spans
+// t1 = atan(d / h) (its top) to t2 = pi / 2 (its foot), so the wall takes
+// F = (1 - d / sqrt(d^2 + h^2)) / 2 of the cosine-weighted hemisphere and
+//   ao = 1 - F = 1/2 + d / (2 sqrt(d^2 + h^2)),
+// 1/2 at the foot of the wall (a concave right-angle corner hides exactly half) and -> 1 far
+// away. The wall here is 2000 h long, so the finite length leaves it < 1e-6 more open.
+TEST(S9Visibility, FloorPointNextToWallMatchesStripConfigurationFactor) {
+  const double h = 1.0;
+  Scene s = CameraScene(8, 8, {5, 0, 5}, {0, 0, -1}, 0.5);
+  s.meshes.push_back(Quad({Vec3d(0, -1000, 0), Vec3d(0, 1000, 0), Vec3d(0, 1000, h),
+                           Vec3d(0, -1000, h)},
+                          Vec3d(1, 0, 0), false, 0.5f));
+  const EmbreeScene bvh(s);
+  VisibilityOptions o;
+  o.ao = true;
+  o.samples = 8192;
+  for (double d : {1e-4, 0.25, 1.0, 3.0}) {
+    const double expect = 0.5 + d / (2.0 * std::sqrt(d * d + h * h));
+    double mean = 0.0;
+    const int pixels = 8;  // different per-pixel shifts: the mean's noise shrinks
+    for (int px = 0; px < pixels; ++px) {
+      const VisibilityTerms t = ComputeVisibility(s, bvh, o, {}, Vec3d(d, 0.1 * px, 1e-6),
+                                                  Vec3d(0, 0, 1), Vec3d(0, 0, 1), size_t(px), 1e-6);
+      EXPECT_GE(t.ao, 0.0);
+      EXPECT_LE(t.ao, 1.0);
+      EXPECT_NEAR(t.ao, expect, 0.01) << "d " << d << " pixel " << px;
+      mean += t.ao / pixels;
+    }
+    EXPECT_NEAR(mean, expect, 0.003) << "d " << d;
+  }
+  // max_distance: an occluder beyond it does not count.
+  o.max_distance = 0.5;
+  const VisibilityTerms far = ComputeVisibility(s, bvh, o, {}, Vec3d(1.0, 0, 1e-6),
+                                                Vec3d(0, 0, 1), Vec3d(0, 0, 1), 0, 1e-6);
+  EXPECT_EQ(far.ao, 1.0);
+}
+
+// The light map's bounce: a floor point at the foot of the same wall, the wall (albedo rho)
+// lit head-on by a directional light of irradiance E (no environment, nothing shadows the
+// wall's front). The wall is Lambertian with radiance rho E / pi everywhere, so
+//   E_ind / pi = (rho E / pi) F,  F = (1 - d / sqrt(d^2 + h^2)) / 2 (the strip factor above).
+TEST(S9Visibility, BounceOffLitWallMatchesClosedForm) {
+  const double h = 1.0, rho = 0.6, E = 2.0;
+  Scene s = CameraScene(8, 8, {5, 0, 5}, {0, 0, -1}, 0.5);
+  s.meshes.push_back(Quad({Vec3d(0, -1000, 0), Vec3d(0, 1000, 0), Vec3d(0, 1000, h),
+                           Vec3d(0, -1000, h)},
+                          Vec3d(1, 0, 0), false, float(rho)));
+  Light l;
+  l.type = Light::Type::kDirectional;
+  l.intensity = E;
+  l.direction = {-1.0, 0.0, 0.0};  // travelling towards -x: hits the wall's +x face head-on
+  s.lights = {l};
+  const EmbreeScene bvh(s);
+  VisibilityOptions o;
+  o.indirect = true;
+  o.samples = 8192;
+  for (double d : {0.25, 1.0}) {
+    const double F = (1.0 - d / std::sqrt(d * d + h * h)) / 2.0;
+    const double expect = rho * E / kPi * F;
+    const VisibilityTerms t = ComputeVisibility(s, bvh, o, {}, Vec3d(d, 0, 1e-6), Vec3d(0, 0, 1),
+                                                Vec3d(0, 0, 1), 3, 1e-6);
+    EXPECT_NEAR(t.indirect_over_pi.r, expect, 0.01 * expect + 1e-4) << "d " << d;
+    EXPECT_NEAR(t.ao, 1.0 - F, 0.01);
+  }
+}
+
+// The fit keeps one pixel per stride cell (PreviewOptions::sample_mask): those pixels must
+// carry exactly the full frame's visibility terms (directions seeded by the pixel index).
+// The scene is occluded (a sphere on a floor), so the terms are not trivially 1 / 0.
+TEST(S9Visibility, SampledCacheEqualsFullFrame) {
+  const Scene s = SphereOnFloor(48);
+  const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
+  PreviewOptions o;
+  o.model = ModelKind::kStandard;
+  o.shadows = true;
+  o.visibility.ao = true;
+  o.visibility.indirect = true;
+  o.visibility.samples = 32;
+  o.visibility.hit_samples = 4;
+  std::unique_ptr<PreviewCache> full, part, plain;
+  PreviewOptions off = o;
+  off.visibility = VisibilityOptions{};
+  const auto x = StandardFlat(0.5);
+  const auto a = PreviewFrame(s, env, o, x, &full);
+  const auto z = PreviewFrame(s, env, off, x, &plain);
+  PreviewOptions om = o;
+  om.sample_mask.assign(size_t(s.card.width) * size_t(s.card.height), 0);
+  for (size_t p = 0; p < om.sample_mask.size(); p += 3) om.sample_mask[p] = 1;
+  const auto m = PreviewFrame(s, env, om, x, &part);
+  ASSERT_GT(part->pixels.size(), 100u);
+  std::map<int, size_t> full_index;
+  for (size_t i = 0; i < full->pixels.size(); ++i) full_index[full->pixels[i]] = i;
+  for (size_t i = 0; i < part->pixels.size(); ++i) {
+    const size_t j = full_index.at(part->pixels[i]);
+    ASSERT_EQ(m[i].r, a[j].r) << "pixel " << part->pixels[i];
+    ASSERT_EQ(m[i].g, a[j].g);
+    ASSERT_EQ(m[i].b, a[j].b);
+  }
+  // Non-trivial: the terms changed many pixels, and with the AO map alone (no bounce) the
+  // lower quarter of the sphere, which the floor hides from the sky, got darker.
+  PreviewOptions oa = off;
+  oa.visibility.ao = true;
+  oa.visibility.samples = 32;
+  const auto ao_only = PreviewFrame(s, env, oa, x);
+  int changed = 0;
+  double lower_ao = 0.0, lower_off = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    changed += a[i].g != z[i].g;
+    if (full->pixels[i] / s.card.width > s.card.height * 3 / 4) {
+      lower_ao += ao_only[i].g;
+      lower_off += z[i].g;
+    }
+  }
+  EXPECT_GT(changed, int(a.size()) / 2);
+  EXPECT_GT(lower_off, 0.0);
+  EXPECT_LT(lower_ao, 0.95 * lower_off);
+  // The floor (non-fabric, full frame only) gets the terms too.
+  EXPECT_NE(full->background, plain->background);
+}
+
+// Options off (ao and indirect false) with every other visibility field changed: bit-identical.
+TEST(S9Visibility, OptionsOffAreBitIdentical) {
+  const Scene s = SphereOnFloor(32);
+  const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
+  PreviewOptions a;
+  a.model = ModelKind::kStandard;
+  PreviewOptions b = a;
+  b.visibility.samples = 3;
+  b.visibility.hit_samples = 0;
+  b.visibility.max_distance = 0.1;
+  b.visibility.seed = 9;
+  b.visibility.fabric_albedo = {0.2, 0.2, 0.2};
+  std::unique_ptr<PreviewCache> ca, cb;
+  const auto fa = PreviewFrame(s, env, a, StandardFlat(0.5), &ca);
+  const auto fb = PreviewFrame(s, env, b, StandardFlat(0.5), &cb);
+  ASSERT_EQ(fa.size(), fb.size());
+  for (size_t i = 0; i < fa.size(); ++i) ASSERT_EQ(fa[i].g, fb[i].g);
+  EXPECT_EQ(ComposeFrame(*ca, fa), ComposeFrame(*cb, fb));
+}
+
+TEST(S9Visibility, RejectsBadOptions) {
+  const Scene s = SphereOnFloor(16);
+  const Environment env = Environment::Constant({1.0, 1.0, 1.0});
+  PreviewOptions o;
+  o.model = ModelKind::kStandard;
+  o.visibility.ao = true;
+  o.visibility.samples = 0;
+  EXPECT_THROW(PreviewCache::Build(s, &env, o), std::invalid_argument);
+  o.visibility.samples = 16;
+  o.visibility.max_distance = -1.0;
+  EXPECT_THROW(PreviewCache::Build(s, &env, o), std::invalid_argument);
+  o.visibility.max_distance = 0.0;
+  o.exact_ibl_samples = 16;  // the terms apply to the split sum only
+  EXPECT_THROW(PreviewCache::Build(s, &env, o), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace clothfit::render
