@@ -167,6 +167,32 @@ TEST(S9Aniso, ProbeCountIsClampedAndFollowsTheSpec) {
   EXPECT_NEAR(s4.step_u, s1.step_u, 1e-15);
 }
 
+TEST(S9Aniso, SwiftShaderRuleUsesTheAreaAndNoCeil) {
+  using R = WeaveMaps::AnisoRule;
+  const double texels = 64.0;
+  auto fp = [&](std::array<double, 4> d, R rule) {
+    for (double& x : d) x /= texels;
+    return WeaveMaps::FootprintFor(d, texels, 7, 16, 1.0, rule);
+  };
+  // Nearly isotropic (ratio 1.01): the spec's ceil takes 2 probes one LOD finer, SwiftShader 1.
+  EXPECT_EQ(fp({8.08, 0, 0, 8}, R::kSpec).n, 2);
+  EXPECT_NEAR(fp({8.08, 0, 0, 8}, R::kSpec).lambda, std::log2(8.08 / 2), 1e-12);
+  EXPECT_EQ(fp({8.08, 0, 0, 8}, R::kSwiftShader).n, 1);
+  EXPECT_NEAR(fp({8.08, 0, 0, 8}, R::kSwiftShader).lambda, std::log2(8.0), 0.09);  // log2 approx
+  // Equal lengths but skewed 60 degrees apart: the spec sees no anisotropy, SwiftShader's area
+  // rule a = Pmax^2 / |det| = 1 / sin 60 = 1.15 -> 1 probe at log2(8 / 1.15).
+  const double c = std::cos(M_PI / 3), s = std::sin(M_PI / 3);
+  EXPECT_EQ(fp({8, 0, 8 * c, 8 * s}, R::kSpec).n, 1);
+  const auto sk = fp({8, 0, 8 * c, 8 * s}, R::kSwiftShader);
+  EXPECT_EQ(sk.n, 1);
+  EXPECT_NEAR(sk.lambda, std::log2(8 * s), 0.09);
+  // A long footprint: a = 40 / 4 = 10 probes; the piecewise-linear log2 is exact at powers of 2.
+  const auto lf = fp({32, 0, 0, 2}, R::kSwiftShader);
+  EXPECT_EQ(lf.n, 16);
+  EXPECT_DOUBLE_EQ(lf.lambda, 1.0);  // log2(32 / 16)
+  EXPECT_EQ(fp({40, 0, 0, 4}, R::kSwiftShader).n, 10);
+}
+
 TEST(S9Aniso, PresetAnisotropyIsValidatedNamingFileAndField) {
   MaterialPreset p = DefaultPreset(ModelKind::kWoven);
   p.extra["weave_maps"] = {{"file", "/nonexistent/m.weave.exr"}};

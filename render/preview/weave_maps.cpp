@@ -167,8 +167,18 @@ std::array<double, 2> WeaveMaps::SampleAnisotropy(double u, double v, double lam
   return {dx / len * a[2], dy / len * a[2]};
 }
 
+// SwiftShader's log2sqrt (src/Pipeline/SamplerCore.cpp): 1/4 of a piecewise-linear log2 of
+// x^2 in float (the exponent plus the mantissa fraction), x = the squared LOD scale.
+double SwiftShaderLog2Sqrt(double x) {
+  const float y = float(x) * float(x);
+  int e = 0;
+  const float m = std::frexp(y, &e);  // y = m 2^e, m in [0.5, 1)
+  return 0.25 * (double(e - 1) + (2.0 * double(m) - 1.0));
+}
+
 WeaveMaps::Footprint WeaveMaps::FootprintFor(const std::array<double, 4>& duv, double texels,
-                                             int levels, int aniso, double footprint_scale) {
+                                             int levels, int aniso, double footprint_scale,
+                                             AnisoRule rule) {
   // EXT_texture_filter_anisotropic (weave_maps.h): footprint in texels of this map.
   Footprint fp;
   const double top = double(levels - 1);
@@ -181,8 +191,21 @@ WeaveMaps::Footprint WeaveMaps::FootprintFor(const std::array<double, 4>& duv, d
     fp.lambda = top;
     return fp;
   }
-  const double ratio = pmin > 0.0 ? pmax / pmin : std::numeric_limits<double>::infinity();
   const double maxn = double(std::max(aniso, 1));
+  if (rule == AnisoRule::kSwiftShader) {  // weave_maps.h: area-based minor axis, unrounded a
+    const double det = std::abs(duv[0] * duv[3] - duv[2] * duv[1]) * k * k;
+    const double a = det > 0.0 ? std::min(pmax * pmax / det, maxn) : maxn;
+    fp.n = std::max(1, int(std::lround(a)));
+    fp.lambda = std::clamp(SwiftShaderLog2Sqrt(pmax * pmax / (a * a)), 0.0, top);
+    if (fp.n > 1) {
+      const bool x_major = px >= py;
+      const double s = footprint_scale / double(fp.n);
+      fp.step_u = (x_major ? duv[0] : duv[2]) * s;
+      fp.step_v = (x_major ? duv[1] : duv[3]) * s;
+    }
+    return fp;
+  }
+  const double ratio = pmin > 0.0 ? pmax / pmin : std::numeric_limits<double>::infinity();
   fp.n = int(std::min(std::ceil(ratio), maxn));
   fp.lambda = std::clamp(std::log2(pmax / double(fp.n)), 0.0, top);
   if (fp.n > 1) {  // the major axis (x when Px > Py, else y, as the spec), in uv, split in n
@@ -201,7 +224,8 @@ WeaveMaps::Footprint WeaveMaps::FootprintAt(const std::array<double, 4>& duv,
     fp.lambda = Lod(duv, footprint_scale);
     return fp;
   }
-  return FootprintFor(duv, double(size) * uv_repeats, level_count(), anisotropy, footprint_scale);
+  return FootprintFor(duv, double(size) * uv_repeats, level_count(), anisotropy, footprint_scale,
+                      aniso_rule);
 }
 
 std::array<double, WeaveMaps::kChannels> WeaveMaps::Sample(double u, double v,
@@ -276,7 +300,7 @@ double WeaveMaps::SampleGlint(double u, double v, const std::array<double, 4>& d
   if (anisotropy > 1)  // the glint map's own texel density (repeat 1), same rule
     return TrilinearAniso<1>(glint_levels, glint_size, 1.0, u, v,
                              FootprintFor(duv, double(glint_size), int(glint_levels.size()),
-                                          anisotropy, footprint_scale))[0];
+                                          anisotropy, footprint_scale, aniso_rule))[0];
   const double texels = double(glint_size) * footprint_scale;
   const double rho = std::max(std::hypot(duv[0], duv[1]), std::hypot(duv[2], duv[3])) * texels;
   const int n = int(glint_levels.size());

@@ -47,6 +47,16 @@
 // (docs/preview.md "Anisotropic filtering of the weave maps").
 // Degenerate footprints: Pmax = 0 or not finite -> the isotropic rule (one sample); Pmin = 0
 // -> N = anisotropy. anisotropy = 1 is the isotropic path above, bit for bit (same code).
+// AnisoRule::kSwiftShader (opt-in, `render-preview --map-aniso-rule swiftshader`; the browser
+// test compares with it): SwiftShader's own rule (src/Pipeline/SamplerCore.cpp computeLod2D,
+// the WebGL2 of headless Chromium): the minor axis from the footprint's AREA, Pmin' = |det J| /
+// Pmax (det J = du/dx dv/dy - du/dy dv/dx in texels; <= Pmin), a = min(Pmax^2 / |det J|,
+// anisotropy) unrounded, N = round(a) probes (same placement), lambda' = log2(Pmax / a) taken
+// with SwiftShader's piecewise-linear log2 (log2sqrt: the float's exponent plus its mantissa
+// fraction, of (Pmax / a)^4, times 1/4); the major axis is x when Px >= Py. The spec's ceil
+// makes a slightly anisotropic footprint (ratio 1.01) take 2 probes one LOD finer; SwiftShader
+// takes 1 probe at about the same LOD: measured, that difference is up to 7.9 / 255 mean on the
+// sphere (docs/preview.md "Anisotropic filtering of the weave maps").
 //
 // File: a 32-bit float EXR, channels warp, weft, kd.R, kd.G, kd.B [, N.X, N.Y, N.Z], metadata
 // clothfit:weave_maps = 1, clothfit:uv_repeats, clothfit:convention. The preset lists it in
@@ -76,6 +86,10 @@ struct WeaveMaps {
   // map), as three.js's texture.anisotropy: 1 = isotropic (GL's default), up to 16. From the
   // preset's weave_maps.anisotropy (missing: 1).
   int anisotropy = 1;
+  // How N and lambda' are chosen for anisotropy > 1 (above): the EXT specification (default)
+  // or SwiftShader's rule. Not a preset key: an engine property, set by the caller.
+  enum class AnisoRule { kSpec, kSwiftShader };
+  AnisoRule aniso_rule = AnisoRule::kSpec;
   std::vector<std::vector<float>> levels;  // mip chain; level l: (size >> l)^2 x 5, row-major
   // Optional relief normal map (empty: none): tangent-space unit normals (x along the mesh
   // tangent t = +u = warp, y along b = tangent_sign n x t = +v = weft, z along n), 3 per
@@ -107,7 +121,8 @@ struct WeaveMaps {
   // The footprint for a map with `texels` texels per uv unit and `levels` mip levels, from the
   // uv derivatives (du/dx, dv/dx, du/dy, dv/dy) times footprint_scale, max anisotropy `aniso`.
   static Footprint FootprintFor(const std::array<double, 4>& duv, double texels, int levels,
-                                int aniso, double footprint_scale = 1.0);
+                                int aniso, double footprint_scale = 1.0,
+                                AnisoRule rule = AnisoRule::kSpec);
   // The footprint of the weave, normal and anisotropy maps (texels = size x uv_repeats) with
   // this object's anisotropy; anisotropy = 1: {Lod(duv, footprint_scale), 1, 0, 0}.
   Footprint FootprintAt(const std::array<double, 4>& duv, double footprint_scale = 1.0) const;

@@ -171,8 +171,12 @@ function runCmd(cmd, argv) {
   });
 }
 // --ibl-engine threejs: every material here is drawn by three.js in the browser
-// (MeshClothMaterial uses three.js's PMREM too). --cpp-args '' drops it (older binaries).
-const cppExtra = (args['cpp-args'] ?? '--ibl-engine threejs').split(' ').filter(Boolean);
+// (MeshClothMaterial uses three.js's PMREM too). --cpp-args '' drops both (older binaries).
+// --map-aniso-rule swiftshader (s9-aniso): the *-aniso16 cases' maps filtered with SwiftShader's
+// anisotropic rule, the GPU these frames come from (the spec's rule, which the fits use, differs
+// from it by up to 7.9 / 255 mean: docs/preview.md "Anisotropic filtering of the weave maps");
+// it changes nothing for anisotropy 1.
+const cppExtra = (args['cpp-args'] ?? '--ibl-engine threejs --map-aniso-rule swiftshader').split(' ').filter(Boolean);
 // A case whose preview fails (e.g. a binary that does not know a preset option) is reported as
 // that case's error, not as the end of the run.
 const cppErrors = new Map();
