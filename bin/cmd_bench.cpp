@@ -19,6 +19,7 @@
 #include "fit/bench_fit.h"
 #include "render/reference/fabric.h"
 #include "render/preview/preview.h"
+#include "render/preview/weave_maps.h"
 
 namespace clothfit::cli {
 namespace {
@@ -114,6 +115,7 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
     bool sub, shadows;
     render::IblEngine engine = render::IblEngine::kFilament;
     woven::IblMode woven_ibl = woven::IblMode::kSplit;
+    int map_anisotropy = 0;  // > 0: weave maps (synthetic, below) with this max anisotropy
   };
   const Def defs[] = {{"full (direct+ibl+subsurface+shadows)", &scene, env.get(), true, true},
                       {"direct+ibl", &scene, env.get(), false, false},
@@ -128,7 +130,24 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
                       {"threejs: woven direct+ibl, split", &scene, env.get(), false, false,
                        render::IblEngine::kThreejs},
                       {"threejs: woven direct+ibl, fis", &scene, env.get(), false, false,
-                       render::IblEngine::kThreejs, woven::IblMode::kFis}};
+                       render::IblEngine::kThreejs, woven::IblMode::kFis},
+                      // session 9: weave maps, isotropic vs anisotropic filtering (16). The maps
+                      // are sampled once per pixel at cache build (the build time printed above
+                      // the table is where anisotropy costs); the frame evaluates the cached
+                      // per-pixel weights, so the two frame costs should match.
+                      {"threejs: woven direct+ibl, maps anisotropy 1", &scene, env.get(), false,
+                       false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 1},
+                      {"threejs: woven direct+ibl, maps anisotropy 16", &scene, env.get(), false,
+                       false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 16}};
+  // Synthetic maps for the map sets: 64 x 64 per period, 60 periods per uv unit (the canvas's),
+  // a fixed pseudo-random pattern (the cost does not depend on the values).
+  std::vector<float> level0(64 * 64 * render::WeaveMaps::kChannels);
+  uint32_t h = 12345u;
+  for (float& x : level0) {
+    h = h * 1664525u + 1013904223u;
+    x = 0.2f + float(h >> 8) / float(1u << 24);
+  }
+  const render::WeaveMaps base_maps = render::WeaveMaps::FromLevel0(64, 60.0, level0);
   for (const Def& d : defs) {
     render::PreviewOptions o;
     o.model = std::string_view(d.name).find("woven") != std::string_view::npos
@@ -138,6 +157,11 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
     o.woven.ibl = d.woven_ibl;
     o.cloth.subsurface = d.sub;
     o.shadows = d.shadows;
+    if (d.map_anisotropy > 0) {
+      auto maps = std::make_shared<render::WeaveMaps>(base_maps);
+      maps->anisotropy = d.map_anisotropy;
+      o.weave_maps = maps;
+    }
     auto cache = render::PreviewCache::Build(*d.s, d.e, o);
     std::fprintf(stderr, "bench preview: cache '%s': %zu fabric pixels, %zu light samples, built in %.3f s\n",
                  d.name, cache->pixels.size(), cache->light_samples.size(), cache->build_seconds);

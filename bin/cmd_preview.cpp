@@ -79,7 +79,7 @@ void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
 
 void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   struct Args {
-    std::string scene, material, model, out, ibl_engine = "filament";
+    std::string scene, material, model, out, ibl_engine = "filament", map_aniso_rule = "spec";
     bool shadows = false;
     int exact_ibl = 0, exact_irradiance = 0;
     unsigned exact_ibl_seed = 1;
@@ -96,6 +96,11 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--out", args->out, "output: .png (tone-mapped, sRGB) or .exr (linear)")
       ->required();
   cmd->add_flag("--shadows", args->shadows, "ray-traced light visibility (off by default)");
+  cmd->add_option("--map-aniso-rule", args->map_aniso_rule,
+                  "weave maps with weave_maps.anisotropy > 1: spec (EXT_texture_filter_anisotropic, "
+                  "default; what the fit uses) or swiftshader (SwiftShader's rule, the WebGL2 of "
+                  "the browser test; render/preview/weave_maps.h)")
+      ->check(CLI::IsMember({"spec", "swiftshader"}));
   cmd->add_option("--ibl-engine", args->ibl_engine,
                   "whose image-based lighting: threejs (r187 PMREM), filament (SH + prefilter) or "
                   "auto (three.js for standard, physical-sheen, physical-aniso, woven and the seed "
@@ -138,6 +143,11 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       o.woven = preset.woven;
       // "weave_maps" (woven, physical-aniso): "uri" relative to the preset file first
       o.weave_maps = render::LoadPresetWeaveMaps(preset, args->material);
+      if (o.weave_maps && args->map_aniso_rule == "swiftshader") {
+        auto m = std::make_shared<render::WeaveMaps>(*o.weave_maps);
+        m->aniso_rule = render::WeaveMaps::AnisoRule::kSwiftShader;
+        o.weave_maps = m;
+      }
       o.shadows = args->shadows;
       if (preset.model == render::ModelKind::kPhysicalAniso)  // brdf/physical_aniso.h FromFlat
         o.anisotropy_rotation = preset.values.at(10);

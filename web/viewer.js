@@ -47,7 +47,10 @@ async function main() {
       (p.woven ? `woven options ${JSON.stringify(p.woven)} (ibl ${m.ibl ?? 'split'}${m.ibl === 'fis' ? `, ${m.fisTaps} + ${m.fisDiffuseTaps} taps` : ''})\n` : '') +
       `tone mapping ${sc.card.tone_mapping ?? 'ACESFilmic'}, exposure ${sc.exposure}, three.js r${THREE.REVISION}`;
   };
-  setPreset(await fetchClothfitPreset(presetUrl));
+  // renderer: the weave maps' texture.anisotropy (the preset's weave_maps.anisotropy) is clamped
+  // to renderer.capabilities.getMaxAnisotropy(), with a console.info when it is.
+  console.info(`viewer: max texture anisotropy ${renderer.capabilities.getMaxAnisotropy()}`);
+  setPreset(await fetchClothfitPreset(presetUrl, { renderer }));
   const setEnv = async (v) => {
     if (v === 'card') { const e = sc.card.environment; await sc.setEnvironment(e?.path ?? null, { intensity: e?.intensity ?? 1, rotationYDegrees: e?.rotation_y_degrees ?? 0 }); }
     else if (v === 'none') await sc.setEnvironment(null);
@@ -56,7 +59,7 @@ async function main() {
   if ((q.get('env') ?? 'card') !== 'card') await setEnv(q.get('env'));
 
   document.getElementById('card').onchange = (e) => { q.set('card', e.target.value); location.search = q.toString(); };
-  document.getElementById('preset').onchange = async (e) => setPreset(await fetchClothfitPreset(e.target.value));
+  document.getElementById('preset').onchange = async (e) => setPreset(await fetchClothfitPreset(e.target.value, { renderer }));
   document.getElementById('env').onchange = (e) => setEnv(e.target.value);
   document.getElementById('file').onchange = async (e) => {
     const { loadClothfitPreset } = await import('./clothfit.js');

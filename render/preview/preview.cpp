@@ -491,7 +491,9 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     if (woven_frame && x.opt.weave_maps) {
       const WeaveMaps& wm = *x.opt.weave_maps;
       const std::array<double, 4> duv = UvDerivatives(x.scene, h, px + 0.5, y + 0.5);
-      const double lod = wm.Lod(duv, x.opt.weave_footprint_scale);
+      // GPU footprint (isotropic LOD, or anisotropic probes with wm.anisotropy > 1;
+      // render/preview/weave_maps.h), the same for the weave, normal and anisotropy maps.
+      const WeaveMaps::Footprint lod = wm.FootprintAt(duv, x.opt.weave_footprint_scale);
       const auto s = wm.Sample(uv[0], uv[1], lod);
       for (int k = 0; k < WeaveMaps::kChannels; ++k) weave[size_t(k)] = float(s[size_t(k)]);
       if (wm.has_glint()) {  // the glint multiplies both yarn lobes: fold it into their weights

@@ -90,6 +90,27 @@ double ClampLod(double lambda, double top) {
   return std::clamp(std::isfinite(lambda) ? lambda : top, 0.0, top);
 }
 
+// The mean of fp.n trilinear probes (REPEAT) along the footprint's major axis, probe i (0-based)
+// at uv + step (i - (n - 1) / 2): the centres of n equal segments of [-1/2, 1/2] x the axis.
+// n = 1: exactly Trilinear at (u, v) (the isotropic path).
+template <int N>
+std::array<double, N> TrilinearAniso(const std::vector<std::vector<float>>& levels, int size,
+                                     double uv_repeats, double u, double v,
+                                     const WeaveMaps::Footprint& fp) {
+  const double l = ClampLod(fp.lambda, double(levels.size()) - 1.0);
+  if (fp.n <= 1) return Trilinear<N>(levels, size, uv_repeats, u, v, l);
+  std::array<double, N> sum{};
+  const double c = 0.5 * double(fp.n - 1);
+  for (int i = 0; i < fp.n; ++i) {
+    const double t = double(i) - c;
+    const std::array<double, N> a =
+        Trilinear<N>(levels, size, uv_repeats, u + t * fp.step_u, v + t * fp.step_v, l);
+    for (int k = 0; k < N; ++k) sum[size_t(k)] += a[size_t(k)];
+  }
+  for (int k = 0; k < N; ++k) sum[size_t(k)] /= double(fp.n);
+  return sum;
+}
+
 }  // namespace
 
 WeaveMaps WeaveMaps::FromLevel0(int size, double uv_repeats, std::vector<float> level0) {
@@ -146,6 +167,91 @@ std::array<double, 2> WeaveMaps::SampleAnisotropy(double u, double v, double lam
   return {dx / len * a[2], dy / len * a[2]};
 }
 
+// SwiftShader's log2sqrt (src/Pipeline/SamplerCore.cpp): 1/4 of a piecewise-linear log2 of
+// x^2 in float (the exponent plus the mantissa fraction), x = the squared LOD scale.
+double SwiftShaderLog2Sqrt(double x) {
+  const float y = float(x) * float(x);
+  int e = 0;
+  const float m = std::frexp(y, &e);  // y = m 2^e, m in [0.5, 1)
+  return 0.25 * (double(e - 1) + (2.0 * double(m) - 1.0));
+}
+
+WeaveMaps::Footprint WeaveMaps::FootprintFor(const std::array<double, 4>& duv, double texels,
+                                             int levels, int aniso, double footprint_scale,
+                                             AnisoRule rule) {
+  // EXT_texture_filter_anisotropic (weave_maps.h): footprint in texels of this map.
+  Footprint fp;
+  const double top = double(levels - 1);
+  const double k = texels * footprint_scale;
+  const double px = std::hypot(duv[0], duv[1]) * k;
+  const double py = std::hypot(duv[2], duv[3]) * k;
+  const double pmax = std::max(px, py), pmin = std::min(px, py);
+  if (!(pmax > 0.0)) return fp;  // no footprint (or NaN): level 0, one sample
+  if (!std::isfinite(pmax)) {    // ray parallel to the plane: the coarsest level
+    fp.lambda = top;
+    return fp;
+  }
+  const double maxn = double(std::max(aniso, 1));
+  if (rule == AnisoRule::kSwiftShader) {  // weave_maps.h: area-based minor axis, unrounded a
+    const double det = std::abs(duv[0] * duv[3] - duv[2] * duv[1]) * k * k;
+    const double a = det > 0.0 ? std::min(pmax * pmax / det, maxn) : maxn;
+    fp.n = std::max(1, int(std::lround(a)));
+    fp.lambda = std::clamp(SwiftShaderLog2Sqrt(pmax * pmax / (a * a)), 0.0, top);
+    if (fp.n > 1) {
+      const bool x_major = px >= py;
+      const double s = footprint_scale / double(fp.n);
+      fp.step_u = (x_major ? duv[0] : duv[2]) * s;
+      fp.step_v = (x_major ? duv[1] : duv[3]) * s;
+    }
+    return fp;
+  }
+  const double ratio = pmin > 0.0 ? pmax / pmin : std::numeric_limits<double>::infinity();
+  fp.n = int(std::min(std::ceil(ratio), maxn));
+  fp.lambda = std::clamp(std::log2(pmax / double(fp.n)), 0.0, top);
+  if (fp.n > 1) {  // the major axis (x when Px > Py, else y, as the spec), in uv, split in n
+    const bool x_major = px > py;
+    const double s = footprint_scale / double(fp.n);
+    fp.step_u = (x_major ? duv[0] : duv[2]) * s;
+    fp.step_v = (x_major ? duv[1] : duv[3]) * s;
+  }
+  return fp;
+}
+
+WeaveMaps::Footprint WeaveMaps::FootprintAt(const std::array<double, 4>& duv,
+                                            double footprint_scale) const {
+  if (anisotropy <= 1) {  // the isotropic path, unchanged
+    Footprint fp;
+    fp.lambda = Lod(duv, footprint_scale);
+    return fp;
+  }
+  return FootprintFor(duv, double(size) * uv_repeats, level_count(), anisotropy, footprint_scale,
+                      aniso_rule);
+}
+
+std::array<double, WeaveMaps::kChannels> WeaveMaps::Sample(double u, double v,
+                                                           const Footprint& fp) const {
+  if (fp.n <= 1) return Sample(u, v, fp.lambda);
+  return TrilinearAniso<kChannels>(levels, size, uv_repeats, u, v, fp);
+}
+
+std::array<double, 2> WeaveMaps::SampleAnisotropy(double u, double v, const Footprint& fp) const {
+  if (fp.n <= 1 || aniso_levels.empty()) return SampleAnisotropy(u, v, fp.lambda);
+  // The texture is filtered (its encoded RG / B), then decoded, as the GPU and three.js do.
+  const std::array<double, 3> a = TrilinearAniso<3>(aniso_levels, size, uv_repeats, u, v, fp);
+  const double dx = 2.0 * a[0] - 1.0, dy = 2.0 * a[1] - 1.0;
+  const double len = std::hypot(dx, dy);
+  if (!(len > 0.0)) return {0.0, 0.0};
+  return {dx / len * a[2], dy / len * a[2]};
+}
+
+std::array<double, 3> WeaveMaps::SampleNormal(double u, double v, const Footprint& fp) const {
+  if (fp.n <= 1 || normal_levels.empty()) return SampleNormal(u, v, fp.lambda);
+  const std::array<double, 3> a = TrilinearAniso<3>(normal_levels, size, uv_repeats, u, v, fp);
+  const double len = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+  if (!(len > 1e-9)) return {0.0, 0.0, 1.0};
+  return {a[0] / len, a[1] / len, a[2] / len};
+}
+
 double WeaveMaps::Lod(const std::array<double, 4>& duv, double footprint_scale) const {
   const double texels = double(size) * uv_repeats * footprint_scale;
   const double rx = std::hypot(duv[0], duv[1]) * texels;
@@ -191,6 +297,10 @@ void WeaveMaps::SetGlint(int gsize, std::vector<float> level0) {
 double WeaveMaps::SampleGlint(double u, double v, const std::array<double, 4>& duv,
                               double footprint_scale) const {
   if (glint_levels.empty()) return 1.0;
+  if (anisotropy > 1)  // the glint map's own texel density (repeat 1), same rule
+    return TrilinearAniso<1>(glint_levels, glint_size, 1.0, u, v,
+                             FootprintFor(duv, double(glint_size), int(glint_levels.size()),
+                                          anisotropy, footprint_scale, aniso_rule))[0];
   const double texels = double(glint_size) * footprint_scale;
   const double rho = std::max(std::hypot(duv[0], duv[1]), std::hypot(duv[2], duv[3])) * texels;
   const int n = int(glint_levels.size());
@@ -354,12 +464,29 @@ void AddPresetWeaveMapUris(MaterialPreset* preset, const std::string& preset_pat
   }
 }
 
+int PresetMapAnisotropy(const nlohmann::json& f, const std::string& where) {
+  if (!f.is_object() || !f.contains("anisotropy")) return 1;
+  const nlohmann::json& a = f["anisotropy"];
+  const std::string range = "expected an integer in [1, " +
+                            std::to_string(WeaveMaps::kMaxAnisotropy) + "] (texture.anisotropy)";
+  if (!a.is_number_integer())
+    throw MaterialError(where + ": field weave_maps.anisotropy: " + range + ", got " +
+                        (a.is_number() ? limits::EscapeForMessage(a.dump(), 40)
+                                       : std::string(a.type_name())));
+  const long long n = a.get<long long>();
+  if (n < 1 || n > WeaveMaps::kMaxAnisotropy)
+    throw MaterialError(where + ": field weave_maps.anisotropy: " + range + ", got " +
+                        std::to_string(n));
+  return int(n);
+}
+
 void ResolvePresetWeaveMapPaths(MaterialPreset* preset, const std::string& preset_path) {
   if (!HasWeaveMapsField(*preset)) return;
   nlohmann::json& f = preset->extra["weave_maps"];
   if (!f.is_object())
     throw MaterialError(limits::EscapeForMessage(preset_path, 400) +
                         ": field weave_maps: expected an object");
+  PresetMapAnisotropy(f, limits::EscapeForMessage(preset_path, 400));
   for (const auto& [file_key, uri_key] : kPathKeys) {
     if (!f.contains(uri_key)) continue;
     if (!f[uri_key].is_string())
@@ -387,7 +514,9 @@ std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& prese
                         "reader was not given (render::ResolvePresetWeaveMapPaths first)");
   if (!it->is_object() || !it->contains("file") || !(*it)["file"].is_string())
     throw MaterialError("preset field weave_maps: expected an object with a string \"file\"");
+  const int aniso = PresetMapAnisotropy(*it, "preset");
   auto maps = std::make_shared<WeaveMaps>(ReadWeaveMaps((*it)["file"].get<std::string>()));
+  maps->anisotropy = aniso;
   if (it->contains("uv_repeats")) {
     const auto& r = (*it)["uv_repeats"];
     if (!r.is_number() || !(r.get<double>() > 0.0))

@@ -28,6 +28,36 @@
 // lerped by frac(lambda). Mips are 2 x 2 box averages down to 1 x 1 (the tile means, 1).
 // Every channel enters the model linearly, so averaging the maps averages the shading.
 //
+// Anisotropic filtering (session 9; three.js `texture.anisotropy`, WeaveMaps::anisotropy > 1):
+// EXT_texture_filter_anisotropic (Khronos OpenGL registry, "Texture Filter Anisotropic", the
+// replacement of OpenGL section 3.8.5 / GL 4.6 section 8.14.1), with the footprint in texels
+// of the map being sampled (derivatives times texels per uv unit times footprint_scale):
+//   Px = |(du/dx, dv/dx)|, Py = |(du/dy, dv/dy)|, Pmax = max, Pmin = min,
+//   N = min(ceil(Pmax / Pmin), anisotropy), lambda' = log2(Pmax / N) clamped to [0, top],
+//   result = the mean of N trilinear samples at lambda' along the major axis (the derivative
+//   vector d of the longer axis: x when Px > Py, y when Py >= Px, as the spec's two cases),
+//   probe i = 1..N at uv + d ((i - 1/2) / N - 1/2).
+// Probe placement (stated; the spec allows any N locations "within the footprint" and gives
+// i / (N + 1) - 1/2 as its example): the CENTRES of N equal segments of the major axis
+// [-1/2, 1/2] d. Each probe's trilinear footprint at lambda' is Pmax / N texels long, so the N
+// segments tile the major axis exactly (the midpoint rule of the pixel's box integral along
+// it); the spec's i / (N + 1) spacing leaves the two ends uncovered and overlaps the rest. It is
+// also the placement of SwiftShader (the WebGL2 the browser test runs: Constants.cpp uvStart =
+// -(N - 1) / (2N), uvWeight = 1 / N), which differs from the spec in N and lambda' only
+// (docs/preview.md "Anisotropic filtering of the weave maps").
+// Degenerate footprints: Pmax = 0 or not finite -> the isotropic rule (one sample); Pmin = 0
+// -> N = anisotropy. anisotropy = 1 is the isotropic path above, bit for bit (same code).
+// AnisoRule::kSwiftShader (opt-in, `render-preview --map-aniso-rule swiftshader`; the browser
+// test compares with it): SwiftShader's own rule (src/Pipeline/SamplerCore.cpp computeLod2D,
+// the WebGL2 of headless Chromium): the minor axis from the footprint's AREA, Pmin' = |det J| /
+// Pmax (det J = du/dx dv/dy - du/dy dv/dx in texels; <= Pmin), a = min(Pmax^2 / |det J|,
+// anisotropy) unrounded, N = round(a) probes (same placement), lambda' = log2(Pmax / a) taken
+// with SwiftShader's piecewise-linear log2 (log2sqrt: the float's exponent plus its mantissa
+// fraction, of (Pmax / a)^4, times 1/4); the major axis is x when Px >= Py. The spec's ceil
+// makes a slightly anisotropic footprint (ratio 1.01) take 2 probes one LOD finer; SwiftShader
+// takes 1 probe at about the same LOD: measured, that difference is up to 7.9 / 255 mean on the
+// sphere (docs/preview.md "Anisotropic filtering of the weave maps").
+//
 // File: a 32-bit float EXR, channels warp, weft, kd.R, kd.G, kd.B [, N.X, N.Y, N.Z], metadata
 // clothfit:weave_maps = 1, clothfit:uv_repeats, clothfit:convention. The preset lists it in
 // its top-level "weave_maps" object (written by the fit; see PresetField below).
@@ -49,8 +79,17 @@ struct Hit;
 
 struct WeaveMaps {
   static constexpr int kChannels = 5;  // warp, weft, kd.R, kd.G, kd.B
+  static constexpr int kMaxAnisotropy = 16;  // the preset's limit (GPUs: 16)
   int size = 0;                        // texels per period along u and v (power of two)
   double uv_repeats = 1.0;             // weave tiles per uv unit
+  // Max anisotropy of every map here (weave, relief normal, glint, physical-aniso anisotropy
+  // map), as three.js's texture.anisotropy: 1 = isotropic (GL's default), up to 16. From the
+  // preset's weave_maps.anisotropy (missing: 1).
+  int anisotropy = 1;
+  // How N and lambda' are chosen for anisotropy > 1 (above): the EXT specification (default)
+  // or SwiftShader's rule. Not a preset key: an engine property, set by the caller.
+  enum class AnisoRule { kSpec, kSwiftShader };
+  AnisoRule aniso_rule = AnisoRule::kSpec;
   std::vector<std::vector<float>> levels;  // mip chain; level l: (size >> l)^2 x 5, row-major
   // Optional relief normal map (empty: none): tangent-space unit normals (x along the mesh
   // tangent t = +u = warp, y along b = tangent_sign n x t = +v = weft, z along n), 3 per
@@ -70,6 +109,27 @@ struct WeaveMaps {
   // weft), B = |warp - weft| / (warp + weft); 3 channels, box mips. It is filtered as a GPU
   // filters that texture (the encoded values, not warp/weft), see SampleAnisotropy.
   std::vector<std::vector<float>> aniso_levels;
+
+  // The filter footprint of one sample (see "Anisotropic filtering" above): the LOD, the
+  // number of probes and the uv step between them (the first probe at uv - (n - 1)/2 step).
+  // n = 1, step 0: one trilinear sample at uv (the isotropic path when anisotropy = 1).
+  struct Footprint {
+    double lambda = 0.0;
+    int n = 1;
+    double step_u = 0.0, step_v = 0.0;
+  };
+  // The footprint for a map with `texels` texels per uv unit and `levels` mip levels, from the
+  // uv derivatives (du/dx, dv/dx, du/dy, dv/dy) times footprint_scale, max anisotropy `aniso`.
+  static Footprint FootprintFor(const std::array<double, 4>& duv, double texels, int levels,
+                                int aniso, double footprint_scale = 1.0,
+                                AnisoRule rule = AnisoRule::kSpec);
+  // The footprint of the weave, normal and anisotropy maps (texels = size x uv_repeats) with
+  // this object's anisotropy; anisotropy = 1: {Lod(duv, footprint_scale), 1, 0, 0}.
+  Footprint FootprintAt(const std::array<double, 4>& duv, double footprint_scale = 1.0) const;
+  // The samples below at a footprint: the mean of fp.n trilinear probes at fp.lambda.
+  std::array<double, kChannels> Sample(double u, double v, const Footprint& fp) const;
+  std::array<double, 2> SampleAnisotropy(double u, double v, const Footprint& fp) const;
+  std::array<double, 3> SampleNormal(double u, double v, const Footprint& fp) const;
 
   // From level 0 (size^2 x 5 values): checks the size, renormalises every channel to a tile
   // mean of 1 (throws std::invalid_argument on a non-positive or non-finite mean), builds mips.
@@ -94,7 +154,8 @@ struct WeaveMaps {
   // Glint map (see above). SetGlint throws std::invalid_argument on a bad size or value.
   void SetGlint(int size, std::vector<float> level0);
   bool has_glint() const { return !glint_levels.empty(); }
-  // Trilinear sample of I with the GPU LOD of this map's own texel density; 1 without one.
+  // Trilinear sample of I with the GPU LOD of this map's own texel density (anisotropic with
+  // this object's anisotropy > 1, the footprint in glint texels); 1 without one.
   double SampleGlint(double u, double v, const std::array<double, 4>& duv,
                      double footprint_scale = 1.0) const;
 };
@@ -114,7 +175,8 @@ WeaveMaps ReadWeaveMaps(const std::string& path);
 //    "colour_space": "linear ratios to the tile mean (kd: linear sRGB)",
 //    "convention": "texel (i, j) covers uv [i, i+1) / (size uv_repeats) x [j, j+1) / ..., row j from the top; REPEAT",
 //    "source": {...}   (what the bake was made from; informative),
-//    "glint_file": "<absolute path>", "glint_uri": "<relative>"   (optional: the glint map)}
+//    "glint_file": "<absolute path>", "glint_uri": "<relative>"   (optional: the glint map),
+//    "anisotropy": 16   (optional: WeaveMaps::anisotropy, an integer in [1, 16]; missing = 1)}
 // Which path is read (docs/preset-format.md, "Weave maps"): "uri" ("glint_uri") resolved
 // against the directory of the preset FILE when present -- it must be relative, stay inside
 // that directory (after ".." and symlinks) and name an existing regular file, or the read fails
@@ -131,6 +193,11 @@ void AddPresetWeaveMapUris(MaterialPreset* preset, const std::string& preset_pat
 // one-argument LoadPresetWeaveMaps reads them. Throws MaterialError naming `preset_path` and
 // the field (untrusted text escaped) on an absolute, escaping, scheme-bearing or missing uri.
 void ResolvePresetWeaveMapPaths(MaterialPreset* preset, const std::string& preset_path);
+// Validates weave_maps.anisotropy (if present: a JSON integer in [1, 16]; 0, 17, 2.5, 16.0
+// and "x" are refused, as the woven fis_taps are) and returns it (1 when missing). Throws
+// MaterialError "<where>: field weave_maps.anisotropy: ..." (`where` the preset file, or
+// "preset" when unknown). Called by ResolvePresetWeaveMapPaths and LoadPresetWeaveMaps.
+int PresetMapAnisotropy(const nlohmann::json& weave_maps_field, const std::string& where);
 // The maps a woven preset names, or null (no field, or not a woven preset). Throws
 // MaterialError naming the field on a malformed field, io::IoError on an unreadable file.
 // The one-argument form reads "file" and refuses a field that still has a "uri" (a preset

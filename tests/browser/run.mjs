@@ -8,8 +8,8 @@
 //   by a 1-pixel readPixels; SwiftShader runs on the CPU, so only ratios between cases mean
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 19 materials (6 + 3 woven + 2 physical-aniso
-// + 4 with weave maps + 4 woven with FIS IBL) x 2 environments
+// Cases: each canonical scene (datasets/scenes/*.json) x 22 materials (6 + 3 woven + 2 physical-aniso
+// + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -127,6 +127,16 @@ Object.assign(MATERIALS, {
   'woven-maps-twill-fis': withWoven('woven-maps-twill', { ibl: 'fis' }),
   'woven-fis-diffuse': withWoven('woven', { ibl: 'fis', fis_taps: 8, fis_diffuse_taps: 16 }),
 });
+// s9-aniso: the weave maps with anisotropic filtering ("weave_maps": {"anisotropy": 16} ->
+// texture.anisotropy 16 in three.js, clamped to the renderer's max; the C++ preview filters as
+// EXT_texture_filter_anisotropic specifies, render/preview/weave_maps.h). Same presets as the
+// isotropic cases above, so the two sets differ by the filter only.
+const withAniso = (name, a) => ({ ...MATERIALS[name], weave_maps: { ...MATERIALS[name].weave_maps, anisotropy: a } });
+Object.assign(MATERIALS, {
+  'woven-maps-canvas-aniso16': withAniso('woven-maps-canvas', 16),
+  'woven-maps-twill-aniso16': withAniso('woven-maps-twill', 16),
+  'physical-aniso-maps-aniso16': withAniso('physical-aniso-maps', 16),
+});
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
 const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, rotation_y_degrees: 60 } };
@@ -161,8 +171,12 @@ function runCmd(cmd, argv) {
   });
 }
 // --ibl-engine threejs: every material here is drawn by three.js in the browser
-// (MeshClothMaterial uses three.js's PMREM too). --cpp-args '' drops it (older binaries).
-const cppExtra = (args['cpp-args'] ?? '--ibl-engine threejs').split(' ').filter(Boolean);
+// (MeshClothMaterial uses three.js's PMREM too). --cpp-args '' drops both (older binaries).
+// --map-aniso-rule swiftshader (s9-aniso): the *-aniso16 cases' maps filtered with SwiftShader's
+// anisotropic rule, the GPU these frames come from (the spec's rule, which the fits use, differs
+// from it by up to 7.9 / 255 mean: docs/preview.md "Anisotropic filtering of the weave maps");
+// it changes nothing for anisotropy 1.
+const cppExtra = (args['cpp-args'] ?? '--ibl-engine threejs --map-aniso-rule swiftshader').split(' ').filter(Boolean);
 // A case whose preview fails (e.g. a binary that does not know a preset option) is reported as
 // that case's error, not as the end of the run.
 const cppErrors = new Map();

@@ -23,7 +23,7 @@ globalThis.fetch = async (url, ...rest) => {
   const u = String(url);
   if (u.startsWith('file:')) {
     const buf = fs.readFileSync(fileURLToPath(u));
-    return { ok: true, status: 200, arrayBuffer: async () => buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.length), json: async () => JSON.parse(buf) };
+    return { ok: true, status: 200, arrayBuffer: async () => buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.length), json: async () => JSON.parse(buf), text: async () => buf.toString('utf8') };
   }
   return realFetch(url, ...rest);
 };
@@ -182,11 +182,31 @@ if (args.clothfit) {
   check(() => assert.ok(pa.map === maps.kdTexture && pa.anisotropyMap && pa.anisotropyMap.repeat.x === 60 && pa.map.repeat.y === 60), 'physical-aniso map + anisotropyMap');
   check(() => assert.equal(weaveMapUrl('/abs/dir/x.weave.exr', 'http://h/p/x.json'), 'http://h/p/x.weave.exr'), 'absolute file -> next to the preset');
   check(() => assert.equal(weaveMapUrl('maps/x.exr', 'http://h/p/x.json'), 'http://h/p/maps/x.exr'), 'relative file');
+  // s9-aniso: weave_maps.anisotropy -> texture.anisotropy of every map (1 without the key),
+  // clamped to the renderer's max; 0, 17, 2.5, "x" refused naming the field, and a literal 16.0
+  // in the preset's text too (as the C++ reader, nlohmann is_number_integer).
+  check(() => assert.equal(maps.weightsTexture.anisotropy, 1), 'anisotropy default 1');
+  const m16 = weaveMapsFromExr(buf, { field: { anisotropy: 16 } });
+  check(() => assert.ok(m16.weightsTexture.anisotropy === 16 && m16.kdTexture.anisotropy === 16 && m16.anisotropyTexture().anisotropy === 16), 'anisotropy 16 on every map');
+  check(() => assert.equal(weaveMapsFromExr(buf, { field: { anisotropy: 16 }, maxAnisotropy: 4 }).kdTexture.anisotropy, 4), 'anisotropy clamped to the renderer max');
+  for (const bad of [0, 17, 2.5, 'x', -1]) {
+    check(() => assert.throws(() => weaveMapsFromExr(buf, { field: { anisotropy: bad }, name: 'a.exr' }), /weave_maps\.anisotropy: expected an integer in \[1, 16\]/), `bad anisotropy ${bad}`);
+  }
+  check(() => assert.throws(() => loadClothfitPreset('{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {"anisotropy": 1.0}, "weave_maps": {"file": "m.exr", "source": {"texels": 64.0}, "anisotropy": 16.0}}', { weaveMaps: null }), /weave_maps\.anisotropy: expected an integer/), 'anisotropy 16.0 literal refused');
+  check(() => assert.ok(loadClothfitPreset('{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {"anisotropy": 1.0}, "weave_maps": {"file": "m.exr", "source": {"anisotropy": 2.0}, "anisotropy": 16}}', { weaveMaps: null })), 'a float "anisotropy" elsewhere is not the maps\' key');
+  check(() => assert.throws(() => loadClothfitPreset('{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {}, "woven": {"ibl": "fis", "fis_taps": 16.0}}'), /loadClothfitPreset: woven\.fis_taps: expected an integer/), 'fis_taps 16.0 literal refused');
+  check(() => assert.throws(() => loadClothfitPreset('{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {}, "woven": {"ibl": "fis", "fis_diffuse_taps": 1e1}}'), /woven\.fis_diffuse_taps: expected an integer/), 'fis_diffuse_taps 1e1 literal refused');
+  check(() => assert.equal(loadClothfitPreset('{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {}, "woven": {"ibl": "fis", "fis_taps": 16}}').fisTaps, 16), 'fis_taps 16 accepted');
   const mapsWork = fs.mkdtempSync('/tmp/clothfit-unit-maps-');
   const presetFile = path.join(mapsWork, 'woven-maps-unit.json');
   fs.writeFileSync(presetFile, JSON.stringify(wpm()));
   const fm = await fetchClothfitPreset(pathToFileURL(presetFile).href, { resolveWeaveMapPath: (f) => pathToFileURL(f).href });
   check(() => assert.ok(fm.weaveMaps && fm.weaveMaps.uvRepeats === 60), 'fetchClothfitPreset loads the maps');
+  fs.writeFileSync(presetFile, JSON.stringify(wpm()).replace('"uv_repeats":60', '"uv_repeats":60,"anisotropy":16.0'));
+  await assert.rejects(fetchClothfitPreset(pathToFileURL(presetFile).href, { resolveWeaveMapPath: (f) => pathToFileURL(f).href }), /woven-maps-unit\.json: weave_maps\.anisotropy: expected an integer/);
+  fs.writeFileSync(presetFile, JSON.stringify(wpm()).replace('"uv_repeats":60', '"uv_repeats":60,"anisotropy":8'));
+  const fa = await fetchClothfitPreset(pathToFileURL(presetFile).href, { resolveWeaveMapPath: (f) => pathToFileURL(f).href, maxAnisotropy: 16 });
+  check(() => assert.equal(fa.weaveMaps.kdTexture.anisotropy, 8), 'fetchClothfitPreset: the preset\'s anisotropy');
   fs.writeFileSync(presetFile, JSON.stringify(wpm({ weave_maps: { file: exrPath, glint_file: exrPath } })));
   await assert.rejects(fetchClothfitPreset(pathToFileURL(presetFile).href, { resolveWeaveMapPath: (f) => pathToFileURL(f).href }), /woven-maps-unit\.json: weave_maps\.glint_file/);
   // "uri" first (docs/preset-format.md "Weave maps: `uri` and `file`"): relative to the preset,

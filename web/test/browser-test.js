@@ -20,7 +20,7 @@ async function run() {
   renderer.debug.onShaderError = (g, program, vs, fs) => {
     log(`shader error: ${g.getProgramInfoLog(program)}\n${g.getShaderInfoLog(fs)}\n${g.getShaderInfoLog(vs)}`.slice(0, 4000));
   };
-  log(`WebGL: ${gl.getParameter(gl.VERSION)} / ${gl.getParameter(gl.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? gl.RENDERER)}; OES_texture_float_linear: ${renderer.extensions.has('OES_texture_float_linear')}`);
+  log(`WebGL: ${gl.getParameter(gl.VERSION)} / ${gl.getParameter(gl.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? gl.RENDERER)}; OES_texture_float_linear: ${renderer.extensions.has('OES_texture_float_linear')}; max anisotropy: ${renderer.capabilities.getMaxAnisotropy()}`);
   const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
   const cards = new Map();
   for (const c of plan.cases) {
@@ -35,8 +35,10 @@ async function run() {
     }
     // fetchClothfitPreset: also fetches a preset's weave maps; their "file" is an absolute
     // file-system path here, served under /fs.
-    const material = await fetchClothfitPreset(fsUrl(c.preset), { resolveWeaveMapPath: (file) => fsUrl(file) });
-    if (material.userData.clothfit?.weave_maps) log(`${c.name}: weave maps ${material.userData.clothfit.weave_maps.file}`);
+    // renderer: texture.anisotropy of the maps clamped to getMaxAnisotropy() (logged when it is).
+    const material = await fetchClothfitPreset(fsUrl(c.preset), { renderer, resolveWeaveMapPath: (file) => fsUrl(file) });
+    const wmap = material.userData.clothfit?.weave_maps;
+    if (wmap) log(`${c.name}: weave maps ${wmap.file}${wmap.anisotropy ? `, anisotropy ${wmap.anisotropy} (max ${renderer.capabilities.getMaxAnisotropy()})` : ''}`);
     sc.setMaterial(material);
     sc.apply(renderer);
     renderer.setSize(sc.width, sc.height, false);
