@@ -170,7 +170,7 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
       std::printf(", split sum with exact irradiance (%d samples per pixel, seed %u)",
                   a.exact_irradiance, a.exact_ibl_seed);
     if (o.shadows || o.visibility.enabled())
-      std::printf("evaluate: visibility %s\n", VisibilityJson(o).dump().c_str());
+      std::printf(", visibility %s", VisibilityJson(o).dump().c_str());
     std::printf("\n");
     for (const auto& s : r.scenes)
       std::printf("evaluate:   %s: %d blocks, block rmse %.5f\n", s.scene.c_str(), s.blocks,

@@ -148,7 +148,7 @@ struct FitArgs {
   // written to the preset's weave_maps.anisotropy. Default 16, by measurement (docs/flip.md
   // "Anisotropic filtering of the maps": per-pixel FLIP canvas 0.93x -> 0.83x, twill 0.97x ->
   // 0.90x of the best baseline; block RMSE canvas -0.6 %, twill +1.0 %).
-  int map_anisotropy = 16;
+  int map_anisotropy = -1;  // -1: not given (16 where there are maps); given without maps: an error
   std::string target_error;  // reference adaptive sampling (TargetErrorFor)
   double loss_scale = 1.0, min_coverage = 0.5;
   bool subsurface = false, no_floor = false, second_seed = false;
@@ -734,7 +734,10 @@ int RunFit(const FitArgs& a, const Globals& g) {
   // The maps' filter (both models' maps alike: the "same maps" rule).
   if (o.start.extra.is_object() && o.start.extra.contains("weave_maps") &&
       o.start.extra["weave_maps"].is_object())
-    o.start.extra["weave_maps"]["anisotropy"] = a.map_anisotropy;
+    o.start.extra["weave_maps"]["anisotropy"] = a.map_anisotropy >= 0 ? a.map_anisotropy : 16;
+  else if (a.map_anisotropy >= 0)
+    throw std::invalid_argument("--map-anisotropy: this fit has no weave maps (woven or "
+                                "physical-aniso with an Irawan --fabric, --weave-maps not none)");
   // Load everything.
   fit::ReferenceOptions ro;
   ro.alpha = fit::ParseAlphaMode(a.alpha);

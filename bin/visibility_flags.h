@@ -58,6 +58,22 @@ inline void AddVisibilityFlags(CLI::App* cmd, VisibilityFlags& f) {
 }
 
 inline void ApplyVisibilityFlags(const VisibilityFlags& f, fit::FitOptions* o) {
+  // Options that would be ignored are errors (a value equal to the default changes nothing).
+  const VisibilityFlags d;
+  const auto unused = [](const char* flag, const char* needs) {
+    throw std::invalid_argument(std::string(flag) + ": only with " + needs);
+  };
+  if (!f.ao && f.ao_weighting != d.ao_weighting) unused("--ao-weighting", "--ao");
+  if (!f.indirect) {
+    if (f.hit_samples != d.hit_samples) unused("--vis-hit-samples", "--indirect");
+    if (f.bounces != d.bounces) unused("--vis-bounces", "--indirect");
+    if (!f.fabric_albedo.empty()) unused("--indirect-albedo", "--indirect");
+  }
+  if (!f.ao && !f.indirect) {
+    if (f.samples != d.samples) unused("--vis-samples", "--ao or --indirect");
+    if (f.max_distance != d.max_distance) unused("--vis-max-distance", "--ao or --indirect");
+    if (f.seed != d.seed) unused("--vis-seed", "--ao or --indirect");
+  }
   o->shadows = f.shadows;
   o->visibility.ao = f.ao;
   o->visibility.indirect = f.indirect;

@@ -35,4 +35,9 @@ done
 err=$("$BIN" --quiet render-preview --scene "$SCENE" --material "$TMP/bad.json" --out "$TMP/p.png" \
       --map-aniso-rule nvidia 2>&1) && fail "render-preview --map-aniso-rule nvidia accepted"
 echo "$err" | grep -q -- "--map-aniso-rule" || fail "error does not name --map-aniso-rule: $err"
+# --map-anisotropy on a fit without weave maps would be ignored: an error naming it.
+err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --model standard \
+      --map-anisotropy 4 --out "$TMP/f.json" 2>&1) && fail "fit --model standard --map-anisotropy 4 accepted"
+echo "$err" | grep -q -- "--map-anisotropy" || fail "error does not name --map-anisotropy: $err"
+[ ! -e "$TMP/f.json" ] || fail "preset written despite --map-anisotropy without maps"
 echo "s9_aniso_cli: ok"

@@ -186,6 +186,9 @@ TEST(S9Aniso, SwiftShaderRuleUsesTheAreaAndNoCeil) {
   const auto sk = fp({8, 0, 8 * c, 8 * s}, R::kSwiftShader);
   EXPECT_EQ(sk.n, 1);
   EXPECT_NEAR(sk.lambda, std::log2(8 * s), 0.09);
+  // SwiftShader's log2 is piecewise linear between powers of two (docs/preview.md): off a power
+  // of two it differs from the exact log2 (2.7925 here), which would also pass the bound above.
+  EXPECT_GT(std::abs(sk.lambda - std::log2(8 * s)), 1e-3) << sk.lambda;
   // A long footprint: a = 40 / 4 = 10 probes; the piecewise-linear log2 is exact at powers of 2.
   const auto lf = fp({32, 0, 0, 2}, R::kSwiftShader);
   EXPECT_EQ(lf.n, 16);
@@ -217,6 +220,18 @@ TEST(S9Aniso, PresetAnisotropyIsValidatedNamingFileAndField) {
       FAIL() << "no error for anisotropy " << bad.dump();
     } catch (const MaterialError& e) {
       EXPECT_NE(std::string(e.what()).find("weave_maps.anisotropy"), std::string::npos)
+          << e.what();
+    }
+  }
+  // An unsigned value above LLONG_MAX is reported as written, not wrapped to a negative one.
+  {
+    MaterialPreset q = p;
+    q.extra["weave_maps"]["anisotropy"] = 18446744073709551615ull;
+    try {
+      ResolvePresetWeaveMapPaths(&q, "big.json");
+      FAIL() << "no error for anisotropy 2^64 - 1";
+    } catch (const MaterialError& e) {
+      EXPECT_NE(std::string(e.what()).find("got 18446744073709551615"), std::string::npos)
           << e.what();
     }
   }

@@ -71,4 +71,12 @@ run fis "--woven-ibl fis --fis-taps 8" || fail "second run failed"
 if STUB_IN_OFFSET=0.001 run bad; then fail "an in-sample mismatch was accepted"; fi
 grep -q 'canvas_woven.json: evaluate gives 0.01100 in-sample, the fit recorded 0.01000' "$T/bad.err" \
   || fail "unexpected error: $(cat "$T/bad.err")"
-echo "cross-env: 4 checks passed"
+# 5. A preset with weave maps is refitted with its own map filter (weave_maps.anisotropy; a
+#    preset with maps but no key: 1, the filter of presets before session 9).
+echo '{"fit": {"rmse": 0.01, "level": 4, "pixel_stride": 4, "space": "display"}, "weave_maps": {"file": "m.exr", "anisotropy": 16}}' > "$T/presets/canvas_woven.json"
+run maps16 || fail "run with maps failed: $(cat "$T/maps16.err")"
+grep -q '^--quiet fit .*--map-anisotropy 16$' "$T/maps16.log" || fail "refit without the preset's anisotropy: $(grep ' fit ' "$T/maps16.log")"
+echo '{"fit": {"rmse": 0.01, "level": 4, "pixel_stride": 4, "space": "display"}, "weave_maps": {"file": "m.exr"}}' > "$T/presets/canvas_woven.json"
+run maps1 || fail "run with old maps failed: $(cat "$T/maps1.err")"
+grep -q '^--quiet fit .*--map-anisotropy 1$' "$T/maps1.log" || fail "old preset refit not at anisotropy 1: $(grep ' fit ' "$T/maps1.log")"
+echo "cross-env: 5 checks passed"

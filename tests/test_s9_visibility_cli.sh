@@ -31,5 +31,10 @@ check --indirect-albedo fit --references "$TMP/ref.exr" --scenes "$SCENE" --indi
   --indirect-albedo 2,0,0 --out "$TMP/f.json"
 check --indirect-albedo fit --references "$TMP/ref.exr" --scenes "$SCENE" --indirect \
   --indirect-albedo 0.5,0.5 --out "$TMP/f.json"
+# Tuning flags without the term they tune are errors, not ignored (session 9 review).
+check --vis-samples fit --references "$TMP/ref.exr" --scenes "$SCENE" --vis-samples 5 --out "$TMP/f.json"
+check --vis-bounces fit --references "$TMP/ref.exr" --scenes "$SCENE" --ao --vis-bounces 2 --out "$TMP/f.json"
+check --ao-weighting fit --references "$TMP/ref.exr" --scenes "$SCENE" --indirect \
+  --ao-weighting environment --out "$TMP/f.json"
 [ ! -e "$TMP/f.json" ] || fail "preset written despite a bad option"
 echo "ok"

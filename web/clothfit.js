@@ -937,23 +937,48 @@ export function weaveMapsFromExr(buffer, { field = {}, name = 'weave maps', half
 export function weaveMapAnisotropy(field) {
   if (field === null || typeof field !== 'object' || field.anisotropy === undefined) return 1;
   const a = field.anisotropy;
-  if (typeof a !== 'number' || !Number.isInteger(a) || a < 1 || a > 16) throw new Error(`weave_maps.anisotropy: expected an integer in [1, 16] (texture.anisotropy), got ${JSON.stringify(a)}`);
+  if (typeof a !== 'number' || !Number.isInteger(a) || a < 1 || a > 16) throw new Error(`weave_maps.anisotropy: expected an integer in [1, 16] (texture.anisotropy), got ${typeof a === 'number' ? String(a).slice(0, 40) : typeof a}`);
   return a;
 }
 
 // The preset's integer fields written with a fraction or an exponent in the JSON text ("fis_taps":
 // 16.0), which JSON.parse turns into the integer 16 and the C++ reader (nlohmann is_number_integer)
-// refuses: woven.fis_taps, woven.fis_diffuse_taps, weave_maps.anisotropy (the top level of the
-// weave_maps object, one nested level such as "source" allowed). Throws naming the field, in the
-// message shape of the other checks ("loadClothfitPreset: <field>: expected an integer ...").
+// refuses: woven.fis_taps, woven.fis_diffuse_taps, weave_maps.anisotropy, at exactly those paths
+// (a float "anisotropy" or "fis_taps" elsewhere in the preset is not checked, as in C++). The text
+// is walked with a stack of the keys of the open objects (strings with escapes and braces inside
+// them are skipped as strings); call it on text JSON.parse accepted. Throws naming the field, in
+// the message shape of the other checks; the literal echoed is digits only, at most 40 characters.
+const PRESET_INTEGER_FIELDS = new Map([
+  ['woven.fis_taps', 'loadClothfitPreset: woven.fis_taps: expected an integer (JSON integer literal)'],
+  ['woven.fis_diffuse_taps', 'loadClothfitPreset: woven.fis_diffuse_taps: expected an integer (JSON integer literal)'],
+  ['weave_maps.anisotropy', 'weave_maps.anisotropy: expected an integer in [1, 16] (JSON integer literal)'],
+]);
 export function presetIntegerLiterals(text) {
-  const num = '(-?\\d+(?:\\.\\d*)?(?:[eE][+-]?\\d+)?)';
-  const bad = (f, lit) => new Error(`loadClothfitPreset: ${f}: expected an integer (JSON integer literal), got ${lit}`);
-  for (const m of text.matchAll(new RegExp(`"(fis_taps|fis_diffuse_taps)"\\s*:\\s*${num}`, 'g'))) {
-    if (/[.eE]/.test(m[2])) throw bad(`woven.${m[1]}`, m[2]);
+  const keys = [];  // per open container: the current key (object) or '#' (array)
+  let expectKey = false;
+  for (let i = 0; i < text.length;) {
+    const c = text[i];
+    if (c === '{') { keys.push(null); expectKey = true; ++i; continue; }
+    if (c === '[') { keys.push('#'); expectKey = false; ++i; continue; }
+    if (c === '}' || c === ']') { keys.pop(); expectKey = false; ++i; continue; }
+    if (c === ',') { expectKey = keys.length > 0 && keys[keys.length - 1] !== '#'; ++i; continue; }
+    if (c === '"') {
+      let j = i + 1;
+      while (j < text.length && text[j] !== '"') j += text[j] === '\\' ? 2 : 1;
+      if (expectKey) { keys[keys.length - 1] = JSON.parse(text.slice(i, j + 1)); expectKey = false; }
+      i = j + 1;
+      continue;
+    }
+    if (c === '-' || (c >= '0' && c <= '9')) {
+      let j = i;
+      while (j < text.length && /[-+0-9.eE]/.test(text[j])) ++j;
+      const lit = text.slice(i, j), msg = PRESET_INTEGER_FIELDS.get(keys.join('.'));
+      if (msg !== undefined && /[.eE]/.test(lit)) throw new Error(`${msg}, got ${lit.slice(0, 40)}`);
+      i = j;
+      continue;
+    }
+    ++i;  // ':', whitespace, the letters of true / false / null
   }
-  const wm = new RegExp(`"weave_maps"\\s*:\\s*\\{(?:[^{}]|\\{[^{}]*\\})*?"anisotropy"\\s*:\\s*${num}`).exec(text);
-  if (wm && /[.eE]/.test(wm[1])) throw new Error(`weave_maps.anisotropy: expected an integer in [1, 16] (JSON integer literal), got ${wm[1]}`);
 }
 
 // The anisotropyMap texel a weave-map texel stands for (render/preview/preview.cpp

@@ -473,10 +473,12 @@ int PresetMapAnisotropy(const nlohmann::json& f, const std::string& where) {
     throw MaterialError(where + ": field weave_maps.anisotropy: " + range + ", got " +
                         (a.is_number() ? limits::EscapeForMessage(a.dump(), 40)
                                        : std::string(a.type_name())));
-  const long long n = a.get<long long>();
-  if (n < 1 || n > WeaveMaps::kMaxAnisotropy)
-    throw MaterialError(where + ": field weave_maps.anisotropy: " + range + ", got " +
-                        std::to_string(n));
+  // a.dump(): an unsigned value above LLONG_MAX is reported as written, not wrapped.
+  const bool too_big = a.is_number_unsigned() &&
+                       a.get<unsigned long long>() > (unsigned long long)WeaveMaps::kMaxAnisotropy;
+  const long long n = too_big ? 0 : a.get<long long>();
+  if (too_big || n < 1 || n > WeaveMaps::kMaxAnisotropy)
+    throw MaterialError(where + ": field weave_maps.anisotropy: " + range + ", got " + a.dump());
   return int(n);
 }
 

@@ -129,7 +129,7 @@ if (args.clothfit) {
 // ---- weave maps (web/exr.js, weaveMapsFromExr; the C++ side is render/preview/weave_maps.*) ----
 {
   const { parseExr } = await import(pathToFileURL(path.join(repo, 'web', 'exr.js')).href);
-  const { weaveMapsFromExr, anisotropyFromWeave, fetchClothfitPreset, weaveMapUrl, weaveMapUriUrl } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+  const { weaveMapsFromExr, anisotropyFromWeave, fetchClothfitPreset, weaveMapUrl, weaveMapUriUrl, presetIntegerLiterals } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
   const exrPath = path.join(here, 'maps', 'canvas.weave.exr');
   const buf = fs.readFileSync(exrPath);
   const img = parseExr(buf, exrPath);
@@ -197,6 +197,13 @@ if (args.clothfit) {
   check(() => assert.throws(() => loadClothfitPreset('{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {}, "woven": {"ibl": "fis", "fis_taps": 16.0}}'), /loadClothfitPreset: woven\.fis_taps: expected an integer/), 'fis_taps 16.0 literal refused');
   check(() => assert.throws(() => loadClothfitPreset('{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {}, "woven": {"ibl": "fis", "fis_diffuse_taps": 1e1}}'), /woven\.fis_diffuse_taps: expected an integer/), 'fis_diffuse_taps 1e1 literal refused');
   check(() => assert.equal(loadClothfitPreset('{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {}, "woven": {"ibl": "fis", "fis_taps": 16}}').fisTaps, 16), 'fis_taps 16 accepted');
+  // The literal check follows the key path (session 9 review): nested objects, braces inside
+  // strings and earlier keys of the same name do not hide or fake a match.
+  check(() => assert.throws(() => presetIntegerLiterals('{"weave_maps": {"source": {"a": {"b": 1}}, "file": "a}b.exr", "anisotropy": 16.0}}'), /weave_maps\.anisotropy: expected an integer/), 'anisotropy 16.0 after a two-level object and a "}" in a string');
+  check(() => assert.throws(() => presetIntegerLiterals('{"x": {"weave_maps": {"anisotropy": 4}}, "weave_maps": {"anisotropy": 16.0}}'), /weave_maps\.anisotropy/), 'anisotropy 16.0 after a nested "weave_maps"');
+  check(() => assert.doesNotThrow(() => presetIntegerLiterals('{"provenance": {"fis_taps": 2.5, "woven": {"fis_taps": 1.5}}, "woven": {"fis_taps": 16}, "a": [{}, "woven", 1.5]}')), 'fis_taps floats at other paths are not checked');
+  check(() => assert.throws(() => presetIntegerLiterals('{"woven": {"note": "q\\"}", "fis_taps": 1e1}}'), /woven\.fis_taps/), 'an escaped quote in a string');
+  check(() => assert.throws(() => weaveMapsFromExr(buf, { field: { anisotropy: '\u202e'.repeat(200) } }), (e) => e.message.endsWith('got string')), 'a bad anisotropy value is named by type, not echoed');
   const mapsWork = fs.mkdtempSync('/tmp/clothfit-unit-maps-');
   const presetFile = path.join(mapsWork, 'woven-maps-unit.json');
   fs.writeFileSync(presetFile, JSON.stringify(wpm()));
