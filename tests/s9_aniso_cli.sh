@@ -3,13 +3,7 @@
 # s9_aniso_cli.sh <clothfit> <source dir>. A bad --map-anisotropy / --map-aniso-rule fails naming
 # the option; a preset whose weave_maps.anisotropy is not an integer in [1, 16] fails in
 # render-preview and evaluate naming the preset file and the field (before any map is read).
-set -uo pipefail
-BIN=$1
-SRC=$(cd "$2" && pwd)
-TMP=$(mktemp -d)
-trap 'rm -rf "$TMP"' EXIT
-fail() { echo "FAIL: $*" >&2; exit 1; }
-SCENE="$SRC/datasets/scenes/sphere.json"
+. "$(dirname "$0")/cli_common.sh"
 
 for n in 0 17 2.5 x; do
   err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --model woven \

@@ -2,13 +2,7 @@
 # s8-fis-cpp: the command-line side of woven FIS and of the fits' IBL engine:
 # test_s8_fis_cli.sh <clothfit> <source dir>. Bad --ibl-engine / --woven-ibl values and a bad
 # preset "woven" IBL field fail with an error naming the option or field; no preset is written.
-set -uo pipefail
-BIN=$1
-SRC=$(cd "$2" && pwd)
-TMP=$(mktemp -d)
-trap 'rm -rf "$TMP"' EXIT
-fail() { echo "FAIL: $*" >&2; exit 1; }
-SCENE="$SRC/datasets/scenes/sphere.json"
+. "$(dirname "$0")/cli_common.sh"
 
 err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --ibl-engine vulkan \
       --out "$TMP/f.json" 2>&1) && fail "fit --ibl-engine vulkan accepted"

@@ -3,13 +3,7 @@
 # test_s9_visibility_cli.sh <clothfit> <source dir>. Bad --ao-weighting, --vis-samples,
 # --vis-bounces and --indirect-albedo values fail (fit and evaluate) with an error naming the
 # option; no preset is written. The unit tests are tests/test_s9_visibility.cpp (S9Visibility.*).
-set -uo pipefail
-BIN=$1
-SRC=$(cd "$2" && pwd)
-TMP=$(mktemp -d)
-trap 'rm -rf "$TMP"' EXIT
-fail() { echo "FAIL: $*" >&2; exit 1; }
-SCENE="$SRC/datasets/scenes/sphere.json"
+. "$(dirname "$0")/cli_common.sh"
 
 check() {  # check <option named in the error> <args...>
   local name=$1; shift
