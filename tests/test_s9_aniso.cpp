@@ -133,6 +133,35 @@ TEST(S9Aniso, LongFootprintKeepsTheStripesContrastAcrossThem) {
   }
 }
 
+// The probes are centred on the sample point (session 9 review): a footprint of 8 texels along u
+// (N = 8 at level 0) centred on texel column c covers [c - 4, c + 4]; its probes sit on the texel
+// boundaries c + i - 3.5, where bilinear filtering averages two neighbours, so the result is the
+// trapezoid box (t[c-4] / 2 + t[c-3] + ... + t[c+3] + t[c+4] / 2) / 8 of the columns, an
+// expression independent of the implementation. One-sided probes (c + i) would miss a bright
+// column at c - 3; c = 1 puts that column at 62 through the REPEAT wrap.
+TEST(S9Aniso, ProbesAreCentredOnTheSamplePointAndWrap) {
+  const int S = 64, bright = 62;
+  std::vector<float> l0(size_t(S) * S * C, 1.0f);
+  for (int j = 0; j < S; ++j)
+    for (int i = 0; i < S; ++i) l0[size_t(j * S + i) * C + 0] = i == bright ? 50.0f : 0.2f;
+  WeaveMaps m = WeaveMaps::FromLevel0(S, 1.0, l0);
+  m.anisotropy = 16;
+  const auto col = [&](int i) { return double(m.levels[0][size_t(((i % S) + S) % S) * C + 0]); };
+  for (int c : {1, 5, 30}) {
+    const double u = (c + 0.5) / S, v = 10.5 / S;
+    const WeaveMaps::Footprint fp = m.FootprintAt({8.0 / S, 0.0, 0.0, 1.0 / S});
+    ASSERT_EQ(fp.n, 8);
+    ASSERT_EQ(fp.lambda, 0.0);
+    double want = 0.5 * (col(c - 4) + col(c + 4));
+    for (int k = -3; k <= 3; ++k) want += col(c + k);
+    want /= 8.0;
+    EXPECT_NEAR(m.Sample(u, v, fp)[0], want, 1e-6 * want) << "column " << c;
+  }
+  // The bright column (62 = 1 - 3 wrapped) is inside the footprint at c = 1 only.
+  const WeaveMaps::Footprint fp = m.FootprintAt({8.0 / S, 0.0, 0.0, 1.0 / S});
+  EXPECT_GT(m.Sample(1.5 / S, 10.5 / S, fp)[0], 3.0 * m.Sample(30.5 / S, 10.5 / S, fp)[0]);
+}
+
 TEST(S9Aniso, ProbeCountIsClampedAndFollowsTheSpec) {
   const double texels = 64.0;
   const int levels = 7;
