@@ -7,6 +7,7 @@
 // full frame at its pixels; options off (whatever the other fields) leave the frame unchanged.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <vector>
@@ -220,6 +221,40 @@ TEST(S9Visibility, SampledCacheEqualsFullFrame) {
   EXPECT_LT(lower_ao, 0.95 * lower_off);
   // The floor (non-fabric, full frame only) gets the terms too.
   EXPECT_NE(full->background, plain->background);
+}
+
+// The AO map darkens the prefiltered specular tables by three.js's computeSpecularOcclusion at
+// each roughness node (session 9 review: the darkening check above is met by the diffuse alone).
+// ao per pixel is recovered from the diffuse irradiance (E_d x ao with the light map off).
+TEST(S9Visibility, AoAppliesSpecularOcclusionToTheRadianceTables) {
+  const Scene s = SphereOnFloor(32);
+  const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
+  PreviewOptions off;
+  off.model = ModelKind::kStandard;
+  PreviewOptions on = off;
+  on.visibility.ao = true;
+  on.visibility.samples = 32;
+  const auto a = PreviewCache::Build(s, &env, on), b = PreviewCache::Build(s, &env, off);
+  ASSERT_EQ(a->pixels, b->pixels);
+  const int K = on.roughness_nodes;
+  ASSERT_EQ(a->radiance.size(), a->pixels.size() * size_t(K) * 3);
+  int occluded = 0;
+  for (size_t i = 0; i < a->pixels.size(); ++i) {
+    if (!(b->irradiance[i * 3 + 1] > 1e-3f)) continue;
+    const double ao = double(a->irradiance[i * 3 + 1]) / double(b->irradiance[i * 3 + 1]);
+    if (ao > 0.99) continue;
+    ++occluded;
+    for (int k = 0; k < K; k += 4) {
+      const double so = SpecularOcclusion(std::clamp(double(a->NoV[i]), 0.0, 1.0), ao,
+                                          double(k) / double(K - 1));
+      for (int c = 0; c < 3; ++c) {
+        const size_t j = (i * size_t(K) + size_t(k)) * 3 + size_t(c);
+        EXPECT_NEAR(a->radiance[j], double(b->radiance[j]) * so, 1e-4 * double(b->radiance[j]) + 1e-7)
+            << "pixel " << a->pixels[i] << " node " << k << " ao " << ao;
+      }
+    }
+  }
+  EXPECT_GT(occluded, 10);
 }
 
 // Options off (ao and indirect false) with every other visibility field changed: bit-identical.
