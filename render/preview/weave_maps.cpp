@@ -169,7 +169,7 @@ std::array<double, 2> WeaveMaps::SampleAnisotropy(double u, double v, double lam
 
 // SwiftShader's log2sqrt (src/Pipeline/SamplerCore.cpp): 1/4 of a piecewise-linear log2 of
 // x^2 in float (the exponent plus the mantissa fraction), x = the squared LOD scale.
-double SwiftShaderLog2Sqrt(double x) {
+static double SwiftShaderLog2Sqrt(double x) {
   const float y = float(x) * float(x);
   int e = 0;
   const float m = std::frexp(y, &e);  // y = m 2^e, m in [0.5, 1)
