@@ -1,5 +1,7 @@
 // Material preset reader: render::ReadPreset, then the round trip the tool does when it writes
-// a preset back (PresetToJson, DumpJson), and the weave maps' relative "uri" resolution.
+// a preset back (PresetToJson, DumpJson), the weave maps' relative "uri" resolution and their
+// max anisotropy (render::PresetMapAnisotropy, session 9).
+#include "render/preview/weave_maps.h"
 #include "render/scene/material.h"
 #include "tests/fuzz/fuzz_common.h"
 
@@ -11,11 +13,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     (void)limits::DumpJson(render::PresetToJson(p));
     // The weave maps' relative "uri" (render::ResolvePresetRelativeUri, every reader's rule).
     const auto wm = p.extra.find("weave_maps");
-    if (wm != p.extra.end() && wm->is_object())
+    if (wm != p.extra.end() && wm->is_object()) {
       for (const char* key : {"uri", "glint_uri"})
         if (wm->contains(key) && (*wm)[key].is_string())
           (void)render::ResolvePresetRelativeUri(path, std::string("weave_maps.") + key,
                                                  (*wm)[key].get<std::string>());
+      // Last, so that its error (checked by fuzz::Run like every other) hides no uri check.
+      (void)render::PresetMapAnisotropy(*wm, path);
+    }
   });
   return 0;
 }
