@@ -281,6 +281,37 @@ TEST(ConvertWeave, PhysicalAnisoMapsAreBakedIntoGltfAndThreejsTexturesWithinQuan
   fs::remove_all(d);
 }
 
+// The preset's weave_maps.anisotropy (the maps' max anisotropy, session 9) reaches the outputs:
+// every three.js texture's "anisotropy" (ObjectLoader sets texture.anisotropy from it) and the
+// glTF material's extras (glTF samplers have no such field); a preset without the key gives 1,
+// three.js's default. Session 10 (it was written as 1 whatever the preset said).
+TEST(ConvertWeave, MapAnisotropyIsCarriedToThreejsTexturesAndGltfExtras) {
+  for (const int aniso : {0, 8}) {  // 0: the key absent
+    const fs::path d = TempDir("aniso" + std::to_string(aniso));
+    fs::create_directories(d / "in");
+    const render::WeaveMaps maps = SyntheticMaps(16, 5.0, 3);
+    const std::string exr = (d / "in" / "a.weave.exr").string();
+    render::WriteWeaveMaps(exr, maps);
+    render::MaterialPreset p = AnisoPreset(0.5, 0.0);
+    p.extra["weave_maps"] = render::WeaveMapsPresetField(exr, maps);
+    if (aniso > 0) p.extra["weave_maps"]["anisotropy"] = aniso;
+    render::WritePreset((d / "in" / "a.json").string(), p);
+    const ConvertReport r = RunBatch({(d / "in").string()}, d / "out", {"gltf", "threejs"});
+    ASSERT_EQ(r.converted, 1) << (r.items.empty() ? "" : r.items[0].reason);
+    const int expected = aniso > 0 ? aniso : 1;
+    const json t = ReadJsonFile(d / "out" / "a.three.json");
+    ASSERT_EQ(t.at("textures").size(), 2u);
+    for (const json& x : t.at("textures")) EXPECT_EQ(x.at("anisotropy").get<int>(), expected);
+    EXPECT_EQ(t.at("userData").at("clothfit").at("weave_textures").at("max_anisotropy").get<int>(),
+              expected);
+    const json g = ReadJsonFile(d / "out" / "a.gltf");
+    EXPECT_EQ(g.at("materials").at(0).at("extras").at("clothfit_weave_textures")
+                  .at("max_anisotropy").get<int>(),
+              expected);
+    fs::remove_all(d);
+  }
+}
+
 // A texture that does NOT follow the preview (transposed rows and columns) must fail the same
 // comparison: the check is sensitive to the texel convention, not only to value ranges.
 TEST(ConvertWeave, TheComparisonDetectsATransposedTexture) {

@@ -737,6 +737,11 @@ json WeaveTexturesJson(const WeaveTextures& w, const char* target) {
   return {{"target", target},
           {"size", w.size},
           {"uv_repeats", w.uv_repeats},
+          {"max_anisotropy", w.max_anisotropy},
+          {"max_anisotropy_convention",
+           "the preset's weave_maps.anisotropy: three.js texture.anisotropy "
+           "(EXT_texture_filter_anisotropic max anisotropy, 1 = isotropic); a viewer clamps it "
+           "to renderer.capabilities.getMaxAnisotropy()"},
           {"base_color",
            "texel (8-bit sRGB) x factor = preset base_color x weave kd ratio; factor = the "
            "smallest 8-bit sRGB value >= base_color x max ratio"},
@@ -821,7 +826,7 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
                           {"colorSpace", tex[k].second},  // "srgb" / NoColorSpace ""
                           {"minFilter", 1008},            // LinearMipmapLinearFilter
                           {"magFilter", 1006},            // LinearFilter
-                          {"anisotropy", 1},
+                          {"anisotropy", w.max_anisotropy},  // the preset's maps' filter
                           {"flipY", false},  // glTF uv convention: v = 0 at the image's top row
                           {"generateMipmaps", true}});
     }

@@ -58,6 +58,7 @@ WeaveTextures BakePhysicalAnisoTextures(const render::MaterialPreset& p,
   WeaveTextures w;
   w.size = maps.size;
   w.uv_repeats = maps.uv_repeats;
+  w.max_anisotropy = maps.anisotropy;
   w.base_color.assign(n * 3, 0);
   w.anisotropy.assign(n * 3, 0);
 

@@ -47,6 +47,11 @@ namespace clothfit::fit {
 struct WeaveTextures {
   int size = 0;             // texels per side (one weave period)
   double uv_repeats = 1.0;  // KHR_texture_transform scale / three.js repeat
+  // The preset's weave_maps.anisotropy (1..16; 1 when missing): the maps' max anisotropy as
+  // three.js texture.anisotropy (EXT_texture_filter_anisotropic). Written as the three.js
+  // textures' "anisotropy"; glTF samplers have no such field, so the glTF output records it in
+  // extras.clothfit_weave_textures.max_anisotropy (docs/convert.md).
+  int max_anisotropy = 1;
   std::vector<unsigned char> base_color;  // size^2 x 3, sRGB codes, rows top first
   std::vector<unsigned char> anisotropy;  // size^2 x 3, linear codes (RG direction, B strength)
   Rgb<double> base_factor{0.0, 0.0, 0.0};  // linear baseColorFactor (an exact 8-bit sRGB value)
