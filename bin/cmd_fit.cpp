@@ -732,10 +732,9 @@ int RunFit(const FitArgs& a, const Globals& g) {
     if (!line.empty()) std::printf("fit: %s\n", line.c_str());
   }
   // The maps' filter (both models' maps alike: the "same maps" rule).
-  if (o.start.extra.is_object() && o.start.extra.contains("weave_maps") &&
-      o.start.extra["weave_maps"].is_object())
-    o.start.extra["weave_maps"]["anisotropy"] = a.map_anisotropy >= 0 ? a.map_anisotropy : 16;
-  else if (a.map_anisotropy >= 0)
+  if (!fit::SetMapAnisotropy(a.map_anisotropy >= 0 ? a.map_anisotropy : fit::kDefaultMapAnisotropy,
+                             &o) &&
+      a.map_anisotropy >= 0)
     throw std::invalid_argument("--map-anisotropy: this fit has no weave maps (woven or "
                                 "physical-aniso with an Irawan --fabric, --weave-maps not none)");
   // Load everything.

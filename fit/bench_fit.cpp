@@ -133,6 +133,7 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
           const std::filesystem::path maps = std::filesystem::temp_directory_path() /
                                              ("clothfit-bench-" + fabric + ".weave.exr");
           (void)AttachWeaveMaps(fabric_path, maps.string(), &o);
+          (void)SetMapAnisotropy(kDefaultMapAnisotropy, &o);  // as clothfit fit's default
         }
         r = FitWovenImages(inputs, o);
       } else if (m == render::ModelKind::kPhysicalAniso) {
@@ -140,6 +141,7 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
           const std::filesystem::path maps = std::filesystem::temp_directory_path() /
                                              ("clothfit-bench-" + fabric + ".aniso.weave.exr");
           (void)AttachWeaveMapsToPhysicalAniso(fabric_path, maps.string(), &o);
+          (void)SetMapAnisotropy(kDefaultMapAnisotropy, &o);  // as clothfit fit's default
         }
         r = FitImages(inputs, o);
       } else {

@@ -115,4 +115,11 @@ std::string AttachWeaveMapsToPhysicalAniso(const std::string& fabric_path,
   return line;
 }
 
+bool SetMapAnisotropy(int n, FitOptions* options) {
+  nlohmann::json& e = options->start.extra;
+  if (!e.is_object() || !e.contains("weave_maps") || !e["weave_maps"].is_object()) return false;
+  e["weave_maps"]["anisotropy"] = n;
+  return true;
+}
+
 }  // namespace clothfit::fit

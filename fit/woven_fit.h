@@ -53,4 +53,13 @@ void ApplyModelDefaults(FitOptions* options);
 std::string AttachWeaveMapsToPhysicalAniso(const std::string& fabric_path,
                                            const std::string& maps_path, FitOptions* options);
 
+// The weave maps' max anisotropy a fit uses by default (three.js texture.anisotropy; clothfit
+// fit --map-anisotropy, bench fit; docs/flip.md "Anisotropic filtering of the maps", session 9).
+inline constexpr int kDefaultMapAnisotropy = 16;
+
+// Sets options->start.extra["weave_maps"]["anisotropy"] = n when the start preset names weave
+// maps (after AttachWeaveMaps / AttachWeaveMapsToPhysicalAniso); returns false (nothing set)
+// when it names none.
+bool SetMapAnisotropy(int n, FitOptions* options);
+
 }  // namespace clothfit::fit
