@@ -223,6 +223,12 @@ TEST(S9Aniso, SwiftShaderRuleUsesTheAreaAndNoCeil) {
   EXPECT_EQ(lf.n, 16);
   EXPECT_DOUBLE_EQ(lf.lambda, 1.0);  // log2(32 / 16)
   EXPECT_EQ(fp({40, 0, 0, 4}, R::kSwiftShader).n, 10);
+  // Ties round to even, as SwiftShader's RoundInt (cvtss2si / nearbyint): a = 2.5 -> 2 probes,
+  // a = 3.5 -> 4, a = 4.5 -> 4 (std::lround would give 3 and 5); off the tie, nearest.
+  EXPECT_EQ(fp({20, 0, 0, 8}, R::kSwiftShader).n, 2);
+  EXPECT_EQ(fp({28, 0, 0, 8}, R::kSwiftShader).n, 4);
+  EXPECT_EQ(fp({36, 0, 0, 8}, R::kSwiftShader).n, 4);
+  EXPECT_EQ(fp({20.4, 0, 0, 8}, R::kSwiftShader).n, 3);  // a = 2.55
 }
 
 TEST(S9Aniso, PresetAnisotropyIsValidatedNamingFileAndField) {

@@ -176,6 +176,18 @@ static double SwiftShaderLog2Sqrt(double x) {
   return 0.25 * (double(e - 1) + (2.0 * double(m) - 1.0));
 }
 
+// Round to nearest, ties to even: SwiftShader's RoundInt (Reactor: cvtss2si under the default
+// MXCSR mode on x86, Subzero's nearbyint, the mantissa trick on ARM; all ties-to-even), which
+// picks its probe count from the anisotropy a. Explicit, so it does not depend on the FP
+// environment's rounding mode. std::lround would round a = k + 0.5 away from zero.
+static int RoundHalfEven(double a) {
+  const double f = std::floor(a);
+  const double d = a - f;
+  if (d > 0.5) return int(f) + 1;
+  if (d < 0.5) return int(f);
+  return std::fmod(f, 2.0) == 0.0 ? int(f) : int(f) + 1;
+}
+
 WeaveMaps::Footprint WeaveMaps::FootprintFor(const std::array<double, 4>& duv, double texels,
                                              int levels, int aniso, double footprint_scale,
                                              AnisoRule rule) {
@@ -195,7 +207,7 @@ WeaveMaps::Footprint WeaveMaps::FootprintFor(const std::array<double, 4>& duv, d
   if (rule == AnisoRule::kSwiftShader) {  // weave_maps.h: area-based minor axis, unrounded a
     const double det = std::abs(duv[0] * duv[3] - duv[2] * duv[1]) * k * k;
     const double a = det > 0.0 ? std::min(pmax * pmax / det, maxn) : maxn;
-    fp.n = std::max(1, int(std::lround(a)));
+    fp.n = std::max(1, RoundHalfEven(a));
     fp.lambda = std::clamp(SwiftShaderLog2Sqrt(pmax * pmax / (a * a)), 0.0, top);
     if (fp.n > 1) {
       const bool x_major = px >= py;

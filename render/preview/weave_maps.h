@@ -51,7 +51,8 @@
 // test compares with it): SwiftShader's own rule (src/Pipeline/SamplerCore.cpp computeLod2D,
 // the WebGL2 of headless Chromium): the minor axis from the footprint's AREA, Pmin' = |det J| /
 // Pmax (det J = du/dx dv/dy - du/dy dv/dx in texels; <= Pmin), a = min(Pmax^2 / |det J|,
-// anisotropy) unrounded, N = round(a) probes (same placement), lambda' = log2(Pmax / a) taken
+// anisotropy) unrounded, N = round(a) probes, ties to even as its RoundInt (same placement),
+// lambda' = log2(Pmax / a) taken
 // with SwiftShader's piecewise-linear log2 (log2sqrt: the float's exponent plus its mantissa
 // fraction, of (Pmax / a)^4, times 1/4); the major axis is x when Px >= Py. The spec's ceil
 // makes a slightly anisotropic footprint (ratio 1.01) take 2 probes one LOD finer; SwiftShader
