@@ -101,7 +101,7 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     render::PreviewOptions po;
     po.model = preset.model;
     po.cloth = preset.cloth;
-    po.woven = preset.woven;
+    po.woven = render::PreviewWovenOptions(preset);
     po.ibl_engine = o.ibl_engine;
     engine = render::UsesThreejsIbl(po) ? "threejs" : "filament";
     fis_applied = preset.model == render::ModelKind::kWoven && a.exact_ibl <= 0 &&

@@ -247,8 +247,10 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
       ->check(CLI::IsMember({"auto", "threejs", "filament"}));
   cmd->add_option("--woven-ibl", a.woven_ibl,
                   "woven's yarn-lobe IBL on the three.js engine: auto (default: split), fis "
-                  "(filtered importance sampling of the PMREM) or split (split sum)")
-      ->check(CLI::IsMember({"auto", "fis", "split"}));
+                  "(filtered importance sampling of the PMREM), split (split sum) or bent (split "
+                  "sum about each yarn lobe's bent normal, three.js getIBLAnisotropyRadiance "
+                  "style; brdf/woven.h IblMode::kBent)")
+      ->check(CLI::IsMember({"auto", "fis", "split", "bent"}));
   cmd->add_option("--fis-taps", a.fis_taps, "woven FIS: yarn-lobe taps (1-64)")
       ->check(CLI::Range(1, woven::kMaxFisTaps));
   cmd->add_option("--fis-diffuse-taps", a.fis_diffuse_taps,
@@ -430,6 +432,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
                                   "three.js IBL engine (--ibl-engine threejs or auto)");
     const woven::IblMode mode = a.woven_ibl == "fis"     ? woven::IblMode::kFis
                                 : a.woven_ibl == "split" ? woven::IblMode::kSplit
+                                : a.woven_ibl == "bent"  ? woven::IblMode::kBent
                                 : threejs                ? kDefaultWovenIbl
                                                          : woven::IblMode::kSplit;
     if (mode != woven::IblMode::kFis && (a.fis_taps >= 0 || a.fis_diffuse_taps >= 0))

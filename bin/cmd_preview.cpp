@@ -140,7 +140,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       render::PreviewOptions o;
       o.model = preset.model;
       o.cloth = preset.cloth;
-      o.woven = preset.woven;
+      o.woven = render::PreviewWovenOptions(preset);
       // "weave_maps" (woven, physical-aniso): "uri" relative to the preset file first
       o.weave_maps = render::LoadPresetWeaveMaps(preset, args->material);
       if (o.weave_maps && args->map_aniso_rule == "swiftshader") {

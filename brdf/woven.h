@@ -43,7 +43,9 @@
 //   PT = lut::DefaultWovenPhase() (our own integrator; beta interpolated linearly between the
 //   nodes lut::kWovenPhaseBetas), read at the effective isotropic roughness
 //   r_e = (alpha_a alpha_c)^(1/4) (geometric-mean alpha). The renderer looks both yarn lobes up
-//   at the dominant direction of r_e (no bent normal yet: documented approximation).
+//   at the dominant direction of r_e (ibl "split", the default), or each lobe about its own bent
+//   normal (ibl "bent", IblMode::kBent below, session 10), or by filtered importance sampling
+//   (ibl "fis").
 //
 // Parameters (kParameterTable, flat order):
 //   name                size default     range        diff  convention
@@ -93,8 +95,18 @@ inline std::string_view ToString(YarnLayer y) {
 // lobe at alpha = r_e^2, each read from the prefiltered chain at the mip of its solid angle;
 // render/preview/preview.cpp FisYarnRadiance, web/clothfit.js; spec: docs/fitting.md
 // "Filtered importance sampling for woven's IBL (session 8)"). The BRDF itself is unchanged.
-enum class IblMode { kSplit, kFis };
-inline std::string_view ToString(IblMode m) { return m == IblMode::kSplit ? "split" : "fis"; }
+// kBent (session 10): the split sum with the engine-style anisotropic approximation the issue
+// asks for, three.js getIBLAnisotropyRadiance's bent normal, one per yarn lobe: the warp lobe
+// reads the prefiltered radiance about bn_w = normalize(mix(normalize((a_w x v) x a_w), n, w)),
+// the weft lobe about bn_f (a_f in place of a_w), w = (1 - s (1 - r_e))^4 (three.js's weight
+// with r_e for its roughness; s = `anisotropy`), each at the node's r_e as the split sum. The
+// fibre axis a_j plays three.js's anisotropy bitangent: roughness is raised ACROSS the fibre.
+// s = 0 (w = 1) is the split sum exactly. The tables depend on s and twist, which the woven
+// fit holds (fit/woven_fit.cpp); Options::bent_anisotropy / bent_twist carry them.
+enum class IblMode { kSplit, kFis, kBent };
+inline std::string_view ToString(IblMode m) {
+  return m == IblMode::kSplit ? "split" : m == IblMode::kFis ? "fis" : "bent";
+}
 inline constexpr int kMaxFisTaps = 64;
 inline constexpr int kDefaultFisTaps = 16;
 // 0: three.js's own top-level irradiance, measured closer to the exact irradiance than E_fis
@@ -111,6 +123,11 @@ struct Options {
   int fis_taps = kDefaultFisTaps;         // yarn-lobe taps N, 1..64 (ibl == kFis)
   int fis_diffuse_taps = kDefaultFisDiffuseTaps;  // diffuse taps N_d, 0..64 (0: the engine's
                                                   // irradiance; ibl == kFis)
+  // ibl == kBent: the lobe frame the bent-normal tables are built for, i.e. the preset's
+  // `anisotropy` and `twist` (degrees): render::PreviewWovenOptions copies them from a preset's
+  // values; a preview frame must evaluate the same values (checked).
+  double bent_anisotropy = 0.7;
+  double bent_twist = 0.0;
 };
 
 // Per-pixel weave-map sample (constant during a fit). Uniform material = the defaults.
@@ -200,6 +217,14 @@ inline Lobes<T> PrepareLobes(const Params<T>& p) {
   o.beta = Clamp(p.forward_scattering, Const<T>(0.0), Const<T>(kMaxBeta));
   o.m = Saturate(p.warp_share);
   return o;
+}
+
+// IblMode::kBent's bent-normal weight w = (1 - s (1 - r_e))^4 (three.js getIBLAnisotropyRadiance
+// with r_e as its roughness), s = saturate(anisotropy), r_e in [0, 1].
+inline double BentNormalWeight(double anisotropy, double r_e) {
+  const double s = std::clamp(anisotropy, 0.0, 1.0);
+  const double q = 1.0 - s * (1.0 - r_e);
+  return q * q * q * q;
 }
 
 // PT_beta(NoV, r_e): the phase table, linear in beta between the nodes.

@@ -107,9 +107,11 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
     if (!full.radiance.empty())
       c->radiance.insert(c->radiance.end(), full.radiance.begin() + long(ui * KR),
                          full.radiance.begin() + long((ui + 1) * KR));
-    if (!full.yarn_radiance.empty())  // woven FIS
-      c->yarn_radiance.insert(c->yarn_radiance.end(), full.yarn_radiance.begin() + long(ui * K3),
-                              full.yarn_radiance.begin() + long((ui + 1) * K3));
+    if (!full.yarn_radiance.empty()) {  // woven FIS (one K x 3 table) or bent (two: warp, weft)
+      const size_t KY = full.yarn_radiance.size() / full.pixels.size();
+      c->yarn_radiance.insert(c->yarn_radiance.end(), full.yarn_radiance.begin() + long(ui * KY),
+                              full.yarn_radiance.begin() + long((ui + 1) * KY));
+    }
     if (!full.geometry_roughness.empty())  // three.js IBL: geometryRoughness per pixel
       c->geometry_roughness.push_back(full.geometry_roughness[ui]);
     if (!full.sheen_radiance.empty())
@@ -493,7 +495,7 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   render::PreviewOptions po;
   po.model = opt.start.model;
   po.cloth = opt.start.cloth;
-  po.woven = opt.start.woven;  // yarn layering, tints, IBL mode (split / FIS) and taps
+  po.woven = render::PreviewWovenOptions(opt.start);  // yarn layering, tints, IBL mode (split / FIS) and taps
   po.ibl_engine = opt.ibl_engine;
   // Only the pixels a block can sample get preview cache entries (fit speed: the radiance
   // tables of the other pixels were built and thrown away); every pixel's fabric flag is kept.
@@ -846,7 +848,7 @@ std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::
   render::PreviewOptions o;
   o.model = preset.model;
   o.cloth = preset.cloth;
-  o.woven = preset.woven;
+  o.woven = render::PreviewWovenOptions(preset);
   o.ibl_engine = engine;
   o.weave_maps = render::LoadPresetWeaveMaps(preset);  // woven weave maps (null: none)
   auto cache = render::PreviewCache::Build(scene, env, o);

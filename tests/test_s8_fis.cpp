@@ -285,8 +285,8 @@ TEST(S8Fis, PresetKeysRoundTripAndDefaults) {
 }
 
 TEST(S8Fis, BadPresetValuesNameTheField) {
-  ExpectError(WovenPreset({{"ibl", "exact"}}), "woven.ibl", "\"split\" or \"fis\"");
-  ExpectError(WovenPreset({{"ibl", 1}}), "woven.ibl", "\"split\" or \"fis\"");
+  ExpectError(WovenPreset({{"ibl", "exact"}}), "woven.ibl", "\"split\", \"fis\" or \"bent\"");
+  ExpectError(WovenPreset({{"ibl", 1}}), "woven.ibl", "\"split\", \"fis\" or \"bent\"");
   ExpectError(WovenPreset({{"ibl", "fis"}, {"fis_taps", 0}}), "woven.fis_taps", "[1, 64]");
   ExpectError(WovenPreset({{"ibl", "fis"}, {"fis_taps", 65}}), "woven.fis_taps", "[1, 64]");
   ExpectError(WovenPreset({{"ibl", "fis"}, {"fis_taps", 16.5}}), "woven.fis_taps", "integer");

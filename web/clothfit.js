@@ -381,7 +381,7 @@ export function wovenLobes(p) {
   return {
     alphaA, alphaC, rE: Math.sqrt(Math.sqrt(alphaA * alphaC)),
     rS: Math.min(Math.max(p.sheen_roughness, WOVEN_MIN_ROUGHNESS), 1),
-    cr: Math.cos(rho), sr: Math.sin(rho), f0: clamp01(p.specular_f0), beta, m: clamp01(p.warp_share),
+    cr: Math.cos(rho), sr: Math.sin(rho), f0: clamp01(p.specular_f0), beta, m: clamp01(p.warp_share), s,
     phaseK: k, phaseT: t,
   };
 }
@@ -418,6 +418,7 @@ uniform float wovenSr;
 uniform float wovenF0;
 uniform float wovenBeta;
 uniform float wovenM;
+uniform float wovenAniso;
 uniform int wovenPhaseK;
 uniform float wovenPhaseT;
 uniform sampler2D wovenPhase;
@@ -628,6 +629,14 @@ vec3 wovenFisIrradianceOverPi( const in vec3 nView ) {
 #endif
 #endif
 
+// three.js getIBLAnisotropyRadiance's bent normal about bitangent B (physical_aniso::BentNormal):
+// w >= 1 is n itself.
+vec3 wovenBentNormal( const in vec3 n, const in vec3 v, const in vec3 B, const in float w ) {
+	if ( w >= 1.0 ) return n;
+	vec3 bn = normalize( cross( cross( B, v ), B ) );
+	return normalize( mix( bn, n, w ) );
+}
+
 // radiance: three.js's getIBLRadiance at material.roughness = r_e; the sheen lobe's at r_s.
 // With WOVEN_FIS (preset "woven": {"ibl": "fis"}) the yarn lobes multiply wovenFisRadiance
 // instead, and with WOVEN_FIS_DIFFUSE_TAPS > 0 the diffuse E_d = wovenFisIrradianceOverPi.
@@ -640,6 +649,16 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 	vec3 lobes = yarn * ( wovenTintWarp * ( wovenM * ws.warp ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft ) );
 	#if defined( WOVEN_FIS ) && defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM )
 		reflectedLight.indirectSpecular += lobes * wovenFisRadiance( geometryNormal, geometryViewDir, rE, radiance );
+	#elif defined( WOVEN_BENT ) && defined( USE_ENVMAP ) && defined( STANDARD )
+		// brdf/woven.h IblMode::kBent: each lobe's radiance about its bent normal, the fibre axis
+		// as three.js's anisotropy bitangent, w = (1 - s (1 - r_e))^4, read at r_e.
+		vec3 bt, bb;
+		wovenFrame( geometryNormal, bt, bb );
+		vec3 aW = wovenCr * bt + wovenSr * bb, aF = wovenCr * bb - wovenSr * bt;
+		float wB = pow2( pow2( 1.0 - wovenAniso * ( 1.0 - rE ) ) );
+		vec3 radW = getIBLRadiance( geometryViewDir, wovenBentNormal( geometryNormal, geometryViewDir, aW, wB ), rE );
+		vec3 radF = getIBLRadiance( geometryViewDir, wovenBentNormal( geometryNormal, geometryViewDir, aF, wB ), rE );
+		reflectedLight.indirectSpecular += yarn * ( wovenTintWarp * ( wovenM * ws.warp ) * radW + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft ) * radF );
 	#else
 		reflectedLight.indirectSpecular += lobes * radiance;
 	#endif
@@ -682,8 +701,9 @@ material.roughness = wovenRE;
  * options: yarnLayer 'additive' (default) | 'albedo-scaled', tintWarp / tintWeft (THREE.Color);
  * ibl 'split' (default: the split sum, one PMREM read at r_e) | 'fis' (filtered importance
  * sampling of the yarn lobe, fisTaps taps, 1..64, default 16; fisDiffuseTaps 0..64 cosine taps
- * for the diffuse irradiance, default 0 = three.js's getIBLIrradiance). Changing them
- * recompiles.
+ * for the diffuse irradiance, default 0 = three.js's getIBLIrradiance) | 'bent' (the split sum
+ * about each yarn lobe's bent normal, three.js getIBLAnisotropyRadiance style: brdf/woven.h
+ * IblMode::kBent). Changing them recompiles.
  */
 export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
   constructor(parameters = {}, {
@@ -696,7 +716,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     this.woven = p;
     this.yarnLayer = yarnLayer;
     if (yarnLayer !== 'additive' && yarnLayer !== 'albedo-scaled') throw new Error(`MeshWovenMaterial: yarnLayer '${yarnLayer}' (valid: additive, albedo-scaled)`);
-    if (ibl !== 'split' && ibl !== 'fis') throw new Error(`MeshWovenMaterial: ibl '${ibl}' (valid: split, fis)`);
+    if (ibl !== 'split' && ibl !== 'fis' && ibl !== 'bent') throw new Error(`MeshWovenMaterial: ibl '${ibl}' (valid: split, fis, bent)`);
     if (!Number.isInteger(fisTaps) || fisTaps < 1 || fisTaps > WOVEN_FIS_MAX_TAPS) throw new Error(`MeshWovenMaterial: fisTaps ${fisTaps} (an integer in [1, ${WOVEN_FIS_MAX_TAPS}])`);
     if (!Number.isInteger(fisDiffuseTaps) || fisDiffuseTaps < 0 || fisDiffuseTaps > WOVEN_FIS_MAX_TAPS) throw new Error(`MeshWovenMaterial: fisDiffuseTaps ${fisDiffuseTaps} (an integer in [0, ${WOVEN_FIS_MAX_TAPS}])`);
     this.ibl = ibl;
@@ -709,7 +729,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       wovenTintWarp: { value: new THREE.Color() }, wovenTintWeft: { value: new THREE.Color() },
       wovenAlphaA: { value: 0 }, wovenAlphaC: { value: 0 }, wovenRE: { value: 0 }, wovenRS: { value: 0 },
       wovenCr: { value: 1 }, wovenSr: { value: 0 }, wovenF0: { value: 0 }, wovenBeta: { value: 0 },
-      wovenM: { value: 0 }, wovenPhaseK: { value: 0 }, wovenPhaseT: { value: 0 },
+      wovenM: { value: 0 }, wovenAniso: { value: 0 }, wovenPhaseK: { value: 0 }, wovenPhaseT: { value: 0 },
       wovenPhase: { value: wovenPhaseTexture }, clothDG: { value: clothDGTexture },
       wovenWeaveWeights: { value: null }, wovenWeaveKd: { value: null },
       wovenWeaveTransform: { value: new THREE.Matrix3() },
@@ -729,7 +749,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     u.wovenAlphaA.value = lb.alphaA; u.wovenAlphaC.value = lb.alphaC;
     u.wovenRE.value = lb.rE; u.wovenRS.value = lb.rS;
     u.wovenCr.value = lb.cr; u.wovenSr.value = lb.sr;
-    u.wovenF0.value = lb.f0; u.wovenBeta.value = lb.beta; u.wovenM.value = lb.m;
+    u.wovenF0.value = lb.f0; u.wovenBeta.value = lb.beta; u.wovenM.value = lb.m; u.wovenAniso.value = lb.s;
     u.wovenPhaseK.value = lb.phaseK; u.wovenPhaseT.value = lb.phaseT;
     u.wovenPhase.value = wovenPhaseTexture; u.clothDG.value = clothDGTexture;
     const wm = this.weaveMaps;
@@ -756,6 +776,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     const defs = [];
     if (this.yarnLayer === 'albedo-scaled') defs.push('#define WOVEN_ALBEDO_SCALED');
     if (this.weaveMaps) defs.push('#define WOVEN_WEAVE_MAPS');
+    if (this.ibl === 'bent') defs.push('#define WOVEN_BENT');
     if (this.ibl === 'fis') {
       defs.push('#define WOVEN_FIS', `#define WOVEN_FIS_TAPS ${this.fisTaps}`, `#define WOVEN_FIS_DIFFUSE_TAPS ${this.fisDiffuseTaps}`);
     }
@@ -767,7 +788,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
   }
 
   customProgramCacheKey() {
-    const ibl = this.ibl === 'fis' ? `fis${this.fisTaps}/${this.fisDiffuseTaps}` : 'split';
+    const ibl = this.ibl === 'fis' ? `fis${this.fisTaps}/${this.fisDiffuseTaps}` : this.ibl;
     return ['woven', this.yarnLayer, this.weaveMaps ? 'maps' : 'uniform', ibl].join(':');
   }
 
@@ -1152,7 +1173,7 @@ registerClothfitModel('woven', {
 // A woven preset's "woven" object, checked as the C++ reader checks it (render/scene/material.cpp
 // ParseWovenOptions; brdf/woven.h woven::Options): yarn_layer 'additive' (default) |
 // 'albedo-scaled'; tint_warp / tint_weft linear RGB, each >= 0, default [1, 1, 1]; ibl 'split'
-// (default: old presets keep their meaning) | 'fis'; fis_taps an integer in [1, 64] (default 16),
+// (default: old presets keep their meaning) | 'fis' | 'bent'; fis_taps an integer in [1, 64] (default 16),
 // fis_diffuse_taps an integer in [0, 64] (default 0 = three.js's irradiance), both only
 // allowed with "ibl": "fis" (brdf/woven.h kDefaultFisTaps / kDefaultFisDiffuseTaps, as the C++
 // reader). Unknown keys and values throw, naming the field.
@@ -1179,7 +1200,7 @@ export function wovenOptions(w) {
       });
       out[k] = [...v];
     } else if (k === 'ibl') {
-      if (v !== 'split' && v !== 'fis') fail(f, 'expected "split" or "fis"');
+      if (v !== 'split' && v !== 'fis' && v !== 'bent') fail(f, 'expected "split", "fis" or "bent"');
       out.ibl = v;
     } else if (k === 'fis_taps' || k === 'fis_diffuse_taps') {
       const lo = k === 'fis_taps' ? 1 : 0;

@@ -330,6 +330,32 @@ void FillFisYarnTable(const PixelContext& x, const PrimaryHit& hit, PixelData* p
   }
 }
 
+// Woven "ibl": "bent" (UsesWovenBent; brdf/woven.h IblMode::kBent): two K-node tables, the warp
+// lobe's then the weft lobe's, each node k read about the lobe's bent normal at r_e = k / (K - 1)
+// (three.js getIBLRadiance about the bent normal: direction mix(reflect(-v, bn), bn, r_e^4), mip
+// of r_e), w = woven::BentNormalWeight(bent_anisotropy, r_e), fibre axes from bent_twist.
+void FillBentYarnTables(const PixelContext& x, const PrimaryHit& hit, PixelData* pd) {
+  const int K = x.opt.roughness_nodes;
+  pd->yrad.resize(size_t(K) * 3 * 2);
+  const double rho = x.opt.woven.bent_twist * kPi / 180.0;
+  const double cr = std::cos(rho), sr = std::sin(rho);
+  const Vec3d axes[2] = {hit.t * cr + hit.b * sr,    // warp fibre axis a_w
+                         hit.b * cr - hit.t * sr};   // weft fibre axis a_f = c_w
+  for (int j = 0; j < 2; ++j) {
+    for (int k = 0; k < K; ++k) {
+      const double r = double(k) / double(K - 1);
+      const double w = woven::BentNormalWeight(x.opt.woven.bent_anisotropy, r);
+      const Vec3d bent = physical_aniso::BentNormal(hit.n, hit.v, axes[j], w);
+      const Vec3d dd = physical_aniso::IblDirection(bent, hit.v, r);
+      const Rgb<double> L =
+          x.e.pmrem ? x.e.pmrem->Sample(dd, x.e.pmrem->MipForRoughness(r))
+                    : x.e.ggx->Sample(dd, LodFor(x.opt.model, *x.e.ggx, r, x.opt.prefilter_levels));
+      for (int ch = 0; ch < 3; ++ch)
+        pd->yrad[(size_t(j) * size_t(K) + size_t(k)) * 3 + size_t(ch)] = float(L[ch]);
+    }
+  }
+}
+
 // physical-aniso (three.js getIBLAnisotropyRadiance): the bent normal depends on the fitted
 // anisotropy and roughness through one weight w = (1 - a (1 - r))^4, so the cache holds the
 // K-node roughness table at kAnisoBentNodes values of w in [0, 1] (node w = 1 is the
@@ -564,6 +590,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     else if (split_sum)
       FillRadianceTables(x, hit.n, R, &pd);
     if (split_sum && x.fis_yarn) FillFisYarnTable(x, hit, &pd);
+    if (split_sum && UsesWovenBent(x.opt)) FillBentYarnTables(x, hit, &pd);
     if (vis_on && vis.ao != 1.0) {  // three.js aomap_fragment: indirectSpecular x SO, sheen x ao
       const int K = x.opt.roughness_nodes;
       ApplySpecularOcclusion(pd.rad.data(), pd.rad.size() / (size_t(K) * 3), K, hit.NoV, vis.ao);
@@ -797,6 +824,8 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   const Table2D& dfg = *c.dfg;
   const Table2D& phase = *c.woven_phase;
   const woven::FrameTerms<T> f = woven::PrepareFrame(wp, wo, dfg, phase);
+  CheckWovenBentFrame(c.options, ScalarPart(wp.anisotropy), ScalarPart(wp.twist));
+  const bool bent = UsesWovenBent(c.options) && !c.yarn_radiance.empty();
   TableWeights<T> tw_e, tw_s;
   if constexpr (kIbl) {
     tw_e = MakeTableWeights(K, f.lb.r_e);
@@ -829,9 +858,15 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
       if constexpr (kIbl) {
         const float* rad = &c.radiance[i * size_t(K) * 3];
         // yarn lobes: the FIS table when the cache has one (woven ibl "fis"), else the split sum's
-        const float* yrad = c.yarn_radiance.empty() ? rad : &c.yarn_radiance[i * size_t(K) * 3];
         const woven::WovenIblWeights<T> w = woven::EvalIblView(wp, f, vt, ws);
-        Rgb<T> ibl = (w.warp + w.weft) * ApplyTableWeights(yrad, tw_e);
+        Rgb<T> ibl;
+        if (bent) {  // woven "bent": the warp lobe's table, then the weft lobe's
+          const float* yw = &c.yarn_radiance[i * size_t(K) * 6];
+          ibl = w.warp * ApplyTableWeights(yw, tw_e) + w.weft * ApplyTableWeights(yw + K * 3, tw_e);
+        } else {
+          const float* yrad = c.yarn_radiance.empty() ? rad : &c.yarn_radiance[i * size_t(K) * 3];
+          ibl = (w.warp + w.weft) * ApplyTableWeights(yrad, tw_e);
+        }
         if (!f.sheen_off) ibl = ibl + w.sheen * ApplyTableWeights(rad, tw_s);
         L += ibl + TimesConstRgb(w.diffuse, &c.irradiance[i * 3]);
       }
@@ -854,6 +889,7 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   if constexpr (M == ModelKind::kWoven) {
     wp = woven::FromFlat(x);
     wl = woven::PrepareLobes(wp);
+    CheckWovenBentFrame(c.options, ScalarPart(wp.anisotropy), ScalarPart(wp.twist));
   }
   physical_aniso::Params<T> ap;
   if constexpr (M == ModelKind::kPhysicalAniso) ap = physical_aniso::FromFlat(x);
@@ -926,9 +962,13 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
         if constexpr (M == ModelKind::kWoven) {
           const woven::WovenIblWeights<T> w =
               woven::EvalIbl(wp, c.options.woven, wl, NoV, ws, *c.dfg, *c.woven_phase);
-          const float* yrad =
-              c.yarn_radiance.empty() ? rad : &c.yarn_radiance[i * size_t(K) * 3];  // FIS
-          L += (w.warp + w.weft) * TableRadiance(yrad, K, wl.r_e) +
+          const bool bent = UsesWovenBent(c.options) && !c.yarn_radiance.empty();
+          const float* yrad = c.yarn_radiance.empty()
+                                  ? rad
+                                  : &c.yarn_radiance[i * size_t(K) * 3 * (bent ? 2 : 1)];  // FIS / bent
+          L += (bent ? w.warp * TableRadiance(yrad, K, wl.r_e) +
+                           w.weft * TableRadiance(yrad + K * 3, K, wl.r_e)
+                     : (w.warp + w.weft) * TableRadiance(yrad, K, wl.r_e)) +
                w.sheen * TableRadiance(rad, K, wl.r_s) + w.diffuse * Ed;
         } else if constexpr (M == ModelKind::kPhysicalAniso) {
           const IblWeights<T> w = physical_aniso::EvalIbl(apx, so, NoV, *c.dfg);

@@ -134,6 +134,11 @@ bool UsesThreejsIbl(const PreviewOptions& o);
 // Whether the woven yarn lobes use filtered importance sampling (woven, ibl == kFis, three.js
 // IBL engine, no exact IBL).
 bool UsesWovenFis(const PreviewOptions& o);
+// Whether the woven yarn lobes use the bent-normal tables (woven, ibl == kBent, an environment's
+// split sum, no exact IBL; both engines). CheckWovenBentFrame: a frame's anisotropy and twist
+// must be the cache's options.woven.bent_anisotropy / bent_twist (throws std::invalid_argument).
+bool UsesWovenBent(const PreviewOptions& o);
+void CheckWovenBentFrame(const PreviewOptions& o, double anisotropy, double twist);
 // Whether three.js's geometryRoughness and 16 x 16 DFG table apply (MeshStandardMaterial and
 // MeshPhysicalMaterial on three.js IBL; the cloth keeps clothfit's 128 x 128 table, as
 // web/clothfit.js does).

@@ -535,6 +535,22 @@ bool UsesWovenFis(const PreviewOptions& o) {
          o.exact_ibl_samples <= 0 && UsesThreejsIbl(o);
 }
 
+bool UsesWovenBent(const PreviewOptions& o) {
+  return o.model == ModelKind::kWoven && o.woven.ibl == woven::IblMode::kBent &&
+         o.exact_ibl_samples <= 0;
+}
+
+void CheckWovenBentFrame(const PreviewOptions& o, double anisotropy, double twist) {
+  if (!UsesWovenBent(o)) return;
+  if (anisotropy != o.woven.bent_anisotropy || twist != o.woven.bent_twist)
+    throw std::invalid_argument(
+        "preview: woven \"ibl\": \"bent\": the frame's anisotropy / twist (" +
+        std::to_string(anisotropy) + ", " + std::to_string(twist) +
+        ") differ from the values the bent-normal tables were built for (" +
+        std::to_string(o.woven.bent_anisotropy) + ", " + std::to_string(o.woven.bent_twist) +
+        "): hold them fixed (the woven fit does)");
+}
+
 bool RasterBarycentrics(const Scene& scene, const std::array<V3, 3>& P, double sx, double sy,
                         int subpixel_bits, double b[3]) {
   const Camera& cam = scene.camera;

@@ -73,6 +73,15 @@ int MaterialPreset::Offset(const std::string& name) const {
   throw std::invalid_argument("model " + ToString(model) + " has no parameter '" + name + "'");
 }
 
+woven::Options PreviewWovenOptions(const MaterialPreset& p) {
+  woven::Options o = p.woven;
+  if (p.model == ModelKind::kWoven) {
+    o.bent_anisotropy = p.values.at(size_t(p.Offset("anisotropy")));
+    o.bent_twist = p.values.at(size_t(p.Offset("twist")));
+  }
+  return o;
+}
+
 MaterialPreset DefaultPreset(ModelKind m) {
   MaterialPreset p;
   p.model = m;
@@ -170,7 +179,8 @@ void ParseWovenOptions(const json& w, const std::string& where, woven::Options* 
       const std::string v = it->is_string() ? it->get<std::string>() : "";
       if (v == "split") o->ibl = woven::IblMode::kSplit;
       else if (v == "fis") o->ibl = woven::IblMode::kFis;
-      else Fail(where, f, "expected \"split\" or \"fis\"");
+      else if (v == "bent") o->ibl = woven::IblMode::kBent;
+      else Fail(where, f, "expected \"split\", \"fis\" or \"bent\"");
     } else if (k == "fis_taps" || k == "fis_diffuse_taps") {
       const int lo = k == "fis_taps" ? 1 : 0;
       if (!it->is_number_integer())

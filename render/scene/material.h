@@ -10,7 +10,7 @@
 //               "subsurface": true | false, "platform": "desktop" | "mobile"}   (cloth only)
 //     "woven": {"yarn_layer": "additive" | "albedo-scaled",
 //               "tint_warp": [r, g, b], "tint_weft": [r, g, b],
-//               "ibl": "split" | "fis", "fis_taps": 1..64, "fis_diffuse_taps": 0..64}
+//               "ibl": "split" | "fis" | "bent", "fis_taps": 1..64, "fis_diffuse_taps": 0..64}
 //               (woven only; brdf/woven.h woven::Options; tints linear, >= 0, default
 //               [1, 1, 1]; "ibl" missing = "split"; the tap counts (integers; defaults 16 and
 //               0) only with "ibl": "fis" (filtered importance sampling of the three.js PMREM
@@ -64,6 +64,11 @@ struct MaterialPreset {
 
 // Defaults of a model (parameter-table defaults).
 MaterialPreset DefaultPreset(ModelKind m);
+
+// The woven renderer options a preview of preset `p` uses: p.woven with the lobe frame of
+// "ibl": "bent" (bent_anisotropy, bent_twist) taken from p's `anisotropy` and `twist` values
+// (p.woven unchanged for other models).
+woven::Options PreviewWovenOptions(const MaterialPreset& p);
 
 MaterialPreset ReadPreset(const std::string& path);
 MaterialPreset ParsePreset(const nlohmann::json& j, const std::string& where);

@@ -8,8 +8,9 @@
 //   by a 1-pixel readPixels; SwiftShader runs on the CPU, so only ratios between cases mean
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 22 materials (6 + 3 woven + 2 physical-aniso
-// + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16) x 2 environments
+// Cases: each canonical scene (datasets/scenes/*.json) x 25 materials (6 + 3 woven + 2 physical-aniso
+// + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
+// bent-normal IBL) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -136,6 +137,14 @@ Object.assign(MATERIALS, {
   'woven-maps-canvas-aniso16': withAniso('woven-maps-canvas', 16),
   'woven-maps-twill-aniso16': withAniso('woven-maps-twill', 16),
   'physical-aniso-maps-aniso16': withAniso('physical-aniso-maps', 16),
+});
+// s10-bent: the yarn lobes' IBL about each lobe's bent normal ("woven": {"ibl": "bent"},
+// brdf/woven.h IblMode::kBent; three.js getIBLAnisotropyRadiance style): the two uniform woven
+// presets (twisted lobes, anisotropy 0.7 and 0.9) and the fitted twill with its maps.
+Object.assign(MATERIALS, {
+  'woven-bent': withWoven('woven', { ibl: 'bent' }),
+  'woven-forward-bent': withWoven('woven-forward', { ibl: 'bent' }),
+  'woven-maps-twill-bent': withWoven('woven-maps-twill', { ibl: 'bent' }),
 });
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();

@@ -92,7 +92,8 @@ check(() => assert.equal(loadClothfitPreset(wp({ ibl: 'split' })).customProgramC
   check(() => assert.ok(/#define WOVEN_FIS\n/.test(ff) && /#define WOVEN_FIS_TAPS 8\n/.test(ff) && /#define WOVEN_FIS_DIFFUSE_TAPS 12\n/.test(ff)), 'fis defines');
   check(() => assert.ok(!/#define WOVEN_FIS\n/.test(fd) && !/#define WOVEN_FIS_TAPS /.test(fd) && !/#define WOVEN_FIS_DIFFUSE_TAPS /.test(fd)), 'split: no fis defines');
 }
-for (const [opt, re] of [[{ ibl: 'FIS' }, /woven\.ibl: expected "split" or "fis"/], [{ ibl: 1 }, /woven\.ibl: expected/],
+for (const [opt, re] of [[{ ibl: 'FIS' }, /woven\.ibl: expected "split", "fis" or "bent"/], [{ ibl: 1 }, /woven\.ibl: expected/],
+  [{ ibl: 'bent', fis_taps: 16 }, /woven\.fis_taps: only allowed with "ibl": "fis"/],
   [{ ibl: 'fis', fis_taps: 0 }, /woven\.fis_taps: must be in \[1, 64\]/], [{ ibl: 'fis', fis_taps: 65 }, /woven\.fis_taps: must be in/],
   [{ ibl: 'fis', fis_taps: 2.5 }, /woven\.fis_taps: expected an integer/], [{ ibl: 'fis', fis_taps: '16' }, /woven\.fis_taps: expected an integer/],
   [{ ibl: 'fis', fis_diffuse_taps: -1 }, /woven\.fis_diffuse_taps: must be in \[0, 64\]/], [{ ibl: 'fis', fis_diffuse_taps: 65 }, /woven\.fis_diffuse_taps: must be in/],
@@ -101,6 +102,7 @@ for (const [opt, re] of [[{ ibl: 'FIS' }, /woven\.ibl: expected "split" or "fis"
   check(() => assert.throws(() => loadClothfitPreset(wp(opt)), re), `bad ${JSON.stringify(opt)}`);
 }
 check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'exact' }), /MeshWovenMaterial: ibl 'exact'/), 'material ibl refused');
+check(() => assert.equal(new MeshWovenMaterial({}, { ibl: 'bent' }).customProgramCacheKey(), 'woven:additive:uniform:bent'), 'bent ibl: its own program');
 check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps: 0 }), /MeshWovenMaterial: fisTaps 0/), 'material taps refused');
 
 // From the real converter: a glTF with one single-sided and one double-sided material.
