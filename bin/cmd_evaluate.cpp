@@ -8,7 +8,9 @@
 // fit.scenes (scene card + reference) are evaluated: the in-sample error, which must equal
 // fit.rmse. With --references/--scenes: out-of-sample (e.g. scripts/cross-env: the same
 // fabric under another environment).
+#include <cmath>
 #include <cstdio>
+#include <limits>
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -36,6 +38,9 @@ struct EvaluateArgs {
   int level = -1, stride = -1;
   int exact_ibl = 0, exact_irradiance = 0;
   unsigned exact_ibl_seed = 1;
+  // s10-velvet sheen nap prototype (docs/velvet.md): NaN = the preset's fit.sheen_tilt_degrees
+  // (0 without it).
+  double sheen_tilt = std::numeric_limits<double>::quiet_NaN();
   bool json = false;
   std::string ibl_engine = "preset";  // preset: the fit's recorded fit.ibl_engine (else filament)
   VisibilityFlags visibility;  // --shadows, --ao, --indirect (docs/visibility.md)
@@ -77,6 +82,15 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   o.exact_ibl_samples = a.exact_ibl;
   o.exact_ibl_seed = a.exact_ibl_seed;
   o.exact_irradiance_samples = a.exact_irradiance;
+  o.sheen_tilt_degrees = a.sheen_tilt;
+  if (std::isnan(a.sheen_tilt)) {
+    o.sheen_tilt_degrees = 0.0;
+    if (fj.contains("sheen_tilt_degrees")) {
+      if (!fj["sheen_tilt_degrees"].is_number())
+        throw std::runtime_error(a.preset + ": field 'fit.sheen_tilt_degrees': expected a number");
+      o.sheen_tilt_degrees = fj["sheen_tilt_degrees"].get<double>();
+    }
+  }
   ApplyVisibilityFlags(a.visibility, &o);
   // The IBL engine: as the fit recorded it (fit.ibl_engine; presets before session 8 were
   // fitted on Filament's), or --ibl-engine. The woven IBL mode is the preset's "woven" object.
@@ -208,6 +222,11 @@ void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "Carlo, this many directions per pixel) instead of SH9")
       ->check(CLI::Range(0, 65536));
   cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
+  cmd->add_option("--sheen-tilt", args->sheen_tilt,
+                  "measurement (cloth, woven): the sheen lobe's normal tilted this many degrees "
+                  "towards the mesh tangent +u (docs/velvet.md); default: the preset's "
+                  "fit.sheen_tilt_degrees, else 0")
+      ->check(CLI::Range(-90.0, 90.0));
   cmd->add_option("--ibl-engine", args->ibl_engine,
                   "whose image-based lighting: preset (default: the fit's recorded "
                   "fit.ibl_engine, filament for presets without it), auto, threejs or filament")

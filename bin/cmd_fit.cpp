@@ -154,6 +154,7 @@ struct FitArgs {
   bool subsurface = false, no_floor = false, second_seed = false;
   int spp = 256, stride = 0, threads = 0, max_iterations = 50;
   int exact_ibl = 0;  // s7-ibl measurement hook (docs/fitting.md "The sphere's error decomposed")
+  double sheen_tilt = 0.0;  // s10-velvet: the sheen nap prototype (docs/velvet.md)
   // Session 8: the IBL engine of the previews (auto: the engine web/ draws the model with) and
   // woven's IBL integration (docs/fitting.md "Filtered importance sampling for woven's IBL").
   std::string ibl_engine = "auto", woven_ibl = "auto";
@@ -239,6 +240,10 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "this many directions per pixel, seed 1; no split sum); 0 = the engine (default)")
       ->check(CLI::Range(0, 65536));
   AddVisibilityFlags(cmd, a.visibility);  // s9-vis: measurement flags (bin/visibility_flags.h)
+  cmd->add_option("--sheen-tilt", a.sheen_tilt,
+                  "measurement (cloth, woven): the sheen lobe's normal tilted this many degrees "
+                  "towards the mesh tangent +u, a nap (docs/velvet.md); 0 = none (default)")
+      ->check(CLI::Range(-90.0, 90.0));
   cmd->add_option("--ibl-engine", a.ibl_engine,
                   "whose image-based lighting the previews reproduce: auto (default: three.js "
                   "r187's PMREM for standard, physical-sheen, physical-aniso, woven and the "
@@ -411,6 +416,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   o.max_iterations = a.max_iterations;
   o.min_coverage = a.min_coverage;
   o.exact_ibl_samples = a.exact_ibl;
+  o.sheen_tilt_degrees = a.sheen_tilt;  // s10-velvet
   ApplyVisibilityFlags(a.visibility, &o);  // s9-vis
   o.ibl_engine = ParseIblEngine(a.ibl_engine);
   // woven: the IBL mode the previews (and the written preset) use. FIS exists on the three.js
@@ -523,6 +529,7 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
   fitj["max_iterations"] = o.max_iterations;
   fitj["min_coverage"] = o.min_coverage;
   if (o.exact_ibl_samples > 0) fitj["exact_ibl_samples"] = o.exact_ibl_samples;  // not an engine fit
+  if (o.sheen_tilt_degrees != 0.0) fitj["sheen_tilt_degrees"] = o.sheen_tilt_degrees;  // s10-velvet
   if (o.shadows || o.visibility.enabled()) fitj["visibility"] = VisibilityJson(o);  // s9-vis
   {  // the IBL engine the previews reproduced (resolved; `evaluate` defaults to it)
     render::PreviewOptions po;

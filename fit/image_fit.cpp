@@ -117,6 +117,10 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
     if (!full.sheen_radiance.empty())
       c->sheen_radiance.insert(c->sheen_radiance.end(), full.sheen_radiance.begin() + long(ui * K3),
                                full.sheen_radiance.begin() + long((ui + 1) * K3));
+    if (!full.sheen_tilt_radiance.empty())  // s10-velvet sheen nap prototype
+      c->sheen_tilt_radiance.insert(c->sheen_tilt_radiance.end(),
+                                    full.sheen_tilt_radiance.begin() + long(ui * K3),
+                                    full.sheen_tilt_radiance.begin() + long((ui + 1) * K3));
   }
   return c;
 }
@@ -505,6 +509,7 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   po.exact_ibl_samples = opt.exact_ibl_samples;
   po.exact_ibl_seed = opt.exact_ibl_seed;
   po.exact_irradiance_samples = opt.exact_irradiance_samples;
+  po.sheen_tilt_degrees = opt.sheen_tilt_degrees;
   po.shadows = opt.shadows;
   po.visibility = opt.visibility;
   const auto full = render::PreviewCache::Build(scene, in.environment, po);
@@ -866,6 +871,7 @@ struct PreparedScenes {
   nlohmann::json weave_maps;  // the start preset's "weave_maps" field (null: none)
   int exact_ibl_samples = 0, exact_irradiance_samples = 0;
   unsigned exact_ibl_seed = 1;
+  double sheen_tilt_degrees = 0.0;
   bool shadows = false;
   render::VisibilityOptions visibility;
   render::IblEngine ibl_engine = render::IblEngine::kFilament;
@@ -903,6 +909,7 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->exact_ibl_samples = opt.exact_ibl_samples;
   p->exact_ibl_seed = opt.exact_ibl_seed;
   p->exact_irradiance_samples = opt.exact_irradiance_samples;
+  p->sheen_tilt_degrees = opt.sheen_tilt_degrees;
   p->shadows = opt.shadows;
   p->visibility = opt.visibility;
   p->ibl_engine = opt.ibl_engine;
@@ -945,6 +952,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->exact_ibl_samples != opt.exact_ibl_samples ||
         prepared->exact_ibl_seed != opt.exact_ibl_seed ||
         prepared->exact_irradiance_samples != opt.exact_irradiance_samples ||
+        prepared->sheen_tilt_degrees != opt.sheen_tilt_degrees ||
         prepared->shadows != opt.shadows || !SameVisibility(prepared->visibility, opt.visibility) ||
         prepared->ibl_engine != opt.ibl_engine || prepared->woven_ibl != opt.start.woven.ibl ||
         prepared->fis_taps != opt.start.woven.fis_taps ||

@@ -99,6 +99,9 @@ struct FitOptions {
   int exact_ibl_samples = 0;
   unsigned exact_ibl_seed = 1;
   int exact_irradiance_samples = 0;  // PreviewOptions::exact_irradiance_samples (measurement)
+  // Sheen nap prototype (PreviewOptions::sheen_tilt_degrees, docs/velvet.md; measurement,
+  // cloth and woven): 0 = untouched.
+  double sheen_tilt_degrees = 0.0;
   // Light visibility in the preview (measurement, docs/visibility.md): PreviewOptions::shadows
   // and ::visibility (AO map, light map); every model of a comparison gets the same.
   bool shadows = false;

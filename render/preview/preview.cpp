@@ -31,10 +31,14 @@
 #include "render/scene/lights.h"
 #include "render/preview/prefilter.h"
 #include "render/preview/sh.h"
+#include "render/preview/sheen_tilt.h"
 #include "render/preview/threejs_ibl.h"
 
 namespace clothfit::render {
 namespace {
+
+// Sheen nap prototype (sheen_tilt.h): on for a non-zero tilt (Build rejects other models).
+bool SheenTiltOn(const PreviewOptions& o) { return o.sheen_tilt_degrees != 0.0; }
 
 using Vec3d = Vec3<double>;
 Vec3d V(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
@@ -112,6 +116,7 @@ struct PixelData {
   std::vector<PreviewLightSample> lights;
   std::array<float, 3> irr{};
   std::vector<float> rad, srad;
+  std::vector<float> trad;    // sheen tilt: the K-node table about the tilted sheen normal
   std::vector<float> yrad;    // woven FIS: the yarn lobes' K-node table
   std::array<float, 2> tv{};  // woven: t.v, b.v
   std::vector<float> lt;      // woven: t.l, b.l, t.h, b.h per light sample
@@ -542,9 +547,12 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       }
     }
     std::vector<float> lt;
-    std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit, woven_frame ? &lt : nullptr);
+    // Sheen tilt (sheen_tilt.h): the tilted cosines come from the tangent cosines, so a cloth
+    // fabric pixel gathers them too.
+    const bool tangent_cosines = woven_frame || (SheenTiltOn(x.opt) && hit.mesh->is_fabric);
+    std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit, tangent_cosines ? &lt : nullptr);
     if (x.env && x.opt.exact_ibl_samples > 0 && hit.mesh->is_fabric)
-      AppendEnvironmentSamples(x, hit, pix, &ls, woven_frame ? &lt : nullptr,
+      AppendEnvironmentSamples(x, hit, pix, &ls, tangent_cosines ? &lt : nullptr,
                                x.opt.exact_ibl_samples);
     Rgb<double> Ed(0, 0, 0);
     if (x.env) Ed = x.e.pmrem ? x.e.pmrem->IrradianceOverPi(hit.n) : IrradianceOverPi(x.e.sh, hit.n);
@@ -591,11 +599,19 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       FillRadianceTables(x, hit.n, R, &pd);
     if (split_sum && x.fis_yarn) FillFisYarnTable(x, hit, &pd);
     if (split_sum && UsesWovenBent(x.opt)) FillBentYarnTables(x, hit, &pd);
+    if (split_sum && SheenTiltOn(x.opt)) {  // the sheen lobe's table about n_s (sheen_tilt.h)
+      const double th = x.opt.sheen_tilt_degrees * kPi / 180.0;
+      const Vec3d ns = hit.n * std::cos(th) + hit.t * std::sin(th);
+      PixelData tmp;
+      FillRadianceTables(x, ns, ns * (2.0 * Dot(ns, hit.v)) - hit.v, &tmp);
+      pd.trad = std::move(tmp.rad);
+    }
     if (vis_on && vis.ao != 1.0) {  // three.js aomap_fragment: indirectSpecular x SO, sheen x ao
       const int K = x.opt.roughness_nodes;
       ApplySpecularOcclusion(pd.rad.data(), pd.rad.size() / (size_t(K) * 3), K, hit.NoV, vis.ao);
       ApplySpecularOcclusion(pd.yrad.data(), pd.yrad.size() / (size_t(K) * 3), K, hit.NoV, vis.ao);
       for (float& v : pd.srad) v = float(double(v) * vis.ao);
+      ApplySpecularOcclusion(pd.trad.data(), pd.trad.size() / (size_t(K) * 3), K, hit.NoV, vis.ao);
     }
     row->push_back(std::move(pd));
   }
@@ -617,8 +633,9 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       c->radiance.insert(c->radiance.end(), pd.rad.begin(), pd.rad.end());
       c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
       c->yarn_radiance.insert(c->yarn_radiance.end(), pd.yrad.begin(), pd.yrad.end());
+      c->sheen_tilt_radiance.insert(c->sheen_tilt_radiance.end(), pd.trad.begin(), pd.trad.end());
       if (c->options.model == ModelKind::kWoven ||
-          c->options.model == ModelKind::kPhysicalAniso) {
+          c->options.model == ModelKind::kPhysicalAniso || SheenTiltOn(c->options)) {
         c->tangent_v.insert(c->tangent_v.end(), pd.tv.begin(), pd.tv.end());
         c->light_tangent.insert(c->light_tangent.end(), pd.lt.begin(), pd.lt.end());
         if (c->options.weave_maps) c->weave.insert(c->weave.end(), pd.weave.begin(), pd.weave.end());
@@ -650,6 +667,16 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   if (opt.exact_ibl_samples < 0 || opt.exact_ibl_samples > 1 << 16)
     throw std::invalid_argument("preview: exact_ibl_samples " +
                                 std::to_string(opt.exact_ibl_samples) + " not in [0, 65536]");
+  if (SheenTiltOn(opt)) {
+    if (!std::isfinite(opt.sheen_tilt_degrees) || std::abs(opt.sheen_tilt_degrees) > 90.0)
+      throw std::invalid_argument("preview: sheen tilt " + std::to_string(opt.sheen_tilt_degrees) +
+                                  " degrees not in [-90, 90]");
+    if (opt.model != ModelKind::kCloth && opt.model != ModelKind::kWoven)
+      throw std::invalid_argument("preview: a sheen tilt applies to the cloth and woven models only, not " +
+                                  ToString(opt.model));
+    if (opt.model == ModelKind::kCloth && opt.cloth.subsurface)
+      throw std::invalid_argument("preview: a sheen tilt is not implemented for cloth with subsurface");
+  }
   const bool exact_ibl = env != nullptr && opt.exact_ibl_samples > 0;
   c->features.direct = !scene.lights.empty() || exact_ibl;
   c->features.ibl = env != nullptr && !exact_ibl;  // exact: the environment is in the lights
@@ -893,6 +920,10 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   }
   physical_aniso::Params<T> ap;
   if constexpr (M == ModelKind::kPhysicalAniso) ap = physical_aniso::FromFlat(x);
+  // Sheen nap prototype (sheen_tilt.h; cloth and woven): n_s.x = ct n.x + st t.x.
+  const bool tilt = SheenTiltOn(c.options);
+  const double tilt_rad = c.options.sheen_tilt_degrees * kPi / 180.0;
+  const double ct = std::cos(tilt_rad), st = std::sin(tilt_rad);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& br) {
     for (size_t i = br.begin(); i != br.end(); ++i) {
       // Woven: the pixel's weave-map sample; without maps the uniform defaults (all 1).
@@ -906,6 +937,8 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
         }
       }
       const T NoV = Const<T>(double(c.NoV[i]));
+      const T NoV_s = tilt ? Const<T>(ct * double(c.NoV[i]) + st * double(c.tangent_v[i * 2]))
+                           : NoV;
       standard::Options so;  // three.js geometryRoughness (0 unless the cache has it)
       if (!c.geometry_roughness.empty()) so.geometry_roughness = double(c.geometry_roughness[i]);
       // physical-aniso: the kd map multiplies the base colour, the warp/weft weights give the
@@ -932,7 +965,15 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
             const TangentCosines<T> tc{Const<T>(double(tv[0])), Const<T>(double(tv[1])),
                                        Const<T>(double(lt[0])), Const<T>(double(lt[1])),
                                        Const<T>(double(lt[2])), Const<T>(double(lt[3]))};
-            f = woven::EvalDirect(wp, c.options.woven, wl, cs, tc, ws, *c.dfg, *c.woven_phase);
+            if (tilt) {
+              const sheen_tilt::TiltedCosines<T> tl{
+                  NoV_s, Const<T>(ct * double(q.NoL) + st * double(lt[0])),
+                  Const<T>(ct * double(q.NoH) + st * double(lt[2]))};
+              f = sheen_tilt::WovenDirect(wp, c.options.woven, wl, cs, tl, tc, ws, *c.dfg,
+                                          *c.woven_phase);
+            } else {
+              f = woven::EvalDirect(wp, c.options.woven, wl, cs, tc, ws, *c.dfg, *c.woven_phase);
+            }
           } else if constexpr (M == ModelKind::kPhysicalAniso) {
             const float* tv = &c.tangent_v[i * 2];
             const float* lt = &c.light_tangent[size_t(s) * 4];
@@ -941,7 +982,15 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
                                        Const<T>(double(lt[2])), Const<T>(double(lt[3]))};
             f = physical_aniso::EvalDirect(apx, so, cs, tc, as, *c.dfg);
           } else if constexpr (M == ModelKind::kCloth) {
-            f = cloth::EvalDirect(cloth::Params<T>{rgb(0), rgb(3), x[6], rgb(7)}, co, cs);
+            if (tilt) {
+              const float* lt = &c.light_tangent[size_t(s) * 4];
+              const sheen_tilt::TiltedCosines<T> tl{
+                  NoV_s, Const<T>(ct * double(q.NoL) + st * double(lt[0])),
+                  Const<T>(ct * double(q.NoH) + st * double(lt[2]))};
+              f = sheen_tilt::ClothDirect(cloth::Params<T>{rgb(0), rgb(3), x[6], rgb(7)}, co, cs, tl);
+            } else {
+              f = cloth::EvalDirect(cloth::Params<T>{rgb(0), rgb(3), x[6], rgb(7)}, co, cs);
+            }
           } else if constexpr (M == ModelKind::kStandard) {
             f = standard::EvalDirect(standard::Params<T>{rgb(0), x[3], x[4]}, so, cs, *c.dfg);
           } else if constexpr (M == ModelKind::kPhysicalSheen) {
@@ -961,15 +1010,18 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
         const float* rad = &c.radiance[i * rad_stride];
         if constexpr (M == ModelKind::kWoven) {
           const woven::WovenIblWeights<T> w =
-              woven::EvalIbl(wp, c.options.woven, wl, NoV, ws, *c.dfg, *c.woven_phase);
+              tilt ? sheen_tilt::WovenIbl(wp, c.options.woven, wl, NoV, NoV_s, ws, *c.dfg,
+                                          *c.woven_phase)
+                   : woven::EvalIbl(wp, c.options.woven, wl, NoV, ws, *c.dfg, *c.woven_phase);
           const bool bent = UsesWovenBent(c.options) && !c.yarn_radiance.empty();
           const float* yrad = c.yarn_radiance.empty()
                                   ? rad
                                   : &c.yarn_radiance[i * size_t(K) * 3 * (bent ? 2 : 1)];  // FIS / bent
+          const float* srad = tilt ? &c.sheen_tilt_radiance[i * size_t(K) * 3] : rad;
           L += (bent ? w.warp * TableRadiance(yrad, K, wl.r_e) +
                            w.weft * TableRadiance(yrad + K * 3, K, wl.r_e)
                      : (w.warp + w.weft) * TableRadiance(yrad, K, wl.r_e)) +
-               w.sheen * TableRadiance(rad, K, wl.r_s) + w.diffuse * Ed;
+               w.sheen * TableRadiance(srad, K, wl.r_s) + w.diffuse * Ed;
         } else if constexpr (M == ModelKind::kPhysicalAniso) {
           const IblWeights<T> w = physical_aniso::EvalIbl(apx, so, NoV, *c.dfg);
           const T r = standard::ClampedRoughness(apx.roughness, so);
@@ -982,8 +1034,10 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
           L += w.specular * (L0 * (Const<T>(1.0) - f) + L1 * f) + w.diffuse * Ed;
         } else if constexpr (M == ModelKind::kCloth) {
           const cloth::Params<T> p{rgb(0), rgb(3), x[6], rgb(7)};
-          const IblWeights<T> w = cloth::EvalIbl(p, co, NoV, *c.dfg);
-          L += w.specular * TableRadiance(rad, K, cloth::ClampedRoughness(p.roughness, co)) +
+          const IblWeights<T> w = tilt ? sheen_tilt::ClothIbl(p, co, NoV_s, *c.dfg)
+                                       : cloth::EvalIbl(p, co, NoV, *c.dfg);
+          const float* srad = tilt ? &c.sheen_tilt_radiance[i * size_t(K) * 3] : rad;
+          L += w.specular * TableRadiance(srad, K, cloth::ClampedRoughness(p.roughness, co)) +
                w.diffuse * Ed;
         } else if constexpr (M == ModelKind::kStandard) {
           const standard::Params<T> p{rgb(0), x[3], x[4]};
@@ -1014,7 +1068,7 @@ void DispatchFeatures(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& ou
   const PreviewFeatures& f = c.features;
   const int key = (f.direct ? 4 : 0) | (f.ibl ? 2 : 0) | (f.subsurface ? 1 : 0);
   if constexpr (M == ModelKind::kWoven) {
-    if (!c.options.woven_reference_kernel) {
+    if (!c.options.woven_reference_kernel && !SheenTiltOn(c.options)) {
       if (f.direct && f.ibl) return WovenKernel<T, true, true>(c, x, out);
       if (f.direct) return WovenKernel<T, true, false>(c, x, out);
       if (f.ibl) return WovenKernel<T, false, true>(c, x, out);

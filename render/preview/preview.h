@@ -119,6 +119,11 @@ struct PreviewOptions {
   // its vertices snapped to 1 / 2^bits pixel. 4: SwiftShader (GL_SUBPIXEL_BITS of Chromium's
   // WebGL2 on SwiftShader); -1: exact (the camera ray's hit).
   int raster_subpixel_bits = 4;
+  // Sheen nap prototype (render/preview/sheen_tilt.h, docs/velvet.md; measurement, opt-in):
+  // cloth and woven only: the sheen lobe (direct and IBL) shaded with its own normal
+  // n_s = cos(theta) n + sin(theta) t, theta = this many degrees towards +t (the mesh tangent,
+  // +u). 0 (default): the untouched paths, bit-identical. Not with cloth subsurface.
+  double sheen_tilt_degrees = 0.0;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;
@@ -176,6 +181,9 @@ class PreviewCache {
   std::vector<float> irradiance;          // E_d(n), 3 per fabric pixel
   std::vector<float> radiance;            // K x 3 per fabric pixel: GGX-prefiltered, node k
   std::vector<float> sheen_radiance;      // K x 3 per fabric pixel: Charlie (gltf-sheen only)
+  // options.sheen_tilt_degrees != 0 with a split-sum environment (else empty): K x 3 per fabric
+  // pixel, the radiance table looked up about the tilted sheen normal (sheen_tilt.h).
+  std::vector<float> sheen_tilt_radiance;
   // Woven with options.woven.ibl == kFis on the three.js IBL engine (else empty): K x 3 per
   // fabric pixel, the yarn lobes' radiance at node k's r by filtered importance sampling
   // (FisGgxRadiance, options.woven.fis_taps taps; the split-sum read where no tap survives).
@@ -184,7 +192,7 @@ class PreviewCache {
   std::vector<float> yarn_radiance;
   std::vector<float> background;          // linear RGB of every pixel without fabric
   std::vector<float> fabric_mask;         // 1 where a fabric pixel is shaded
-  // Woven only (empty for the other models): raw cosines against the reference renderer's
+  // Woven and physical-aniso, and cloth with a sheen tilt (else empty): raw cosines against the reference renderer's
   // tangent frame (t = mesh tangent Gram-Schmidt'd against the viewer-side n, +u = warp;
   // b = tangent_sign n x t, +v = weft): t.v, b.v per fabric pixel; t.l, b.l, t.h, b.h per
   // light sample (parallel to light_samples).
