@@ -39,6 +39,7 @@
 #include <array>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -119,6 +120,11 @@ struct PreviewOptions {
   // its vertices snapped to 1 / 2^bits pixel. 4: SwiftShader (GL_SUBPIXEL_BITS of Chromium's
   // WebGL2 on SwiftShader); -1: exact (the camera ray's hit).
   int raster_subpixel_bits = 4;
+  // The environment's sun as a directional light (render/scene/sun.h, docs/sun.md): kAuto
+  // detects a compact sun and, when found, the IBL (SH, prefilter / PMREM, exact IBL) is built
+  // from the sun-free map and the sun is one more directional light (the background keeps the
+  // full map). Unset: the card's "environment": {"sun"}, else off (bit-identical to no split).
+  std::optional<SunMode> env_sun;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;
@@ -192,6 +198,8 @@ class PreviewCache {
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
   const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table
   double build_seconds = 0.0;
+  bool sun_split = false;   // the environment's sun was drawn as a light (PreviewOptions::env_sun)
+  std::string sun_summary;  // what the sun detection found (empty without an environment)
 };
 
 // Linear radiance of every fabric pixel (3 per pixel, cache order) for flat parameters `x`
