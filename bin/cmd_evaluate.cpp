@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "bin/commands.h"
+#include "render/scene/sun.h"
 #include "bin/visibility_flags.h"
 #include "fit/image_fit.h"
 #include "fit/reference.h"
@@ -38,6 +39,7 @@ struct EvaluateArgs {
   unsigned exact_ibl_seed = 1;
   bool json = false;
   std::string ibl_engine = "preset";  // preset: the fit's recorded fit.ibl_engine (else filament)
+  std::string env_sun = "preset";  // s10-sun: preset = fit.env_sun, else the cards' (else off)
   VisibilityFlags visibility;  // --shadows, --ao, --indirect (docs/visibility.md)
 };
 
@@ -78,6 +80,16 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   o.exact_ibl_seed = a.exact_ibl_seed;
   o.exact_irradiance_samples = a.exact_irradiance;
   ApplyVisibilityFlags(a.visibility, &o);
+  // s10-sun: the environment's sun (docs/sun.md): --env-sun, else the fit's fit.env_sun, else
+  // each card's environment.sun (else off).
+  if (a.env_sun != "preset") {
+    o.env_sun = render::ParseSunMode(a.env_sun, "--env-sun");
+  } else if (fj.contains("env_sun")) {
+    if (!fj["env_sun"].is_string())
+      throw std::runtime_error(a.preset + ": field 'fit.env_sun': expected \"auto\" or \"off\"");
+    o.env_sun = render::ParseSunMode(fj["env_sun"].get<std::string>(),
+                                     a.preset + ": field 'fit.env_sun'");
+  }
   // The IBL engine: as the fit recorded it (fit.ibl_engine; presets before session 8 were
   // fitted on Filament's), or --ibl-engine. The woven IBL mode is the preset's "woven" object.
   std::string engine = a.ibl_engine;
@@ -147,6 +159,7 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
                          " samples, seed " + std::to_string(a.exact_ibl_seed) + ")"
                    : "split sum";
     j["ibl_engine"] = engine;
+    j["env_sun"] = o.env_sun ? render::SunModeName(*o.env_sun) : "card";  // s10-sun
     if (preset.model == render::ModelKind::kWoven)
       j["woven_ibl"] = fis_applied ? "fis" : "split";
     if (o.shadows || o.visibility.enabled()) j["visibility"] = VisibilityJson(o);
@@ -208,6 +221,10 @@ void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "Carlo, this many directions per pixel) instead of SH9")
       ->check(CLI::Range(0, 65536));
   cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
+  cmd->add_option("--env-sun", args->env_sun,
+                  "s10-sun: the environment's sun as a directional light (docs/sun.md): preset "
+                  "(default: the fit's fit.env_sun, else each card's environment.sun, else off), "
+                  "auto or off");
   cmd->add_option("--ibl-engine", args->ibl_engine,
                   "whose image-based lighting: preset (default: the fit's recorded "
                   "fit.ibl_engine, filament for presets without it), auto, threejs or filament")
