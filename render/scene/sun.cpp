@@ -90,11 +90,30 @@ SunSplit DetectSun(int W, int H, const float* rgb, double intensity, double rota
     return s;
   }
   const int pj = int(peak / size_t(W)), pi = int(peak % size_t(W));
-  const double dp[3] = {cos_e[size_t(pj)] * cos_p[size_t(pi)], sin_e[size_t(pj)],
-                        cos_e[size_t(pj)] * sin_p[size_t(pi)]};
-  // 2. Window and annulus (by the angle between texel centres and the peak).
+  auto dir_of = [&](size_t t, double* d) {
+    const size_t j = t / size_t(W), i = t % size_t(W);
+    d[0] = cos_e[j] * cos_p[i];
+    d[1] = sin_e[j];
+    d[2] = cos_e[j] * sin_p[i];
+  };
+  double d0[3];
+  dir_of(peak, d0);
   const double r = prm.max_radius_deg * kPi / 180.0;
   const double cos_in = std::cos(r), cos_out = std::cos(std::min(kPi, 2.0 * r));
+  // The window's centre: the luminance-weighted centroid of the texels within max_radius_deg
+  // of the peak at >= half its luminance (a clipped, flat-topped sun's peak texel is the first
+  // of many equal ones, at its edge; the centroid is its middle).
+  double dp[3] = {0, 0, 0};
+  for (size_t t = 0; t < n; ++t) {
+    double d[3];
+    dir_of(t, d);
+    const double y = lum(t);
+    if (y >= 0.5 * peak_y && d[0] * d0[0] + d[1] * d0[1] + d[2] * d0[2] >= cos_in)
+      for (int k = 0; k < 3; ++k) dp[k] += y * d[k];
+  }
+  const double dn = std::sqrt(dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2]);
+  for (int k = 0; k < 3; ++k) dp[k] /= dn;
+  // 2. Window and annulus (by the angle between texel centres and that centre).
   std::vector<size_t> inner, ring;
   for (int j = 0; j < H; ++j) {
     for (int i = 0; i < W; ++i) {

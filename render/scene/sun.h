@@ -26,7 +26,10 @@
 // Detection ("auto", SunDetectParams; the numbers and why in docs/sun.md "Detection"):
 //   1. P = sum Y dw (the map's power); none if P = 0. The peak = the brightest texel (first in
 //      row-major order on ties).
-//   2. Window: texels whose centre is within max_radius_deg of the peak's direction (angles,
+//      The window's centre: the luminance-weighted mean direction of the texels within
+//      max_radius_deg of the peak with Y >= Y_peak / 2 (a clipped, flat-topped sun's first
+//      peak texel is at its edge; this is its middle).
+//   2. Window: texels whose centre is within max_radius_deg of that centre (angles,
 //      not texels: the seam u = 0 / 1 and the poles need no special case). Annulus: centres
 //      between max_radius_deg and 2 x max_radius_deg. None if the annulus has fewer than
 //      min_annulus_texels texels (the map is too coarse to tell a sun from its sky).
