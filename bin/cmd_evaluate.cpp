@@ -80,15 +80,19 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   o.exact_ibl_seed = a.exact_ibl_seed;
   o.exact_irradiance_samples = a.exact_irradiance;
   ApplyVisibilityFlags(a.visibility, &o);
-  // s10-sun: the environment's sun (docs/sun.md): --env-sun, else the fit's fit.env_sun, else
-  // each card's environment.sun (else off).
+  // s10-sun: the environment's sun (docs/sun.md): --env-sun, else the fit's fit.env_sun
+  // ("auto" / "off": that mode; "card": each card's environment.sun, else auto), else (a preset
+  // fitted before session 10, without the field) each card's environment.sun, else off: as fitted.
+  o.env_sun_default = render::SunMode::kOff;
   if (a.env_sun != "preset") {
     o.env_sun = render::ParseSunMode(a.env_sun, "--env-sun");
   } else if (fj.contains("env_sun")) {
+    const std::string field = a.preset + ": field 'fit.env_sun'";
     if (!fj["env_sun"].is_string())
-      throw std::runtime_error(a.preset + ": field 'fit.env_sun': expected \"auto\" or \"off\"");
-    o.env_sun = render::ParseSunMode(fj["env_sun"].get<std::string>(),
-                                     a.preset + ": field 'fit.env_sun'");
+      throw std::runtime_error(field + ": expected \"auto\", \"off\" or \"card\"");
+    const std::string v = fj["env_sun"].get<std::string>();
+    if (v == "card") o.env_sun_default = render::kCliDefaultSunMode;
+    else o.env_sun = render::ParseSunMode(v, field);
   }
   // The IBL engine: as the fit recorded it (fit.ibl_engine; presets before session 8 were
   // fitted on Filament's), or --ibl-engine. The woven IBL mode is the preset's "woven" object.
@@ -159,7 +163,8 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
                          " samples, seed " + std::to_string(a.exact_ibl_seed) + ")"
                    : "split sum";
     j["ibl_engine"] = engine;
-    j["env_sun"] = o.env_sun ? render::SunModeName(*o.env_sun) : "card";  // s10-sun
+    j["env_sun"] = o.env_sun ? render::SunModeName(*o.env_sun)  // s10-sun
+                             : std::string("card, else ") + render::SunModeName(o.env_sun_default);
     if (preset.model == render::ModelKind::kWoven)
       j["woven_ibl"] = fis_applied ? "fis" : "split";
     if (o.shadows || o.visibility.enabled()) j["visibility"] = VisibilityJson(o);
@@ -223,8 +228,8 @@ void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
   cmd->add_option("--env-sun", args->env_sun,
                   "s10-sun: the environment's sun as a directional light (docs/sun.md): preset "
-                  "(default: the fit's fit.env_sun, else each card's environment.sun, else off), "
-                  "auto or off");
+                  "(default: the fit's fit.env_sun; presets without it: each card's "
+                  "environment.sun, else off, as they were fitted), auto or off");
   cmd->add_option("--ibl-engine", args->ibl_engine,
                   "whose image-based lighting: preset (default: the fit's recorded "
                   "fit.ibl_engine, filament for presets without it), auto, threejs or filament")

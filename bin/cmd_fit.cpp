@@ -249,8 +249,8 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
       ->check(CLI::IsMember({"auto", "threejs", "filament"}));
   cmd->add_option("--env-sun", a.env_sun,
                   "s10-sun: the environment's sun as a directional light in the previews "
-                  "(docs/sun.md): auto or off; default: each card's environment.sun, else off. "
-                  "Recorded as fit.env_sun (evaluate reuses it)");
+                  "(docs/sun.md): auto or off; default: each card's environment.sun, else auto. "
+                  "Recorded as fit.env_sun (\"card\" without the flag; evaluate reuses it)");
   cmd->add_option("--woven-ibl", a.woven_ibl,
                   "woven's yarn-lobe IBL on the three.js engine: auto (default: split), fis "
                   "(filtered importance sampling of the PMREM) or split (split sum)")
@@ -418,6 +418,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   ApplyVisibilityFlags(a.visibility, &o);  // s9-vis
   o.ibl_engine = ParseIblEngine(a.ibl_engine);
   if (!a.env_sun.empty()) o.env_sun = render::ParseSunMode(a.env_sun, "--env-sun");  // s10-sun
+  o.env_sun_default = render::kCliDefaultSunMode;
   // woven: the IBL mode the previews (and the written preset) use. FIS exists on the three.js
   // engine only (render/preview/preview.h UsesWovenFis).
   if (o.start.model != render::ModelKind::kWoven) {
@@ -535,7 +536,8 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
     po.ibl_engine = o.ibl_engine;
     fitj["ibl_engine"] = render::UsesThreejsIbl(po) ? "threejs" : "filament";
   }
-  if (o.env_sun) fitj["env_sun"] = render::SunModeName(*o.env_sun);  // s10-sun (docs/sun.md)
+  // s10-sun (docs/sun.md): the flag's mode, or "card" (each card's environment.sun, else auto).
+  fitj["env_sun"] = o.env_sun ? render::SunModeName(*o.env_sun) : "card";
   nlohmann::json ab = nlohmann::json::array();
   bool flagged_bound = false;
   for (const fit::AtBound& b : res.at_bound) {
@@ -584,7 +586,8 @@ void WriteFitImages(const std::string& dir, const FitFiles& f, const LoadedScene
   fs::create_directories(dir);
   for (size_t i = 0; i < l.sc.size(); ++i) {
     const render::Scene& scene = l.sc[i];
-    std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset, engine, env_sun);
+    std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset, engine, env_sun,
+                                                         render::kCliDefaultSunMode);
     // A transparent-film reference (alpha coverage) has no environment behind the geometry:
     // where it saw nothing, the preview images show nothing either, so side-by-sides and
     // residuals do not mix in background differences.

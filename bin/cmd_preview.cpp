@@ -119,7 +119,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--env-sun", args->env_sun,
                   "the environment's sun as a directional light (docs/sun.md): auto (detect a "
                   "compact sun, split it off the IBL's map) or off; default: the card's "
-                  "environment.sun, else off");
+                  "environment.sun, else auto (web/ draws the same)");
   cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
   cmd->callback([args, &g, &exit_code]() {
     try {
@@ -168,6 +168,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                      "--exact-ibl: rendering with the split sum\n",
                      limits::EscapeForMessage(args->material).c_str());
       if (!args->env_sun.empty()) o.env_sun = render::ParseSunMode(args->env_sun, "--env-sun");
+      o.env_sun_default = render::kCliDefaultSunMode;  // s10-sun: auto (as web/ draws it)
       o.exact_ibl_samples = args->exact_ibl;
       o.exact_ibl_seed = args->exact_ibl_seed;
       o.exact_irradiance_samples = args->exact_irradiance;

@@ -506,6 +506,7 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   po.shadows = opt.shadows;
   po.visibility = opt.visibility;
   po.env_sun = opt.env_sun;
+  po.env_sun_default = opt.env_sun_default;
   const auto full = render::PreviewCache::Build(scene, in.environment, po);
   std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
   for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
@@ -844,9 +845,11 @@ int AutoLevel(const std::vector<SceneInput>& inputs, double weave_period_uv, int
 std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
                                       const render::MaterialPreset& preset,
                                       render::IblEngine engine,
-                                      std::optional<render::SunMode> env_sun) {
+                                      std::optional<render::SunMode> env_sun,
+                                      render::SunMode env_sun_default) {
   render::PreviewOptions o;
   o.env_sun = env_sun;
+  o.env_sun_default = env_sun_default;
   o.model = preset.model;
   o.cloth = preset.cloth;
   o.woven = preset.woven;
@@ -872,6 +875,7 @@ struct PreparedScenes {
   render::IblEngine ibl_engine = render::IblEngine::kFilament;
   woven::IblMode woven_ibl = woven::IblMode::kSplit;
   std::optional<render::SunMode> env_sun;
+  render::SunMode env_sun_default = render::SunMode::kOff;
   int fis_taps = 0, fis_diffuse_taps = 0;
   double seconds = 0.0;
 };
@@ -909,6 +913,7 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->visibility = opt.visibility;
   p->ibl_engine = opt.ibl_engine;
   p->env_sun = opt.env_sun;
+  p->env_sun_default = opt.env_sun_default;
   p->woven_ibl = opt.start.woven.ibl;
   p->fis_taps = opt.start.woven.fis_taps;
   p->fis_diffuse_taps = opt.start.woven.fis_diffuse_taps;
@@ -950,7 +955,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->exact_irradiance_samples != opt.exact_irradiance_samples ||
         prepared->shadows != opt.shadows || !SameVisibility(prepared->visibility, opt.visibility) ||
         prepared->ibl_engine != opt.ibl_engine || prepared->woven_ibl != opt.start.woven.ibl ||
-        prepared->env_sun != opt.env_sun ||
+        prepared->env_sun != opt.env_sun || prepared->env_sun_default != opt.env_sun_default ||
         prepared->fis_taps != opt.start.woven.fis_taps ||
         prepared->fis_diffuse_taps != opt.start.woven.fis_diffuse_taps)
       throw FitError("fit: the prepared scenes were built with other options");

@@ -109,8 +109,10 @@ struct FitOptions {
   // engine web/ draws the model with). The woven IBL mode (split / FIS) is start.woven's.
   render::IblEngine ibl_engine = render::IblEngine::kFilament;
   // The environment's sun as a directional light in the previews (render/scene/sun.h,
-  // PreviewOptions::env_sun; docs/sun.md): unset = each card's environment.sun, else off.
+  // PreviewOptions::env_sun / env_sun_default; docs/sun.md): unset = each card's
+  // environment.sun, else env_sun_default (off here; `clothfit fit` and `evaluate` set auto).
   std::optional<render::SunMode> env_sun;
+  render::SunMode env_sun_default = render::SunMode::kOff;
 };
 
 struct SceneInput {
@@ -180,6 +182,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
 std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
                                       const render::MaterialPreset& preset,
                                       render::IblEngine engine = render::IblEngine::kFilament,
-                                      std::optional<render::SunMode> env_sun = std::nullopt);
+                                      std::optional<render::SunMode> env_sun = std::nullopt,
+                                      render::SunMode env_sun_default = render::SunMode::kOff);
 
 }  // namespace clothfit::fit

@@ -25,17 +25,21 @@ function lowerMedian(v) {
 
 /**
  * Detect (and describe) the sun of an equirect map.
- * data: texels, top row first, `channels` values per texel (RGB first), read through
- *   `decode` (e.g. THREE.DataUtils.fromHalfFloat for a HalfFloat texture; default: as is).
+ * data: texels, top row first (rowsBottomUp: bottom row first, as three.js's EXRLoader and
+ *   HDRLoader store them), `channels` values per texel (RGB first), read through `decode`
+ *   (e.g. THREE.DataUtils.fromHalfFloat for a HalfFloat texture; default: as is).
+ *   sunTexels are texel indices into `data` (storage order).
  * Returns {found, summary, powerFraction, annulusExcessRatio, texels, solidAngle, mapDirection,
  *   worldDirection, irradiance, fill, mapPower, sunTexels}; see render/scene/sun.h SunSplit.
  * Light: THREE.DirectionalLight with color = irradiance / max, intensity = max (irradiance at
  *   normal incidence, x the environment intensity), shining FROM worldDirection.
  */
-export function detectSun(data, width, height, { channels = 3, intensity = 1, rotationY = 0, decode = null, params = {} } = {}) {
+export function detectSun(data, width, height, { channels = 3, intensity = 1, rotationY = 0, decode = null, rowsBottomUp = false, params = {} } = {}) {
   const p = { ...SUN_DETECT_DEFAULTS, ...params };
   const W = width, H = height, n = W * H;
-  const get = decode ? (t, c) => clean(decode(data[t * channels + c])) : (t, c) => clean(data[t * channels + c]);
+  // t: texel index in the map's convention (top row first); st(t): its index in `data`.
+  const st = rowsBottomUp ? (t) => (H - 1 - Math.floor(t / W)) * W + (t % W) : (t) => t;
+  const get = decode ? (t, c) => clean(decode(data[st(t) * channels + c])) : (t, c) => clean(data[st(t) * channels + c]);
   const s = {
     found: false, summary: '', powerFraction: 0, annulusExcessRatio: 0, texels: 0, solidAngle: 0,
     mapDirection: [0, 1, 0], worldDirection: [0, 1, 0], irradiance: [0, 0, 0], fill: [0, 0, 0], mapPower: 0, sunTexels: [],
@@ -103,7 +107,7 @@ export function detectSun(data, width, height, { channels = 3, intensity = 1, ro
     if (!(y > T)) continue;
     const j = Math.floor(t / W), i = t % W;
     const w = dw[j];
-    s.sunTexels.push(t);
+    s.sunTexels.push(st(t));
     s.solidAngle += w;
     for (let k = 0; k < 3; ++k) ex[k] += (get(t, k) - s.fill[k]) * w;
     const wy = (y - fillY) * w;

@@ -632,7 +632,7 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   std::shared_ptr<const SunSplitEnvironment> sun;
   std::vector<Light> lights = scene.lights;
   if (env) {
-    sun = SplitEnvironmentSun(*env, EffectiveSunMode(scene, opt.env_sun));
+    sun = SplitEnvironmentSun(*env, EffectiveSunMode(scene, opt.env_sun, opt.env_sun_default));
     env = sun->environment.get();
     if (sun->split.found) lights.push_back(sun->split.light);
     c->sun_summary = sun->split.summary;

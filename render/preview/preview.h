@@ -123,8 +123,11 @@ struct PreviewOptions {
   // The environment's sun as a directional light (render/scene/sun.h, docs/sun.md): kAuto
   // detects a compact sun and, when found, the IBL (SH, prefilter / PMREM, exact IBL) is built
   // from the sun-free map and the sun is one more directional light (the background keeps the
-  // full map). Unset: the card's "environment": {"sun"}, else off (bit-identical to no split).
+  // full map). env_sun set: that mode for every scene (a CLI flag, a preset's fit.env_sun);
+  // unset: the card's "environment": {"sun"}, else env_sun_default. The library default is off
+  // (bit-identical to no split); the clothfit commands default to auto (docs/sun.md).
   std::optional<SunMode> env_sun;
+  SunMode env_sun_default = SunMode::kOff;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;

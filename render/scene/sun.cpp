@@ -21,10 +21,11 @@ SunMode ParseSunMode(const std::string& value, const std::string& field) {
 
 const char* SunModeName(SunMode m) { return m == SunMode::kAuto ? "auto" : "off"; }
 
-SunMode EffectiveSunMode(const Scene& scene, const std::optional<SunMode>& forced) {
+SunMode EffectiveSunMode(const Scene& scene, const std::optional<SunMode>& forced,
+                         SunMode fallback) {
   if (forced) return *forced;
   if (scene.card.environment && scene.card.environment->sun) return *scene.card.environment->sun;
-  return SunMode::kOff;
+  return fallback;
 }
 
 namespace {

@@ -99,7 +99,10 @@ std::shared_ptr<const SunSplitEnvironment> SplitEnvironmentSun(const Environment
                                                                 SunMode mode);
 
 // The sun mode a scene's preview uses: `forced` when set (a CLI flag, a preset's fit.env_sun),
-// else the card's environment.sun, else kOff (the preview's default: docs/sun.md).
-SunMode EffectiveSunMode(const Scene& scene, const std::optional<SunMode>& forced);
+// else the card's environment.sun, else `fallback` (docs/sun.md "Where the option lives").
+SunMode EffectiveSunMode(const Scene& scene, const std::optional<SunMode>& forced,
+                         SunMode fallback = SunMode::kOff);
+// The clothfit commands' default (render-preview, fit, evaluate; web/ too): auto.
+inline constexpr SunMode kCliDefaultSunMode = SunMode::kAuto;
 
 }  // namespace clothfit::render

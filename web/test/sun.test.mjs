@@ -94,3 +94,13 @@ assert.equal(w.found, false, w.summary); assert.match(w.summary, /too weak/); ch
 assert.equal(parseSunMode('auto'), 'auto'); checks++;
 assert.throws(() => parseSunMode('maybe', 'environment.sun'), /environment\.sun: expected "auto" or "off", got "maybe"/); checks++;
 console.log(`web/test/sun.test.mjs: ${checks} checks passed (${s.summary})`);
+{
+  // Bottom-up storage (three.js's EXRLoader): the same split, sun texels as storage indices.
+  const { width: W2, height: H2 } = spec;
+  const flipped = new Float32Array(px.length);
+  for (let j = 0; j < H2; ++j) flipped.set(px.subarray(j * W2 * 3, (j + 1) * W2 * 3), (H2 - 1 - j) * W2 * 3);
+  const f = detectSun(flipped, W2, H2, { intensity: spec.intensity, rotationY: spec.rotation_y, rowsBottomUp: true });
+  for (let k = 0; k < 3; ++k) near(f.irradiance[k], s.irradiance[k], 1e-12 * s.irradiance[k], `bottom-up irradiance[${k}]`);
+  for (const t of f.sunTexels) assert.ok(flipped[t * 3] >= 1000, `bottom-up sun texel ${t}`);
+  console.log(`web/test/sun.test.mjs: bottom-up storage checked (${f.sunTexels.length} texels)`);
+}
