@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "bin/commands.h"
+#include "render/scene/sun.h"
 #include "bin/visibility_flags.h"
 #include "fit/image_fit.h"
 #include "fit/reference.h"
@@ -43,6 +44,7 @@ struct EvaluateArgs {
   double sheen_tilt = std::numeric_limits<double>::quiet_NaN();
   bool json = false;
   std::string ibl_engine = "preset";  // preset: the fit's recorded fit.ibl_engine (else filament)
+  std::string env_sun = "preset";  // s10-sun: preset = fit.env_sun, else the cards' (else off)
   VisibilityFlags visibility;  // --shadows, --ao, --indirect (docs/visibility.md)
 };
 
@@ -92,6 +94,20 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     }
   }
   ApplyVisibilityFlags(a.visibility, &o);
+  // s10-sun: the environment's sun (docs/sun.md): --env-sun, else the fit's fit.env_sun
+  // ("auto" / "off": that mode; "card": each card's environment.sun, else auto), else (a preset
+  // fitted before session 10, without the field) each card's environment.sun, else off: as fitted.
+  o.env_sun_default = render::SunMode::kOff;
+  if (a.env_sun != "preset") {
+    o.env_sun = render::ParseSunMode(a.env_sun, "--env-sun");
+  } else if (fj.contains("env_sun")) {
+    const std::string field = a.preset + ": field 'fit.env_sun'";
+    if (!fj["env_sun"].is_string())
+      throw std::runtime_error(field + ": expected \"auto\", \"off\" or \"card\"");
+    const std::string v = fj["env_sun"].get<std::string>();
+    if (v == "card") o.env_sun_default = render::kCliDefaultSunMode;
+    else o.env_sun = render::ParseSunMode(v, field);
+  }
   // The IBL engine: as the fit recorded it (fit.ibl_engine; presets before session 8 were
   // fitted on Filament's), or --ibl-engine. The woven IBL mode is the preset's "woven" object.
   std::string engine = a.ibl_engine;
@@ -161,6 +177,8 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
                          " samples, seed " + std::to_string(a.exact_ibl_seed) + ")"
                    : "split sum";
     j["ibl_engine"] = engine;
+    j["env_sun"] = o.env_sun ? render::SunModeName(*o.env_sun)  // s10-sun
+                             : std::string("card, else ") + render::SunModeName(o.env_sun_default);
     if (preset.model == render::ModelKind::kWoven)
       j["woven_ibl"] = fis_applied ? "fis" : "split";
     if (o.shadows || o.visibility.enabled()) j["visibility"] = VisibilityJson(o);
@@ -227,6 +245,10 @@ void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "towards the mesh tangent +u (docs/velvet.md); default: the preset's "
                   "fit.sheen_tilt_degrees, else 0")
       ->check(CLI::Range(-90.0, 90.0));
+  cmd->add_option("--env-sun", args->env_sun,
+                  "s10-sun: the environment's sun as a directional light (docs/sun.md): preset "
+                  "(default: the fit's fit.env_sun; presets without it: each card's "
+                  "environment.sun, else off, as they were fitted), auto or off");
   cmd->add_option("--ibl-engine", args->ibl_engine,
                   "whose image-based lighting: preset (default: the fit's recorded "
                   "fit.ibl_engine, filament for presets without it), auto, threejs or filament")

@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include "bin/commands.h"
+#include "render/scene/sun.h"
 #include "bin/visibility_flags.h"  // s9-vis
 #include "bin/progress.h"
 #include "fit/image_fit.h"
@@ -161,6 +162,7 @@ struct FitArgs {
   // -1: not given (the FIS defaults apply). Given without --woven-ibl fis: an error, not ignored.
   int fis_taps = -1, fis_diffuse_taps = -1;
   VisibilityFlags visibility;  // s9-vis: --shadows, --ao, --indirect (docs/visibility.md)
+  std::string env_sun;  // s10-sun: "" = the cards' environment.sun (else off); auto | off
 };
 
 // woven fits on the three.js IBL engine: the yarn lobes' IBL by the split sum unless
@@ -250,6 +252,10 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "seed cloth, as web/ draws them; Filament for the Filament cloth and "
                   "gltf-sheen), threejs or filament")
       ->check(CLI::IsMember({"auto", "threejs", "filament"}));
+  cmd->add_option("--env-sun", a.env_sun,
+                  "s10-sun: the environment's sun as a directional light in the previews "
+                  "(docs/sun.md): auto or off; default: each card's environment.sun, else auto. "
+                  "Recorded as fit.env_sun (\"card\" without the flag; evaluate reuses it)");
   cmd->add_option("--woven-ibl", a.woven_ibl,
                   "woven's yarn-lobe IBL on the three.js engine: auto (default: split), fis "
                   "(filtered importance sampling of the PMREM), split (split sum) or bent (split "
@@ -419,6 +425,8 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   o.sheen_tilt_degrees = a.sheen_tilt;  // s10-velvet
   ApplyVisibilityFlags(a.visibility, &o);  // s9-vis
   o.ibl_engine = ParseIblEngine(a.ibl_engine);
+  if (!a.env_sun.empty()) o.env_sun = render::ParseSunMode(a.env_sun, "--env-sun");  // s10-sun
+  o.env_sun_default = render::kCliDefaultSunMode;
   // woven: the IBL mode the previews (and the written preset) use. FIS exists on the three.js
   // engine only (render/preview/preview.h UsesWovenFis).
   if (o.start.model != render::ModelKind::kWoven) {
@@ -538,6 +546,8 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
     po.ibl_engine = o.ibl_engine;
     fitj["ibl_engine"] = render::UsesThreejsIbl(po) ? "threejs" : "filament";
   }
+  // s10-sun (docs/sun.md): the flag's mode, or "card" (each card's environment.sun, else auto).
+  fitj["env_sun"] = o.env_sun ? render::SunModeName(*o.env_sun) : "card";
   nlohmann::json ab = nlohmann::json::array();
   bool flagged_bound = false;
   for (const fit::AtBound& b : res.at_bound) {
@@ -581,11 +591,13 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
 
 // Per scene: the fitted preview (display PNG and linear EXR) and the residual EXR.
 void WriteFitImages(const std::string& dir, const FitFiles& f, const LoadedScenes& l,
-                    const render::MaterialPreset& preset, render::IblEngine engine) {
+                    const render::MaterialPreset& preset, render::IblEngine engine,
+                    std::optional<render::SunMode> env_sun) {
   fs::create_directories(dir);
   for (size_t i = 0; i < l.sc.size(); ++i) {
     const render::Scene& scene = l.sc[i];
-    std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset, engine);
+    std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset, engine, env_sun,
+                                                         render::kCliDefaultSunMode);
     // A transparent-film reference (alpha coverage) has no environment behind the geometry:
     // where it saw nothing, the preview images show nothing either, so side-by-sides and
     // residuals do not mix in background differences.
@@ -778,7 +790,7 @@ int RunFit(const FitArgs& a, const Globals& g) {
                                 {"fabric", a.fabric.empty() ? nlohmann::json(nullptr)
                                                             : nlohmann::json(a.fabric)}};
   // Images first, the preset last: a preset on disk means its images are complete.
-  if (!a.images.empty()) WriteFitImages(a.images, files, l, preset, o.ibl_engine);
+  if (!a.images.empty()) WriteFitImages(a.images, files, l, preset, o.ibl_engine, o.env_sun);
   // weave_maps: "uri" (relative to the preset; the maps are written next to it) beside the
   // absolute "file", so the preset's directory can move (docs/preset-format.md).
   render::AddPresetWeaveMapUris(&preset, a.out);

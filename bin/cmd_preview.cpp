@@ -11,6 +11,7 @@
 #include "render/scene/material.h"
 #include "render/preview/preview.h"
 #include "render/preview/weave_maps.h"
+#include "render/scene/sun.h"
 #include "render/scene/tonemap.h"
 #include "render/scene/input_limits.h"
 
@@ -80,6 +81,7 @@ void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
 void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   struct Args {
     std::string scene, material, model, out, ibl_engine = "filament", map_aniso_rule = "spec";
+    std::string env_sun;  // "": the card's environment.sun (else off)
     bool shadows = false;
     int exact_ibl = 0, exact_irradiance = 0;
     unsigned exact_ibl_seed = 1;
@@ -114,6 +116,10 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "measurement: the fabric's diffuse irradiance integrated exactly (Monte Carlo, "
                   "this many directions per pixel); the lobes keep the engine's IBL")
       ->check(CLI::Range(0, 65536));
+  cmd->add_option("--env-sun", args->env_sun,
+                  "the environment's sun as a directional light (docs/sun.md): auto (detect a "
+                  "compact sun, split it off the IBL's map) or off; default: the card's "
+                  "environment.sun, else auto (web/ draws the same)");
   cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
   cmd->callback([args, &g, &exit_code]() {
     try {
@@ -161,6 +167,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                      "three.js IBL engine only (--ibl-engine threejs or auto) and not with "
                      "--exact-ibl: rendering with the split sum\n",
                      limits::EscapeForMessage(args->material).c_str());
+      if (!args->env_sun.empty()) o.env_sun = render::ParseSunMode(args->env_sun, "--env-sun");
+      o.env_sun_default = render::kCliDefaultSunMode;  // s10-sun: auto (as web/ draws it)
       o.exact_ibl_samples = args->exact_ibl;
       o.exact_ibl_seed = args->exact_ibl_seed;
       o.exact_irradiance_samples = args->exact_irradiance;
@@ -214,6 +222,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
         io::WritePng8(args->out, cache->width, cache->height,
                       ToDisplayImage(frame, op, scene.card.exposure));
       }
+      if (!cache->sun_summary.empty() && cache->sun_summary != "no sun: off")
+        std::printf("render-preview: environment %s\n", cache->sun_summary.c_str());
       std::printf("render-preview: %s (%s) on %s: %dx%d, %zu fabric pixels, cache %.3f s -> %s\n",
                   args->material.c_str(), render::ToString(preset.model).c_str(),
                   args->scene.c_str(), cache->width, cache->height, cache->pixels.size(),

@@ -512,6 +512,8 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   po.sheen_tilt_degrees = opt.sheen_tilt_degrees;
   po.shadows = opt.shadows;
   po.visibility = opt.visibility;
+  po.env_sun = opt.env_sun;
+  po.env_sun_default = opt.env_sun_default;
   const auto full = render::PreviewCache::Build(scene, in.environment, po);
   std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
   for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
@@ -849,8 +851,12 @@ int AutoLevel(const std::vector<SceneInput>& inputs, double weave_period_uv, int
 
 std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
                                       const render::MaterialPreset& preset,
-                                      render::IblEngine engine) {
+                                      render::IblEngine engine,
+                                      std::optional<render::SunMode> env_sun,
+                                      render::SunMode env_sun_default) {
   render::PreviewOptions o;
+  o.env_sun = env_sun;
+  o.env_sun_default = env_sun_default;
   o.model = preset.model;
   o.cloth = preset.cloth;
   o.woven = render::PreviewWovenOptions(preset);
@@ -876,6 +882,8 @@ struct PreparedScenes {
   render::VisibilityOptions visibility;
   render::IblEngine ibl_engine = render::IblEngine::kFilament;
   woven::IblMode woven_ibl = woven::IblMode::kSplit;
+  std::optional<render::SunMode> env_sun;
+  render::SunMode env_sun_default = render::SunMode::kOff;
   int fis_taps = 0, fis_diffuse_taps = 0;
   double seconds = 0.0;
 };
@@ -913,6 +921,8 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->shadows = opt.shadows;
   p->visibility = opt.visibility;
   p->ibl_engine = opt.ibl_engine;
+  p->env_sun = opt.env_sun;
+  p->env_sun_default = opt.env_sun_default;
   p->woven_ibl = opt.start.woven.ibl;
   p->fis_taps = opt.start.woven.fis_taps;
   p->fis_diffuse_taps = opt.start.woven.fis_diffuse_taps;
@@ -955,6 +965,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->sheen_tilt_degrees != opt.sheen_tilt_degrees ||
         prepared->shadows != opt.shadows || !SameVisibility(prepared->visibility, opt.visibility) ||
         prepared->ibl_engine != opt.ibl_engine || prepared->woven_ibl != opt.start.woven.ibl ||
+        prepared->env_sun != opt.env_sun || prepared->env_sun_default != opt.env_sun_default ||
         prepared->fis_taps != opt.start.woven.fis_taps ||
         prepared->fis_diffuse_taps != opt.start.woven.fis_diffuse_taps)
       throw FitError("fit: the prepared scenes were built with other options");

@@ -30,6 +30,7 @@
 #include <ceres/ceres.h>
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -110,6 +111,11 @@ struct FitOptions {
   // kFilament here keeps library callers unchanged; `clothfit fit` defaults to kAuto (the
   // engine web/ draws the model with). The woven IBL mode (split / FIS) is start.woven's.
   render::IblEngine ibl_engine = render::IblEngine::kFilament;
+  // The environment's sun as a directional light in the previews (render/scene/sun.h,
+  // PreviewOptions::env_sun / env_sun_default; docs/sun.md): unset = each card's
+  // environment.sun, else env_sun_default (off here; `clothfit fit` and `evaluate` set auto).
+  std::optional<render::SunMode> env_sun;
+  render::SunMode env_sun_default = render::SunMode::kOff;
 };
 
 struct SceneInput {
@@ -178,6 +184,8 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
 // (IBL mode and taps) apply.
 std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
                                       const render::MaterialPreset& preset,
-                                      render::IblEngine engine = render::IblEngine::kFilament);
+                                      render::IblEngine engine = render::IblEngine::kFilament,
+                                      std::optional<render::SunMode> env_sun = std::nullopt,
+                                      render::SunMode env_sun_default = render::SunMode::kOff);
 
 }  // namespace clothfit::fit

@@ -1,6 +1,12 @@
 #!/usr/bin/python3
 """scripts/sun_extract.py: move an environment map's sun into a directional light (measurement).
 
+SUPERSEDED (session 10, s10-sun): the preview and web/ now split a map's sun themselves
+(render/scene/sun.{h,cpp}, web/sun.js; docs/sun.md), on by default, or per card with
+"environment": {"sun": "auto" | "off"} and `--env-sun` on render-preview / fit / evaluate. This
+prototype (a fixed threshold, a 1-texel dilation, modified glTF copies) is kept only to
+reproduce session 9's figures (docs/fitting.md "Why velvet fails under blender-city").
+
     /usr/bin/python3 scripts/sun_extract.py --threshold T OUT_DIR CARD...
 
 Written for issue 12's "Generalises" (docs/fitting.md, "Another environment, on three.js-engine

@@ -28,6 +28,9 @@ import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { EXRLoader } from 'three/addons/loaders/EXRLoader.js';
 import { HDRLoader } from 'three/addons/loaders/HDRLoader.js';
 import { parseExr } from './exr.js';
+import { detectSun, parseSunMode } from './sun.js';
+
+export { detectSun, parseSunMode };
 
 const HERE = new URL('.', import.meta.url);
 
@@ -1334,6 +1337,42 @@ async function pmremFor(renderer, url) {
   return m.get(url);
 }
 
+// The environment's sun (web/sun.js, docs/sun.md): detected once per map on the texture's own
+// texels (half floats from EXRLoader, rows bottom-up), at intensity 1 and rotation 0; when found,
+// a sun-free copy of the texture (the sun texels set to the fill) feeds the PMREM.
+const sunCache = new Map();  // url -> Promise<{split, sunFree: THREE.DataTexture | null}>
+async function sunSplitFor(url) {
+  if (!sunCache.has(url)) {
+    sunCache.set(url, loadEquirect(url).then((eq) => {
+      const { data, width, height } = eq.image;
+      const channels = data.length / (width * height);
+      const half = eq.type === THREE.HalfFloatType;
+      const decode = half ? THREE.DataUtils.fromHalfFloat : null;
+      const split = detectSun(data, width, height, { channels, decode, rowsBottomUp: !eq.flipY });
+      if (!split.found) return { split, sunFree: null };
+      const copy = data.slice();
+      const fill = split.fill.map((x) => (half ? THREE.DataUtils.toHalfFloat(x) : x));
+      for (const t of split.sunTexels) for (let k = 0; k < 3; ++k) copy[t * channels + k] = fill[k];
+      const sunFree = eq.clone();
+      sunFree.source = new THREE.Source({ data: copy, width, height });
+      sunFree.needsUpdate = true;
+      return { split, sunFree };
+    }));
+  }
+  return sunCache.get(url);
+}
+
+async function pmremForTexture(renderer, key, texture) {
+  if (!pmremCache.has(renderer)) pmremCache.set(renderer, new Map());
+  const m = pmremCache.get(renderer);
+  if (!m.has(key)) {
+    const gen = new THREE.PMREMGenerator(renderer);
+    m.set(key, Promise.resolve(gen.fromEquirectangular(texture)));
+    gen.dispose();
+  }
+  return m.get(key);
+}
+
 async function loadEquirect(url) {
   if (!envCache.has(url)) {
     const loader = /\.hdr$/i.test(url) ? new HDRLoader() : new EXRLoader();
@@ -1394,6 +1433,8 @@ export async function loadSceneCard(url, options = {}) {
     toneMapping: TONE_MAPPINGS[card.tone_mapping ?? 'ACESFilmic'],
     exposure: card.exposure ?? 1,
     environment: null,
+    sun: null,        // the sun split of the environment (web/sun.js detectSun), when asked for
+    sunLight: null,   // its THREE.DirectionalLight, when one was found
     // The fabric's material: keeps the side GLTFLoader derived from the glTF doubleSided.
     setMaterial(m) {
       for (const mesh of fabricMeshes) {
@@ -1402,8 +1443,14 @@ export async function loadSceneCard(url, options = {}) {
         mesh.material = mm;
       }
     },
-    async setEnvironment(path, { intensity = 1, rotationYDegrees = 0 } = {}) {
+    // sun: 'auto' (default, as `clothfit render-preview`) draws a compact sun of the map as a
+    // THREE.DirectionalLight (this.sunLight) and builds the PMREM from the sun-free map
+    // (web/sun.js, docs/sun.md); 'off': the map as is.
+    async setEnvironment(path, { intensity = 1, rotationYDegrees = 0, sun = 'auto' } = {}) {
       this.environment = null;
+      this.sun = null;
+      if (this.sunLight) { scene.remove(this.sunLight); this.sunLight.dispose(); this.sunLight = null; }
+      parseSunMode(sun, 'environment.sun');
       if (!path) {
         scene.environment = null;
         scene.background = new THREE.Color(bg[0], bg[1], bg[2]);
@@ -1414,9 +1461,27 @@ export async function loadSceneCard(url, options = {}) {
       if (!renderer) throw new Error('loadSceneCard: options.renderer is needed for the environment PMREM');
       const url = environmentUrl(path, cardUrl, options);
       const eq = await loadEquirect(url);
-      const target = await pmremFor(renderer, url);
-      this.environment = target;
       const rot = THREE.MathUtils.degToRad(rotationYDegrees);
+      let target;
+      const sp = sun === 'auto' ? await sunSplitFor(url) : null;
+      if (sp?.split.found) {
+        target = await pmremForTexture(renderer, `${url}#sun-free`, sp.sunFree);
+        // render/scene/sun.cpp: E = excess x intensity; world = R_y(rotation) map direction.
+        const E = sp.split.irradiance.map((x) => x * intensity);
+        const emax = Math.max(...E);
+        const m = sp.split.mapDirection, cr = Math.cos(rot), sr = Math.sin(rot);
+        const w = [cr * m[0] + sr * m[2], m[1], -sr * m[0] + cr * m[2]];
+        const light = new THREE.DirectionalLight(new THREE.Color(E[0] / emax, E[1] / emax, E[2] / emax), emax);
+        light.name = 'environment sun';
+        light.position.set(w[0], w[1], w[2]);  // shines from w towards the target at the origin
+        scene.add(light);
+        this.sunLight = light;
+        this.sun = { ...sp.split, irradiance: E, worldDirection: w };
+      } else {
+        target = await pmremFor(renderer, url);
+        if (sp) this.sun = sp.split;
+      }
+      this.environment = target;
       scene.environment = target.texture;
       scene.environmentIntensity = intensity;
       scene.environmentRotation.set(0, rot, 0);
@@ -1433,7 +1498,7 @@ export async function loadSceneCard(url, options = {}) {
   };
   if (card.environment) {
     const e = card.environment;
-    await out.setEnvironment(e.path, { intensity: e.intensity ?? 1, rotationYDegrees: e.rotation_y_degrees ?? 0 });
+    await out.setEnvironment(e.path, { intensity: e.intensity ?? 1, rotationYDegrees: e.rotation_y_degrees ?? 0, sun: e.sun ?? 'auto' });
   }
   await Promise.all([clothDGTable(), wovenPhaseTable()]);
   return out;

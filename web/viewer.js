@@ -1,6 +1,8 @@
 // web/viewer.html: a scene card + a clothfit preset in three.js r187, with orbit controls and
-// environment / preset switching. Query: card, preset, presets (comma list), env, shot (=1:
-// POST the first finished frame as PNG to /shot, for web/tools/screenshot.mjs).
+// environment / preset switching. Query: card, preset, presets (comma list), env, sun (auto |
+// off: the environment's sun as a directional light, docs/sun.md; default the card's
+// environment.sun, else auto), shot (=1: POST the first finished frame as PNG to /shot, for
+// web/tools/screenshot.mjs).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { loadSceneCard, fetchClothfitPreset } from './clothfit.js';
@@ -51,12 +53,14 @@ async function main() {
   // to renderer.capabilities.getMaxAnisotropy(), with a console.info when it is.
   console.info(`viewer: max texture anisotropy ${renderer.capabilities.getMaxAnisotropy()}`);
   setPreset(await fetchClothfitPreset(presetUrl, { renderer }));
+  const sun = q.get('sun') ?? sc.card.environment?.sun ?? 'auto';
   const setEnv = async (v) => {
-    if (v === 'card') { const e = sc.card.environment; await sc.setEnvironment(e?.path ?? null, { intensity: e?.intensity ?? 1, rotationYDegrees: e?.rotation_y_degrees ?? 0 }); }
+    if (v === 'card') { const e = sc.card.environment; await sc.setEnvironment(e?.path ?? null, { intensity: e?.intensity ?? 1, rotationYDegrees: e?.rotation_y_degrees ?? 0, sun }); }
     else if (v === 'none') await sc.setEnvironment(null);
-    else await sc.setEnvironment(v, { intensity: sc.card.environment?.intensity ?? 1 });
+    else await sc.setEnvironment(v, { intensity: sc.card.environment?.intensity ?? 1, sun });
+    if (sc.sun) console.info(`viewer: environment ${sc.sun.summary}`);
   };
-  if ((q.get('env') ?? 'card') !== 'card') await setEnv(q.get('env'));
+  if ((q.get('env') ?? 'card') !== 'card' || q.has('sun')) await setEnv(q.get('env') ?? 'card');
 
   document.getElementById('card').onchange = (e) => { q.set('card', e.target.value); location.search = q.toString(); };
   document.getElementById('preset').onchange = async (e) => setPreset(await fetchClothfitPreset(e.target.value, { renderer }));

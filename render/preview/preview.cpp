@@ -29,6 +29,7 @@
 #include "brdf/woven.h"
 #include "render/scene/embree_scene.h"
 #include "render/scene/lights.h"
+#include "render/scene/sun.h"
 #include "render/preview/prefilter.h"
 #include "render/preview/sh.h"
 #include "render/preview/sheen_tilt.h"
@@ -126,7 +127,7 @@ struct PixelData {
 // What the per-pixel work of a cache build reads.
 struct PixelContext {
   const Scene& scene;
-  const Environment* env;
+  const Environment* env;  // the IBL's map (sun-free when the sun is split, render/scene/sun.h)
   const PreviewOptions& opt;
   const EmbreeScene& bvh;
   const EnvironmentData& e;
@@ -134,6 +135,8 @@ struct PixelContext {
   bool wrap_past_terminator;
   const FisPattern* fis_yarn = nullptr;     // woven FIS (UsesWovenFis), else null
   const FisPattern* fis_diffuse = nullptr;  // woven FIS with fis_diffuse_taps > 0, else null
+  const std::vector<Light>* lights = nullptr;     // scene.lights (+ the environment's sun)
+  const Environment* background_env = nullptr;    // what escaping rays see: the full map
 };
 
 // A visible surface point: position (offset off the surface), shading normal on the viewer's
@@ -156,7 +159,7 @@ std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const Previe
   const Vec3d& n = hit.n;
   const Vec3d& v = hit.v;
   std::vector<PreviewLightSample> ls;
-  for (const Light& light : x.scene.lights) {
+  for (const Light& light : *x.lights) {
     const LightSample s = EvaluateLight(light, p);
     if (s.scale <= 0.0) continue;
     const double NoL = Dot(n, s.wi);
@@ -461,7 +464,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     const Vec3d d = V(dir);
     if (!h.valid) {
       const Rgb<double> bg =
-          x.env ? x.env->Eval(d)
+          x.background_env ? x.background_env->Eval(d)
                 : Rgb<double>(x.scene.card.background[0], x.scene.card.background[1],
                               x.scene.card.background[2]);
       for (int k = 0; k < 3; ++k) c->background[pix * 3 + size_t(k)] = float(bg[k]);
@@ -677,8 +680,20 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
     if (opt.model == ModelKind::kCloth && opt.cloth.subsurface)
       throw std::invalid_argument("preview: a sheen tilt is not implemented for cloth with subsurface");
   }
+  // The environment's sun as a directional light (render/scene/sun.h, docs/sun.md): the IBL
+  // gets the sun-free map, the sun joins the scene's lights; the background keeps the full map.
+  const Environment* background_env = env;
+  std::shared_ptr<const SunSplitEnvironment> sun;
+  std::vector<Light> lights = scene.lights;
+  if (env) {
+    sun = SplitEnvironmentSun(*env, EffectiveSunMode(scene, opt.env_sun, opt.env_sun_default));
+    env = sun->environment.get();
+    if (sun->split.found) lights.push_back(sun->split.light);
+    c->sun_summary = sun->split.summary;
+    c->sun_split = sun->split.found;
+  }
   const bool exact_ibl = env != nullptr && opt.exact_ibl_samples > 0;
-  c->features.direct = !scene.lights.empty() || exact_ibl;
+  c->features.direct = !lights.empty() || exact_ibl;
   c->features.ibl = env != nullptr && !exact_ibl;  // exact: the environment is in the lights
   c->features.subsurface = opt.model == ModelKind::kCloth && opt.cloth.subsurface;
   c->features.shadows = opt.shadows && c->features.direct;
@@ -703,7 +718,7 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
     if (!opt.sample_mask.empty())
       candidates = size_t(std::count_if(opt.sample_mask.begin(), opt.sample_mask.end(),
                                         [](auto m) { return m != 0; }));
-    const size_t per_pixel = size_t(opt.exact_ibl_samples) + scene.lights.size();
+    const size_t per_pixel = size_t(opt.exact_ibl_samples) + lights.size();
     constexpr size_t kMaxLightSamples = size_t(1) << 28;
     if (per_pixel > 0 && candidates > kMaxLightSamples / per_pixel)
       throw std::invalid_argument(
@@ -735,8 +750,8 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
     if (opt.woven.fis_diffuse_taps > 0)
       fis_diffuse = std::make_unique<FisPattern>(opt.woven.fis_diffuse_taps);
   }
-  const PixelContext x{scene, env, opt, bvh, e, eps, wrap_past_terminator, fis_yarn.get(),
-                       fis_diffuse.get()};
+  const PixelContext x{scene,          env,      opt,           bvh, e, eps, wrap_past_terminator,
+                       fis_yarn.get(), fis_diffuse.get(), &lights, background_env};
   tbb::parallel_for(0, H, [&](int y) { BuildRow(x, y, c.get(), &rows[size_t(y)]); });
 
   AssembleFabricPixels(rows, c.get());

@@ -39,6 +39,7 @@
 #include <array>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -124,6 +125,14 @@ struct PreviewOptions {
   // n_s = cos(theta) n + sin(theta) t, theta = this many degrees towards +t (the mesh tangent,
   // +u). 0 (default): the untouched paths, bit-identical. Not with cloth subsurface.
   double sheen_tilt_degrees = 0.0;
+  // The environment's sun as a directional light (render/scene/sun.h, docs/sun.md): kAuto
+  // detects a compact sun and, when found, the IBL (SH, prefilter / PMREM, exact IBL) is built
+  // from the sun-free map and the sun is one more directional light (the background keeps the
+  // full map). env_sun set: that mode for every scene (a CLI flag, a preset's fit.env_sun);
+  // unset: the card's "environment": {"sun"}, else env_sun_default. The library default is off
+  // (bit-identical to no split); the clothfit commands default to auto (docs/sun.md).
+  std::optional<SunMode> env_sun;
+  SunMode env_sun_default = SunMode::kOff;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;
@@ -205,6 +214,8 @@ class PreviewCache {
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
   const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table
   double build_seconds = 0.0;
+  bool sun_split = false;   // the environment's sun was drawn as a light (PreviewOptions::env_sun)
+  std::string sun_summary;  // what the sun detection found (empty without an environment)
 };
 
 // Linear radiance of every fabric pixel (3 per pixel, cache order) for flat parameters `x`

@@ -321,6 +321,35 @@ Environment Environment::Constant(const std::array<double, 3>& radiance, int wid
   return env;
 }
 
+Environment Environment::FromPixels(int width, int height, std::vector<float> rgb,
+                                    double intensity, double rotation_y,
+                                    const std::string& source) {
+  CheckIntensityAndRotation(intensity, rotation_y, source.c_str());
+  if (width < 1 || height < 1 || width > io::kMaxDimension || height > io::kMaxDimension ||
+      rgb.size() != size_t(width) * size_t(height) * 3) {
+    throw std::invalid_argument(source + ": environment of " + std::to_string(width) + " x " +
+                                std::to_string(height) + " with " + std::to_string(rgb.size()) +
+                                " values (expected width x height x 3, each dimension in [1, " +
+                                std::to_string(io::kMaxDimension) + "])");
+  }
+  for (size_t k = 0; k < rgb.size(); ++k) {
+    if (!std::isfinite(rgb[k]) || rgb[k] < 0.0f || double(rgb[k]) * intensity > limits::kMaxRadiance)
+      throw std::invalid_argument(source + ": texel " + std::to_string(k / 3) + " channel " +
+                                  std::to_string(k % 3) +
+                                  " must be finite, >= 0 and <= 1e+12 after intensity " +
+                                  limits::LimitRef("kMaxRadiance"));
+  }
+  Environment env;
+  env.width_ = width;
+  env.height_ = height;
+  env.intensity_ = intensity;
+  env.SetRotation(rotation_y);
+  env.source_ = source;
+  env.rgb_ = std::move(rgb);
+  env.BuildDistribution();
+  return env;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Lookup.
 

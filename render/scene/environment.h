@@ -37,6 +37,11 @@ class Environment {
   static Environment ProceduralSky(double intensity, double rotation_y, int width = 512);
   // Uniform radiance everywhere (white furnace tests).
   static Environment Constant(const std::array<double, 3>& radiance, int width = 64);
+  // A map from texels already in memory (RGB, top row first, width x height, finite, >= 0:
+  // throws std::invalid_argument otherwise); `source` names it (caches key prefilters on it).
+  // Used for the sun-free map of render/scene/sun.h and by tests.
+  static Environment FromPixels(int width, int height, std::vector<float> rgb, double intensity,
+                                double rotation_y, const std::string& source);
 
   // Radiance arriving FROM world direction d (unit). Bilinear in the map.
   Rgb<double> Eval(const Vec3<double>& d) const;
@@ -60,12 +65,12 @@ class Environment {
   // Map-space direction <-> (u, v) per the convention above (no rotation applied).
   static void DirectionToUv(const Vec3<double>& d, double* u, double* v);
   static Vec3<double> UvToDirection(double u, double v);
+  Vec3<double> WorldToMap(const Vec3<double>& d) const;  // R_y(-rotation_y) d
+  Vec3<double> MapToWorld(const Vec3<double>& m) const;  // R_y(+rotation_y) m
 
  private:
   void BuildDistribution();
   void SetRotation(double rotation_y);                   // sets rotation_y_, cos_rot_, sin_rot_
-  Vec3<double> WorldToMap(const Vec3<double>& d) const;  // R_y(-rotation_y) d
-  Vec3<double> MapToWorld(const Vec3<double>& m) const;  // R_y(+rotation_y) m
   Rgb<double> Texel(int i, int j) const;                 // stored RGB (no intensity)
   double TexelDensity(int i, int j) const;               // p(u, v) inside texel (i, j)
 

@@ -988,7 +988,7 @@ Json ParseCardJson(const std::string& text, const std::string& card_path) {
   }
 }
 
-// "environment": {path, intensity, rotation_y_degrees}, its path resolved.
+// "environment": {path, intensity, rotation_y_degrees, sun}, its path resolved.
 EnvironmentSpec ReadCardEnvironment(const FieldReader& r, const fs::path& card_dir) {
   const Json& env_json = r.object()["environment"];
   if (!env_json.is_object()) {
@@ -998,13 +998,19 @@ EnvironmentSpec ReadCardEnvironment(const FieldReader& r, const fs::path& card_d
               FieldReader::Show(env_json));
   }
   const FieldReader e(r.file(), env_json, "environment.");
-  e.RejectUnknown({"path", "intensity", "rotation_y_degrees"});
+  e.RejectUnknown({"path", "intensity", "rotation_y_degrees", "sun"});
   EnvironmentSpec env;
   env.name = e.String("path", "", true);
   env.intensity = e.Number("intensity", 1.0, 0.0, 1e30, false, ">= 0");
   const double degrees =
       e.Number("rotation_y_degrees", 0.0, -1e6, 1e6, false, "in [-1e6, 1e6] degrees");
   env.rotation_y = degrees * kPi / 180.0;
+  if (e.Has("sun")) {  // the preview's sun split (render/scene/sun.h, docs/sun.md)
+    const std::string sun = e.String("sun", "", true);
+    if (sun == "auto") env.sun = SunMode::kAuto;
+    else if (sun == "off") env.sun = SunMode::kOff;
+    else e.Bad("sun", "expected \"auto\" or \"off\", got " + Quote(sun));
+  }
   ResolveEnvironment(r.file(), card_dir, env);
   return env;
 }

@@ -72,6 +72,12 @@ struct Light {
   double inner_cone = 0.0, outer_cone = kPi / 4.0;  // radians (spot)
 };
 
+// Whether the preview draws a compact sun of the environment as a directional light
+// (render/scene/sun.h, docs/sun.md): kOff = the map as is; kAuto = detect one and, if found,
+// split it off the map (the IBL gets the sun-free map, the sun becomes one more light).
+// The reference renderer ignores it (it renders the full map; the sun is the same light).
+enum class SunMode { kOff, kAuto };
+
 struct EnvironmentSpec {
   std::string name;         // as written in the card ("studio", "maps/x.exr", ...)
   std::string path;         // resolved absolute path, or "procedural-sky"
@@ -79,6 +85,8 @@ struct EnvironmentSpec {
                             // the renderer falls back to the procedural sky and warns
   double intensity = 1.0;   // multiplies the map's radiance
   double rotation_y = 0.0;  // radians, rotation of the map about +Y (three.js environmentRotation)
+  // "sun": "auto" | "off" (docs/scene-card.md); unset = not in the card (the preview's default).
+  std::optional<SunMode> sun;
 };
 
 struct SceneCard {

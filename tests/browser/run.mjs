@@ -11,7 +11,8 @@
 // Cases: each canonical scene (datasets/scenes/*.json) x 25 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
 // bent-normal IBL) x 2 environments
-// ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}). The page posts
+// ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
+// 7 of the materials under blender-city with its sun split off as a directional light. The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
 // Metric: 8-bit sRGB (tone-mapped as the card says), over the fabric pixels the browser draws,
@@ -148,7 +149,18 @@ Object.assign(MATERIALS, {
 });
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
-const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, rotation_y_degrees: 60 } };
+// s10-sun: the sun split is on by default in both renderers ("environment": {"sun": "auto"}
+// when a card does not say; docs/sun.md): the studio map has no compact sun (nothing split); the
+// blender-city cases keep the unsplit map ("sun": "off") so they still cover that path and their
+// bounds stay valid.
+const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, rotation_y_degrees: 60, sun: 'off' } };
+// s10-sun: blender-city with its sun drawn as a directional light ("environment": {"sun":
+// "auto"}: web/sun.js in the browser, render/scene/sun.cpp in the C++ preview; docs/sun.md),
+// rotated 60 degrees and at intensity 0.8 so the light's rotation and scale are both exercised;
+// a subset of the materials (the lit models and a sharp metal highlight of the sun).
+const SUN_ENV = `${HIGH}-rot60-sun`;
+ENVS[SUN_ENV] = { path: HIGH, intensity: 0.8, rotation_y_degrees: 60, sun: 'auto' };
+const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-seed', 'cloth-filament', 'woven', 'woven-fis']);
 
 fs.mkdirSync(work, { recursive: true });
 for (const [name, p] of Object.entries(MATERIALS)) fs.writeFileSync(path.join(work, `${name}.json`), JSON.stringify(p, null, 1));
@@ -161,6 +173,7 @@ for (const s of scenes) {
     const cardPath = path.join(work, `${s}-${env}.card.json`);
     fs.writeFileSync(cardPath, JSON.stringify(c, null, 1));
     for (const m of Object.keys(MATERIALS)) {
+      if (env === SUN_ENV && !SUN_MATERIALS.has(m)) continue;
       const name = `${s}/${env}/${m}`;
       if (args.only && !name.includes(args.only)) continue;
       cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png: path.join(work, `${s}-${env}-${m}.png`) });

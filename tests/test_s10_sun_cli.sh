@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# s10-sun: the command-line side of the environment's sun as a directional light (docs/sun.md):
+# test_s10_sun_cli.sh <clothfit> <source dir>. Bad --env-sun values (render-preview, fit,
+# evaluate), a bad card "environment": {"sun"} and a bad preset fit.env_sun fail with an error
+# naming the option or the file and field; no preset or image is written. A fit records
+# fit.env_sun. The unit tests are tests/test_s10_sun.cpp (S10Sun.*).
+. "$(dirname "$0")/cli_common.sh"
+
+check() {  # check <text the error must contain> <args...>
+  local name=$1; shift
+  err=$("$BIN" --quiet "$@" 2>&1) && fail "$* accepted"
+  echo "$err" | grep -q -- "$name" || fail "error of '$*' does not name $name: $err"
+}
+cat > "$TMP/std.json" <<'J'
+{"schema": "clothfit.preset", "version": 1, "model": "standard", "parameters": {"base_color": [0.5, 0.5, 0.5], "roughness": 0.6, "metalness": 0}}
+J
+small=$(python3 - "$SCENE" "$TMP" <<'PY'
+import json, os, sys
+card = json.load(open(sys.argv[1]))
+card["gltf"] = os.path.join(os.path.dirname(sys.argv[1]), card["gltf"])
+card["width"] = card["height"] = 32
+json.dump(card, open(os.path.join(sys.argv[2], "small.json"), "w"))
+card["environment"]["sun"] = "maybe"
+json.dump(card, open(os.path.join(sys.argv[2], "bad.json"), "w"))
+print(os.path.join(sys.argv[2], "small.json"))
+PY
+)
+check -- "--env-sun" render-preview --scene "$small" --material "$TMP/std.json" --env-sun bogus --out "$TMP/p.png"
+check "field 'environment.sun'" render-preview --scene "$TMP/bad.json" --material "$TMP/std.json" --out "$TMP/p.png"
+[ ! -e "$TMP/p.png" ] || fail "image written despite a bad option"
+"$BIN" --quiet render-reference --scene "$small" --fabric "$SRC/datasets/fabrics/canvas.json" \
+  --spp 1 --out "$TMP/ref.exr" > /dev/null 2>&1 || fail "render-reference failed"
+check -- "--env-sun" fit --references "$TMP/ref.exr" --scenes "$small" --model standard --env-sun sometimes --out "$TMP/f.json"
+[ ! -e "$TMP/f.json" ] || fail "preset written despite a bad option"
+# A fit records its choice; evaluate refuses a bad one naming the preset and the field.
+"$BIN" --quiet fit --references "$TMP/ref.exr" --scenes "$small" --model standard --level 2 \
+  --max-iterations 2 --env-sun off --out "$TMP/f.json" > /dev/null 2>&1 || [ $? = 3 ] || fail "fit failed"
+python3 -c 'import json,sys; v=json.load(open(sys.argv[1]))["fit"].get("env_sun"); sys.exit(0 if v == "off" else "fit.env_sun = %r" % v)' "$TMP/f.json" || fail "fit.env_sun not recorded"
+check -- "--env-sun" evaluate --preset "$TMP/f.json" --env-sun bogus
+python3 -c 'import json,sys; p=json.load(open(sys.argv[1])); p["fit"]["env_sun"]="maybe"; json.dump(p, open(sys.argv[2], "w"))' "$TMP/f.json" "$TMP/g.json"
+check "field 'fit.env_sun'" evaluate --preset "$TMP/g.json"
+"$BIN" --quiet evaluate --preset "$TMP/f.json" > /dev/null 2>&1 || fail "evaluate of a good preset failed"
+echo "ok"
