@@ -91,6 +91,17 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
       if (!fj["sheen_tilt_degrees"].is_number())
         throw std::runtime_error(a.preset + ": field 'fit.sheen_tilt_degrees': expected a number");
       o.sheen_tilt_degrees = fj["sheen_tilt_degrees"].get<double>();
+      // Named here, before the preview's own (unnamed) checks: the file and the field.
+      const double t = o.sheen_tilt_degrees;
+      const std::string field = a.preset + ": field 'fit.sheen_tilt_degrees': ";
+      if (!std::isfinite(t) || std::abs(t) > 90.0)
+        throw std::runtime_error(field + "expected degrees in [-90, 90], got " + std::to_string(t));
+      if (t != 0.0 && preset.model != render::ModelKind::kCloth &&
+          preset.model != render::ModelKind::kWoven)
+        throw std::runtime_error(field + "a sheen tilt applies to the cloth and woven models only, "
+                                 "not " + render::ToString(preset.model));
+      if (t != 0.0 && preset.model == render::ModelKind::kCloth && preset.cloth.subsurface)
+        throw std::runtime_error(field + "a sheen tilt is not implemented for cloth with subsurface");
     }
   }
   ApplyVisibilityFlags(a.visibility, &o);
@@ -106,7 +117,9 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
       throw std::runtime_error(field + ": expected \"auto\", \"off\" or \"card\"");
     const std::string v = fj["env_sun"].get<std::string>();
     if (v == "card") o.env_sun_default = render::kCliDefaultSunMode;
-    else o.env_sun = render::ParseSunMode(v, field);
+    else if (v == "auto" || v == "off") o.env_sun = render::ParseSunMode(v, field);
+    else  // the value is escaped by the command's error handler (main.cpp)
+      throw std::runtime_error(field + ": expected \"auto\", \"off\" or \"card\", got \"" + v + "\"");
   }
   // The IBL engine: as the fit recorded it (fit.ibl_engine; presets before session 8 were
   // fitted on Filament's), or --ibl-engine. The woven IBL mode is the preset's "woven" object.
@@ -127,6 +140,9 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   // What is applied (review s8): auto resolved to its engine; woven FIS only on the three.js
   // engine and without the exact-IBL measurement (render/preview/preview.h UsesWovenFis).
   bool fis_applied = false;
+  // Woven "ibl": "bent" (session 10): on either engine, not with the exact-IBL measurement.
+  const bool bent_applied = preset.model == render::ModelKind::kWoven && a.exact_ibl <= 0 &&
+                            preset.woven.ibl == woven::IblMode::kBent;
   {
     render::PreviewOptions po;
     po.model = preset.model;
@@ -180,7 +196,7 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     j["env_sun"] = o.env_sun ? render::SunModeName(*o.env_sun)  // s10-sun
                              : std::string("card, else ") + render::SunModeName(o.env_sun_default);
     if (preset.model == render::ModelKind::kWoven)
-      j["woven_ibl"] = fis_applied ? "fis" : "split";
+      j["woven_ibl"] = fis_applied ? "fis" : bent_applied ? "bent" : "split";
     if (o.shadows || o.visibility.enabled()) j["visibility"] = VisibilityJson(o);
     j["rmse"] = r.rmse;
     if (fj.contains("rmse")) j["fit_rmse"] = fj["rmse"];
@@ -196,6 +212,8 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     if (fis_applied)
       std::printf(" (woven FIS, %d / %d taps)", preset.woven.fis_taps,
                   preset.woven.fis_diffuse_taps);
+    if (bent_applied) std::printf(" (woven bent-normal yarn IBL)");
+    if (o.sheen_tilt_degrees != 0.0) std::printf(", sheen tilt %g degrees", o.sheen_tilt_degrees);
     if (a.exact_ibl > 0)
       std::printf(", exact IBL (%d samples per pixel, seed %u)", a.exact_ibl, a.exact_ibl_seed);
     else if (a.exact_irradiance > 0)

@@ -81,7 +81,7 @@ void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
 void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   struct Args {
     std::string scene, material, model, out, ibl_engine = "filament", map_aniso_rule = "spec";
-    std::string env_sun;  // "": the card's environment.sun (else off)
+    std::string env_sun;  // "": the card's environment.sun (else auto, the commands' default)
     bool shadows = false;
     int exact_ibl = 0, exact_irradiance = 0;
     unsigned exact_ibl_seed = 1;

@@ -181,11 +181,17 @@ TEST(WovenPreview, FastKernelEqualsTheReferenceKernel) {
   const Scene s = SphereWithLight(32);
   const Environment env = Environment::ProceduralSky(1.0, 0.4);
   using Jet = ceres::Jet<double, 10>;
-  for (int maps = 0; maps < 2; ++maps) {
+  for (int combo = 0; combo < 4; ++combo) {  // maps off / on, x ibl split / bent (review s10)
+    const int maps = combo & 1;
     PreviewOptions o;
     o.model = ModelKind::kWoven;
     o.prefilter_base_width = 128;
     o.prefilter_samples = 16;
+    if (combo >= 2) {  // the bent tables, built for WovenParams()'s anisotropy and twist
+      o.woven.ibl = woven::IblMode::kBent;
+      o.woven.bent_anisotropy = WovenParams()[7];
+      o.woven.bent_twist = WovenParams()[8];
+    }
     if (maps) {
       std::vector<float> level0(8 * 8 * WeaveMaps::kChannels);
       std::mt19937 rng(7);

@@ -294,7 +294,7 @@ VisibilityTerms PointVisibility(const PixelContext& x, const PrimaryHit& hit, co
   RadianceFn radiance;
   if (x.env) radiance = [&x](const Vec3d& l) { return x.env->Eval(l); };
   VisibilityTerms t = ComputeVisibility(x.scene, x.bvh, x.opt.visibility, env, hit.p, hit.n, ng,
-                                        pix, x.eps, radiance);
+                                        pix, x.eps, radiance, x.lights);
   if (!x.opt.visibility.ao) t.ao = 1.0;
   return t;
 }

@@ -60,7 +60,8 @@ double TFar(const VisibilityOptions& o) {
 }
 
 // Lambert radiance leaving a bounce hit point q (normal nq facing the ray's origin).
-Rgb<double> BounceRadiance(const Scene& scene, const EmbreeScene& bvh, const VisibilityOptions& o,
+Rgb<double> BounceRadiance(const Scene& scene, const std::vector<Light>& lights,
+                           const EmbreeScene& bvh, const VisibilityOptions& o,
                            const IrradianceOverPiFn& env, const RadianceFn& env_radiance,
                            const Mesh& mesh, const Vec3d& q, const Vec3d& nq, Pcg32& rng,
                            int depth, double eps) {
@@ -69,7 +70,7 @@ Rgb<double> BounceRadiance(const Scene& scene, const EmbreeScene& bvh, const Vis
       o.fabric_albedo[2] >= 0.0)
     kd = Rgb<double>(o.fabric_albedo[0], o.fabric_albedo[1], o.fabric_albedo[2]);
   Rgb<double> e(0.0, 0.0, 0.0);  // direct irradiance over pi
-  for (const Light& light : scene.lights) {
+  for (const Light& light : lights) {
     const LightSample s = EvaluateLight(light, q);
     if (s.scale <= 0.0) continue;
     const double c = Dot(nq, s.wi);
@@ -106,7 +107,7 @@ Rgb<double> BounceRadiance(const Scene& scene, const EmbreeScene& bvh, const Vis
       if (Dot(n2, wo) < 0.0) n2 = n2 * -1.0;
       const Vec3d g2 = V(h.ng);
       const Vec3d q2 = V(a.position) + g2 * (Dot(g2, wo) > 0.0 ? eps : -eps);
-      next += BounceRadiance(scene, bvh, o, env, env_radiance, scene.meshes[size_t(h.mesh)], q2,
+      next += BounceRadiance(scene, lights, bvh, o, env, env_radiance, scene.meshes[size_t(h.mesh)], q2,
                              n2, rng, depth + 1, eps);
     }
     ao_q = Ratio(open, all);
@@ -158,7 +159,8 @@ void ValidateVisibilityOptions(const VisibilityOptions& o) {
 VisibilityTerms ComputeVisibility(const Scene& scene, const EmbreeScene& bvh,
                                   const VisibilityOptions& o, const IrradianceOverPiFn& env,
                                   const Vec3d& p, const Vec3d& n, const Vec3d& ng,
-                                  size_t pixel, double eps, const RadianceFn& env_radiance) {
+                                  size_t pixel, double eps, const RadianceFn& env_radiance,
+                                  const std::vector<Light>* lights) {
   VisibilityTerms t;
   if (!o.enabled()) return t;
   Pcg32 rng(uint64_t(o.seed), uint64_t(pixel));
@@ -190,7 +192,8 @@ VisibilityTerms ComputeVisibility(const Scene& scene, const EmbreeScene& bvh,
     if (Dot(nq, wo) < 0.0) nq = nq * -1.0;
     const Vec3d gq = V(h.ng);
     const Vec3d q = V(a.position) + gq * (Dot(gq, wo) > 0.0 ? eps : -eps);
-    sum += BounceRadiance(scene, bvh, o, env, env_radiance, mesh, q, nq, rng, 0, eps);
+    sum += BounceRadiance(scene, lights ? *lights : scene.lights, bvh, o, env, env_radiance, mesh, q,
+                          nq, rng, 0, eps);
   }
   t.ao = Ratio(open, all);
   if (o.indirect) t.indirect_over_pi = sum * (1.0 / double(o.samples));

@@ -101,6 +101,10 @@ VisibilityTerms ComputeVisibility(const Scene& scene, const EmbreeScene& bvh,
                                   const VisibilityOptions& o, const IrradianceOverPiFn& env,
                                   const Vec3<double>& p, const Vec3<double>& n,
                                   const Vec3<double>& ng, size_t pixel, double eps,
-                                  const RadianceFn& env_radiance = {});
+                                  const RadianceFn& env_radiance = {},
+                                  const std::vector<Light>* lights = nullptr);
+// lights: the punctual lights the bounce points see (null: scene.lights); the preview passes
+// the scene's lights plus an environment sun split off as a light (render/scene/sun.h), since
+// `env` / `env_radiance` are then the sun-free map's (review s10).
 
 }  // namespace clothfit::render
