@@ -120,4 +120,20 @@ inline Environment EnvironmentFrom(int W, int H,
   return env;
 }
 
+// A bright disc of `radius_deg` around the unit direction c on a dim constant sky.
+inline Environment DiscEnvironment(int W, int H, const Vec3<double>& c, double radius_deg,
+                                   const Rgb<double>& disc, const Rgb<double>& sky) {
+  const double cos_r = std::cos(radius_deg * kPi / 180.0);
+  return EnvironmentFrom(W, H, [&](const Vec3<double>& d) { return Dot(d, c) > cos_r ? disc : sky; });
+}
+
+// Options of a woven preview on the three.js IBL engine with the given yarn-lobe IBL mode.
+inline PreviewOptions WovenThreejsOptions(woven::IblMode mode) {
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  o.ibl_engine = IblEngine::kThreejs;
+  o.woven.ibl = mode;
+  return o;
+}
+
 }  // namespace clothfit::render

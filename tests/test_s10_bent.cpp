@@ -22,10 +22,7 @@ namespace {
 using V3 = Vec3<double>;
 
 PreviewOptions Woven(woven::IblMode mode, double anisotropy, double twist) {
-  PreviewOptions o;
-  o.model = ModelKind::kWoven;
-  o.ibl_engine = IblEngine::kThreejs;
-  o.woven.ibl = mode;
+  PreviewOptions o = WovenThreejsOptions(mode);
   o.woven.bent_anisotropy = anisotropy;
   o.woven.bent_twist = twist;
   return o;
@@ -33,11 +30,8 @@ PreviewOptions Woven(woven::IblMode mode, double anisotropy, double twist) {
 
 // A bright disc above and in front on a dim sky: the bent normal moves the reads across it.
 Environment Disc() {
-  const V3 c = Normalize(V3(0.35, 0.55, 0.75));
-  const double cos_r = std::cos(12.0 * kPi / 180.0);
-  return EnvironmentFrom(256, 128, [&](const V3& d) {
-    return Dot(d, c) > cos_r ? Rgb<double>(20.0, 18.0, 15.0) : Rgb<double>(0.05, 0.05, 0.06);
-  });
+  return DiscEnvironment(256, 128, Normalize(V3(0.35, 0.55, 0.75)), 12.0, {20.0, 18.0, 15.0},
+                         {0.05, 0.05, 0.06});
 }
 
 double MaxRelDiff(const std::vector<Rgb<double>>& a, const std::vector<Rgb<double>>& b) {

@@ -29,10 +29,7 @@ namespace {
 using V3 = Vec3<double>;
 
 PreviewOptions WovenThreejs(woven::IblMode mode, int taps = 16, int diffuse_taps = 16) {
-  PreviewOptions o;
-  o.model = ModelKind::kWoven;
-  o.ibl_engine = IblEngine::kThreejs;
-  o.woven.ibl = mode;
+  PreviewOptions o = WovenThreejsOptions(mode);
   o.woven.fis_taps = taps;
   o.woven.fis_diffuse_taps = diffuse_taps;
   return o;
@@ -42,11 +39,8 @@ PreviewOptions WovenThreejs(woven::IblMode mode, int taps = 16, int diffuse_taps
 // sphere on a dim sky (0.05): the case where one prefiltered read at the dominant direction
 // misplaces the light a rough lobe gathers.
 Environment CompactSource() {
-  const V3 c = Normalize(V3(0.35, 0.55, 0.75));
-  const double cos_r = std::cos(6.0 * kPi / 180.0);
-  return EnvironmentFrom(512, 256, [&](const V3& d) {
-    return Dot(d, c) > cos_r ? Rgb<double>(40.0, 36.0, 30.0) : Rgb<double>(0.05, 0.05, 0.06);
-  });
+  return DiscEnvironment(512, 256, Normalize(V3(0.35, 0.55, 0.75)), 6.0, {40.0, 36.0, 30.0},
+                         {0.05, 0.05, 0.06});
 }
 
 // In a constant environment every PMREM texel is the constant (fp16-exact values here), so

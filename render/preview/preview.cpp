@@ -299,6 +299,13 @@ VisibilityTerms PointVisibility(const PixelContext& x, const PrimaryHit& hit, co
   return t;
 }
 
+// The prefiltered GGX radiance along dd at perceptual roughness r: three.js's PMREM at its mip
+// for r, else the Filament-style chain at LodFor (every radiance table below reads through it).
+Rgb<double> PrefilteredRead(const PixelContext& x, const Vec3d& dd, double r) {
+  return x.e.pmrem ? x.e.pmrem->Sample(dd, x.e.pmrem->MipForRoughness(r))
+                   : x.e.ggx->Sample(dd, LodFor(x.opt.model, *x.e.ggx, r, x.opt.prefilter_levels));
+}
+
 // The K-node radiance tables of a fabric pixel (GGX; Charlie for gltf-sheen).
 void FillRadianceTables(const PixelContext& x, const Vec3d& n, const Vec3d& R, PixelData* pd) {
   const int K = x.opt.roughness_nodes;
@@ -306,9 +313,7 @@ void FillRadianceTables(const PixelContext& x, const Vec3d& n, const Vec3d& R, P
   for (int k = 0; k < K; ++k) {
     const double r = double(k) / double(K - 1);
     const Vec3d dd = DominantDirection(x.opt.model, n, R, r);
-    const Rgb<double> L =
-        x.e.pmrem ? x.e.pmrem->Sample(dd, x.e.pmrem->MipForRoughness(r))
-                  : x.e.ggx->Sample(dd, LodFor(x.opt.model, *x.e.ggx, r, x.opt.prefilter_levels));
+    const Rgb<double> L = PrefilteredRead(x, dd, r);
     for (int ch = 0; ch < 3; ++ch) pd->rad[size_t(k) * 3 + size_t(ch)] = float(L[ch]);
   }
   if (x.e.charlie) {
@@ -355,9 +360,7 @@ void FillBentYarnTables(const PixelContext& x, const PrimaryHit& hit, PixelData*
       const double w = woven::BentNormalWeight(x.opt.woven.bent_anisotropy, r);
       const Vec3d bent = physical_aniso::BentNormal(hit.n, hit.v, axes[j], w);
       const Vec3d dd = physical_aniso::IblDirection(bent, hit.v, r);
-      const Rgb<double> L =
-          x.e.pmrem ? x.e.pmrem->Sample(dd, x.e.pmrem->MipForRoughness(r))
-                    : x.e.ggx->Sample(dd, LodFor(x.opt.model, *x.e.ggx, r, x.opt.prefilter_levels));
+      const Rgb<double> L = PrefilteredRead(x, dd, r);
       for (int ch = 0; ch < 3; ++ch)
         pd->yrad[(size_t(j) * size_t(K) + size_t(k)) * 3 + size_t(ch)] = float(L[ch]);
     }
@@ -410,9 +413,7 @@ void FillAnisoRadianceTables(const PixelContext& x, const PrimaryHit& hit, const
     for (int k = 0; k < K; ++k) {
       const double r = double(k) / double(K - 1);
       const Vec3d dd = physical_aniso::IblDirection(bent, hit.v, r);
-      const Rgb<double> L =
-          x.e.pmrem ? x.e.pmrem->Sample(dd, x.e.pmrem->MipForRoughness(r))
-                    : x.e.ggx->Sample(dd, LodFor(x.opt.model, *x.e.ggx, r, x.opt.prefilter_levels));
+      const Rgb<double> L = PrefilteredRead(x, dd, r);
       for (int ch = 0; ch < 3; ++ch)
         pd->rad[(size_t(j) * size_t(K) + size_t(k)) * 3 + size_t(ch)] = float(L[ch]);
     }
