@@ -128,7 +128,7 @@ inline Environment DiscEnvironment(int W, int H, const Vec3<double>& c, double r
 }
 
 // Options of a woven preview on the three.js IBL engine with the given yarn-lobe IBL mode.
-inline PreviewOptions WovenThreejsOptions(woven::IblMode mode) {
+inline PreviewOptions WovenThreejsOptions(::clothfit::woven::IblMode mode) {
   PreviewOptions o;
   o.model = ModelKind::kWoven;
   o.ibl_engine = IblEngine::kThreejs;
