@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -23,6 +24,7 @@
 #include "fit/image_fit.h"
 #include "fit/reference.h"
 #include "fit/woven_fit.h"
+#include "fit/yarn_farfield.h"
 #include "render/reference/fabric.h"
 #include "render/scene/image_io.h"
 #include "render/reference/path_tracer.h"
@@ -156,6 +158,10 @@ struct FitArgs {
   int spp = 256, stride = 0, threads = 0, max_iterations = 50;
   int exact_ibl = 0;  // s7-ibl measurement hook (docs/fitting.md "The sphere's error decomposed")
   double sheen_tilt = 0.0;  // s10-velvet: the sheen nap prototype (docs/velvet.md)
+  // Session 11: the far-field yarn lobe measurement (fit/yarn_farfield.h; "" = the model's own).
+  std::string yarn_lobe;
+  int yarn_lobe_positions = 16;
+  int yarn_table_theta = 16, yarn_table_jitter = 0;
   // Session 8: the IBL engine of the previews (auto: the engine web/ draws the model with) and
   // woven's IBL integration (docs/fitting.md "Filtered importance sampling for woven's IBL").
   std::string ibl_engine = "auto", woven_ibl = "auto";
@@ -241,6 +247,24 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "measurement only: fit with the environment integrated exactly (Monte Carlo, "
                   "this many directions per pixel, seed 1; no split sum); 0 = the engine (default)")
       ->check(CLI::Range(0, 65536));
+  cmd->add_option("--yarn-lobe", a.yarn_lobe,
+                  "measurement only (woven, with --fabric of an irawan fabric): 'farfield' "
+                  "replaces the yarn lobes by the fabric's period-averaged Irawan specular "
+                  "(fit/yarn_farfield.h; needs --exact-ibl), 'table' by that lobe tabulated "
+                  "(brdf/yarn_table.h) with its own split-sum IBL, 'farfield-split' the far-field lobe "
+                  "for lights and the table's split sum for the environment; roughness, anisotropy, twist, "
+                  "specular_f0 and forward_scattering locked (no effect)")
+      ->check(CLI::IsMember({"farfield", "table", "farfield-split"}));
+  cmd->add_option("--yarn-table-theta", a.yarn_table_theta,
+                  "--yarn-lobe table: theta bins of wo and wi (phi: twice as many; default 16)")
+      ->check(CLI::Range(2, 64));
+  cmd->add_option("--yarn-table-jitter", a.yarn_table_jitter,
+                  "--yarn-lobe table: 0 = bin-centre values (default), N = each entry the mean of N "
+                  "(wo, wi) pairs within its bins")
+      ->check(CLI::Range(0, 4096));
+  cmd->add_option("--yarn-lobe-positions", a.yarn_lobe_positions,
+                  "weave positions per far-field evaluation (a square; default 16)")
+      ->check(CLI::Range(1, 4096));
   AddVisibilityFlags(cmd, a.visibility);  // s9-vis: measurement flags (bin/visibility_flags.h)
   cmd->add_option("--sheen-tilt", a.sheen_tilt,
                   "measurement (cloth, woven): the sheen lobe's normal tilted this many degrees "
@@ -457,6 +481,28 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
     o.start.woven.fis_diffuse_taps =
         a.fis_diffuse_taps >= 0 ? a.fis_diffuse_taps : woven::kDefaultFisDiffuseTaps;
   }
+  if (!a.yarn_lobe.empty()) {  // session 11 measurement (docs/fitting.md "far-field yarn lobe")
+    if (o.start.model != render::ModelKind::kWoven)
+      throw std::invalid_argument("--yarn-lobe: only for --model woven");
+    if (a.yarn_lobe == "farfield" && a.exact_ibl <= 0)
+      throw std::invalid_argument("--yarn-lobe farfield: needs --exact-ibl N (the lobe has no "
+                                  "split-sum path; --yarn-lobe table has)");
+    if (a.fabric.empty())
+      throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": needs --fabric (an irawan fabric)");
+    o.yarn_far_field = std::make_shared<const fit::YarnFarField>(a.fabric, a.yarn_lobe_positions);
+    if (a.yarn_lobe == "table" || a.yarn_lobe == "farfield-split") {
+      const auto t0 = std::chrono::steady_clock::now();
+      o.yarn_table = std::make_shared<const yarn_table::Table>(
+          o.yarn_far_field->Bake(a.yarn_table_theta, 2 * a.yarn_table_theta, a.yarn_table_jitter));
+      std::printf("fit: yarn table %d x %d per direction baked in %.2f s (%s)\n", a.yarn_table_theta,
+                  2 * a.yarn_table_theta,
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+                  o.yarn_far_field->Describe().c_str());
+      o.yarn_table_ibl_only = a.yarn_lobe == "farfield-split";
+    }
+    for (const char* n : {"roughness", "anisotropy", "twist", "specular_f0", "forward_scattering"})
+      if (std::find(o.locked.begin(), o.locked.end(), n) == o.locked.end()) o.locked.push_back(n);
+  }
   ApplyStarts(a, &o);
   return o;
 }
@@ -537,6 +583,14 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
   fitj["max_iterations"] = o.max_iterations;
   fitj["min_coverage"] = o.min_coverage;
   if (o.exact_ibl_samples > 0) fitj["exact_ibl_samples"] = o.exact_ibl_samples;  // not an engine fit
+  if (o.yarn_far_field) {  // session 11 measurement: not an engine fit either
+    fitj["yarn_lobe"] = (o.yarn_table ? std::string(o.yarn_table_ibl_only ? "split sum of the " : "") +
+                                            "table " + std::to_string(o.yarn_table->n_theta) + "x" +
+                                            std::to_string(o.yarn_table->n_phi) + " of the "
+                                      : std::string()) +
+                        o.yarn_far_field->Describe();
+    fitj["yarn_lobe_warp_albedo_share"] = o.yarn_far_field->WarpAlbedoShare();
+  }
   if (o.sheen_tilt_degrees != 0.0) fitj["sheen_tilt_degrees"] = o.sheen_tilt_degrees;  // s10-velvet
   if (o.shadows || o.visibility.enabled()) fitj["visibility"] = VisibilityJson(o);  // s9-vis
   {  // the IBL engine the previews reproduced (resolved; `evaluate` defaults to it)
@@ -591,13 +645,13 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
 
 // Per scene: the fitted preview (display PNG and linear EXR) and the residual EXR.
 void WriteFitImages(const std::string& dir, const FitFiles& f, const LoadedScenes& l,
-                    const render::MaterialPreset& preset, render::IblEngine engine,
-                    std::optional<render::SunMode> env_sun) {
+                    const render::MaterialPreset& preset, const fit::FitOptions& o) {
   fs::create_directories(dir);
   for (size_t i = 0; i < l.sc.size(); ++i) {
     const render::Scene& scene = l.sc[i];
-    std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset, engine, env_sun,
-                                                         render::kCliDefaultSunMode);
+    // the fit's own preview settings: a measurement fit's (exact IBL, visibility, sheen tilt,
+    // far-field lobe) images show what its residuals were computed on
+    std::vector<float> frame = fit::RenderPreviewFrame(scene, l.envs[i].get(), preset, o);
     // A transparent-film reference (alpha coverage) has no environment behind the geometry:
     // where it saw nothing, the preview images show nothing either, so side-by-sides and
     // residuals do not mix in background differences.
@@ -790,7 +844,7 @@ int RunFit(const FitArgs& a, const Globals& g) {
                                 {"fabric", a.fabric.empty() ? nlohmann::json(nullptr)
                                                             : nlohmann::json(a.fabric)}};
   // Images first, the preset last: a preset on disk means its images are complete.
-  if (!a.images.empty()) WriteFitImages(a.images, files, l, preset, o.ibl_engine, o.env_sun);
+  if (!a.images.empty()) WriteFitImages(a.images, files, l, preset, o);
   // weave_maps: "uri" (relative to the preset; the maps are written next to it) beside the
   // absolute "file", so the preset's directory can move (docs/preset-format.md).
   render::AddPresetWeaveMapUris(&preset, a.out);

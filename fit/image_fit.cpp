@@ -1,4 +1,5 @@
 #include "fit/image_fit.h"
+#include "fit/yarn_farfield.h"
 
 #include <tbb/parallel_for.h>
 
@@ -70,6 +71,44 @@ struct SceneData {
 };
 
 // A copy of `full` restricted to the cache pixels `keep` (in that order).
+// The preview options of a fit's previews for the preset `p`: model, cloth and woven options,
+// weave maps, IBL engine, sun, and the measurement settings (exact IBL, sheen tilt,
+// visibility, far-field yarn lobe). The caller adds the sample mask and footprint.
+render::PreviewOptions PreviewOptionsFor(const FitOptions& opt, const render::MaterialPreset& p) {
+  render::PreviewOptions po;
+  po.model = p.model;
+  po.cloth = p.cloth;
+  po.woven = render::PreviewWovenOptions(p);  // yarn layering, tints, IBL mode (split / FIS) and taps
+  po.ibl_engine = opt.ibl_engine;
+  po.weave_maps = render::LoadPresetWeaveMaps(p);  // woven weave maps (null: none)
+  po.exact_ibl_samples = opt.exact_ibl_samples;
+  po.exact_ibl_seed = opt.exact_ibl_seed;
+  po.exact_irradiance_samples = opt.exact_irradiance_samples;
+  po.sheen_tilt_degrees = opt.sheen_tilt_degrees;
+  po.shadows = opt.shadows;
+  po.visibility = opt.visibility;
+  po.env_sun = opt.env_sun;
+  po.env_sun_default = opt.env_sun_default;
+  if (opt.yarn_table && !(opt.yarn_table_ibl_only && opt.yarn_far_field)) {
+    // the tabulated lobe: direct values and the split-sum IBL from the table
+    std::shared_ptr<const yarn_table::Table> t = opt.yarn_table;
+    po.yarn_lobe = [t](const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
+      t->Eval(wo, wi, out);
+    };
+    po.yarn_ibl = [t](const Vec3<double>& wo, yarn_table::IblLobe out[2]) { t->Ibl(wo, out); };
+  } else if (opt.yarn_far_field) {
+    if (opt.yarn_table) {  // yarn_table_ibl_only: the table's split sum for the environment
+      std::shared_ptr<const yarn_table::Table> t = opt.yarn_table;
+      po.yarn_ibl = [t](const Vec3<double>& wo, yarn_table::IblLobe out[2]) { t->Ibl(wo, out); };
+    }
+    std::shared_ptr<const YarnFarField> ff = opt.yarn_far_field;
+    po.yarn_lobe = [ff](const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
+      ff->Eval(wo, wi, out);
+    };
+  }
+  return po;
+}
+
 std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
                                              const std::vector<int>& keep) {
   auto c = std::make_unique<render::PreviewCache>();
@@ -97,6 +136,13 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
                               full.light_tangent.begin() + long(full.light_begin[ui]) * 4,
                               full.light_tangent.begin() + long(full.light_begin[ui + 1]) * 4);
     }
+    if (!full.yarn_ibl.empty())  // tabulated yarn lobes' split sum: 6 per pixel
+      c->yarn_ibl.insert(c->yarn_ibl.end(), full.yarn_ibl.begin() + long(ui * 6),
+                         full.yarn_ibl.begin() + long((ui + 1) * 6));
+    if (!full.yarn_lobe.empty())  // far-field yarn lobe (measurement): 2 per light sample
+      c->yarn_lobe.insert(c->yarn_lobe.end(),
+                          full.yarn_lobe.begin() + long(full.light_begin[ui]) * 2,
+                          full.yarn_lobe.begin() + long(full.light_begin[ui + 1]) * 2);
     if (!full.weave.empty()) {  // woven with weave maps: the sampled maps per pixel
       const size_t nc = size_t(render::WeaveMaps::kChannels);
       c->weave.insert(c->weave.end(), full.weave.begin() + long(ui * nc),
@@ -496,24 +542,11 @@ std::unique_ptr<SceneData> BuildSceneData(const SceneInput& in, const FitOptions
   d->space = opt.space;
   d->op = render::ParseToneMapping(scene.card.tone_mapping);
   d->exposure = scene.card.exposure;
-  render::PreviewOptions po;
-  po.model = opt.start.model;
-  po.cloth = opt.start.cloth;
-  po.woven = render::PreviewWovenOptions(opt.start);  // yarn layering, tints, IBL mode (split / FIS) and taps
-  po.ibl_engine = opt.ibl_engine;
+  render::PreviewOptions po = PreviewOptionsFor(opt, opt.start);
   // Only the pixels a block can sample get preview cache entries (fit speed: the radiance
   // tables of the other pixels were built and thrown away); every pixel's fabric flag is kept.
   po.sample_mask = SampleMask(scene.card.width, scene.card.height, B, stride);
-  po.weave_maps = render::LoadPresetWeaveMaps(opt.start);  // woven weave maps (null: none)
   po.weave_footprint_scale = stride;  // a kept pixel stands for its stride x stride cell
-  po.exact_ibl_samples = opt.exact_ibl_samples;
-  po.exact_ibl_seed = opt.exact_ibl_seed;
-  po.exact_irradiance_samples = opt.exact_irradiance_samples;
-  po.sheen_tilt_degrees = opt.sheen_tilt_degrees;
-  po.shadows = opt.shadows;
-  po.visibility = opt.visibility;
-  po.env_sun = opt.env_sun;
-  po.env_sun_default = opt.env_sun_default;
   const auto full = render::PreviewCache::Build(scene, in.environment, po);
   std::vector<int> cache_index(size_t(full->width) * size_t(full->height), -1);
   for (size_t i = 0; i < full->pixels.size(); ++i) cache_index[size_t(full->pixels[i])] = int(i);
@@ -868,6 +901,16 @@ std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::
   return render::ComposeFrame(*cache, px);
 }
 
+std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
+                                      const render::MaterialPreset& preset,
+                                      const FitOptions& fit) {
+  const render::PreviewOptions o = PreviewOptionsFor(fit, preset);
+  auto cache = render::PreviewCache::Build(scene, env, o);
+  std::vector<Rgb<double>> px;
+  render::EvaluatePreview(*cache, preset.values.data(), px);
+  return render::ComposeFrame(*cache, px);
+}
+
 struct PreparedScenes {
   SceneList data;
   int level = 0, stride = 0;
@@ -885,6 +928,9 @@ struct PreparedScenes {
   std::optional<render::SunMode> env_sun;
   render::SunMode env_sun_default = render::SunMode::kOff;
   int fis_taps = 0, fis_diffuse_taps = 0;
+  std::shared_ptr<const YarnFarField> yarn_far_field;
+  std::shared_ptr<const yarn_table::Table> yarn_table;
+  bool yarn_table_ibl_only = false;
   double seconds = 0.0;
 };
 
@@ -926,6 +972,9 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->woven_ibl = opt.start.woven.ibl;
   p->fis_taps = opt.start.woven.fis_taps;
   p->fis_diffuse_taps = opt.start.woven.fis_diffuse_taps;
+  p->yarn_far_field = opt.yarn_far_field;
+  p->yarn_table = opt.yarn_table;
+  p->yarn_table_ibl_only = opt.yarn_table_ibl_only;
   p->seconds = SecondsSince(t0);
   return p;
 }
@@ -967,7 +1016,9 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->ibl_engine != opt.ibl_engine || prepared->woven_ibl != opt.start.woven.ibl ||
         prepared->env_sun != opt.env_sun || prepared->env_sun_default != opt.env_sun_default ||
         prepared->fis_taps != opt.start.woven.fis_taps ||
-        prepared->fis_diffuse_taps != opt.start.woven.fis_diffuse_taps)
+        prepared->fis_diffuse_taps != opt.start.woven.fis_diffuse_taps ||
+        prepared->yarn_far_field != opt.yarn_far_field || prepared->yarn_table != opt.yarn_table ||
+        prepared->yarn_table_ibl_only != opt.yarn_table_ibl_only)
       throw FitError("fit: the prepared scenes were built with other options");
   } else {
     own = PrepareScenes(inputs, opt);

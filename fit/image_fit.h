@@ -43,6 +43,8 @@
 
 namespace clothfit::fit {
 
+class YarnFarField;  // fit/yarn_farfield.h
+
 enum class Space { kDisplay, kLinear, kLog };
 std::string ToString(Space s);
 Space ParseSpace(const std::string& s);  // throws std::invalid_argument
@@ -116,6 +118,18 @@ struct FitOptions {
   // environment.sun, else env_sun_default (off here; `clothfit fit` and `evaluate` set auto).
   std::optional<render::SunMode> env_sun;
   render::SunMode env_sun_default = render::SunMode::kOff;
+  // Far-field yarn lobe (measurement, fit/yarn_farfield.h; woven with exact_ibl_samples > 0):
+  // the previews' yarn lobes are the fabric's period-averaged Irawan specular
+  // (PreviewOptions::yarn_lobe). Null: the model's own lobes.
+  std::shared_ptr<const YarnFarField> yarn_far_field;
+  // Tabulated yarn lobe (session 11; brdf/yarn_table.h, woven): the previews' yarn lobes from
+  // the table, direct lights by lookup and the environment by its per-wo split sum
+  // (PreviewOptions::yarn_lobe and yarn_ibl), so no exact IBL is needed. Takes precedence over
+  // yarn_far_field. Null: the model's own lobes.
+  std::shared_ptr<const yarn_table::Table> yarn_table;
+  // With yarn_table and yarn_far_field: the table gives the environment's split sum only, the
+  // far-field lobe the lights (and exact-IBL samples): separates the two approximations.
+  bool yarn_table_ibl_only = false;
 };
 
 struct SceneInput {
@@ -187,5 +201,10 @@ std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::
                                       render::IblEngine engine = render::IblEngine::kFilament,
                                       std::optional<render::SunMode> env_sun = std::nullopt,
                                       render::SunMode env_sun_default = render::SunMode::kOff);
+// The same with the fit's own preview settings (IBL engine, sun, and the measurement settings:
+// exact IBL, sheen tilt, visibility, far-field yarn lobe), so that a measurement fit's images
+// show what its residuals were computed on; the full frame (no sample mask).
+std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::Environment* env,
+                                      const render::MaterialPreset& preset, const FitOptions& fit);
 
 }  // namespace clothfit::fit

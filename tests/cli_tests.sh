@@ -115,6 +115,19 @@ PY
     echo "$out" | grep -q "none.exr" || fail "batch job error does not name the file: $out"
     err=$("$BIN" --quiet fit --model standard 2>&1) && fail "fit without --out accepted"
     echo "$err" | grep -q -- "--out is required" || fail "missing --out not named: $err"
+    # --yarn-lobe farfield (session 11 measurement): woven only, with --exact-ibl and an irawan
+    # --fabric; refused before any reference is read, nothing written.
+    D="$(dirname "$0")/../datasets"
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
+      --yarn-lobe farfield --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe without --exact-ibl accepted"
+    echo "$err" | grep -q -- "--yarn-lobe farfield: needs --exact-ibl" || fail "--yarn-lobe without --exact-ibl: $err"
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model standard \
+      --yarn-lobe farfield --exact-ibl 16 --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe on standard accepted"
+    echo "$err" | grep -q -- "--yarn-lobe: only for --model woven" || fail "--yarn-lobe on standard: $err"
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
+      --yarn-lobe farfield --exact-ibl 16 --fabric "$D/fabrics/velvet.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe on velvet accepted"
+    echo "$err" | grep -q "velvet.json: model 'sadeghi' has no yarns" || fail "--yarn-lobe on velvet: $err"
+    [ ! -e "$TMP/y.json" ] || fail "preset written despite a --yarn-lobe error"
     ;;
   report)
     # Small EXRs from the lut command stand in for references and previews (16x16, RGB).

@@ -122,6 +122,7 @@ struct PixelData {
   std::array<float, 2> tv{};  // woven: t.v, b.v
   std::vector<float> lt;      // woven: t.l, b.l, t.h, b.h per light sample
   std::array<float, WeaveMaps::kChannels> weave{};  // woven with maps: the sampled maps
+  std::array<float, 6> yibl{};  // PreviewOptions::yarn_ibl: A_w L_w, A_f L_f
 };
 
 // What the per-pixel work of a cache build reads.
@@ -603,6 +604,16 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       FillRadianceTables(x, hit.n, R, &pd);
     if (split_sum && x.fis_yarn) FillFisYarnTable(x, hit, &pd);
     if (split_sum && UsesWovenBent(x.opt)) FillBentYarnTables(x, hit, &pd);
+    if (split_sum && x.opt.yarn_ibl) {  // the tabulated lobes' split sum (PreviewOptions::yarn_ibl)
+      yarn_table::IblLobe lobes[2];
+      x.opt.yarn_ibl(Vec3d(Dot(hit.t, hit.v), Dot(hit.b, hit.v), hit.NoV), lobes);
+      for (int k = 0; k < 2; ++k) {
+        const Vec3d& d = lobes[k].dir;
+        const Vec3d dd = Normalize(hit.t * d.x + hit.b * d.y + hit.n * d.z);
+        const Rgb<double> L = PrefilteredRead(x, dd, lobes[k].roughness);
+        for (int ch = 0; ch < 3; ++ch) pd.yibl[size_t(k * 3 + ch)] = float(lobes[k].albedo * L[ch]);
+      }
+    }
     if (split_sum && SheenTiltOn(x.opt)) {  // the sheen lobe's table about n_s (sheen_tilt.h)
       const double th = x.opt.sheen_tilt_degrees * kPi / 180.0;
       const Vec3d ns = hit.n * std::cos(th) + hit.t * std::sin(th);
@@ -638,6 +649,8 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
       c->yarn_radiance.insert(c->yarn_radiance.end(), pd.yrad.begin(), pd.yrad.end());
       c->sheen_tilt_radiance.insert(c->sheen_tilt_radiance.end(), pd.trad.begin(), pd.trad.end());
+      if (c->options.yarn_ibl && c->features.ibl)
+        c->yarn_ibl.insert(c->yarn_ibl.end(), pd.yibl.begin(), pd.yibl.end());
       if (c->options.model == ModelKind::kWoven ||
           c->options.model == ModelKind::kPhysicalAniso || SheenTiltOn(c->options)) {
         c->tangent_v.insert(c->tangent_v.end(), pd.tv.begin(), pd.tv.end());
@@ -694,6 +707,18 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
     c->sun_split = sun->split.found;
   }
   const bool exact_ibl = env != nullptr && opt.exact_ibl_samples > 0;
+  if (opt.yarn_lobe) {  // far-field yarn lobe (measurement): every light a light sample
+    if (opt.model != ModelKind::kWoven)
+      throw std::invalid_argument("preview: a yarn_lobe applies to the woven model only, not " +
+                                  ToString(opt.model));
+    if (env && !exact_ibl && !opt.yarn_ibl)
+      throw std::invalid_argument("preview: a yarn_lobe needs exact_ibl_samples > 0 or a "
+                                  "yarn_ibl with an environment");
+    if (opt.woven.yarn_layer != woven::YarnLayer::kAdditive || SheenTiltOn(opt) ||
+        opt.woven_reference_kernel)
+      throw std::invalid_argument("preview: a yarn_lobe needs the additive yarn layer, no sheen "
+                                  "tilt and the fast woven kernel");
+  }
   c->features.direct = !lights.empty() || exact_ibl;
   c->features.ibl = env != nullptr && !exact_ibl;  // exact: the environment is in the lights
   c->features.subsurface = opt.model == ModelKind::kCloth && opt.cloth.subsurface;
@@ -756,6 +781,21 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   tbb::parallel_for(0, H, [&](int y) { BuildRow(x, y, c.get(), &rows[size_t(y)]); });
 
   AssembleFabricPixels(rows, c.get());
+  if (opt.yarn_lobe) {  // the far-field lobe per light sample, local frame (t, b, n)
+    c->yarn_lobe.assign(c->light_samples.size() * 2, 0.f);
+    tbb::parallel_for(size_t(0), c->pixels.size(), [&](size_t i) {
+      const Vec3d wo{double(c->tangent_v[i * 2]), double(c->tangent_v[i * 2 + 1]),
+                     double(c->NoV[i])};
+      for (int s = c->light_begin[i]; s < c->light_begin[i + 1]; ++s) {
+        const float* lt = &c->light_tangent[size_t(s) * 4];
+        const Vec3d wi{double(lt[0]), double(lt[1]), double(c->light_samples[size_t(s)].NoL)};
+        double v[2] = {0.0, 0.0};
+        if (wo.z > 0.0 && wi.z > 0.0) opt.yarn_lobe(Normalize(wo), Normalize(wi), v);
+        c->yarn_lobe[size_t(s) * 2] = float(v[0]);
+        c->yarn_lobe[size_t(s) * 2 + 1] = float(v[1]);
+      }
+    });
+  }
   c->build_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return c;
@@ -869,6 +909,18 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   const woven::FrameTerms<T> f = woven::PrepareFrame(wp, wo, dfg, phase);
   CheckWovenBentFrame(c.options, ScalarPart(wp.anisotropy), ScalarPart(wp.twist));
   const bool bent = UsesWovenBent(c.options) && !c.yarn_radiance.empty();
+  // Far-field yarn lobe (PreviewOptions::yarn_lobe): EvalDirectLight with the yarn specular
+  // zeroed gives the diffuse and sheen terms (additive layer: FrameTerms do not depend on
+  // specular_color), the yarn term is added from the cached lobe values.
+  const bool far_field = bool(c.options.yarn_lobe);
+  if (far_field && kIbl && c.yarn_ibl.size() != c.pixels.size() * 6)
+    throw std::invalid_argument("preview: the cache has no yarn IBL values (PreviewOptions::yarn_ibl)");
+  if (far_field && c.yarn_lobe.size() != c.light_samples.size() * 2)  // e.g. a copied cache
+    throw std::invalid_argument("preview: the cache has " + std::to_string(c.yarn_lobe.size()) +
+                                " yarn lobe values for " + std::to_string(c.light_samples.size()) +
+                                " light samples (PreviewOptions::yarn_lobe)");
+  woven::Params<T> wp_no_yarn = wp;
+  if (far_field) wp_no_yarn.specular_color = Rgb<T>(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
   TableWeights<T> tw_e, tw_s;
   if constexpr (kIbl) {
     tw_e = MakeTableWeights(K, f.lb.r_e);
@@ -892,6 +944,21 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
         for (int s = c.light_begin[i]; s < c.light_begin[i + 1]; ++s) {
           const PreviewLightSample& q = c.light_samples[size_t(s)];
           const float* lt = &c.light_tangent[size_t(s) * 4];
+          if (far_field) {  // PreviewOptions::yarn_lobe: the model's terms without its yarn lobes
+            const Rgb<T> rest = woven::EvalDirectLight(
+                wp_no_yarn, f, vt, ws, G(double(q.NoL)), G(double(q.NoH)), G(double(q.LoH)),
+                G(double(lt[0])), G(double(lt[1])), G(double(lt[2])), G(double(lt[3])), dfg,
+                phase);
+            const G NoL = Saturate(G(double(q.NoL)));
+            const float* yl = &c.yarn_lobe[size_t(s) * 2];
+            const T lobes_w = vt.mw * G(2.0 * double(yl[0]));
+            const T lobes_f = vt.mf * G(2.0 * double(yl[1]));
+            const T s_l = f.sheen_off ? Const<T>(1.0) : Min(vt.s_v, woven::SheenScalingAt(f, dfg, NoL));
+            const Rgb<T> yarn = wp.specular_color * (f.tint_w * lobes_w + f.tint_f * lobes_f) *
+                                (ws.glint * s_l);
+            L += TimesConstRgb(rest + woven::ScaleRgb(yarn, NoL), q.irradiance);
+            continue;
+          }
           const Rgb<T> fl = woven::EvalDirectLight(
               wp, f, vt, ws, G(double(q.NoL)), G(double(q.NoH)), G(double(q.LoH)),
               G(double(lt[0])), G(double(lt[1])), G(double(lt[2])), G(double(lt[3])), dfg, phase);
@@ -903,7 +970,14 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
         // yarn lobes: the FIS table when the cache has one (woven ibl "fis"), else the split sum's
         const woven::WovenIblWeights<T> w = woven::EvalIblView(wp, f, vt, ws);
         Rgb<T> ibl;
-        if (bent) {  // woven "bent": the warp lobe's table, then the weft lobe's
+        if (far_field) {  // PreviewOptions::yarn_ibl: A_k L_k per lobe, cached
+          const float* y = &c.yarn_ibl[i * 6];
+          const Rgb<T> yw = f.tint_w * (vt.mw * Const<T>(2.0)), yf = f.tint_f * (vt.mf * Const<T>(2.0));
+          Rgb<T> lobes;
+          for (int ch = 0; ch < 3; ++ch)
+            lobes[ch] = yw[ch] * G(double(y[ch])) + yf[ch] * G(double(y[3 + ch]));
+          ibl = wp.specular_color * lobes * (vt.s_v * ws.glint);
+        } else if (bent) {  // woven "bent": the warp lobe's table, then the weft lobe's
           const float* yw = &c.yarn_radiance[i * size_t(K) * 6];
           ibl = w.warp * ApplyTableWeights(yw, tw_e) + w.weft * ApplyTableWeights(yw + K * 3, tw_e);
         } else {
@@ -1030,6 +1104,18 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
                                           *c.woven_phase)
                    : woven::EvalIbl(wp, c.options.woven, wl, NoV, ws, *c.dfg, *c.woven_phase);
           const bool bent = UsesWovenBent(c.options) && !c.yarn_radiance.empty();
+  // Far-field yarn lobe (PreviewOptions::yarn_lobe): EvalDirectLight with the yarn specular
+  // zeroed gives the diffuse and sheen terms (additive layer: FrameTerms do not depend on
+  // specular_color), the yarn term is added from the cached lobe values.
+  const bool far_field = bool(c.options.yarn_lobe);
+  if (far_field && kIbl && c.yarn_ibl.size() != c.pixels.size() * 6)
+    throw std::invalid_argument("preview: the cache has no yarn IBL values (PreviewOptions::yarn_ibl)");
+  if (far_field && c.yarn_lobe.size() != c.light_samples.size() * 2)  // e.g. a copied cache
+    throw std::invalid_argument("preview: the cache has " + std::to_string(c.yarn_lobe.size()) +
+                                " yarn lobe values for " + std::to_string(c.light_samples.size()) +
+                                " light samples (PreviewOptions::yarn_lobe)");
+  woven::Params<T> wp_no_yarn = wp;
+  if (far_field) wp_no_yarn.specular_color = Rgb<T>(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
           const float* yrad = c.yarn_radiance.empty()
                                   ? rad
                                   : &c.yarn_radiance[i * size_t(K) * 3 * (bent ? 2 : 1)];  // FIS / bent

@@ -46,6 +46,7 @@
 #include "brdf/math.h"
 #include "brdf/table.h"
 #include "brdf/woven.h"
+#include "brdf/yarn_table.h"
 #include "render/preview/visibility.h"
 #include "render/preview/weave_maps.h"
 #include "render/scene/environment.h"
@@ -133,6 +134,25 @@ struct PreviewOptions {
   // (bit-identical to no split); the clothfit commands default to auto (docs/sun.md).
   std::optional<SunMode> env_sun;
   SunMode env_sun_default = SunMode::kOff;
+  // Far-field yarn lobe (measurement, docs/fitting.md "The far-field yarn lobe (session 11)";
+  // woven only, additive yarn layer, every light through the light samples: exact_ibl_samples
+  // > 0 when the scene has an environment): when set, the woven yarn lobes (anisotropic GGX x
+  // phase Fresnel) are replaced by this function's values, computed once per light sample at
+  // cache build: out[0], out[1] = the warp and the weft yarn specular BRDF (no cosine, no ks)
+  // for the local directions wo (to the viewer) and wi (to the light), x = t (+u, warp),
+  // y = b (+v, weft), z = n (fit/yarn_farfield.h: the period-averaged Irawan specular). The
+  // frame is then ks (x) glint [2 m tint_w out[0] + 2 (1 - m) tint_f out[1]] + the diffuse
+  // and sheen terms as usual (m = warp_share; m = 0.5 reproduces the function's lobe).
+  // roughness, anisotropy, twist, specular_f0 and forward_scattering have no effect.
+  // Must be thread-safe. Empty (default): the model's own lobes.
+  std::function<void(const Vec3<double>& wo, const Vec3<double>& wi, double out[2])> yarn_lobe;
+  // With yarn_lobe, the split-sum IBL of those lobes (session 11; woven, the environment's
+  // split sum): per fabric pixel the function gives, for wo (local frame as above), each lobe's
+  // albedo A_k, mean direction (local) and equivalent roughness (brdf/yarn_table.h IblLobe);
+  // the cache reads the prefiltered environment (the IBL engine's: three.js PMREM or
+  // Filament's chain) at that direction and roughness: yarn IBL = ks (x) glint S(NoV)
+  // [2 m tint_w A_w L_w + 2 (1 - m) tint_f A_f L_f]. Empty: yarn_lobe needs exact_ibl_samples.
+  std::function<void(const Vec3<double>& wo, yarn_table::IblLobe out[2])> yarn_ibl;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;
@@ -210,6 +230,12 @@ class PreviewCache {
   // Woven with weave maps only (else empty): WeaveMaps::kChannels per fabric pixel (warp,
   // weft, kd.R, kd.G, kd.B ratios), the maps sampled at the pixel's uv and footprint.
   std::vector<float> weave;
+  // PreviewOptions::yarn_lobe set (else empty): its two values per light sample (parallel to
+  // light_samples).
+  std::vector<float> yarn_lobe;
+  // PreviewOptions::yarn_ibl set with a split-sum environment (else empty): 6 per fabric pixel,
+  // A_w L_w (RGB) then A_f L_f (RGB).
+  std::vector<float> yarn_ibl;
   const Table2D* woven_phase = nullptr;   // lut::DefaultWovenPhase() (woven only)
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
   const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table

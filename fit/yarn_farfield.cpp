@@ -1,0 +1,176 @@
+// fit/yarn_farfield.cpp: see yarn_farfield.h.
+#include "fit/yarn_farfield.h"
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <stdexcept>
+
+#include <tbb/parallel_for.h>
+
+#include "render/reference/fabric.h"
+#include "render/reference/irawan.h"
+
+namespace clothfit::fit {
+
+namespace {
+
+uint64_t Mix(uint64_t z) {
+  z += 0x9e3779b97f4a7c15ull;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+uint64_t Bits(double x) {
+  uint64_t b;
+  std::memcpy(&b, &x, sizeof b);
+  return b;
+}
+double Unit(uint64_t z) { return double(z >> 11) * (1.0 / 9007199254740992.0); }
+
+}  // namespace
+
+struct YarnFarField::Impl {
+  render::Fabric fabric;
+  const render::IrawanBsdf* irawan = nullptr;
+  int side = 4;
+  std::string path;
+};
+
+YarnFarField::YarnFarField(const std::string& fabric_path, int positions)
+    : impl_(std::make_unique<Impl>()) {
+  const int side = int(std::lround(std::sqrt(double(std::max(positions, 0)))));
+  if (positions < 1 || positions > 4096 || side * side != positions)
+    throw std::invalid_argument("yarn far-field: positions " + std::to_string(positions) +
+                                " is not a square in [1, 4096]");
+  impl_->fabric = render::LoadFabric(fabric_path);
+  impl_->irawan = dynamic_cast<const render::IrawanBsdf*>(impl_->fabric.bsdf.get());
+  if (!impl_->irawan)
+    throw std::invalid_argument(fabric_path + ": model '" + impl_->fabric.model +
+                                "' has no yarns: the far-field yarn lobe needs an irawan fabric");
+  impl_->side = side;
+  impl_->path = fabric_path;
+}
+
+YarnFarField::~YarnFarField() = default;
+
+void YarnFarField::Eval(const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) const {
+  out[0] = out[1] = 0.0;
+  if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
+  const render::IrawanBsdf& b = *impl_->irawan;
+  const auto& pat = b.pattern();
+  uint64_t h = Mix(Bits(wo.x) ^ Mix(Bits(wo.y) ^ Mix(Bits(wo.z) ^ Mix(Bits(wi.x) ^
+                   Mix(Bits(wi.y) ^ Mix(Bits(wi.z)))))));
+  const int S = impl_->side;
+  const double norm = b.specular_normalisation() / double(S * S);
+  // One tile in uv: 1 / repeat along u and v.
+  const double tu = 1.0 / b.repeat_u(), tv = 1.0 / b.repeat_v();
+  for (int j = 0; j < S; ++j) {
+    for (int i = 0; i < S; ++i) {
+      // each point in its own random tile: the fineness intensity (hashed per fabric cell,
+      // exponentially distributed) varies from tile to tile
+      h = Mix(h);
+      const double tile_u = std::floor(Unit(h) * 1024.0);
+      h = Mix(h);
+      const double tile_v = std::floor(Unit(h) * 1024.0);
+      h = Mix(h);
+      const double fx = (i + Unit(h)) / S;
+      h = Mix(h);
+      const double fy = (j + Unit(h)) / S;
+      const render::IrawanPoint p = b.Locate({(tile_u + fx) * tu, (tile_v + fy) * tv});
+      const double s = b.SpecularIntegrand(p, wo, wi) * p.intensity * norm;
+      out[pat.yarns[size_t(p.yarn)].type == render::YarnType::kWarp ? 0 : 1] += s;
+    }
+  }
+}
+
+double YarnFarField::WarpAlbedoShare(int pairs) const {
+  double sum[2] = {0.0, 0.0};
+  uint64_t h = 0x5EEDull;
+  for (int k = 0; k < pairs; ++k) {
+    auto cosine = [&]() {
+      h = Mix(h);
+      const double u1 = Unit(h);
+      h = Mix(h);
+      const double u2 = Unit(h);
+      const double r = std::sqrt(u1), phi = 2.0 * kPi * u2;
+      return Vec3<double>(r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0, 1.0 - u1)));
+    };
+    const Vec3<double> wo = cosine(), wi = cosine();
+    double v[2];
+    Eval(wo, wi, v);
+    sum[0] += v[0];
+    sum[1] += v[1];
+  }
+  return sum[0] + sum[1] > 0.0 ? sum[0] / (sum[0] + sum[1]) : 0.5;
+}
+
+yarn_table::Table YarnFarField::Bake(int n_theta, int n_phi, int jitter) const {
+  if (n_theta < 2 || n_theta > 64 || n_phi < 3 || n_phi > 128)
+    throw std::invalid_argument("yarn table: resolution " + std::to_string(n_theta) + " x " +
+                                std::to_string(n_phi) + " not in [2, 64] x [3, 128]");
+  yarn_table::Table t;
+  t.n_theta = n_theta;
+  t.n_phi = n_phi;
+  const size_t D = size_t(n_theta) * size_t(n_phi);
+  t.lobe.assign(2 * D * D, 0.f);
+  t.ibl.assign(2 * D * 5, 0.f);
+  std::vector<Vec3<double>> dirs(D);
+  std::vector<double> solid(D);
+  const double dth = 0.5 * kPi / n_theta, dph = 2.0 * kPi / n_phi;
+  for (int it = 0; it < n_theta; ++it)
+    for (int ip = 0; ip < n_phi; ++ip) {
+      dirs[size_t(it) * size_t(n_phi) + size_t(ip)] = t.Direction(it, ip);
+      solid[size_t(it) * size_t(n_phi) + size_t(ip)] = std::sin((it + 0.5) * dth) * dth * dph;
+    }
+  tbb::parallel_for(size_t(0), D, [&](size_t o) {
+    double A[2] = {0, 0};
+    Vec3<double> m[2] = {{0, 0, 0}, {0, 0, 0}};
+    for (size_t i = 0; i < D; ++i) {
+      double v[2] = {0.0, 0.0};
+      if (jitter <= 0) {
+        Eval(dirs[o], dirs[i], v);
+      } else {  // the bin average: wo and wi jittered within their bins
+        uint64_t h = Mix(o * 0x9E3779B97F4A7C15ull + i);
+        for (int j = 0; j < jitter; ++j) {
+          auto jit = [&](size_t bin) {
+            const int it = int(bin) / n_phi, ip = int(bin) % n_phi;
+            h = Mix(h);
+            const double th = (it + Unit(h)) * dth;
+            h = Mix(h);
+            const double ph = (ip + Unit(h)) * dph;
+            return Vec3<double>(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th));
+          };
+          double q[2];
+          Eval(jit(o), jit(i), q);
+          v[0] += q[0] / jitter;
+          v[1] += q[1] / jitter;
+        }
+      }
+      const double w = dirs[i].z * solid[i];
+      for (int k = 0; k < 2; ++k) {
+        t.lobe[(size_t(k) * D + o) * D + i] = float(v[k]);
+        A[k] += v[k] * w;
+        m[k] = m[k] + dirs[i] * (v[k] * w);
+      }
+    }
+    for (int k = 0; k < 2; ++k) {
+      float* e = &t.ibl[(size_t(k) * D + o) * 5];
+      const double len = Length(m[k]);
+      const Vec3<double> d = len > 0.0 ? m[k] * (1.0 / len) : Vec3<double>(0, 0, 1);
+      e[0] = float(A[k]);
+      e[1] = float(d.x);
+      e[2] = float(d.y);
+      e[3] = float(d.z);
+      e[4] = float(A[k] > 0.0 ? yarn_table::RoughnessForMeanCosine(len / A[k]) : 1.0);
+    }
+  });
+  return t;
+}
+
+std::string YarnFarField::Describe() const {
+  return "irawan far-field of " + impl_->path + " (" + impl_->irawan->Name() + ", " +
+         std::to_string(impl_->side * impl_->side) + " positions per evaluation)";
+}
+
+}  // namespace clothfit::fit

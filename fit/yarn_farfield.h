@@ -1,0 +1,61 @@
+// fit/yarn_farfield.h: the far-field (weave-period averaged) yarn specular of a fabric's
+// Irawan-Marschner BSDF, as a yarn lobe for the preview (render/preview/preview.h
+// PreviewOptions::yarn_lobe). A measurement (docs/fitting.md, "The far-field yarn lobe
+// (session 11)"): how far the woven preview gets when its yarn lobe has the reference's own
+// shape instead of the anisotropic GGX x phase Fresnel fit of it.
+//
+//   T_k(wo, wi) = E_x[ 1{yarn at x is of type k} SpecularIntegrand(x, wo, wi) I(x) specNorm ]
+//
+// k = warp or weft; x uniform over the weave tiles (render/reference/irawan.h: the specular
+// term of Eval without the yarn's ks, fineness intensity I and umax noise included); local
+// directions x = t (+u, warp), y = b (+v, weft), z = n. The reference BSDF averaged over a
+// tile is then sum_k ks_k T_k(wo, wi) + mean(kd) / pi: a block of pixels that spans whole
+// weave periods sees this average (fit/image_fit.h blocks).
+// The expectation is a Monte Carlo estimate with `positions` stratified points (jittered on a
+// sqrt x sqrt grid over one tile, each shifted by its own whole random tile) whose random numbers
+// are a hash of (wo, wi): deterministic, thread-safe, unbiased; its noise averages out over a
+// block's pixels and an exact IBL's directions.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "brdf/math.h"
+#include "brdf/yarn_table.h"
+
+namespace clothfit::render {
+class IrawanBsdf;
+}
+
+namespace clothfit::fit {
+
+class YarnFarField {
+ public:
+  // Throws std::invalid_argument when the fabric file is not an Irawan fabric (the message
+  // names the file) or positions is not a square in [1, 4096].
+  YarnFarField(const std::string& fabric_path, int positions = 16);
+  ~YarnFarField();
+  YarnFarField(const YarnFarField&) = delete;
+  YarnFarField& operator=(const YarnFarField&) = delete;
+
+  // out[0] warp, out[1] weft; zero unless wo.z > 0 and wi.z > 0.
+  void Eval(const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) const;
+  // The warp's share of the tile-averaged yarn specular albedo (deterministic estimate over
+  // cosine-distributed wo, wi), for the record: m = warp_share at which the preview's
+  // 2 m T_w + 2 (1 - m) T_f weights the lobes as the reference with equal ks does is 0.5.
+  double WarpAlbedoShare(int pairs = 4096) const;
+  std::string Describe() const;  // the pattern and settings, for logs and fit records
+  // The lobe tabulated (brdf/yarn_table.h): T_k at the bin centres of (wo, wi) from Eval, and
+  // per wo bin the IBL summary integrated over the wi bins (midpoint rule, dw = sin theta
+  // dtheta dphi): A = sum T cos dw, dir = normalize(sum T cos wi dw), r =
+  // RoughnessForMeanCosine(|sum T cos wi dw| / A). Parallel; deterministic.
+  // jitter > 0: each entry is the average over `jitter` (wo, wi) pairs drawn uniformly in
+  // angle within the two bins (a box-filtered table) instead of the bin centres' values.
+  yarn_table::Table Bake(int n_theta = 16, int n_phi = 32, int jitter = 0) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace clothfit::fit

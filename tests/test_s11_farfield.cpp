@@ -1,0 +1,302 @@
+// Session 11: the far-field yarn lobe measurement (fit/yarn_farfield.h, PreviewOptions::
+// yarn_lobe; docs/fitting.md "The far-field yarn lobe (session 11)").
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <random>
+
+// preview_fixtures.h (material.h's woven::Options) before the reference renderer's headers,
+// whose render::woven namespace would shadow clothfit::woven inside namespace render.
+#include "tests/preview_fixtures.h"
+#include "fit/yarn_farfield.h"
+#include "render/reference/fabric.h"
+#include "render/reference/irawan.h"
+#include "render/reference/weave_pattern.h"
+
+namespace clothfit {
+namespace {
+
+namespace fs = std::filesystem;
+using render::ModelKind;
+using render::PreviewCache;
+using render::PreviewOptions;
+
+std::string Fabric(const char* name) {
+  return (fs::path(CLOTHFIT_TEST_SOURCE_DIR) / "datasets" / "fabrics" / name).string();
+}
+
+// A lobe that depends on both directions in the tangent frame (so a swapped axis, a dropped
+// component or a wrong warp/weft weight shows).
+void TestLobe(const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
+  out[0] = 0.3 * wi.z * (0.2 + wo.x * wo.x) + 0.05 * (1.0 + wi.x);
+  out[1] = 0.1 * (1.0 + wi.y) * (0.5 + wo.y * wo.y);
+}
+
+// The kernel adds ks (x) [2 m T_w + 2 (1 - m) T_f] NoL E to the model's terms without its yarn
+// lobes, with T evaluated at the pixel's own local directions (recomputed here from the
+// camera ray, independently of the cache's cosines).
+TEST(S11FarField, KernelAddsTheLobeValuesInTheTangentFrame) {
+  const render::Scene s = render::SphereWithLight(24);
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  o.yarn_lobe = TestLobe;
+  const auto cache = PreviewCache::Build(s, nullptr, o);
+  ASSERT_GT(cache->pixels.size(), 100u);
+  const Rgb<double> ks(0.2, 0.4, 0.6);
+  const double m = 0.3;
+  const auto x = render::WovenFlat({0.3, 0.2, 0.1}, ks, 0.5, 0.7, m, 0.05, 2.0);
+  auto x0 = x;
+  x0[3] = x0[4] = x0[5] = 0.0;  // specular_color 0: diffuse only
+  std::vector<Rgb<double>> full, rest;
+  render::EvaluatePreview(*cache, x.data(), full);
+  render::EvaluatePreview(*cache, x0.data(), rest);
+  int lit = 0;
+  render::ForEachPixelGeometry(s, *cache, [&](size_t i, const render::PixelGeometry& g) {
+    const Vec3<double> wo(Dot(g.t, g.v), Dot(g.b, g.v), Dot(g.n, g.v));
+    const Vec3<double> wi(Dot(g.t, g.light.wi), Dot(g.b, g.light.wi), Dot(g.n, g.light.wi));
+    double T[2] = {0.0, 0.0};
+    if (wo.z > 0.0 && wi.z > 0.0) TestLobe(wo, wi, T);
+    const double w = 2.0 * m * T[0] + 2.0 * (1.0 - m) * T[1];
+    const double NoL = std::max(0.0, wi.z);
+    lit += NoL > 0.0 && w > 0.0;
+    for (int c = 0; c < 3; ++c) {
+      const double expect = rest[i][c] + ks[c] * w * NoL * s.lights[0].color[c] * g.light.scale;
+      EXPECT_NEAR(full[i][c], expect, 2e-4 * std::max(1.0, std::abs(expect))) << "pixel " << i;
+    }
+  });
+  EXPECT_GT(lit, 50);
+}
+
+TEST(S11FarField, RefusedWhereItHasNoPath) {
+  const render::Scene s = render::SphereWithLight(8);
+  PreviewOptions o;
+  o.model = ModelKind::kCloth;
+  o.yarn_lobe = TestLobe;
+  EXPECT_THROW(PreviewCache::Build(s, nullptr, o), std::invalid_argument);
+  o.model = ModelKind::kWoven;
+  const render::Environment env = render::DiscEnvironment(64, 32, {0, 1, 0}, 20, {4, 4, 4}, {0.2, 0.2, 0.2});
+  EXPECT_THROW(PreviewCache::Build(s, &env, o), std::invalid_argument);  // split sum
+  o.exact_ibl_samples = 16;
+  EXPECT_NO_THROW(PreviewCache::Build(s, &env, o));
+  o.woven.yarn_layer = woven::YarnLayer::kAlbedoScaled;
+  EXPECT_THROW(PreviewCache::Build(s, &env, o), std::invalid_argument);
+}
+
+// The far-field lobe is the period average of the reference BSDF's specular term:
+// E_uv[Eval(wo, wi, uv)] = sum_k ks_k T_k(wo, wi) + E_uv[kd] / pi, with the left side from
+// IrawanBsdf::Eval at random surface points (the path tracer's own evaluation).
+TEST(S11FarField, IsThePeriodAverageOfTheReferenceBsdf) {
+  const std::string path = Fabric("twill.json");
+  const fit::YarnFarField ff(path, 4096);
+  const render::Fabric fab = render::LoadFabric(path);
+  const auto* irawan = dynamic_cast<const render::IrawanBsdf*>(fab.bsdf.get());
+  ASSERT_NE(irawan, nullptr);
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  const Vec3<double> dirs[][2] = {
+      {Normalize(Vec3<double>(0.3, 0.1, 0.9)), Normalize(Vec3<double>(-0.4, 0.05, 0.8))},
+      {Normalize(Vec3<double>(0.1, 0.6, 0.5)), Normalize(Vec3<double>(-0.2, -0.7, 0.4))},
+      {Normalize(Vec3<double>(0.9, 0.2, 0.2)), Normalize(Vec3<double>(-0.85, -0.1, 0.3))}};
+  for (const auto& d : dirs) {
+    const int N = 200000;
+    Rgb<double> mean(0, 0, 0), kd(0, 0, 0), ks_w(0, 0, 0), ks_f(0, 0, 0);
+    int nw = 0, nf = 0;
+    for (int k = 0; k < N; ++k) {
+      render::ShadingPoint sp;
+      sp.uv = {U(rng) * 3.0, U(rng) * 3.0};
+      mean = mean + irawan->Eval(d[0], d[1], sp) * (1.0 / N);
+      const render::IrawanPoint p = irawan->Locate(sp.uv);
+      const auto& y = irawan->pattern().yarns[size_t(p.yarn)];
+      kd = kd + y.kd * (1.0 / N);
+      if (y.type == render::YarnType::kWarp) ks_w = ks_w + y.ks, ++nw;
+      else ks_f = ks_f + y.ks, ++nf;
+    }
+    ASSERT_GT(nw, 0);
+    ASSERT_GT(nf, 0);
+    double T[2];
+    ff.Eval(d[0], d[1], T);
+    EXPECT_GT(T[0] + T[1], 0.0);
+    for (int c = 0; c < 3; ++c) {
+      const double expect = ks_w[c] / nw * T[0] + ks_f[c] / nf * T[1] + kd[c] * kInvPi;
+      EXPECT_NEAR(mean[c], expect, 0.03 * expect) << "channel " << c;
+    }
+  }
+}
+
+// ks is a relative albedo (irawan.h: with ks = 1 the tile-averaged bi-hemispherical specular
+// albedo is 1), so E over cosine-distributed wo, wi of pi (T_w + T_f) is 1, up to the
+// reference's own estimate of specNorm (10 000 draws of a heavy-tailed integrand: measured 1.00
+// canvas, 1.065 twill, hence the 0.1); a plain weave (canvas) splits it about evenly between
+// warp and weft.
+TEST(S11FarField, NormalisedAsTheReference) {
+  for (const char* name : {"canvas.json", "twill.json"}) {
+    const fit::YarnFarField ff(Fabric(name), 64);
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> U(0.0, 1.0);
+    auto cosine = [&]() {
+      const double u1 = U(rng), u2 = U(rng), r = std::sqrt(u1), phi = 2 * kPi * u2;
+      return Vec3<double>(r * std::cos(phi), r * std::sin(phi), std::sqrt(1 - u1));
+    };
+    const int N = 40000;
+    double sum = 0.0;
+    for (int k = 0; k < N; ++k) {
+      double T[2];
+      ff.Eval(cosine(), cosine(), T);
+      sum += T[0] + T[1];
+    }
+    EXPECT_NEAR(kPi * sum / N, 1.0, 0.1) << name;
+  }
+  const fit::YarnFarField canvas(Fabric("canvas.json"), 64);
+  EXPECT_NEAR(canvas.WarpAlbedoShare(20000), 0.5, 0.1);
+  EXPECT_THROW(fit::YarnFarField(Fabric("velvet.json")), std::invalid_argument);
+  EXPECT_THROW(fit::YarnFarField(Fabric("canvas.json"), 15), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace clothfit
+
+namespace clothfit {
+namespace {
+
+// A table filled from a known function: nodes reproduce it, phi wraps, and the IBL summary of
+// a constant lobe is the cosine lobe's (A = c pi, mean direction n, mean cosine 2/3).
+TEST(S11YarnTable, NodesWrapAndIblSummary) {
+  yarn_table::Table t;
+  t.n_theta = 8;
+  t.n_phi = 16;
+  const size_t D = size_t(t.n_theta * t.n_phi);
+  t.lobe.assign(2 * D * D, 0.f);
+  t.ibl.assign(2 * D * 5, 0.f);
+  auto f = [](const Vec3<double>& wo, const Vec3<double>& wi, int k) {
+    return k == 0 ? 0.5 + 0.25 * wo.x * wi.y + 0.1 * wi.z : 0.3;
+  };
+  const double dth = 0.5 * kPi / t.n_theta, dph = 2 * kPi / t.n_phi;
+  for (size_t o = 0; o < D; ++o) {
+    const Vec3<double> wo = t.Direction(int(o) / t.n_phi, int(o) % t.n_phi);
+    double A[2] = {0, 0};
+    Vec3<double> m[2] = {{0, 0, 0}, {0, 0, 0}};
+    for (size_t i = 0; i < D; ++i) {
+      const int it = int(i) / t.n_phi;
+      const Vec3<double> wi = t.Direction(it, int(i) % t.n_phi);
+      const double w = wi.z * std::sin((it + 0.5) * dth) * dth * dph;
+      for (int k = 0; k < 2; ++k) {
+        t.lobe[(size_t(k) * D + o) * D + i] = float(f(wo, wi, k));
+        A[k] += f(wo, wi, k) * w;
+        m[k] = m[k] + wi * (f(wo, wi, k) * w);
+      }
+    }
+    for (int k = 0; k < 2; ++k) {
+      float* e = &t.ibl[(size_t(k) * D + o) * 5];
+      const Vec3<double> d = Normalize(m[k]);
+      e[0] = float(A[k]);
+      e[1] = float(d.x);
+      e[2] = float(d.y);
+      e[3] = float(d.z);
+      e[4] = float(yarn_table::RoughnessForMeanCosine(Length(m[k]) / A[k]));
+    }
+  }
+  ASSERT_TRUE(t.Valid());
+  for (int it : {0, 3, 7})
+    for (int ip : {0, 5, 15}) {
+      const Vec3<double> wo = t.Direction(it, ip), wi = t.Direction(7 - it, (ip + 3) % t.n_phi);
+      double v[2];
+      t.Eval(wo, wi, v);
+      EXPECT_NEAR(v[0], f(wo, wi, 0), 1e-6);
+      EXPECT_NEAR(v[1], 0.3, 1e-6);
+    }
+  // phi just below 2 pi and just above 0 interpolate the same two phi bins
+  const double th = 0.6;
+  const Vec3<double> a(std::sin(th) * std::cos(-1e-7), std::sin(th) * std::sin(-1e-7), std::cos(th));
+  const Vec3<double> b(std::sin(th) * std::cos(1e-7), std::sin(th) * std::sin(1e-7), std::cos(th));
+  const Vec3<double> wi = Normalize(Vec3<double>(0.2, 0.3, 0.9));
+  double va[2], vb[2];
+  t.Eval(a, wi, va);
+  t.Eval(b, wi, vb);
+  EXPECT_NEAR(va[0], vb[0], 1e-5);
+  double below[2];
+  t.Eval(a, Vec3<double>(0.1, 0.1, -0.5), below);
+  EXPECT_EQ(below[0], 0.0);
+  yarn_table::IblLobe lobes[2];
+  t.Ibl(Normalize(Vec3<double>(0.3, -0.2, 0.8)), lobes);
+  EXPECT_NEAR(lobes[1].albedo, 0.3 * kPi, 0.01 * 0.3 * kPi);  // midpoint rule of cos over 8 x 16 bins
+  EXPECT_NEAR(lobes[1].dir.z, 1.0, 1e-6);
+  EXPECT_NEAR(lobes[1].roughness, yarn_table::RoughnessForMeanCosine(2.0 / 3.0), 0.01);
+}
+
+// The prefiltered lobe's mean cosine falls monotonically with roughness, and the inversion
+// returns the roughness it was given.
+TEST(S11YarnTable, MeanCosineInversion) {
+  double prev = 1.1;
+  for (double r = 0.05; r <= 1.0; r += 0.05) {
+    const double mu = yarn_table::PrefilteredMeanCosine(r);
+    EXPECT_LT(mu, prev) << r;
+    prev = mu;
+    EXPECT_NEAR(yarn_table::RoughnessForMeanCosine(mu), r, 1e-4) << r;
+  }
+  EXPECT_GT(yarn_table::PrefilteredMeanCosine(0.05), 0.99);
+}
+
+// Bake: the lobe entries are the far-field at the bin centres, the IBL albedo their cosine
+// integral.
+TEST(S11YarnTable, BakeIsTheFarFieldAtTheBinCentres) {
+  const fit::YarnFarField ff(Fabric("canvas.json"), 4);
+  const yarn_table::Table t = ff.Bake(6, 12);
+  ASSERT_TRUE(t.Valid());
+  const size_t D = 72;
+  double A = 0.0;
+  for (size_t i = 0; i < D; ++i) {
+    const int it = int(i) / 12;
+    const Vec3<double> wo = t.Direction(2, 5), wi = t.Direction(it, int(i) % 12);
+    double v[2];
+    ff.Eval(wo, wi, v);
+    EXPECT_FLOAT_EQ(t.lobe[(0 * D + 2 * 12 + 5) * D + i], float(v[0]));
+    EXPECT_FLOAT_EQ(t.lobe[(1 * D + 2 * 12 + 5) * D + i], float(v[1]));
+    const double dth = 0.5 * kPi / 6;
+    A += v[0] * wi.z * std::sin((it + 0.5) * dth) * dth * (2 * kPi / 12);
+  }
+  EXPECT_NEAR(t.ibl[(0 * D + 2 * 12 + 5) * 5], A, 1e-5 * std::max(1.0, A));
+}
+
+// The split-sum path of the yarn lobes: under a constant environment every prefiltered read is
+// that constant, so the yarn term is ks (x) [2 m A_w + 2 (1 - m) A_f] L.
+TEST(S11YarnTable, SplitSumWeightsUnderAConstantSky) {
+  // the lit sphere with its light at intensity 0 (ForEachPixelGeometry reads lights[0])
+  render::Scene s = render::SphereWithLight(16);
+  s.lights[0].intensity = 0.0;
+  const render::Environment env =
+      render::EnvironmentFrom(64, 32, [](const Vec3<double>&) { return Rgb<double>(0.7, 0.7, 0.7); });
+  for (render::IblEngine engine : {render::IblEngine::kFilament, render::IblEngine::kThreejs}) {
+    PreviewOptions o;
+    o.model = ModelKind::kWoven;
+    o.ibl_engine = engine;
+    o.yarn_lobe = TestLobe;
+    o.yarn_ibl = [](const Vec3<double>& wo, yarn_table::IblLobe out[2]) {
+      out[0].albedo = 0.4 + 0.2 * wo.x;
+      out[0].dir = Normalize(Vec3<double>(-wo.x, -wo.y, wo.z));
+      out[0].roughness = 0.3;
+      out[1].albedo = 0.1;
+      out[1].dir = {0.0, 0.0, 1.0};
+      out[1].roughness = 0.9;
+    };
+    const auto cache = PreviewCache::Build(s, &env, o);
+    ASSERT_EQ(cache->yarn_ibl.size(), cache->pixels.size() * 6);
+    const Rgb<double> ks(0.2, 0.4, 0.6);
+    const double m = 0.3;
+    const auto x = render::WovenFlat({0.3, 0.2, 0.1}, ks, 0.5, 0.7, m, 0.05, 2.0);
+    auto x0 = x;
+    x0[3] = x0[4] = x0[5] = 0.0;
+    std::vector<Rgb<double>> full, rest;
+    render::EvaluatePreview(*cache, x.data(), full);
+    render::EvaluatePreview(*cache, x0.data(), rest);
+    render::ForEachPixelGeometry(s, *cache, [&](size_t i, const render::PixelGeometry& g) {
+      const double Aw = 0.4 + 0.2 * Dot(g.t, g.v);
+      const double w = 2.0 * m * Aw + 2.0 * (1.0 - m) * 0.1;
+      for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(full[i][c] - rest[i][c], ks[c] * w * 0.7, 0.02 * ks[c] * w * 0.7) << i;
+    });
+  }
+}
+
+}  // namespace
+}  // namespace clothfit
