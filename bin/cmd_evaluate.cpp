@@ -58,6 +58,10 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   if (!pj.contains("fit") || !pj["fit"].is_object())
     throw std::runtime_error(a.preset + ": field 'fit': missing (evaluate needs a fitted preset)");
   const nlohmann::json& fj = pj["fit"];
+  if (fj.contains("yarn_lobe"))  // session 11 measurement fits (clothfit fit --yarn-lobe)
+    throw std::runtime_error(a.preset + ": field 'fit.yarn_lobe': fitted with the far-field yarn "
+                             "lobe (a measurement, docs/fitting.md); its colours scale that lobe, "
+                             "which evaluate does not draw");
   std::vector<std::string> scenes = SplitList(a.scenes), refs = SplitList(a.references);
   if (refs.empty() != scenes.empty())
     throw std::invalid_argument("give both --references and --scenes, or neither");

@@ -161,7 +161,7 @@ struct FitArgs {
   // Session 11: the far-field yarn lobe measurement (fit/yarn_farfield.h; "" = the model's own).
   std::string yarn_lobe;
   int yarn_lobe_positions = 16;
-  int yarn_table_theta = 16, yarn_table_jitter = 0;
+  int yarn_table_theta = 16, yarn_table_jitter = 0, yarn_quad_nodes = 16;
   // Session 8: the IBL engine of the previews (auto: the engine web/ draws the model with) and
   // woven's IBL integration (docs/fitting.md "Filtered importance sampling for woven's IBL").
   std::string ibl_engine = "auto", woven_ibl = "auto";
@@ -252,9 +252,14 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "replaces the yarn lobes by the fabric's period-averaged Irawan specular "
                   "(fit/yarn_farfield.h; needs --exact-ibl), 'table' by that lobe tabulated "
                   "(brdf/yarn_table.h) with its own split-sum IBL, 'farfield-split' the far-field lobe "
-                  "for lights and the table's split sum for the environment; roughness, anisotropy, twist, "
+                  "for lights and the table's split sum for the environment, 'quadrature' the same with "
+                  "the lobe by a deterministic quadrature (YarnFarField::EvalQuadrature; the "
+                  "table baked from it); roughness, anisotropy, twist, "
                   "specular_f0 and forward_scattering locked (no effect)")
-      ->check(CLI::IsMember({"farfield", "table", "farfield-split"}));
+      ->check(CLI::IsMember({"farfield", "table", "farfield-split", "quadrature"}));
+  cmd->add_option("--yarn-quad-nodes", a.yarn_quad_nodes,
+                  "--yarn-lobe quadrature: nodes per yarn group (default 16)")
+      ->check(CLI::Range(1, 256));
   cmd->add_option("--yarn-table-theta", a.yarn_table_theta,
                   "--yarn-lobe table: theta bins of wo and wi (phi: twice as many; default 16)")
       ->check(CLI::Range(2, 64));
@@ -489,16 +494,34 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
                                   "split-sum path; --yarn-lobe table has)");
     if (a.fabric.empty())
       throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": needs --fabric (an irawan fabric)");
+    if (a.weave_maps != "none")
+      throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": the lobe is the tile average; "
+                                  "add --weave-maps none (maps would count the weave twice)");
+    if (a.sheen_tilt != 0.0 || a.visibility.ao || a.visibility.indirect)
+      throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": not with --sheen-tilt or the "
+                                  "visibility flags");
+    if (a.yarn_lobe == "farfield-split" && a.exact_ibl > 0)
+      throw std::invalid_argument("--yarn-lobe farfield-split: the table's split sum is not used "
+                                  "with --exact-ibl (use --yarn-lobe farfield)");
+    const int D = a.yarn_table_theta * 2 * a.yarn_table_theta;
+    if (a.yarn_lobe != "farfield" &&
+        double(D) * D * std::max(1, a.yarn_table_jitter) *
+                (a.yarn_lobe == "quadrature" ? a.yarn_quad_nodes : a.yarn_lobe_positions) > 2e10)
+      throw std::invalid_argument("--yarn-table-theta " + std::to_string(a.yarn_table_theta) +
+                                  ": the bake would take more than 2e10 lobe evaluations; fewer "
+                                  "bins, positions or jitter");
     o.yarn_far_field = std::make_shared<const fit::YarnFarField>(a.fabric, a.yarn_lobe_positions);
-    if (a.yarn_lobe == "table" || a.yarn_lobe == "farfield-split") {
+    if (a.yarn_lobe == "quadrature") o.yarn_quadrature_nodes = a.yarn_quad_nodes;
+    if (a.yarn_lobe == "table" || a.yarn_lobe == "farfield-split" || a.yarn_lobe == "quadrature") {
       const auto t0 = std::chrono::steady_clock::now();
       o.yarn_table = std::make_shared<const yarn_table::Table>(
-          o.yarn_far_field->Bake(a.yarn_table_theta, 2 * a.yarn_table_theta, a.yarn_table_jitter));
+          o.yarn_far_field->Bake(a.yarn_table_theta, 2 * a.yarn_table_theta, a.yarn_table_jitter,
+                                o.yarn_quadrature_nodes));
       std::printf("fit: yarn table %d x %d per direction baked in %.2f s (%s)\n", a.yarn_table_theta,
                   2 * a.yarn_table_theta,
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
                   o.yarn_far_field->Describe().c_str());
-      o.yarn_table_ibl_only = a.yarn_lobe == "farfield-split";
+      o.yarn_table_ibl_only = a.yarn_lobe == "farfield-split" || a.yarn_lobe == "quadrature";
     }
     for (const char* n : {"roughness", "anisotropy", "twist", "specular_f0", "forward_scattering"})
       if (std::find(o.locked.begin(), o.locked.end(), n) == o.locked.end()) o.locked.push_back(n);
@@ -584,7 +607,10 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
   fitj["min_coverage"] = o.min_coverage;
   if (o.exact_ibl_samples > 0) fitj["exact_ibl_samples"] = o.exact_ibl_samples;  // not an engine fit
   if (o.yarn_far_field) {  // session 11 measurement: not an engine fit either
-    fitj["yarn_lobe"] = (o.yarn_table ? std::string(o.yarn_table_ibl_only ? "split sum of the " : "") +
+    fitj["yarn_lobe"] = (o.yarn_quadrature_nodes > 0
+                             ? "quadrature (" + std::to_string(o.yarn_quadrature_nodes) + " nodes) + "
+                             : std::string()) +
+                        (o.yarn_table ? std::string(o.yarn_table_ibl_only ? "split sum of the " : "") +
                                             "table " + std::to_string(o.yarn_table->n_theta) + "x" +
                                             std::to_string(o.yarn_table->n_phi) + " of the "
                                       : std::string()) +

@@ -131,6 +131,13 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
         return;
       }
       const render::MaterialPreset preset = render::ReadPreset(args->material);
+      if (const auto fit = preset.extra.find("fit");
+          fit != preset.extra.end() && fit->is_object() && fit->contains("yarn_lobe"))
+        std::fprintf(stderr,
+                     "clothfit render-preview: warning: %s was fitted with the far-field yarn lobe "
+                     "(fit.yarn_lobe, a measurement): drawn here with woven's own lobes, which "
+                     "that fit did not use\n",
+                     args->material.c_str());
       if (!args->model.empty() && render::ParseModelKind(args->model) != preset.model) {
         std::fprintf(stderr,
                      "clothfit render-preview: error: --model %s but %s is a %s preset\n",

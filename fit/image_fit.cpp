@@ -70,7 +70,6 @@ struct SceneData {
   int blocks() const { return int(block_begin.size()) - 1; }
 };
 
-// A copy of `full` restricted to the cache pixels `keep` (in that order).
 // The preview options of a fit's previews for the preset `p`: model, cloth and woven options,
 // weave maps, IBL engine, sun, and the measurement settings (exact IBL, sheen tilt,
 // visibility, far-field yarn lobe). The caller adds the sample mask and footprint.
@@ -102,13 +101,16 @@ render::PreviewOptions PreviewOptionsFor(const FitOptions& opt, const render::Ma
       po.yarn_ibl = [t](const Vec3<double>& wo, yarn_table::IblLobe out[2]) { t->Ibl(wo, out); };
     }
     std::shared_ptr<const YarnFarField> ff = opt.yarn_far_field;
-    po.yarn_lobe = [ff](const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
-      ff->Eval(wo, wi, out);
+    const int nodes = opt.yarn_quadrature_nodes;
+    po.yarn_lobe = [ff, nodes](const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
+      if (nodes > 0) ff->EvalQuadrature(wo, wi, out, nodes);
+      else ff->Eval(wo, wi, out);
     };
   }
   return po;
 }
 
+// A copy of `full` restricted to the cache pixels `keep` (in that order).
 std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
                                              const std::vector<int>& keep) {
   auto c = std::make_unique<render::PreviewCache>();
@@ -931,6 +933,7 @@ struct PreparedScenes {
   std::shared_ptr<const YarnFarField> yarn_far_field;
   std::shared_ptr<const yarn_table::Table> yarn_table;
   bool yarn_table_ibl_only = false;
+  int yarn_quadrature_nodes = 0;
   double seconds = 0.0;
 };
 
@@ -975,6 +978,7 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->yarn_far_field = opt.yarn_far_field;
   p->yarn_table = opt.yarn_table;
   p->yarn_table_ibl_only = opt.yarn_table_ibl_only;
+  p->yarn_quadrature_nodes = opt.yarn_quadrature_nodes;
   p->seconds = SecondsSince(t0);
   return p;
 }
@@ -1018,7 +1022,8 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->fis_taps != opt.start.woven.fis_taps ||
         prepared->fis_diffuse_taps != opt.start.woven.fis_diffuse_taps ||
         prepared->yarn_far_field != opt.yarn_far_field || prepared->yarn_table != opt.yarn_table ||
-        prepared->yarn_table_ibl_only != opt.yarn_table_ibl_only)
+        prepared->yarn_table_ibl_only != opt.yarn_table_ibl_only ||
+        prepared->yarn_quadrature_nodes != opt.yarn_quadrature_nodes)
       throw FitError("fit: the prepared scenes were built with other options");
   } else {
     own = PrepareScenes(inputs, opt);

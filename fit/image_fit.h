@@ -118,9 +118,10 @@ struct FitOptions {
   // environment.sun, else env_sun_default (off here; `clothfit fit` and `evaluate` set auto).
   std::optional<render::SunMode> env_sun;
   render::SunMode env_sun_default = render::SunMode::kOff;
-  // Far-field yarn lobe (measurement, fit/yarn_farfield.h; woven with exact_ibl_samples > 0):
-  // the previews' yarn lobes are the fabric's period-averaged Irawan specular
-  // (PreviewOptions::yarn_lobe). Null: the model's own lobes.
+  // Far-field yarn lobe (measurement, fit/yarn_farfield.h; woven): the previews' yarn lobes are
+  // the fabric's period-averaged Irawan specular (PreviewOptions::yarn_lobe; with an
+  // environment it needs exact_ibl_samples > 0 unless yarn_table gives its split sum). Null:
+  // the model's own lobes.
   std::shared_ptr<const YarnFarField> yarn_far_field;
   // Tabulated yarn lobe (session 11; brdf/yarn_table.h, woven): the previews' yarn lobes from
   // the table, direct lights by lookup and the environment by its per-wo split sum
@@ -130,6 +131,9 @@ struct FitOptions {
   // With yarn_table and yarn_far_field: the table gives the environment's split sum only, the
   // far-field lobe the lights (and exact-IBL samples): separates the two approximations.
   bool yarn_table_ibl_only = false;
+  // > 0: the far-field lobe by YarnFarField::EvalQuadrature with this many nodes (the
+  // deterministic, shader-shaped evaluation) instead of the Monte Carlo Eval.
+  int yarn_quadrature_nodes = 0;
 };
 
 struct SceneInput {

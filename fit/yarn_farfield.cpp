@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <algorithm>
 #include <stdexcept>
 
 #include <tbb/parallel_for.h>
@@ -14,6 +15,8 @@
 namespace clothfit::fit {
 
 namespace {
+
+constexpr double kDegToRad = kPi / 180.0;
 
 uint64_t Mix(uint64_t z) {
   z += 0x9e3779b97f4a7c15ull;
@@ -35,6 +38,12 @@ struct YarnFarField::Impl {
   const render::IrawanBsdf* irawan = nullptr;
   int side = 4;
   std::string path;
+  struct Group {
+    int yarn = 0;         // a representative yarn index
+    double share = 0.0;   // its group's fraction of the tile's cells
+    double across = 0.5, along = 0.5;  // half extents of its segments' cells (cells)
+  };
+  std::vector<Group> groups;
 };
 
 YarnFarField::YarnFarField(const std::string& fabric_path, int positions)
@@ -50,6 +59,81 @@ YarnFarField::YarnFarField(const std::string& fabric_path, int positions)
                                 "' has no yarns: the far-field yarn lobe needs an irawan fabric");
   impl_->side = side;
   impl_->path = fabric_path;
+  // Groups of identical yarns and their share of the tile's cells.
+  const auto& pat = impl_->irawan->pattern();
+  // Each yarn id is one rectangle of cells centred on its segment centre (weave_pattern.cpp
+  // DeriveSegmentCentres): columns run along the warp's across axis (draft X), rows along Y.
+  const size_t n = pat.yarns.size();
+  std::vector<double> cells(n, 0.0);
+  std::vector<int> c0(n, pat.tile_width), c1(n, -1), r0(n, pat.tile_height), r1(n, -1);
+  for (int r = 0; r < pat.tile_height; ++r)
+    for (int c = 0; c < pat.tile_width; ++c) {
+      const int id = pat.IdAt(c, r);
+      if (id < 1 || size_t(id) > n) continue;
+      const size_t k = size_t(id - 1);
+      cells[k] += 1.0;
+      c0[k] = std::min(c0[k], c);
+      c1[k] = std::max(c1[k], c);
+      r0[k] = std::min(r0[k], r);
+      r1[k] = std::max(r1[k], r);
+    }
+  const double total = double(pat.tile_width) * double(pat.tile_height);
+  for (size_t i = 0; i < n; ++i) {
+    if (cells[i] <= 0.0) continue;
+    const render::Yarn& y = pat.yarns[i];
+    const double half_x = 0.5 * (c1[i] - c0[i] + 1), half_y = 0.5 * (r1[i] - r0[i] + 1);
+    const bool warp = y.type == render::YarnType::kWarp;
+    const double across = warp ? half_x : half_y, along = warp ? half_y : half_x;
+    bool merged = false;
+    for (Impl::Group& g : impl_->groups) {
+      const render::Yarn& z = pat.yarns[size_t(g.yarn)];
+      if (z.type == y.type && z.psi == y.psi && z.umax == y.umax && z.kappa == y.kappa &&
+          z.width == y.width && z.length == y.length && g.across == across && g.along == along) {
+        g.share += cells[i] / total;
+        merged = true;
+        break;
+      }
+    }
+    if (!merged) impl_->groups.push_back({int(i), cells[i] / total, across, along});
+  }
+}
+
+void YarnFarField::EvalQuadrature(const Vec3<double>& wo, const Vec3<double>& wi, double out[2],
+                                  int nodes) const {
+  out[0] = out[1] = 0.0;
+  if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
+  if (nodes < 1 || nodes > 256)
+    throw std::invalid_argument("yarn far-field: quadrature nodes " + std::to_string(nodes) +
+                                " not in [1, 256]");
+  const render::IrawanBsdf& b = *impl_->irawan;
+  const auto& pat = b.pattern();
+  const double mean_intensity = pat.fineness > 0.0 ? 1.0 - std::exp(-10.0) : 1.0;
+  for (const Impl::Group& g : impl_->groups) {
+    const render::Yarn& y = pat.yarns[size_t(g.yarn)];
+    const double umax = y.umax * kDegToRad;
+    double sum = 0.0;
+    for (int j = 0; j < nodes; ++j) {
+      const double s = -1.0 + (2.0 * j + 1.0) / nodes;  // midpoints of (-1, 1)
+      render::IrawanPoint p;
+      p.yarn = g.yarn;
+      p.umax = umax;
+      // as LocateDraft: u and v from the position, clamped
+      if (y.psi != 0.0) {  // staple: u along the segment's cells, the band across them
+        p.along = s * g.along;
+        p.u = std::clamp(p.along / (0.5 * y.length) * umax, -umax, umax);
+        p.sin_u = std::sin(p.u);
+        p.cos_u = std::cos(p.u);
+        p.spine_radius = render::SpineRadius(std::abs(p.u), umax, y.kappa, y.width, y.length);
+        sum += b.SpecularBandAverage(p, wo, wi, g.across);
+      } else {  // filament: v across the segment's cells, the band along them
+        p.across = s * g.across;
+        p.v = std::clamp(p.across * kPi / y.width, -0.5 * kPi, 0.5 * kPi);
+        sum += b.SpecularBandAverage(p, wo, wi, g.along);
+      }
+    }
+    out[y.type == render::YarnType::kWarp ? 0 : 1] +=
+        g.share * sum / nodes * mean_intensity * b.specular_normalisation();
+  }
 }
 
 YarnFarField::~YarnFarField() = default;
@@ -105,7 +189,7 @@ double YarnFarField::WarpAlbedoShare(int pairs) const {
   return sum[0] + sum[1] > 0.0 ? sum[0] / (sum[0] + sum[1]) : 0.5;
 }
 
-yarn_table::Table YarnFarField::Bake(int n_theta, int n_phi, int jitter) const {
+yarn_table::Table YarnFarField::Bake(int n_theta, int n_phi, int jitter, int quadrature_nodes) const {
   if (n_theta < 2 || n_theta > 64 || n_phi < 3 || n_phi > 128)
     throw std::invalid_argument("yarn table: resolution " + std::to_string(n_theta) + " x " +
                                 std::to_string(n_phi) + " not in [2, 64] x [3, 128]");
@@ -128,7 +212,9 @@ yarn_table::Table YarnFarField::Bake(int n_theta, int n_phi, int jitter) const {
     Vec3<double> m[2] = {{0, 0, 0}, {0, 0, 0}};
     for (size_t i = 0; i < D; ++i) {
       double v[2] = {0.0, 0.0};
-      if (jitter <= 0) {
+      if (quadrature_nodes > 0) {
+        EvalQuadrature(dirs[o], dirs[i], v, quadrature_nodes);
+      } else if (jitter <= 0) {
         Eval(dirs[o], dirs[i], v);
       } else {  // the bin average: wo and wi jittered within their bins
         uint64_t h = Mix(o * 0x9E3779B97F4A7C15ull + i);

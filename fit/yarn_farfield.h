@@ -40,6 +40,14 @@ class YarnFarField {
 
   // out[0] warp, out[1] weft; zero unless wo.z > 0 and wi.z > 0.
   void Eval(const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) const;
+  // The same expectation by a deterministic quadrature, the form a shader can evaluate: per
+  // group of identical yarns (type, psi, umax, kappa, width, length; weight = its share of the
+  // tile's cells), the band-averaged specular (IrawanBsdf::SpecularBandAverage) at `nodes`
+  // midpoints of the remaining coordinate (staple: u in (-umax, umax); filament: v in
+  // (-pi/2, pi/2)), times E[I] = 1 - e^-10 (fineness > 0) and specNorm. The pattern's umax noise
+  // (period > 0) is not modelled: the nominal umax is used. nodes in [1, 256].
+  void EvalQuadrature(const Vec3<double>& wo, const Vec3<double>& wi, double out[2],
+                      int nodes = 16) const;
   // The warp's share of the tile-averaged yarn specular albedo (deterministic estimate over
   // cosine-distributed wo, wi), for the record: m = warp_share at which the preview's
   // 2 m T_w + 2 (1 - m) T_f weights the lobes as the reference with equal ks does is 0.5.
@@ -51,7 +59,9 @@ class YarnFarField {
   // RoughnessForMeanCosine(|sum T cos wi dw| / A). Parallel; deterministic.
   // jitter > 0: each entry is the average over `jitter` (wo, wi) pairs drawn uniformly in
   // angle within the two bins (a box-filtered table) instead of the bin centres' values.
-  yarn_table::Table Bake(int n_theta = 16, int n_phi = 32, int jitter = 0) const;
+  // quadrature_nodes > 0: entries from EvalQuadrature (deterministic) instead of Eval.
+  yarn_table::Table Bake(int n_theta = 16, int n_phi = 32, int jitter = 0,
+                         int quadrature_nodes = 0) const;
 
  private:
   struct Impl;

@@ -119,15 +119,22 @@ PY
     # --fabric; refused before any reference is read, nothing written.
     D="$(dirname "$0")/../datasets"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
-      --yarn-lobe farfield --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe without --exact-ibl accepted"
+      --yarn-lobe farfield --weave-maps none --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe without --exact-ibl accepted"
     echo "$err" | grep -q -- "--yarn-lobe farfield: needs --exact-ibl" || fail "--yarn-lobe without --exact-ibl: $err"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model standard \
       --yarn-lobe farfield --exact-ibl 16 --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe on standard accepted"
     echo "$err" | grep -q -- "--yarn-lobe: only for --model woven" || fail "--yarn-lobe on standard: $err"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
-      --yarn-lobe farfield --exact-ibl 16 --fabric "$D/fabrics/velvet.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe on velvet accepted"
+      --yarn-lobe farfield --exact-ibl 16 --weave-maps none --fabric "$D/fabrics/velvet.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe on velvet accepted"
     echo "$err" | grep -q "velvet.json: model 'sadeghi' has no yarns" || fail "--yarn-lobe on velvet: $err"
     [ ! -e "$TMP/y.json" ] || fail "preset written despite a --yarn-lobe error"
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
+      --yarn-lobe quadrature --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe with weave maps accepted"
+    echo "$err" | grep -q -- "--weave-maps none" || fail "--yarn-lobe with weave maps: $err"
+    # a preset fitted with --yarn-lobe is not evaluated as an ordinary woven preset
+    printf '{"schema":"clothfit.preset","version":1,"model":"woven","parameters":{},"fit":{"yarn_lobe":"x","scenes":[]}}' > "$TMP/yl.json"
+    err=$("$BIN" --quiet evaluate --preset "$TMP/yl.json" 2>&1) && fail "evaluate of a --yarn-lobe preset accepted"
+    echo "$err" | grep -q "fit.yarn_lobe" || fail "evaluate of a --yarn-lobe preset: $err"
     ;;
   report)
     # Small EXRs from the lut command stand in for references and previews (16x16, RGB).

@@ -111,8 +111,12 @@ inline Environment EnvironmentFrom(int W, int H,
       for (int k = 0; k < 3; ++k)
         img.pixels[(size_t(j) * size_t(W) + size_t(i)) * 3 + size_t(k)] = float(c[k]);
     }
+  // A new name per map: the preview shares prefiltered chains by source path within a process
+  // (render/preview/preview.cpp SharedPrefilter), so two maps must never share one.
+  static int serial = 0;
   const std::string path = (std::filesystem::temp_directory_path() /
-                            ("clothfit_test_env_" + std::to_string(::getpid()) + ".exr"))
+                            ("clothfit_test_env_" + std::to_string(::getpid()) + "_" +
+                             std::to_string(serial++) + ".exr"))
                                .string();
   io::WriteExr(path, img);
   Environment env = Environment::Load(path, 1.0, 0.0);

@@ -169,7 +169,7 @@ TEST(S11YarnTable, NodesWrapAndIblSummary) {
   t.lobe.assign(2 * D * D, 0.f);
   t.ibl.assign(2 * D * 5, 0.f);
   auto f = [](const Vec3<double>& wo, const Vec3<double>& wi, int k) {
-    return k == 0 ? 0.5 + 0.25 * wo.x * wi.y + 0.1 * wi.z : 0.3;
+    return k == 0 ? 0.5 + 0.25 * wo.x * wi.y + 0.1 * wi.z + 0.2 * wo.y : 0.3;
   };
   const double dth = 0.5 * kPi / t.n_theta, dph = 2 * kPi / t.n_phi;
   for (size_t o = 0; o < D; ++o) {
@@ -205,18 +205,27 @@ TEST(S11YarnTable, NodesWrapAndIblSummary) {
       EXPECT_NEAR(v[0], f(wo, wi, 0), 1e-6);
       EXPECT_NEAR(v[1], 0.3, 1e-6);
     }
-  // phi just below 2 pi and just above 0 interpolate the same two phi bins
-  const double th = 0.6;
-  const Vec3<double> a(std::sin(th) * std::cos(-1e-7), std::sin(th) * std::sin(-1e-7), std::cos(th));
-  const Vec3<double> b(std::sin(th) * std::cos(1e-7), std::sin(th) * std::sin(1e-7), std::cos(th));
-  const Vec3<double> wi = Normalize(Vec3<double>(0.2, 0.3, 0.9));
-  double va[2], vb[2];
+  // phi = 0 lies half-way between the last phi bin (centre -11.25 deg) and the first (+11.25):
+  // the periodic interpolation gives the mean of the two (f depends on wo.y, which differs in
+  // sign between them), at theta on a bin centre
+  const Vec3<double> wi = t.Direction(5, 3);
+  const Vec3<double> c0 = t.Direction(3, 0), c15 = t.Direction(3, 15);
+  const double th = std::acos(c0.z);
+  const Vec3<double> a(std::sin(th), 0.0, std::cos(th));
+  double va[2];
   t.Eval(a, wi, va);
-  t.Eval(b, wi, vb);
-  EXPECT_NEAR(va[0], vb[0], 1e-5);
+  EXPECT_NEAR(va[0], 0.5 * (f(c0, wi, 0) + f(c15, wi, 0)), 1e-6);
+  EXPECT_GT(std::abs(f(c0, wi, 0) - f(c15, wi, 0)), 0.04);  // the two bins differ
   double below[2];
   t.Eval(a, Vec3<double>(0.1, 0.1, -0.5), below);
   EXPECT_EQ(below[0], 0.0);
+  yarn_table::IblLobe node[2];
+  t.Ibl(t.Direction(2, 5), node);  // a node: the stored summary of lobe 0 (not constant in wo)
+  const float* e = &t.ibl[(size_t(0) * D + 2 * 16 + 5) * 5];
+  EXPECT_NEAR(node[0].albedo, e[0], 1e-6);
+  EXPECT_NEAR(node[0].dir.x, e[1], 1e-6);
+  EXPECT_NEAR(node[0].dir.y, e[2], 1e-6);
+  EXPECT_NEAR(node[0].roughness, e[4], 1e-6);
   yarn_table::IblLobe lobes[2];
   t.Ibl(Normalize(Vec3<double>(0.3, -0.2, 0.8)), lobes);
   EXPECT_NEAR(lobes[1].albedo, 0.3 * kPi, 0.01 * 0.3 * kPi);  // midpoint rule of cos over 8 x 16 bins
@@ -235,6 +244,10 @@ TEST(S11YarnTable, MeanCosineInversion) {
     EXPECT_NEAR(yarn_table::RoughnessForMeanCosine(mu), r, 1e-4) << r;
   }
   EXPECT_GT(yarn_table::PrefilteredMeanCosine(0.05), 0.99);
+  // r = 1: D = 1 / pi, h ~ cos(theta_h), l = reflect: with c = cos theta_h, n.l = 2c^2 - 1 on
+  // c^2 > 1/2; mu = int (2c^2-1)^2 c s / int (2c^2-1) c s over theta_h in [0, pi/4]
+  // = [with x = c^2: int_{1/2}^1 (2x-1)^2 dx / int_{1/2}^1 (2x-1) dx] = (1/6) / (1/4) = 2/3
+  EXPECT_NEAR(yarn_table::PrefilteredMeanCosine(1.0), 2.0 / 3.0, 1e-4);
 }
 
 // Bake: the lobe entries are the far-field at the bin centres, the IBL albedo their cosine
@@ -256,6 +269,61 @@ TEST(S11YarnTable, BakeIsTheFarFieldAtTheBinCentres) {
     A += v[0] * wi.z * std::sin((it + 0.5) * dth) * dth * (2 * kPi / 12);
   }
   EXPECT_NEAR(t.ibl[(0 * D + 2 * 12 + 5) * 5], A, 1e-5 * std::max(1.0, A));
+  // the mean direction and the roughness of its mean cosine, recomputed
+  Vec3<double> m(0, 0, 0);
+  for (size_t i = 0; i < D; ++i) {
+    const int it = int(i) / 12;
+    const Vec3<double> wi = t.Direction(it, int(i) % 12);
+    double v[2];
+    ff.Eval(t.Direction(2, 5), wi, v);
+    const double dth = 0.5 * kPi / 6;
+    m = m + wi * (v[0] * wi.z * std::sin((it + 0.5) * dth) * dth * (2 * kPi / 12));
+  }
+  const float* e = &t.ibl[(0 * D + 2 * 12 + 5) * 5];
+  const Vec3<double> d = Normalize(m);
+  EXPECT_NEAR(e[1], d.x, 1e-5);
+  EXPECT_NEAR(e[2], d.y, 1e-5);
+  EXPECT_NEAR(e[3], d.z, 1e-5);
+  EXPECT_NEAR(e[4], yarn_table::RoughnessForMeanCosine(Length(m) / A), 1e-4);
+}
+
+// The split-sum read follows the lobe's direction in the tangent frame: with a bright disc at
+// the zenith, a lobe along +n (local z) is brightest where the normal points up, a lobe along b
+// (local y) where b points up.
+TEST(S11YarnTable, SplitSumReadsAlongTheLobeDirection) {
+  render::Scene s = render::SphereWithLight(16);
+  s.lights[0].intensity = 0.0;
+  const render::Environment env =
+      render::DiscEnvironment(128, 64, {0, 1, 0}, 25, {8, 8, 8}, {0.05, 0.05, 0.05});
+  auto frame = [&](const Vec3<double>& dir) {
+    PreviewOptions o;
+    o.model = ModelKind::kWoven;
+    o.ibl_engine = render::IblEngine::kThreejs;
+    o.yarn_lobe = TestLobe;
+    o.yarn_ibl = [dir](const Vec3<double>&, yarn_table::IblLobe out[2]) {
+      out[0].albedo = 1.0;
+      out[0].dir = dir;
+      out[0].roughness = 0.2;
+      out[1].albedo = 0.0;
+    };
+    std::unique_ptr<PreviewCache> cache;
+    const auto x = render::WovenFlat({0.0, 0.0, 0.0}, {1, 1, 1}, 0.5, 0.7, 1.0, 0.05, 2.0);
+    const auto out = render::PreviewFrame(s, env, o, x, &cache);
+    // the brightest pixel's world normal . up and tangent . up
+    size_t best = 0;
+    for (size_t i = 0; i < out.size(); ++i)
+      if (out[i][0] > out[best][0]) best = i;
+    double nup = 0, dup = 0;  // at the brightest pixel: n.up and the lobe's world direction.up
+    render::ForEachPixelGeometry(s, *cache, [&](size_t i, const render::PixelGeometry& g) {
+      if (i == best) nup = g.n.y, dup = (g.t * dir.x + g.b * dir.y + g.n * dir.z).y;
+    });
+    return std::pair<double, double>(nup, dup);
+  };
+  const auto along_n = frame({0, 0, 1});
+  const auto along_b = frame({0, -1, 0});  // local -y = -b
+  EXPECT_GT(along_n.second, 0.9);  // the brightest pixel reads the disc at the zenith
+  EXPECT_GT(along_b.second, 0.9);
+  EXPECT_GT(std::abs(along_n.first - along_b.first), 0.3);  // at different places on the sphere
 }
 
 // The split-sum path of the yarn lobes: under a constant environment every prefiltered read is
@@ -295,6 +363,41 @@ TEST(S11YarnTable, SplitSumWeightsUnderAConstantSky) {
       for (int c = 0; c < 3; ++c)
         EXPECT_NEAR(full[i][c] - rest[i][c], ks[c] * w * 0.7, 0.02 * ks[c] * w * 0.7) << i;
     });
+  }
+}
+
+}  // namespace
+}  // namespace clothfit
+
+namespace clothfit {
+namespace {
+
+// The deterministic quadrature (the shader-shaped evaluation) is the same tile average as the
+// Monte Carlo over positions: canvas (2 x 2 tile, segments of one cell) and twill (warp floats
+// of several cells, a weft wider than its cell: the band's overlap with the cells matters).
+TEST(S11FarField, QuadratureEqualsTheTileAverage) {
+  for (const char* name : {"canvas.json", "twill.json"}) {
+    const fit::YarnFarField ff(Fabric(name), 4096);
+    const Vec3<double> dirs[][2] = {
+        {Normalize(Vec3<double>(0.3, 0.1, 0.9)), Normalize(Vec3<double>(-0.4, 0.05, 0.8))},
+        {Normalize(Vec3<double>(0.1, 0.6, 0.5)), Normalize(Vec3<double>(-0.2, -0.7, 0.4))},
+        {Normalize(Vec3<double>(0.05, -0.97, 0.2)), Normalize(Vec3<double>(-0.1, 0.95, 0.26))},
+        {Normalize(Vec3<double>(0.9, 0.2, 0.2)), Normalize(Vec3<double>(-0.85, -0.1, 0.3))}};
+    for (const auto& d : dirs) {
+      double mc[2] = {0, 0}, q[2];
+      for (int rep = 0; rep < 32; ++rep) {  // 32 x 4096 positions (the hash varies with wo)
+        const Vec3<double> wo = Normalize(d[0] + Vec3<double>(1e-9 * rep, 0, 0));
+        double v[2];
+        ff.Eval(wo, d[1], v);
+        mc[0] += v[0] / 32;
+        mc[1] += v[1] / 32;
+      }
+      ff.EvalQuadrature(d[0], d[1], q, 64);
+      for (int k = 0; k < 2; ++k)
+        EXPECT_NEAR(q[k], mc[k], 0.03 * std::max(mc[k], 0.05 * (mc[0] + mc[1]))) << name << " lobe " << k;
+    }
+    double z[2];
+    EXPECT_THROW(ff.EvalQuadrature(dirs[0][0], dirs[0][1], z, 0), std::invalid_argument);
   }
 }
 

@@ -718,6 +718,13 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
         opt.woven_reference_kernel)
       throw std::invalid_argument("preview: a yarn_lobe needs the additive yarn layer, no sheen "
                                   "tilt and the fast woven kernel");
+    // The lobe is the tile average: weave maps would count the weave twice; the AO map's
+    // specular occlusion is not applied to the yarn_ibl reads.
+    if (opt.weave_maps || opt.visibility.enabled())
+      throw std::invalid_argument("preview: a yarn_lobe is the tile-averaged lobe: not with weave "
+                                  "maps or the visibility (AO / light map) prototype");
+  } else if (opt.yarn_ibl) {
+    throw std::invalid_argument("preview: a yarn_ibl needs a yarn_lobe");
   }
   c->features.direct = !lights.empty() || exact_ibl;
   c->features.ibl = env != nullptr && !exact_ibl;  // exact: the environment is in the lights
@@ -736,9 +743,9 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
                                 " entries for " + std::to_string(np) + " pixels");
 
   // Validate before allocating: the exact IBL keeps N samples per covered pixel (24 B each, 40 B
-  // with a tangent), and light_begin indexes them with an int. Refuse more than 2^28 samples
-  // (about 6-11 GB) rather than exhaust memory or wrap the offsets; --stride or fewer samples
-  // (or render-preview's row chunks) bring a frame under the budget.
+  // with a tangent, 48 B with a yarn_lobe), and light_begin indexes them with an int. Refuse
+  // more than 2^28 samples (about 6-13 GB) rather than exhaust memory or wrap the offsets;
+  // --stride or fewer samples (or render-preview's row chunks) bring a frame under the budget.
   if (exact_ibl) {
     size_t candidates = np;
     if (!opt.sample_mask.empty())
@@ -1104,18 +1111,6 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
                                           *c.woven_phase)
                    : woven::EvalIbl(wp, c.options.woven, wl, NoV, ws, *c.dfg, *c.woven_phase);
           const bool bent = UsesWovenBent(c.options) && !c.yarn_radiance.empty();
-  // Far-field yarn lobe (PreviewOptions::yarn_lobe): EvalDirectLight with the yarn specular
-  // zeroed gives the diffuse and sheen terms (additive layer: FrameTerms do not depend on
-  // specular_color), the yarn term is added from the cached lobe values.
-  const bool far_field = bool(c.options.yarn_lobe);
-  if (far_field && kIbl && c.yarn_ibl.size() != c.pixels.size() * 6)
-    throw std::invalid_argument("preview: the cache has no yarn IBL values (PreviewOptions::yarn_ibl)");
-  if (far_field && c.yarn_lobe.size() != c.light_samples.size() * 2)  // e.g. a copied cache
-    throw std::invalid_argument("preview: the cache has " + std::to_string(c.yarn_lobe.size()) +
-                                " yarn lobe values for " + std::to_string(c.light_samples.size()) +
-                                " light samples (PreviewOptions::yarn_lobe)");
-  woven::Params<T> wp_no_yarn = wp;
-  if (far_field) wp_no_yarn.specular_color = Rgb<T>(Const<T>(0.0), Const<T>(0.0), Const<T>(0.0));
           const float* yrad = c.yarn_radiance.empty()
                                   ? rad
                                   : &c.yarn_radiance[i * size_t(K) * 3 * (bent ? 2 : 1)];  // FIS / bent

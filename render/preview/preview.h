@@ -152,6 +152,7 @@ struct PreviewOptions {
   // the cache reads the prefiltered environment (the IBL engine's: three.js PMREM or
   // Filament's chain) at that direction and roughness: yarn IBL = ks (x) glint S(NoV)
   // [2 m tint_w A_w L_w + 2 (1 - m) tint_f A_f L_f]. Empty: yarn_lobe needs exact_ibl_samples.
+  // Must be thread-safe (called from the parallel cache build); needs yarn_lobe.
   std::function<void(const Vec3<double>& wo, yarn_table::IblLobe out[2])> yarn_ibl;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment

@@ -213,6 +213,25 @@ IrawanPoint IrawanBsdf::LocateDraft(double X, double Y) const {
 
 double IrawanBsdf::SpecularIntegrand(const IrawanPoint& p, const Vec3d& wo_s,
                                      const Vec3d& wi_s) const {
+  return Specular(p, wo_s, wi_s, 0.0);
+}
+
+double IrawanBsdf::SpecularBandAverage(const IrawanPoint& p, const Vec3d& wo_s,
+                                       const Vec3d& wi_s, double half_extent) const {
+  if (!(half_extent > 0.0)) return 0.0;
+  return Specular(p, wo_s, wi_s, half_extent);
+}
+
+double IrawanBsdf::Specular(const IrawanPoint& p, const Vec3d& wo_s, const Vec3d& wi_s,
+                            double band_extent) const {
+  const bool band_average = band_extent > 0.0;
+  // The band indicator's mean over the band coordinate uniform in [-band_extent, band_extent]:
+  // the overlap of [centre - delta/2, centre + delta/2] with it, over its length.
+  auto band_mean = [band_extent](double centre, double delta) {
+    const double lo = std::max(centre - 0.5 * delta, -band_extent);
+    const double hi = std::min(centre + 0.5 * delta, band_extent);
+    return std::max(hi - lo, 0.0) / (2.0 * band_extent);
+  };
   if (!(wo_s.z > 0.0) || !(wi_s.z > 0.0)) return 0.0;
   const Yarn& y = pattern_.yarns[size_t(p.yarn)];
   const YarnConst& yc = yarn_const_[size_t(p.yarn)];
@@ -234,7 +253,7 @@ double IrawanBsdf::SpecularIntegrand(const IrawanPoint& p, const Vec3d& wo_s,
     const double delta = l * pattern_.h_width;
     // Band centre clamped so the band stays inside the segment.
     const double y_h = std::clamp(u_h / umax * 0.5 * l, -0.5 * (l - delta), 0.5 * (l - delta));
-    if (!(std::abs(p.along - y_h) < 0.5 * delta)) return 0.0;
+    if (!band_average && !(std::abs(p.along - y_h) < 0.5 * delta)) return 0.0;
     const double cos_uh = 1.0 / std::sqrt(1.0 + q * q), sin_uh = q * cos_uh;
     const double v = p.v, sv = std::sin(v), cv = std::cos(v);
     const Vec3d n(sv, sin_uh * cv, cos_uh * cv);
@@ -246,7 +265,8 @@ double IrawanBsdf::SpecularIntegrand(const IrawanPoint& p, const Vec3d& wo_s,
     if (pattern_.ss > 0.0) {
       A *= 1.0 - SmoothStep01((std::abs(u_h) - (1.0 - pattern_.ss) * umax) / (pattern_.ss * umax));
     }
-    fs = G * fc * A * kPi * l / delta;
+    // band_average: the band indicator's mean over `along` in place of the indicator
+    fs = G * fc * A * kPi * l / delta * (band_average ? band_mean(y_h, delta) : 1.0);
   } else {
     const double su = p.sin_u, cu = p.cos_u;
     const double bterm = h.y * su + h.z * cu;
@@ -262,14 +282,14 @@ double IrawanBsdf::SpecularIntegrand(const IrawanPoint& p, const Vec3d& wo_s,
     if (!(std::abs(v_h) < 0.5 * kPi)) return 0.0;
     const double delta = w * pattern_.h_width;
     const double x_h = std::clamp(v_h * w / kPi, -0.5 * (w - delta), 0.5 * (w - delta));
-    if (!(std::abs(p.across - x_h) < 0.5 * delta)) return 0.0;
+    if (!band_average && !(std::abs(p.across - x_h) < 0.5 * delta)) return 0.0;
     const Vec3d n(sin_vh, su * cos_vh, cu * cos_vh);
     const double NoH = Dot(n, h);
     if (!(NoH > 0.0)) return 0.0;
     const double R = p.spine_radius;
     const double G = a * (R + a * cos_vh) / (len * NoH * std::abs(yc.sin_psi));
     const double A = Seeliger(Dot(n, wi), Dot(n, wo));
-    fs = G * fc * A * 2.0 * w * umax / delta;
+    fs = G * fc * A * 2.0 * w * umax / delta * (band_average ? band_mean(x_h, delta) : 1.0);
   }
   return fs * yc.area_factor;
 }

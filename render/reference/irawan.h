@@ -86,11 +86,20 @@ class IrawanBsdf final : public Bsdf {
   IrawanPoint Locate(const Point2d& uv) const;
   // Unnormalised specular integrand (ks = 1, no intensity variation) in the shading frame.
   double SpecularIntegrand(const IrawanPoint& p, const Vec3d& wo, const Vec3d& wi) const;
+  // The same averaged over the highlight band's coordinate (across for staple yarns, along for
+  // filament yarns) uniform in [-half_extent, half_extent] (the segment's cells, in cells): the
+  // band test replaced by its mean, |band n [-e, e]| / 2e. The point's other coordinate (u for
+  // staple, v for filament) is what is left to average over for the tile mean
+  // (fit/yarn_farfield.h's quadrature). 0 for half_extent <= 0.
+  double SpecularBandAverage(const IrawanPoint& p, const Vec3d& wo, const Vec3d& wi,
+                             double half_extent) const;
   // Probability of choosing cosine sampling at this point.
   double CosineProbability(const IrawanPoint& p) const;
 
  private:
   IrawanPoint LocateDraft(double X, double Y) const;
+  // band_extent > 0: SpecularBandAverage's half extent; 0: the band test (SpecularIntegrand).
+  double Specular(const IrawanPoint& p, const Vec3d& wo, const Vec3d& wi, double band_extent) const;
   // Per-(uv, wo) state shared by Eval, Pdf and Sample at one shading point: the weave location
   // and the lobe strategy's cones. Kept in a one-entry thread-local memo keyed by this BSDF's
   // instance id, uv and wo (a path vertex calls Eval for each light, Eval/Pdf for the
