@@ -608,8 +608,8 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       yarn_table::IblLobe lobes[2];
       x.opt.yarn_ibl(Vec3d(Dot(hit.t, hit.v), Dot(hit.b, hit.v), hit.NoV), lobes);
       for (int k = 0; k < 2; ++k) {
-        const Vec3d& d = lobes[k].dir;
-        const Vec3d dd = Normalize(hit.t * d.x + hit.b * d.y + hit.n * d.z);
+        const Vec3d& ld = lobes[k].dir;
+        const Vec3d dd = Normalize(hit.t * ld.x + hit.b * ld.y + hit.n * ld.z);
         const Rgb<double> L = PrefilteredRead(x, dd, lobes[k].roughness);
         for (int ch = 0; ch < 3; ++ch) pd.yibl[size_t(k * 3 + ch)] = float(lobes[k].albedo * L[ch]);
       }
