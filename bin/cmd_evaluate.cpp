@@ -13,6 +13,7 @@
 #include <limits>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
@@ -24,6 +25,7 @@
 #include "bin/visibility_flags.h"
 #include "fit/image_fit.h"
 #include "fit/reference.h"
+#include "fit/yarn_farfield.h"
 #include "render/preview/weave_maps.h"
 #include "render/scene/input_limits.h"
 #include "render/scene/material.h"
@@ -58,10 +60,17 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   if (!pj.contains("fit") || !pj["fit"].is_object())
     throw std::runtime_error(a.preset + ": field 'fit': missing (evaluate needs a fitted preset)");
   const nlohmann::json& fj = pj["fit"];
-  if (fj.contains("yarn_lobe"))  // session 11 measurement fits (clothfit fit --yarn-lobe)
-    throw std::runtime_error(a.preset + ": field 'fit.yarn_lobe': fitted with the far-field yarn "
-                             "lobe (a measurement, docs/fitting.md); its colours scale that lobe, "
-                             "which evaluate does not draw");
+  // Session 11 measurement fits (clothfit fit --yarn-lobe): drawn with the same lobe from
+  // fit.yarn_lobe_settings (fit/yarn_farfield.h); without the settings, refused.
+  std::optional<fit::YarnLobeSettings> yarn_lobe;
+  if (fj.contains("yarn_lobe")) {
+    if (!fj.contains("yarn_lobe_settings"))
+      throw std::runtime_error(a.preset + ": field 'fit.yarn_lobe_settings': missing (fitted with "
+                               "the far-field yarn lobe, a measurement: its colours scale that "
+                               "lobe, which evaluate needs the settings to draw)");
+    yarn_lobe = fit::YarnLobeSettingsFromJson(fj["yarn_lobe_settings"],
+                                              a.preset + ": field 'fit.yarn_lobe_settings'");
+  }
   std::vector<std::string> scenes = SplitList(a.scenes), refs = SplitList(a.references);
   if (refs.empty() != scenes.empty())
     throw std::invalid_argument("give both --references and --scenes, or neither");
@@ -109,6 +118,13 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
     }
   }
   ApplyVisibilityFlags(a.visibility, &o);
+  if (yarn_lobe) {
+    if (yarn_lobe->mode == "farfield" && a.exact_ibl <= 0)
+      throw std::runtime_error(a.preset + ": field 'fit.yarn_lobe_settings.mode': \"farfield\" "
+                               "needs --exact-ibl N");
+    const std::string line = fit::ApplyYarnLobe(*yarn_lobe, &o);
+    if (!line.empty() && !quiet) std::printf("evaluate: %s\n", line.c_str());
+  }
   // s10-sun: the environment's sun (docs/sun.md): --env-sun, else the fit's fit.env_sun
   // ("auto" / "off": that mode; "card": each card's environment.sun, else auto), else (a preset
   // fitted before session 10, without the field) each card's environment.sun, else off: as fitted.

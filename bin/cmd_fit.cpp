@@ -435,6 +435,18 @@ render::MaterialPreset StartPreset(const FitArgs& a) {
   return start;
 }
 
+// The --yarn-lobe settings (session 11), recorded as fit.yarn_lobe_settings for `evaluate`.
+fit::YarnLobeSettings YarnLobeSettingsOf(const FitArgs& a) {
+  fit::YarnLobeSettings s;
+  s.mode = a.yarn_lobe;
+  s.fabric = a.fabric.empty() ? std::string() : fs::absolute(a.fabric).lexically_normal().string();
+  s.positions = a.yarn_lobe_positions;
+  s.nodes = a.yarn_quad_nodes;
+  s.table_theta = a.yarn_table_theta;
+  s.table_jitter = a.yarn_table_jitter;
+  return s;
+}
+
 // Everything but the level (which needs the loaded scenes when it is auto).
 fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& start) {
   fit::FitOptions o;
@@ -503,28 +515,8 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
     if (a.yarn_lobe == "farfield-split" && a.exact_ibl > 0)
       throw std::invalid_argument("--yarn-lobe farfield-split: the table's split sum is not used "
                                   "with --exact-ibl (use --yarn-lobe farfield)");
-    const int D = a.yarn_table_theta * 2 * a.yarn_table_theta;
-    if (a.yarn_lobe != "farfield" &&
-        double(D) * D * std::max(1, a.yarn_table_jitter) *
-                (a.yarn_lobe == "quadrature" ? a.yarn_quad_nodes : a.yarn_lobe_positions) > 2e10)
-      throw std::invalid_argument("--yarn-table-theta " + std::to_string(a.yarn_table_theta) +
-                                  ": the bake would take more than 2e10 lobe evaluations; fewer "
-                                  "bins, positions or jitter");
-    o.yarn_far_field = std::make_shared<const fit::YarnFarField>(a.fabric, a.yarn_lobe_positions);
-    if (a.yarn_lobe == "quadrature") o.yarn_quadrature_nodes = a.yarn_quad_nodes;
-    if (a.yarn_lobe == "table" || a.yarn_lobe == "farfield-split" || a.yarn_lobe == "quadrature") {
-      const auto t0 = std::chrono::steady_clock::now();
-      o.yarn_table = std::make_shared<const yarn_table::Table>(
-          o.yarn_far_field->Bake(a.yarn_table_theta, 2 * a.yarn_table_theta, a.yarn_table_jitter,
-                                o.yarn_quadrature_nodes));
-      std::printf("fit: yarn table %d x %d per direction baked in %.2f s (%s)\n", a.yarn_table_theta,
-                  2 * a.yarn_table_theta,
-                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
-                  o.yarn_far_field->Describe().c_str());
-      o.yarn_table_ibl_only = a.yarn_lobe == "farfield-split" || a.yarn_lobe == "quadrature";
-    }
-    for (const char* n : {"roughness", "anisotropy", "twist", "specular_f0", "forward_scattering"})
-      if (std::find(o.locked.begin(), o.locked.end(), n) == o.locked.end()) o.locked.push_back(n);
+    const std::string line = fit::ApplyYarnLobe(YarnLobeSettingsOf(a), &o);
+    if (!line.empty()) std::printf("fit: %s\n", line.c_str());
   }
   ApplyStarts(a, &o);
   return o;
@@ -616,6 +608,7 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
                                       : std::string()) +
                         o.yarn_far_field->Describe();
     fitj["yarn_lobe_warp_albedo_share"] = o.yarn_far_field->WarpAlbedoShare();
+    fitj["yarn_lobe_settings"] = fit::ToJson(YarnLobeSettingsOf(a));
   }
   if (o.sheen_tilt_degrees != 0.0) fitj["sheen_tilt_degrees"] = o.sheen_tilt_degrees;  // s10-velvet
   if (o.shadows || o.visibility.enabled()) fitj["visibility"] = VisibilityJson(o);  // s9-vis

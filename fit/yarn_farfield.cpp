@@ -3,12 +3,16 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <algorithm>
 #include <stdexcept>
 
 #include <tbb/parallel_for.h>
 
+#include <chrono>
+
+#include "fit/image_fit.h"
 #include "render/reference/fabric.h"
 #include "render/reference/irawan.h"
 
@@ -257,6 +261,67 @@ yarn_table::Table YarnFarField::Bake(int n_theta, int n_phi, int jitter, int qua
 std::string YarnFarField::Describe() const {
   return "irawan far-field of " + impl_->path + " (" + impl_->irawan->Name() + ", " +
          std::to_string(impl_->side * impl_->side) + " positions per evaluation)";
+}
+
+nlohmann::json ToJson(const YarnLobeSettings& s) {
+  return {{"mode", s.mode},           {"fabric", s.fabric},           {"positions", s.positions},
+          {"nodes", s.nodes},         {"table_theta", s.table_theta}, {"table_jitter", s.table_jitter}};
+}
+
+YarnLobeSettings YarnLobeSettingsFromJson(const nlohmann::json& j, const std::string& where) {
+  if (!j.is_object()) throw std::runtime_error(where + ": expected an object");
+  YarnLobeSettings s;
+  auto str = [&](const char* k) {
+    if (!j.contains(k) || !j[k].is_string())
+      throw std::runtime_error(where + "." + k + ": expected a string");
+    return j[k].get<std::string>();
+  };
+  auto num = [&](const char* k, int lo, int hi) {
+    if (!j.contains(k) || !j[k].is_number_integer() || j[k].get<int64_t>() < lo ||
+        j[k].get<int64_t>() > hi)
+      throw std::runtime_error(where + "." + k + ": expected an integer in [" + std::to_string(lo) +
+                               ", " + std::to_string(hi) + "]");
+    return int(j[k].get<int64_t>());
+  };
+  s.mode = str("mode");
+  s.fabric = str("fabric");
+  s.positions = num("positions", 1, 4096);
+  s.nodes = num("nodes", 1, 256);
+  s.table_theta = num("table_theta", 2, 64);
+  s.table_jitter = num("table_jitter", 0, 4096);
+  return s;
+}
+
+std::string ApplyYarnLobe(const YarnLobeSettings& s, FitOptions* o) {
+  if (s.mode != "farfield" && s.mode != "table" && s.mode != "farfield-split" &&
+      s.mode != "quadrature")
+    throw std::invalid_argument("yarn lobe: unknown mode '" + s.mode +
+                                "' (farfield, table, farfield-split, quadrature)");
+  const double D = double(s.table_theta) * 2.0 * s.table_theta;
+  if (s.mode != "farfield" &&
+      D * D * std::max(1, s.table_jitter) * (s.mode == "quadrature" ? s.nodes : s.positions) > 2e10)
+    throw std::invalid_argument("yarn lobe: a " + std::to_string(s.table_theta) + " x " +
+                                std::to_string(2 * s.table_theta) +
+                                " table bake would take more than 2e10 lobe evaluations; fewer "
+                                "bins, positions or jitter");
+  o->yarn_far_field = std::make_shared<const YarnFarField>(s.fabric, s.positions);
+  o->yarn_quadrature_nodes = s.mode == "quadrature" ? s.nodes : 0;
+  o->yarn_table_ibl_only = s.mode == "farfield-split" || s.mode == "quadrature";
+  o->yarn_table.reset();
+  std::string line;
+  if (s.mode != "farfield") {
+    const auto t0 = std::chrono::steady_clock::now();
+    o->yarn_table = std::make_shared<const yarn_table::Table>(o->yarn_far_field->Bake(
+        s.table_theta, 2 * s.table_theta, s.table_jitter, o->yarn_quadrature_nodes));
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "yarn table %d x %d per direction baked in %.2f s (", s.table_theta,
+                  2 * s.table_theta,
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    line = buf + o->yarn_far_field->Describe() + ")";
+  }
+  for (const char* n : {"roughness", "anisotropy", "twist", "specular_f0", "forward_scattering"})
+    if (std::find(o->locked.begin(), o->locked.end(), n) == o->locked.end()) o->locked.push_back(n);
+  return line;
 }
 
 }  // namespace clothfit::fit

@@ -20,6 +20,8 @@
 #include <memory>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "brdf/math.h"
 #include "brdf/yarn_table.h"
 
@@ -67,5 +69,27 @@ class YarnFarField {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+struct FitOptions;  // fit/image_fit.h
+
+// How a fit's previews draw the yarn lobes when they are the fabric's far-field lobe (the
+// `clothfit fit --yarn-lobe` modes; recorded as the preset's fit.yarn_lobe_settings so that
+// `clothfit evaluate` draws the same):
+//   farfield        the Monte Carlo lobe for every light sample (needs an exact IBL)
+//   table           the baked table for the lights and its split sum for the environment
+//   farfield-split  the Monte Carlo lobe for the lights, the table's split sum
+//   quadrature      EvalQuadrature for the lights, the split sum of a table baked from it
+struct YarnLobeSettings {
+  std::string mode, fabric;
+  int positions = 16, nodes = 16, table_theta = 16, table_jitter = 0;
+};
+nlohmann::json ToJson(const YarnLobeSettings& s);
+// Throws std::runtime_error naming `where` and the field on a missing or bad field.
+YarnLobeSettings YarnLobeSettingsFromJson(const nlohmann::json& j, const std::string& where);
+// Sets options' yarn_far_field, yarn_table, yarn_table_ibl_only and yarn_quadrature_nodes and
+// locks the parameters the lobe ignores (roughness, anisotropy, twist, specular_f0,
+// forward_scattering). Throws std::invalid_argument on a bad mode or fabric, or a bake of more
+// than 2e10 lobe evaluations. Returns a log line (empty when no table is baked).
+std::string ApplyYarnLobe(const YarnLobeSettings& s, FitOptions* options);
 
 }  // namespace clothfit::fit

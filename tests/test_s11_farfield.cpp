@@ -9,6 +9,7 @@
 // preview_fixtures.h (material.h's woven::Options) before the reference renderer's headers,
 // whose render::woven namespace would shadow clothfit::woven inside namespace render.
 #include "tests/preview_fixtures.h"
+#include "fit/image_fit.h"
 #include "fit/yarn_farfield.h"
 #include "render/reference/fabric.h"
 #include "render/reference/irawan.h"
@@ -399,6 +400,51 @@ TEST(S11FarField, QuadratureEqualsTheTileAverage) {
     double z[2];
     EXPECT_THROW(ff.EvalQuadrature(dirs[0][0], dirs[0][1], z, 0), std::invalid_argument);
   }
+}
+
+}  // namespace
+}  // namespace clothfit
+
+namespace clothfit {
+namespace {
+
+// fit.yarn_lobe_settings round-trips, names the bad field, and ApplyYarnLobe configures the fit
+// as the mode says (evaluate draws what fit drew).
+TEST(S11YarnLobeSettings, RoundTripErrorsAndModes) {
+  fit::YarnLobeSettings s;
+  s.mode = "quadrature";
+  s.fabric = Fabric("canvas.json");
+  s.nodes = 8;
+  s.table_theta = 4;
+  const fit::YarnLobeSettings r = fit::YarnLobeSettingsFromJson(fit::ToJson(s), "p.json: fit.x");
+  EXPECT_EQ(r.mode, s.mode);
+  EXPECT_EQ(r.fabric, s.fabric);
+  EXPECT_EQ(r.nodes, 8);
+  EXPECT_EQ(r.table_theta, 4);
+  nlohmann::json bad = fit::ToJson(s);
+  bad["nodes"] = 0;
+  try {
+    fit::YarnLobeSettingsFromJson(bad, "p.json: fit.x");
+    ADD_FAILURE() << "nodes 0 accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("p.json: fit.x.nodes"), std::string::npos) << e.what();
+  }
+  fit::FitOptions o;
+  EXPECT_TRUE(fit::ApplyYarnLobe(r, &o).find("yarn table 4 x 8") != std::string::npos);
+  EXPECT_TRUE(o.yarn_far_field && o.yarn_table && o.yarn_table_ibl_only);
+  EXPECT_EQ(o.yarn_quadrature_nodes, 8);
+  EXPECT_NE(std::find(o.locked.begin(), o.locked.end(), "forward_scattering"), o.locked.end());
+  fit::YarnLobeSettings f = r;
+  f.mode = "farfield";
+  fit::FitOptions of;
+  EXPECT_TRUE(fit::ApplyYarnLobe(f, &of).empty());
+  EXPECT_TRUE(of.yarn_far_field && !of.yarn_table && of.yarn_quadrature_nodes == 0);
+  f.mode = "nonsense";
+  EXPECT_THROW(fit::ApplyYarnLobe(f, &of), std::invalid_argument);
+  f.mode = "table";
+  f.table_theta = 64;
+  f.table_jitter = 4096;
+  EXPECT_THROW(fit::ApplyYarnLobe(f, &of), std::invalid_argument);  // the bake budget
 }
 
 }  // namespace
