@@ -506,9 +506,6 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
                                   "split-sum path; --yarn-lobe table has)");
     if (a.fabric.empty())
       throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": needs --fabric (an irawan fabric)");
-    if (a.weave_maps != "none")
-      throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": the lobe is the tile average; "
-                                  "add --weave-maps none (maps would count the weave twice)");
     if (a.sheen_tilt != 0.0 || a.visibility.ao || a.visibility.indirect)
       throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": not with --sheen-tilt or the "
                                   "visibility flags");

@@ -718,11 +718,12 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
         opt.woven_reference_kernel)
       throw std::invalid_argument("preview: a yarn_lobe needs the additive yarn layer, no sheen "
                                   "tilt and the fast woven kernel");
-    // The lobe is the tile average: weave maps would count the weave twice; the AO map's
-    // specular occlusion is not applied to the yarn_ibl reads.
-    if (opt.weave_maps || opt.visibility.enabled())
-      throw std::invalid_argument("preview: a yarn_lobe is the tile-averaged lobe: not with weave "
-                                  "maps or the visibility (AO / light map) prototype");
+    // The AO map's specular occlusion is not applied to the yarn_ibl reads. (Weave maps are
+    // allowed: their warp / weft / kd channels are ratios to the tile mean, so they give the
+    // tile-averaged lobe a per-texel pattern without changing its tile mean.)
+    if (opt.visibility.enabled())
+      throw std::invalid_argument("preview: a yarn_lobe is not implemented with the visibility "
+                                  "(AO / light map) prototype");
   } else if (opt.yarn_ibl) {
     throw std::invalid_argument("preview: a yarn_ibl needs a yarn_lobe");
   }
