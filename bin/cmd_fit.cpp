@@ -162,6 +162,7 @@ struct FitArgs {
   std::string yarn_lobe;
   int yarn_lobe_positions = 16;
   int yarn_table_theta = 16, yarn_table_jitter = 0, yarn_quad_nodes = 16;
+  std::string yarn_ibl = "summary";
   // Session 8: the IBL engine of the previews (auto: the engine web/ draws the model with) and
   // woven's IBL integration (docs/fitting.md "Filtered importance sampling for woven's IBL").
   std::string ibl_engine = "auto", woven_ibl = "auto";
@@ -260,6 +261,10 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
   cmd->add_option("--yarn-quad-nodes", a.yarn_quad_nodes,
                   "--yarn-lobe quadrature: nodes per yarn group (default 16)")
       ->check(CLI::Range(1, 256));
+  cmd->add_option("--yarn-ibl", a.yarn_ibl,
+                  "--yarn-lobe table|farfield-split|quadrature: the environment by the table's "
+                  "one-read summary per lobe (summary, default) or one read per wi bin (bins)")
+      ->check(CLI::IsMember({"summary", "bins"}));
   cmd->add_option("--yarn-table-theta", a.yarn_table_theta,
                   "--yarn-lobe table: theta bins of wo and wi (phi: twice as many; default 16)")
       ->check(CLI::Range(2, 64));
@@ -444,6 +449,7 @@ fit::YarnLobeSettings YarnLobeSettingsOf(const FitArgs& a) {
   s.nodes = a.yarn_quad_nodes;
   s.table_theta = a.yarn_table_theta;
   s.table_jitter = a.yarn_table_jitter;
+  s.ibl = a.yarn_ibl;
   return s;
 }
 

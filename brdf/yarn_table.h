@@ -34,6 +34,14 @@ struct IblLobe {
   double roughness = 1.0;
 };
 
+// One read of the prefiltered environment for the yarn lobes: weight[k] of lobe k (warp,
+// weft) times L_pref(dir, roughness); dir local.
+struct IblTap {
+  double weight[2] = {0.0, 0.0};
+  Vec3<double> dir{0.0, 0.0, 1.0};
+  double roughness = 1.0;
+};
+
 struct Table {
   int n_theta = 0, n_phi = 0;
   std::vector<float> lobe;  // 2 n_theta^2 n_phi^2
@@ -96,6 +104,39 @@ struct Table {
     }
   }
 
+  // The environment integral of both lobes at wo as one read per wi bin (a filtered
+  // quadrature: weight_k = T_k(wo, bin centre) cos(theta_i) dw_i, read at the bin centre with
+  // the prefiltered roughness `row_roughness[theta bin]` whose lobe spans about the bin;
+  // bins whose weight is below 1e-4 of the total are dropped). taps is cleared first.
+  void BinTaps(const Vec3<double>& wo, const std::vector<double>& row_roughness,
+               std::vector<IblTap>* taps) const {
+    taps->clear();
+    if (!(wo.z > 0.0)) return;
+    const double dth = 0.5 * kPi / n_theta, dph = 2.0 * kPi / n_phi;
+    double total = 0.0;
+    for (int it = 0; it < n_theta; ++it)
+      for (int ip = 0; ip < n_phi; ++ip) {
+        const Vec3<double> wi = Direction(it, ip);
+        double v[2];
+        Eval(wo, wi, v);
+        const double w = wi.z * std::sin((it + 0.5) * dth) * dth * dph;
+        IblTap t;
+        t.weight[0] = v[0] * w;
+        t.weight[1] = v[1] * w;
+        t.dir = wi;
+        t.roughness = row_roughness[size_t(it)];
+        total += t.weight[0] + t.weight[1];
+        taps->push_back(t);
+      }
+    const double cut = 1e-4 * total;
+    taps->erase(std::remove_if(taps->begin(), taps->end(),
+                               [cut](const IblTap& t) { return t.weight[0] + t.weight[1] <= cut; }),
+                taps->end());
+  }
+  // BinTaps' row roughness: a uniform cap of the bin's solid angle has mean cosine (1 + cos a)/2,
+  // 2 pi (1 - cos a) = dw; the prefiltered lobe with that mean cosine (RoughnessForMeanCosine).
+  std::vector<double> BinRoughness() const;
+
   // The IBL summary of both lobes at wo (interpolated; the direction renormalised).
   void Ibl(const Vec3<double>& wo_in, IblLobe out[2]) const {
     const Vec3<double> wo(wo_in.x, wo_in.y, std::max(wo_in.z, 1e-4));
@@ -154,6 +195,17 @@ inline double RoughnessForMeanCosine(double mu) {
     else hi = mid;
   }
   return 0.5 * (lo + hi);
+}
+
+inline std::vector<double> Table::BinRoughness() const {
+  std::vector<double> r(size_t(std::max(n_theta, 0)));
+  const double dth = 0.5 * kPi / n_theta, dph = 2.0 * kPi / n_phi;
+  for (int it = 0; it < n_theta; ++it) {
+    const double dw = std::sin((it + 0.5) * dth) * dth * dph;
+    const double cos_a = std::max(-1.0, 1.0 - dw / (2.0 * kPi));
+    r[size_t(it)] = RoughnessForMeanCosine(0.5 * (1.0 + cos_a));
+  }
+  return r;
 }
 
 }  // namespace clothfit::yarn_table

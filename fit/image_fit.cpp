@@ -107,6 +107,13 @@ render::PreviewOptions PreviewOptionsFor(const FitOptions& opt, const render::Ma
       else ff->Eval(wo, wi, out);
     };
   }
+  if (opt.yarn_table && opt.yarn_ibl_bins && po.yarn_lobe) {  // one read per wi bin
+    std::shared_ptr<const yarn_table::Table> t = opt.yarn_table;
+    auto rows = std::make_shared<const std::vector<double>>(t->BinRoughness());
+    po.yarn_ibl_taps = [t, rows](const Vec3<double>& wo, std::vector<yarn_table::IblTap>* taps) {
+      t->BinTaps(wo, *rows, taps);
+    };
+  }
   return po;
 }
 
@@ -934,6 +941,7 @@ struct PreparedScenes {
   std::shared_ptr<const yarn_table::Table> yarn_table;
   bool yarn_table_ibl_only = false;
   int yarn_quadrature_nodes = 0;
+  bool yarn_ibl_bins = false;
   double seconds = 0.0;
 };
 
@@ -979,6 +987,7 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->yarn_table = opt.yarn_table;
   p->yarn_table_ibl_only = opt.yarn_table_ibl_only;
   p->yarn_quadrature_nodes = opt.yarn_quadrature_nodes;
+  p->yarn_ibl_bins = opt.yarn_ibl_bins;
   p->seconds = SecondsSince(t0);
   return p;
 }
@@ -1023,7 +1032,8 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->fis_diffuse_taps != opt.start.woven.fis_diffuse_taps ||
         prepared->yarn_far_field != opt.yarn_far_field || prepared->yarn_table != opt.yarn_table ||
         prepared->yarn_table_ibl_only != opt.yarn_table_ibl_only ||
-        prepared->yarn_quadrature_nodes != opt.yarn_quadrature_nodes)
+        prepared->yarn_quadrature_nodes != opt.yarn_quadrature_nodes ||
+        prepared->yarn_ibl_bins != opt.yarn_ibl_bins)
       throw FitError("fit: the prepared scenes were built with other options");
   } else {
     own = PrepareScenes(inputs, opt);

@@ -134,6 +134,10 @@ struct FitOptions {
   // > 0: the far-field lobe by YarnFarField::EvalQuadrature with this many nodes (the
   // deterministic, shader-shaped evaluation) instead of the Monte Carlo Eval.
   int yarn_quadrature_nodes = 0;
+  // With yarn_table: the environment by one read per wi bin of the table (Table::BinTaps, a
+  // filtered quadrature of the lobe; PreviewOptions::yarn_ibl_taps) instead of the one-read
+  // summary per lobe. Measurement.
+  bool yarn_ibl_bins = false;
 };
 
 struct SceneInput {

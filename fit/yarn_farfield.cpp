@@ -265,7 +265,8 @@ std::string YarnFarField::Describe() const {
 
 nlohmann::json ToJson(const YarnLobeSettings& s) {
   return {{"mode", s.mode},           {"fabric", s.fabric},           {"positions", s.positions},
-          {"nodes", s.nodes},         {"table_theta", s.table_theta}, {"table_jitter", s.table_jitter}};
+          {"nodes", s.nodes},         {"table_theta", s.table_theta}, {"table_jitter", s.table_jitter},
+          {"ibl", s.ibl}};
 }
 
 YarnLobeSettings YarnLobeSettingsFromJson(const nlohmann::json& j, const std::string& where) {
@@ -289,6 +290,11 @@ YarnLobeSettings YarnLobeSettingsFromJson(const nlohmann::json& j, const std::st
   s.nodes = num("nodes", 1, 256);
   s.table_theta = num("table_theta", 2, 64);
   s.table_jitter = num("table_jitter", 0, 4096);
+  if (j.contains("ibl")) {
+    s.ibl = str("ibl");
+    if (s.ibl != "summary" && s.ibl != "bins")
+      throw std::runtime_error(where + ".ibl: expected \"summary\" or \"bins\"");
+  }
   return s;
 }
 
@@ -308,6 +314,9 @@ std::string ApplyYarnLobe(const YarnLobeSettings& s, FitOptions* o) {
   o->yarn_quadrature_nodes = s.mode == "quadrature" ? s.nodes : 0;
   o->yarn_table_ibl_only = s.mode == "farfield-split" || s.mode == "quadrature";
   o->yarn_table.reset();
+  if (s.ibl != "summary" && s.ibl != "bins")
+    throw std::invalid_argument("yarn lobe: ibl '" + s.ibl + "' (summary, bins)");
+  o->yarn_ibl_bins = s.ibl == "bins";
   std::string line;
   if (s.mode != "farfield") {
     const auto t0 = std::chrono::steady_clock::now();

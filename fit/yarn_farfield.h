@@ -82,6 +82,7 @@ struct FitOptions;  // fit/image_fit.h
 struct YarnLobeSettings {
   std::string mode, fabric;
   int positions = 16, nodes = 16, table_theta = 16, table_jitter = 0;
+  std::string ibl = "summary";  // the table's split sum: "summary" (one read per lobe) or "bins"
 };
 nlohmann::json ToJson(const YarnLobeSettings& s);
 // Throws std::runtime_error naming `where` and the field on a missing or bad field.

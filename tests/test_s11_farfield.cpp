@@ -227,6 +227,20 @@ TEST(S11YarnTable, NodesWrapAndIblSummary) {
   EXPECT_NEAR(node[0].dir.x, e[1], 1e-6);
   EXPECT_NEAR(node[0].dir.y, e[2], 1e-6);
   EXPECT_NEAR(node[0].roughness, e[4], 1e-6);
+  // BinTaps: one tap per bin (none dropped here: every bin has weight), weights = the summary's
+  // albedo integrand, each tap at its bin centre with its row's roughness
+  std::vector<yarn_table::IblTap> taps;
+  const std::vector<double> rows = t.BinRoughness();
+  ASSERT_EQ(rows.size(), 8u);
+  EXPECT_LT(rows[0], rows[7]);  // bins near the pole are smaller: a sharper read
+  t.BinTaps(t.Direction(2, 5), rows, &taps);
+  ASSERT_EQ(taps.size(), D);
+  double sw[2] = {0, 0};
+  for (const auto& tp : taps) sw[0] += tp.weight[0], sw[1] += tp.weight[1];
+  EXPECT_NEAR(sw[0], e[0], 1e-5 * e[0]);
+  EXPECT_NEAR(sw[1], 0.3 * kPi, 0.01 * 0.3 * kPi);
+  EXPECT_NEAR(taps[size_t(3 * 16 + 4)].dir.x, t.Direction(3, 4).x, 1e-12);
+  EXPECT_EQ(taps[size_t(3 * 16 + 4)].roughness, rows[3]);
   yarn_table::IblLobe lobes[2];
   t.Ibl(Normalize(Vec3<double>(0.3, -0.2, 0.8)), lobes);
   EXPECT_NEAR(lobes[1].albedo, 0.3 * kPi, 0.01 * 0.3 * kPi);  // midpoint rule of cos over 8 x 16 bins
@@ -335,19 +349,38 @@ TEST(S11YarnTable, SplitSumWeightsUnderAConstantSky) {
   s.lights[0].intensity = 0.0;
   const render::Environment env =
       render::EnvironmentFrom(64, 32, [](const Vec3<double>&) { return Rgb<double>(0.7, 0.7, 0.7); });
-  for (render::IblEngine engine : {render::IblEngine::kFilament, render::IblEngine::kThreejs}) {
+  for (int variant = 0; variant < 4; ++variant) {
+    const render::IblEngine engine =
+        variant % 2 ? render::IblEngine::kThreejs : render::IblEngine::kFilament;
     PreviewOptions o;
     o.model = ModelKind::kWoven;
     o.ibl_engine = engine;
     o.yarn_lobe = TestLobe;
-    o.yarn_ibl = [](const Vec3<double>& wo, yarn_table::IblLobe out[2]) {
-      out[0].albedo = 0.4 + 0.2 * wo.x;
-      out[0].dir = Normalize(Vec3<double>(-wo.x, -wo.y, wo.z));
-      out[0].roughness = 0.3;
-      out[1].albedo = 0.1;
-      out[1].dir = {0.0, 0.0, 1.0};
-      out[1].roughness = 0.9;
-    };
+    if (variant < 2) {
+      o.yarn_ibl = [](const Vec3<double>& wo, yarn_table::IblLobe out[2]) {
+        out[0].albedo = 0.4 + 0.2 * wo.x;
+        out[0].dir = Normalize(Vec3<double>(-wo.x, -wo.y, wo.z));
+        out[0].roughness = 0.3;
+        out[1].albedo = 0.1;
+        out[1].dir = {0.0, 0.0, 1.0};
+        out[1].roughness = 0.9;
+      };
+    } else {  // the same weights as three reads (yarn_ibl_taps): they sum
+      o.yarn_ibl_taps = [](const Vec3<double>& wo, std::vector<yarn_table::IblTap>* taps) {
+        taps->clear();
+        yarn_table::IblTap a, b, c;
+        a.weight[0] = 0.25 + 0.2 * wo.x;
+        a.dir = Normalize(Vec3<double>(0.3, 0.1, 0.9));
+        a.roughness = 0.2;
+        b.weight[0] = 0.15;
+        b.weight[1] = 0.04;
+        b.dir = {0.0, 0.0, 1.0};
+        c.weight[1] = 0.06;
+        c.dir = Normalize(Vec3<double>(-0.5, 0.2, 0.6));
+        c.roughness = 0.6;
+        taps->insert(taps->end(), {a, b, c});
+      };
+    }
     const auto cache = PreviewCache::Build(s, &env, o);
     ASSERT_EQ(cache->yarn_ibl.size(), cache->pixels.size() * 6);
     const Rgb<double> ks(0.2, 0.4, 0.6);

@@ -604,7 +604,16 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       FillRadianceTables(x, hit.n, R, &pd);
     if (split_sum && x.fis_yarn) FillFisYarnTable(x, hit, &pd);
     if (split_sum && UsesWovenBent(x.opt)) FillBentYarnTables(x, hit, &pd);
-    if (split_sum && x.opt.yarn_ibl) {  // the tabulated lobes' split sum (PreviewOptions::yarn_ibl)
+    if (split_sum && x.opt.yarn_ibl_taps) {  // the yarn lobes' environment as reads
+      std::vector<yarn_table::IblTap> taps;
+      x.opt.yarn_ibl_taps(Vec3d(Dot(hit.t, hit.v), Dot(hit.b, hit.v), hit.NoV), &taps);
+      for (const yarn_table::IblTap& tp : taps) {
+        const Vec3d dd = Normalize(hit.t * tp.dir.x + hit.b * tp.dir.y + hit.n * tp.dir.z);
+        const Rgb<double> L = PrefilteredRead(x, dd, tp.roughness);
+        for (int k = 0; k < 2; ++k)
+          for (int ch = 0; ch < 3; ++ch) pd.yibl[size_t(k * 3 + ch)] += float(tp.weight[k] * L[ch]);
+      }
+    } else if (split_sum && x.opt.yarn_ibl) {  // the tabulated lobes' split sum (PreviewOptions::yarn_ibl)
       yarn_table::IblLobe lobes[2];
       x.opt.yarn_ibl(Vec3d(Dot(hit.t, hit.v), Dot(hit.b, hit.v), hit.NoV), lobes);
       for (int k = 0; k < 2; ++k) {
@@ -649,7 +658,7 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
       c->yarn_radiance.insert(c->yarn_radiance.end(), pd.yrad.begin(), pd.yrad.end());
       c->sheen_tilt_radiance.insert(c->sheen_tilt_radiance.end(), pd.trad.begin(), pd.trad.end());
-      if (c->options.yarn_ibl && c->features.ibl)
+      if ((c->options.yarn_ibl || c->options.yarn_ibl_taps) && c->features.ibl)
         c->yarn_ibl.insert(c->yarn_ibl.end(), pd.yibl.begin(), pd.yibl.end());
       if (c->options.model == ModelKind::kWoven ||
           c->options.model == ModelKind::kPhysicalAniso || SheenTiltOn(c->options)) {
@@ -711,7 +720,7 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
     if (opt.model != ModelKind::kWoven)
       throw std::invalid_argument("preview: a yarn_lobe applies to the woven model only, not " +
                                   ToString(opt.model));
-    if (env && !exact_ibl && !opt.yarn_ibl)
+    if (env && !exact_ibl && !opt.yarn_ibl && !opt.yarn_ibl_taps)
       throw std::invalid_argument("preview: a yarn_lobe needs exact_ibl_samples > 0 or a "
                                   "yarn_ibl with an environment");
     if (opt.woven.yarn_layer != woven::YarnLayer::kAdditive || SheenTiltOn(opt) ||
@@ -724,7 +733,7 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
     if (opt.visibility.enabled())
       throw std::invalid_argument("preview: a yarn_lobe is not implemented with the visibility "
                                   "(AO / light map) prototype");
-  } else if (opt.yarn_ibl) {
+  } else if (opt.yarn_ibl || opt.yarn_ibl_taps) {
     throw std::invalid_argument("preview: a yarn_ibl needs a yarn_lobe");
   }
   c->features.direct = !lights.empty() || exact_ibl;

@@ -154,6 +154,10 @@ struct PreviewOptions {
   // [2 m tint_w A_w L_w + 2 (1 - m) tint_f A_f L_f]. Empty: yarn_lobe needs exact_ibl_samples.
   // Must be thread-safe (called from the parallel cache build); needs yarn_lobe.
   std::function<void(const Vec3<double>& wo, yarn_table::IblLobe out[2])> yarn_ibl;
+  // Or (takes precedence) the yarn lobes' environment as a list of reads (measurement; brdf/
+  // yarn_table.h IblTap): A_k L_k = sum_taps weight_k L_pref(dir, roughness). Thread-safe;
+  // needs yarn_lobe.
+  std::function<void(const Vec3<double>& wo, std::vector<yarn_table::IblTap>* taps)> yarn_ibl_taps;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;
