@@ -88,18 +88,15 @@ render::PreviewOptions PreviewOptionsFor(const FitOptions& opt, const render::Ma
   po.visibility = opt.visibility;
   po.env_sun = opt.env_sun;
   po.env_sun_default = opt.env_sun_default;
-  if (opt.yarn_table && !(opt.yarn_table_ibl_only && opt.yarn_far_field)) {
-    // the tabulated lobe: direct values and the split-sum IBL from the table
-    std::shared_ptr<const yarn_table::Table> t = opt.yarn_table;
-    po.yarn_lobe = [t](const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
-      t->Eval(wo, wi, out);
+  if (opt.yarn_table)  // the table's split sum for the environment (every table mode)
+    po.yarn_ibl = [t = opt.yarn_table](const Vec3<double>& wo, yarn_table::IblLobe out[2]) {
+      t->Ibl(wo, out);
     };
-    po.yarn_ibl = [t](const Vec3<double>& wo, yarn_table::IblLobe out[2]) { t->Ibl(wo, out); };
+  if (opt.yarn_table && !(opt.yarn_table_ibl_only && opt.yarn_far_field)) {
+    // the tabulated lobe for the lights too
+    po.yarn_lobe = [t = opt.yarn_table](const Vec3<double>& wo, const Vec3<double>& wi,
+                                        double out[2]) { t->Eval(wo, wi, out); };
   } else if (opt.yarn_far_field) {
-    if (opt.yarn_table) {  // yarn_table_ibl_only: the table's split sum for the environment
-      std::shared_ptr<const yarn_table::Table> t = opt.yarn_table;
-      po.yarn_ibl = [t](const Vec3<double>& wo, yarn_table::IblLobe out[2]) { t->Ibl(wo, out); };
-    }
     std::shared_ptr<const YarnFarField> ff = opt.yarn_far_field;
     const int nodes = opt.yarn_quadrature_nodes;
     po.yarn_lobe = [ff, nodes](const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {

@@ -180,9 +180,7 @@ double YarnFarField::WarpAlbedoShare(int pairs) const {
       h = Mix(h);
       const double u1 = Unit(h);
       h = Mix(h);
-      const double u2 = Unit(h);
-      const double r = std::sqrt(u1), phi = 2.0 * kPi * u2;
-      return Vec3<double>(r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0, 1.0 - u1)));
+      return render::SampleCosineHemisphere({u1, Unit(h)});
     };
     const Vec3<double> wo = cosine(), wi = cosine();
     double v[2];
