@@ -513,8 +513,8 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
     if (a.fabric.empty())
       throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": needs --fabric (an irawan fabric)");
     if (a.sheen_tilt != 0.0 || a.visibility.ao || a.visibility.indirect)
-      throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": not with --sheen-tilt or the "
-                                  "visibility flags");
+      throw std::invalid_argument("--yarn-lobe " + a.yarn_lobe + ": not with --sheen-tilt, --ao "
+                                  "or --indirect");
     if (a.yarn_lobe == "farfield-split" && a.exact_ibl > 0)
       throw std::invalid_argument("--yarn-lobe farfield-split: the table's split sum is not used "
                                   "with --exact-ibl (use --yarn-lobe farfield)");

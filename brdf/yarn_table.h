@@ -107,11 +107,12 @@ struct Table {
   // The environment integral of both lobes at wo as one read per wi bin (a filtered
   // quadrature: weight_k = T_k(wo, bin centre) cos(theta_i) dw_i, read at the bin centre with
   // the prefiltered roughness `row_roughness[theta bin]` whose lobe spans about the bin;
-  // bins whose weight is below 1e-4 of the total are dropped). taps is cleared first.
+  // bins whose weight is below 1e-4 of the total are dropped). taps is cleared first; none
+  // for wo below the surface or a row_roughness of the wrong size (BinRoughness()).
   void BinTaps(const Vec3<double>& wo, const std::vector<double>& row_roughness,
                std::vector<IblTap>* taps) const {
     taps->clear();
-    if (!(wo.z > 0.0)) return;
+    if (!(wo.z > 0.0) || row_roughness.size() != size_t(n_theta)) return;
     const double dth = 0.5 * kPi / n_theta, dph = 2.0 * kPi / n_phi;
     double total = 0.0;
     for (int it = 0; it < n_theta; ++it)

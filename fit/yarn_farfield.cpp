@@ -105,10 +105,10 @@ YarnFarField::YarnFarField(const std::string& fabric_path, int positions)
 void YarnFarField::EvalQuadrature(const Vec3<double>& wo, const Vec3<double>& wi, double out[2],
                                   int nodes) const {
   out[0] = out[1] = 0.0;
-  if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
   if (nodes < 1 || nodes > 256)
     throw std::invalid_argument("yarn far-field: quadrature nodes " + std::to_string(nodes) +
                                 " not in [1, 256]");
+  if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
   const render::IrawanBsdf& b = *impl_->irawan;
   const auto& pat = b.pattern();
   const double mean_intensity = pat.fineness > 0.0 ? 1.0 - std::exp(-10.0) : 1.0;
@@ -283,6 +283,10 @@ YarnLobeSettings YarnLobeSettingsFromJson(const nlohmann::json& j, const std::st
     return int(j[k].get<int64_t>());
   };
   s.mode = str("mode");
+  if (s.mode != "farfield" && s.mode != "table" && s.mode != "farfield-split" &&
+      s.mode != "quadrature")
+    throw std::runtime_error(where + ".mode: expected \"farfield\", \"table\", "
+                             "\"farfield-split\" or \"quadrature\"");
   s.fabric = str("fabric");
   s.positions = num("positions", 1, 4096);
   s.nodes = num("nodes", 1, 256);
@@ -301,6 +305,8 @@ std::string ApplyYarnLobe(const YarnLobeSettings& s, FitOptions* o) {
       s.mode != "quadrature")
     throw std::invalid_argument("yarn lobe: unknown mode '" + s.mode +
                                 "' (farfield, table, farfield-split, quadrature)");
+  if (s.ibl != "summary" && s.ibl != "bins")
+    throw std::invalid_argument("yarn lobe: ibl '" + s.ibl + "' (summary, bins)");
   const double D = double(s.table_theta) * 2.0 * s.table_theta;
   if (s.mode != "farfield" &&
       D * D * std::max(1, s.table_jitter) * (s.mode == "quadrature" ? s.nodes : s.positions) > 2e10)
@@ -312,8 +318,6 @@ std::string ApplyYarnLobe(const YarnLobeSettings& s, FitOptions* o) {
   o->yarn_quadrature_nodes = s.mode == "quadrature" ? s.nodes : 0;
   o->yarn_table_ibl_only = s.mode == "farfield-split" || s.mode == "quadrature";
   o->yarn_table.reset();
-  if (s.ibl != "summary" && s.ibl != "bins")
-    throw std::invalid_argument("yarn lobe: ibl '" + s.ibl + "' (summary, bins)");
   o->yarn_ibl_bins = s.ibl == "bins";
   std::string line;
   if (s.mode != "farfield") {

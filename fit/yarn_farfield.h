@@ -43,11 +43,13 @@ class YarnFarField {
   // out[0] warp, out[1] weft; zero unless wo.z > 0 and wi.z > 0.
   void Eval(const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) const;
   // The same expectation by a deterministic quadrature, the form a shader can evaluate: per
-  // group of identical yarns (type, psi, umax, kappa, width, length; weight = its share of the
-  // tile's cells), the band-averaged specular (IrawanBsdf::SpecularBandAverage) at `nodes`
-  // midpoints of the remaining coordinate (staple: u in (-umax, umax); filament: v in
-  // (-pi/2, pi/2)), times E[I] = 1 - e^-10 (fineness > 0) and specNorm. The pattern's umax noise
-  // (period > 0) is not modelled: the nominal umax is used. nodes in [1, 256].
+  // group of identical yarns (type, psi, umax, kappa, width, length and the half extents of
+  // their cells; weight = its share of the tile's cells), the band-averaged specular
+  // (IrawanBsdf::SpecularBandAverage over the band coordinate's extent) at `nodes` midpoints
+  // of the other coordinate's extent (staple: along, u = clamp(along / (l/2) umax); filament:
+  // across, v = clamp(across pi / w)), as LocateDraft maps them, times E[I] = 1 - e^-10
+  // (fineness > 0) and specNorm. The pattern's umax noise (period > 0) is not modelled: the
+  // nominal umax is used. nodes in [1, 256] (std::invalid_argument otherwise).
   void EvalQuadrature(const Vec3<double>& wo, const Vec3<double>& wi, double out[2],
                       int nodes = 16) const;
   // The warp's share of the tile-averaged yarn specular albedo (deterministic estimate over

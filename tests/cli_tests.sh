@@ -130,7 +130,7 @@ PY
     [ ! -e "$TMP/y.json" ] || fail "preset written despite a --yarn-lobe error"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
       --yarn-lobe quadrature --ao --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe with --ao accepted"
-    echo "$err" | grep -q -- "not with --sheen-tilt or the visibility flags" || fail "--yarn-lobe with --ao: $err"
+    echo "$err" | grep -q -- "not with --sheen-tilt, --ao or --indirect" || fail "--yarn-lobe with --ao: $err"
     # a preset fitted with --yarn-lobe is not evaluated as an ordinary woven preset
     printf '{"schema":"clothfit.preset","version":1,"model":"woven","parameters":{},"fit":{"yarn_lobe":"x","scenes":[]}}' > "$TMP/yl.json"
     err=$("$BIN" --quiet evaluate --preset "$TMP/yl.json" 2>&1) && fail "evaluate of a --yarn-lobe preset accepted"

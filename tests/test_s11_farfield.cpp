@@ -482,3 +482,58 @@ TEST(S11YarnLobeSettings, RoundTripErrorsAndModes) {
 
 }  // namespace
 }  // namespace clothfit
+
+namespace clothfit {
+namespace {
+
+// SpecularBandAverage is the mean of SpecularIntegrand over the band coordinate uniform in
+// [-e, e], including e smaller than the yarn (the band then overlaps the cells only partly):
+// a staple yarn (cotton canvas, band across) and a filament yarn (silk charmeuse, band along).
+TEST(S11FarField, BandAverageIsTheMeanOverTheBandCoordinate) {
+  const fs::path weaves = fs::path(CLOTHFIT_TEST_SOURCE_DIR) / "datasets" / "weaves";
+  const Vec3<double> dirs[][2] = {
+      {Normalize(Vec3<double>(0.3, 0.1, 0.9)), Normalize(Vec3<double>(-0.4, 0.05, 0.8))},
+      {Normalize(Vec3<double>(0.1, 0.6, 0.5)), Normalize(Vec3<double>(-0.2, -0.7, 0.4))},
+      {Normalize(Vec3<double>(0.6, -0.3, 0.5)), Normalize(Vec3<double>(-0.1, 0.5, 0.7))}};
+  int nonzero = 0;
+  for (const char* name : {"cotton_canvas.weave", "silk_charmeuse.weave"}) {
+    const render::IrawanBsdf b(render::LoadWeave((weaves / name).string()), 1.0, 1.0);
+    const render::Yarn& y = b.pattern().yarns[0];
+    const bool staple = y.psi != 0.0;
+    const double umax = y.umax * kPi / 180.0;
+    for (double e : {0.5 * (staple ? y.width : y.length), 0.3, 0.12}) {
+      for (double s : {-0.6, 0.1, 0.7}) {
+        render::IrawanPoint p;
+        p.yarn = 0;
+        p.umax = umax;
+        if (staple) {
+          p.u = s * umax;
+          p.sin_u = std::sin(p.u);
+          p.cos_u = std::cos(p.u);
+          p.spine_radius = render::SpineRadius(std::abs(p.u), umax, y.kappa, y.width, y.length);
+        } else {
+          p.v = s * 0.5 * kPi;
+          p.across = s * 0.5 * y.width;
+        }
+        for (const auto& d : dirs) {
+          const int M = 20000;
+          double mean = 0.0;
+          for (int k = 0; k < M; ++k) {  // the band coordinate over [-e, e], midpoints
+            const double c = (-1.0 + (2.0 * k + 1.0) / M) * e;
+            if (staple) p.across = c;
+            else p.along = c;
+            mean += b.SpecularIntegrand(p, d[0], d[1]) / M;
+          }
+          const double avg = b.SpecularBandAverage(p, d[0], d[1], e);
+          EXPECT_NEAR(avg, mean, 2e-3 * std::max(mean, 1e-3)) << name << " e " << e << " s " << s;
+          nonzero += mean > 0.0;
+        }
+      }
+    }
+  }
+  EXPECT_GT(nonzero, 10);  // the directions meet highlights
+}
+
+}  // namespace
+}  // namespace clothfit
+
