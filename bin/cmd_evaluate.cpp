@@ -69,7 +69,7 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
                                "the far-field yarn lobe, a measurement: its colours scale that "
                                "lobe, which evaluate needs the settings to draw)");
     yarn_lobe = fit::YarnLobeSettingsFromJson(fj["yarn_lobe_settings"],
-                                              a.preset + ": field 'fit.yarn_lobe_settings'");
+                                              a.preset + ": field fit.yarn_lobe_settings");
   }
   std::vector<std::string> scenes = SplitList(a.scenes), refs = SplitList(a.references);
   if (refs.empty() != scenes.empty())
