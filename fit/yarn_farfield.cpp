@@ -15,6 +15,8 @@
 #include "fit/image_fit.h"
 #include "render/reference/fabric.h"
 #include "render/reference/irawan.h"
+#include "render/reference/weave_pattern.h"
+#include "render/scene/sampler.h"
 
 namespace clothfit::fit {
 
@@ -22,12 +24,7 @@ namespace {
 
 constexpr double kDegToRad = kPi / 180.0;
 
-uint64_t Mix(uint64_t z) {
-  z += 0x9e3779b97f4a7c15ull;
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
+uint64_t Mix(uint64_t z) { return render::Mix64(z); }  // SplitMix64 finaliser
 uint64_t Bits(double x) {
   uint64_t b;
   std::memcpy(&b, &x, sizeof b);
@@ -65,27 +62,18 @@ YarnFarField::YarnFarField(const std::string& fabric_path, int positions)
   impl_->path = fabric_path;
   // Groups of identical yarns and their share of the tile's cells.
   const auto& pat = impl_->irawan->pattern();
-  // Each yarn id is one rectangle of cells centred on its segment centre (weave_pattern.cpp
-  // DeriveSegmentCentres): columns run along the warp's across axis (draft X), rows along Y.
-  const size_t n = pat.yarns.size();
-  std::vector<double> cells(n, 0.0);
-  std::vector<int> c0(n, pat.tile_width), c1(n, -1), r0(n, pat.tile_height), r1(n, -1);
-  for (int r = 0; r < pat.tile_height; ++r)
-    for (int c = 0; c < pat.tile_width; ++c) {
-      const int id = pat.IdAt(c, r);
-      if (id < 1 || size_t(id) > n) continue;
-      const size_t k = size_t(id - 1);
-      cells[k] += 1.0;
-      c0[k] = std::min(c0[k], c);
-      c1[k] = std::max(c1[k], c);
-      r0[k] = std::min(r0[k], r);
-      r1[k] = std::max(r1[k], r);
-    }
+  // Each yarn id is one rectangle of cells centred on its segment centre, as the renderer
+  // derives them (weave_pattern.h DeriveSegmentCentres): columns run along the warp's across
+  // axis (draft X), rows along Y.
+  render::WeavePattern copy = pat;
+  const std::vector<render::SegmentCells> rect =
+      render::DeriveSegmentCentres(&copy, "yarn far-field (" + fabric_path + ")");
   const double total = double(pat.tile_width) * double(pat.tile_height);
-  for (size_t i = 0; i < n; ++i) {
-    if (cells[i] <= 0.0) continue;
+  for (size_t i = 0; i < pat.yarns.size() && i < rect.size(); ++i) {
     const render::Yarn& y = pat.yarns[i];
-    const double half_x = 0.5 * (c1[i] - c0[i] + 1), half_y = 0.5 * (r1[i] - r0[i] + 1);
+    const double half_x = 0.5 * (rect[i].col1 - rect[i].col0 + 1);
+    const double half_y = 0.5 * (rect[i].row1 - rect[i].row0 + 1);
+    const double share = 4.0 * half_x * half_y / total;  // the rectangle's cells
     const bool warp = y.type == render::YarnType::kWarp;
     const double across = warp ? half_x : half_y, along = warp ? half_y : half_x;
     bool merged = false;
@@ -93,12 +81,12 @@ YarnFarField::YarnFarField(const std::string& fabric_path, int positions)
       const render::Yarn& z = pat.yarns[size_t(g.yarn)];
       if (z.type == y.type && z.psi == y.psi && z.umax == y.umax && z.kappa == y.kappa &&
           z.width == y.width && z.length == y.length && g.across == across && g.along == along) {
-        g.share += cells[i] / total;
+        g.share += share;
         merged = true;
         break;
       }
     }
-    if (!merged) impl_->groups.push_back({int(i), cells[i] / total, across, along});
+    if (!merged) impl_->groups.push_back({int(i), share, across, along});
   }
 }
 
