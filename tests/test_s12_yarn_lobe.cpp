@@ -268,3 +268,44 @@ TEST(S12YarnLobe, PreviewDrawsThePresetLobe) {
 
 }  // namespace
 }  // namespace clothfit
+
+#include "fit/brdf_fit.h"
+
+namespace clothfit {
+namespace {
+
+// convert's BRDF samples of a preset with the lobe (fit/brdf_fit.h SampleAnalytic): the model
+// without its yarn specular plus ks (x) 2 [m T_w, (1 - m) T_f] NoL at the pair's directions
+// (sheen off: no scaling); the GGX lobes' parameters no longer matter.
+TEST(S12YarnLobe, ConvertSamplesTheLobe) {
+  const fit::YarnFarField ff(Fabric("canvas.json"));
+  render::MaterialPreset p = render::DefaultPreset(render::ModelKind::kWoven);
+  p.values = render::WovenFlat({0.4, 0.35, 0.3}, {0.2, 0.1, 0.05}, 0.5, 0.5, 0.3, 0.04, 0.5);
+  p.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(ff.Description(8, 0));
+  render::MaterialPreset no_spec = p;
+  for (int c = 3; c < 6; ++c) no_spec.values[size_t(c)] = 0.0;
+  render::MaterialPreset rough = p;
+  rough.values[6] = 0.9;  // roughness: ignored with the lobe
+  const fit::BrdfSamples a = fit::SampleAnalytic(p), b = fit::SampleAnalytic(no_spec),
+                         r = fit::SampleAnalytic(rough);
+  const yarn_lobe::Lobe lobe(*p.yarn_lobe);
+  const auto& dirs = fit::CanonicalDirections();
+  ASSERT_EQ(a.value.size(), dirs.size());
+  double lit = 0.0;
+  for (size_t i = 0; i < dirs.size(); ++i) {
+    double t[2];
+    lobe.Eval(dirs[i].v, dirs[i].l, t);
+    const double NoL = std::clamp(dirs[i].cos.NoL, 0.0, 1.0);
+    const double ks[3] = {0.2, 0.1, 0.05};
+    for (int c = 0; c < 3; ++c) {
+      const double want = b.value[i][c] + ks[c] * (2.0 * 0.3 * t[0] + 2.0 * 0.7 * t[1]) * NoL;
+      EXPECT_NEAR(a.value[i][c], want, 1e-12 * std::max(1.0, want)) << i;
+      EXPECT_EQ(a.value[i][c], r.value[i][c]);
+    }
+    lit += t[0] + t[1];
+  }
+  EXPECT_GT(lit, 0.0);
+}
+
+}  // namespace
+}  // namespace clothfit
