@@ -154,6 +154,20 @@ double SegmentSpecular(const Phase& ph, const Yarn& y, const Point& p, const Vec
   return fs * y.area_factor;
 }
 
+Yarn MakeYarn(bool warp, double psi_deg, double width, double length, double kappa,
+              double area_factor) {
+  Yarn y;
+  y.warp = warp;
+  y.psi = psi_deg * kDegToRad;
+  y.sin_psi = std::sin(y.psi);
+  y.tan_psi = std::tan(y.psi);
+  y.width = width;
+  y.length = length;
+  y.kappa = kappa;
+  y.area_factor = area_factor;
+  return y;
+}
+
 void Validate(const FarField& f, const std::string& where, bool need_ibl) {
   auto bad = [&](const std::string& field, const std::string& what) {
     throw std::invalid_argument(where + "." + field + ": " + what);
@@ -203,14 +217,7 @@ Lobe::Lobe(const FarField& f) : f_(f) {
   phase_.ss = f.ss;
   for (const FarField::Group& g : f.groups) {
     G q;
-    q.yarn.warp = g.warp;
-    q.yarn.psi = g.psi * kDegToRad;
-    q.yarn.sin_psi = std::sin(q.yarn.psi);
-    q.yarn.tan_psi = std::tan(q.yarn.psi);
-    q.yarn.width = g.width;
-    q.yarn.length = g.length;
-    q.yarn.kappa = g.kappa;
-    q.yarn.area_factor = g.area_factor;
+    q.yarn = MakeYarn(g.warp, g.psi, g.width, g.length, g.kappa, g.area_factor);
     // (SegmentSpecular multiplies by area_factor itself)
     q.weight = f.scale * g.share / f.nodes;
     const double umax = g.umax * kDegToRad;

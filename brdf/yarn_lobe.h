@@ -66,6 +66,9 @@ struct Yarn {
   double width = 1.0, length = 1.0, kappa = 0.0;
   double area_factor = 1.0;  // (warp area + weft area) / (this type's area)
 };
+// A yarn's constants from its description (psi in DEGREES, as the weave files write it).
+Yarn MakeYarn(bool warp, double psi_deg, double width, double length, double kappa,
+              double area_factor);
 // A point on a segment (render/reference/irawan.h IrawanPoint's geometric part).
 struct Point {
   double umax = 0.0;              // radians

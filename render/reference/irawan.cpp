@@ -71,16 +71,8 @@ IrawanBsdf::IrawanBsdf(WeavePattern pattern, double repeat_u, double repeat_v)
     yc.area_factor = (pattern_.warp_area + pattern_.weft_area) /
                      (y.type == YarnType::kWarp ? pattern_.warp_area : pattern_.weft_area);
     yarn_const_.push_back(yc);
-    yarn_lobe::Yarn ys;
-    ys.warp = y.type == YarnType::kWarp;
-    ys.psi = yc.psi;
-    ys.sin_psi = yc.sin_psi;
-    ys.tan_psi = yc.tan_psi;
-    ys.width = y.width;
-    ys.length = y.length;
-    ys.kappa = y.kappa;
-    ys.area_factor = yc.area_factor;
-    yarn_shape_.push_back(ys);
+    yarn_shape_.push_back(yarn_lobe::MakeYarn(y.type == YarnType::kWarp, y.psi, y.width, y.length,
+                                              y.kappa, yc.area_factor));
   }
 
   // Specular normalisation: 10 000 deterministic draws over 16 x 16 tiles (so the umax
