@@ -147,6 +147,23 @@ Object.assign(MATERIALS, {
   'woven-forward-bent': withWoven('woven-forward', { ibl: 'bent' }),
   'woven-maps-twill-bent': withWoven('woven-maps-twill', { ibl: 'bent' }),
 });
+// s12-web: the far-field yarn lobe ("woven": {"yarn_lobe": {...}}, docs/web.md "The far-field yarn
+// lobe"): the canvas and twill presets a `--yarn-lobe quadrature` fit writes (web/test/
+// yarn-lobe-{canvas,twill}.json: the fitted parameters and the fabric's lobe block), uniform and
+// with the weave maps above (ratio maps: they pattern the lobe weights and kd), and the twill
+// lobe with a strong tinted specular and sheen by hand, so the lobe's shape dominates the frame
+// (the fitted specular is about 0.1) and the sheen scaling s_l of the lights is exercised.
+const lobePreset = (fabric, over = {}) => {
+  const j = JSON.parse(fs.readFileSync(path.join(repo, 'web', 'test', `yarn-lobe-${fabric}.json`), 'utf8'));
+  return preset('woven', { ...j.parameters, ...over }, { woven: j.woven });
+};
+Object.assign(MATERIALS, {
+  'woven-lobe-canvas': lobePreset('canvas'),
+  'woven-lobe-twill': lobePreset('twill'),
+  'woven-lobe-maps-canvas': { ...lobePreset('canvas'), weave_maps: MATERIALS['woven-maps-canvas'].weave_maps },
+  'woven-lobe-maps-twill': { ...lobePreset('twill'), weave_maps: MATERIALS['woven-maps-twill'].weave_maps },
+  'woven-lobe-twill-shiny': lobePreset('twill', { specular_color: [0.5, 0.45, 0.3], sheen_color: [0.25, 0.25, 0.3], sheen_roughness: 0.5, warp_share: 0.7 }),
+});
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
 // s10-sun: the sun split is on by default in both renderers ("environment": {"sun": "auto"}
@@ -160,7 +177,8 @@ const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, ro
 // a subset of the materials (the lit models and a sharp metal highlight of the sun).
 const SUN_ENV = `${HIGH}-rot60-sun`;
 ENVS[SUN_ENV] = { path: HIGH, intensity: 0.8, rotation_y_degrees: 60, sun: 'auto' };
-const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-seed', 'cloth-filament', 'woven', 'woven-fis']);
+const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-seed', 'cloth-filament', 'woven', 'woven-fis',
+  'woven-lobe-canvas', 'woven-lobe-twill-shiny']);
 
 fs.mkdirSync(work, { recursive: true });
 for (const [name, p] of Object.entries(MATERIALS)) fs.writeFileSync(path.join(work, `${name}.json`), JSON.stringify(p, null, 1));
