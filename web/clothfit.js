@@ -483,7 +483,7 @@ export function yarnLobeOptions(v, f = 'woven.yarn_lobe') {
     model: v.model, fabric: v.fabric ?? '',
     nodes: int(v.nodes, `${f}.nodes`, 1, YARN_LOBE_MAX_NODES),
     alpha: num(v.alpha, `${f}.alpha`, (x) => x >= 0, '>= 0'),
-    beta: num(v.beta, `${f}.beta`),
+    beta: num(v.beta, `${f}.beta`, (x) => x >= 0, '>= 0'),
     h_width: num(v.h_width, `${f}.h_width`, (x) => x > 0 && x <= 1, 'in (0, 1]'),
     ss: num(v.ss, `${f}.ss`, (x) => x >= 0 && x < 1, 'in [0, 1)'),
     scale: num(v.scale, `${f}.scale`, (x) => x >= 0, '>= 0'),
@@ -494,20 +494,22 @@ export function yarnLobeOptions(v, f = 'woven.yarn_lobe') {
     const gf = `${f}.groups[${i}]`;
     obj(g, gf, YARN_GROUP_KEYS);
     if (g.type !== 'warp' && g.type !== 'weft') fail(`${gf}.type`, 'expected "warp" or "weft"');
-    const pos = (k) => num(g[k], `${gf}.${k}`, (x) => x > 0, '> 0');
-    return {
+    const pos = (k) => num(g[k], `${gf}.${k}`, (x) => x > 0 && x <= 1e6, 'in (0, 1e6]');
+    const q = {
       type: g.type,
-      share: num(g.share, `${gf}.share`, (x) => x >= 0, '>= 0'),
+      share: num(g.share, `${gf}.share`, (x) => x > 0 && x <= 1, 'in (0, 1]'),
       psi: num(g.psi, `${gf}.psi`, (x) => Math.abs(x) < 90, 'in (-90, 90) degrees'),
       umax: num(g.umax, `${gf}.umax`, (x) => x > 0 && x < 90, 'in (0, 90) degrees'),
-      kappa: num(g.kappa, `${gf}.kappa`, (x) => x >= -1, '>= -1'),
+      kappa: num(g.kappa, `${gf}.kappa`, (x) => x >= -1 && x <= 1e6, 'in [-1, 1e6]'),
       width: pos('width'), length: pos('length'), across: pos('across'), along: pos('along'),
-      area_factor: pos('area_factor'),
+      area_factor: num(g.area_factor, `${gf}.area_factor`, (x) => x >= 1 && x <= 1e6, 'in [1, 1e6]'),
     };
+    if (!(q.width * Math.sin(q.umax * YL_DEG) < q.length)) fail(`${gf}.umax`, 'width sin(umax) must be < length');
+    return q;
   });
   const ibl = v.ibl;
   obj(ibl, `${f}.ibl`, ['n_theta', 'n_phi', 'summary']);
-  const nt = int(ibl.n_theta, `${f}.ibl.n_theta`, 2, 1024), np = int(ibl.n_phi, `${f}.ibl.n_phi`, 3, 2048);
+  const nt = int(ibl.n_theta, `${f}.ibl.n_theta`, 2, 64), np = int(ibl.n_phi, `${f}.ibl.n_phi`, 3, 128);
   const want = 2 * nt * np * 5;
   if (!Array.isArray(ibl.summary) && !(ibl.summary instanceof Float32Array)) fail(`${f}.ibl.summary`, 'expected an array');
   if (ibl.summary.length !== want) fail(`${f}.ibl.summary`, `${ibl.summary.length} numbers, expected 2 x n_theta x n_phi x 5 = ${want}`);
@@ -515,6 +517,7 @@ export function yarnLobeOptions(v, f = 'woven.yarn_lobe') {
   ibl.summary.forEach((x, i) => {
     if (typeof x !== 'number') fail(`${f}.ibl.summary[${i}]`, 'expected a number');
     if (!Number.isFinite(x)) fail(`${f}.ibl.summary[${i}]`, 'not finite');
+    if (Math.abs(x) > 1e30) fail(`${f}.ibl.summary[${i}]`, 'out of float range');
     summary[i] = x;
   });
   out.ibl = { n_theta: nt, n_phi: np, summary };
