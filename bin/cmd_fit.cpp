@@ -159,7 +159,7 @@ struct FitArgs {
   int exact_ibl = 0;  // s7-ibl measurement hook (docs/fitting.md "The sphere's error decomposed")
   double sheen_tilt = 0.0;  // s10-velvet: the sheen nap prototype (docs/velvet.md)
   // Session 11: the far-field yarn lobe measurement (fit/yarn_farfield.h; "" = the model's own).
-  std::string yarn_lobe;
+  std::string yarn_lobe = "auto";
   int yarn_lobe_positions = 16;
   int yarn_table_theta = 16, yarn_table_jitter = 0, yarn_quad_nodes = 16;
   std::string yarn_ibl = "summary";
@@ -249,24 +249,31 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "this many directions per pixel, seed 1; no split sum); 0 = the engine (default)")
       ->check(CLI::Range(0, 65536));
   cmd->add_option("--yarn-lobe", a.yarn_lobe,
-                  "measurement only (woven, with --fabric of an irawan fabric): 'farfield' "
+                  "woven's yarn lobes: auto (default: 'preset' when --fabric is an irawan fabric "
+                  "and no --sheen-tilt, --ao, --indirect or --woven-ibl fis|bent, else 'none'), "
+                  "none (woven's anisotropic GGX lobes), preset (the fabric's far-field lobe "
+                  "written into the preset, \"woven\": {\"yarn_lobe\"}: a deterministic quadrature "
+                  "for lights, its table's split sum for the environment; brdf/yarn_lobe.h, drawn "
+                  "by web/clothfit.js too). Measurement only: 'farfield' "
                   "replaces the yarn lobes by the fabric's period-averaged Irawan specular "
                   "(fit/yarn_farfield.h; needs --exact-ibl), 'table' by that lobe tabulated "
                   "(brdf/yarn_table.h) with its own split-sum IBL, 'farfield-split' the far-field lobe "
                   "for lights and the table's split sum for the environment, 'quadrature' the same with "
                   "the lobe by a deterministic quadrature (YarnFarField::EvalQuadrature; the "
                   "table baked from it); roughness, anisotropy, twist, "
-                  "specular_f0 and forward_scattering locked (no effect)")
-      ->check(CLI::IsMember({"farfield", "table", "farfield-split", "quadrature"}));
+                  "specular_f0 and forward_scattering locked (no effect) in every mode but none")
+      ->check(CLI::IsMember({"auto", "none", "preset", "farfield", "table", "farfield-split",
+                             "quadrature"}));
   cmd->add_option("--yarn-quad-nodes", a.yarn_quad_nodes,
-                  "--yarn-lobe quadrature: nodes per yarn group (default 16)")
-      ->check(CLI::Range(1, 256));
+                  "--yarn-lobe preset|quadrature: nodes per yarn group (default 16)")
+      ->check(CLI::Range(1, 64));
   cmd->add_option("--yarn-ibl", a.yarn_ibl,
                   "--yarn-lobe table|farfield-split|quadrature: the environment by the table's "
                   "one-read summary per lobe (summary, default) or one read per wi bin (bins)")
       ->check(CLI::IsMember({"summary", "bins"}));
   cmd->add_option("--yarn-table-theta", a.yarn_table_theta,
-                  "--yarn-lobe table: theta bins of wo and wi (phi: twice as many; default 16)")
+                  "--yarn-lobe preset|table|...: theta bins of wo and wi (phi: twice as many; "
+                  "default 16)")
       ->check(CLI::Range(2, 64));
   cmd->add_option("--yarn-table-jitter", a.yarn_table_jitter,
                   "--yarn-lobe table: 0 = bin-centre values (default), N = each entry the mean of N "
@@ -504,7 +511,29 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
     o.start.woven.fis_diffuse_taps =
         a.fis_diffuse_taps >= 0 ? a.fis_diffuse_taps : woven::kDefaultFisDiffuseTaps;
   }
-  if (!a.yarn_lobe.empty()) {  // session 11 measurement (docs/fitting.md "far-field yarn lobe")
+  // Woven's yarn lobes (session 12): "auto" is the fabric's far-field lobe in the preset when
+  // the fabric has yarns (irawan) and nothing asks for what the lobe cannot do.
+  std::string lobe = a.yarn_lobe;
+  const bool lobe_compatible = a.sheen_tilt == 0.0 && !a.visibility.ao && !a.visibility.indirect &&
+                               (a.woven_ibl == "auto" || a.woven_ibl == "split");
+  if (lobe == "auto")
+    lobe = o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && lobe_compatible &&
+                   render::LoadFabric(a.fabric).model == "irawan"
+               ? "preset"
+               : "none";
+  if (lobe == "preset") {  // docs/fitting.md "The far-field yarn lobe"
+    if (o.start.model != render::ModelKind::kWoven)
+      throw std::invalid_argument("--yarn-lobe preset: only for --model woven");
+    if (a.fabric.empty())
+      throw std::invalid_argument("--yarn-lobe preset: needs --fabric (an irawan fabric)");
+    if (!lobe_compatible)
+      throw std::invalid_argument("--yarn-lobe preset: not with --sheen-tilt, --ao, --indirect or "
+                                  "--woven-ibl fis|bent (the lobe has its own split sum)");
+    fit::YarnLobeSettings s = YarnLobeSettingsOf(a);
+    s.mode = "quadrature";
+    const std::string line = fit::ApplyPresetYarnLobe(s, &o);
+    std::printf("fit: %s\n", line.c_str());
+  } else if (lobe != "none") {  // session 11 measurement (docs/fitting.md "far-field yarn lobe")
     if (o.start.model != render::ModelKind::kWoven)
       throw std::invalid_argument("--yarn-lobe: only for --model woven");
     if (a.yarn_lobe == "farfield" && a.exact_ibl <= 0)

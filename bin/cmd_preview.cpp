@@ -132,7 +132,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       }
       const render::MaterialPreset preset = render::ReadPreset(args->material);
       if (const auto fit = preset.extra.find("fit");
-          fit != preset.extra.end() && fit->is_object() && fit->contains("yarn_lobe"))
+          !preset.yarn_lobe && fit != preset.extra.end() && fit->is_object() &&
+          fit->contains("yarn_lobe"))
         std::fprintf(stderr,
                      "clothfit render-preview: warning: %s was fitted with the far-field yarn lobe "
                      "(fit.yarn_lobe, a measurement): drawn here with woven's own lobes, which "
@@ -154,6 +155,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       o.model = preset.model;
       o.cloth = preset.cloth;
       o.woven = render::PreviewWovenOptions(preset);
+      render::ApplyPresetYarnLobe(preset, &o);  // "woven": {"yarn_lobe"}
       // "weave_maps" (woven, physical-aniso): "uri" relative to the preset file first
       o.weave_maps = render::LoadPresetWeaveMaps(preset, args->material);
       if (o.weave_maps && args->map_aniso_rule == "swiftshader") {

@@ -78,6 +78,7 @@ render::PreviewOptions PreviewOptionsFor(const FitOptions& opt, const render::Ma
   po.model = p.model;
   po.cloth = p.cloth;
   po.woven = render::PreviewWovenOptions(p);  // yarn layering, tints, IBL mode (split / FIS) and taps
+  render::ApplyPresetYarnLobe(p, &po);  // "woven": {"yarn_lobe"} (the measurement modes below override it)
   po.ibl_engine = opt.ibl_engine;
   po.weave_maps = render::LoadPresetWeaveMaps(p);  // woven weave maps (null: none)
   po.exact_ibl_samples = opt.exact_ibl_samples;
@@ -98,11 +99,16 @@ render::PreviewOptions PreviewOptionsFor(const FitOptions& opt, const render::Ma
                                         double out[2]) { t->Eval(wo, wi, out); };
   } else if (opt.yarn_far_field) {
     std::shared_ptr<const YarnFarField> ff = opt.yarn_far_field;
-    const int nodes = opt.yarn_quadrature_nodes;
-    po.yarn_lobe = [ff, nodes](const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
-      if (nodes > 0) ff->EvalQuadrature(wo, wi, out, nodes);
-      else ff->Eval(wo, wi, out);
-    };
+    if (opt.yarn_quadrature_nodes > 0) {
+      auto lobe = std::make_shared<const yarn_lobe::Lobe>(ff->Description(opt.yarn_quadrature_nodes, 0));
+      po.yarn_lobe = [lobe](const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
+        lobe->Eval(wo, wi, out);
+      };
+    } else {
+      po.yarn_lobe = [ff](const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
+        ff->Eval(wo, wi, out);
+      };
+    }
   }
   if (opt.yarn_table && opt.yarn_ibl_bins && po.yarn_lobe) {  // one read per wi bin
     std::shared_ptr<const yarn_table::Table> t = opt.yarn_table;
@@ -899,6 +905,7 @@ std::vector<float> RenderPreviewFrame(const render::Scene& scene, const render::
   o.model = preset.model;
   o.cloth = preset.cloth;
   o.woven = render::PreviewWovenOptions(preset);
+  render::ApplyPresetYarnLobe(preset, &o);  // "woven": {"yarn_lobe"}
   o.ibl_engine = engine;
   o.weave_maps = render::LoadPresetWeaveMaps(preset);  // woven weave maps (null: none)
   auto cache = render::PreviewCache::Build(scene, env, o);
@@ -939,6 +946,7 @@ struct PreparedScenes {
   bool yarn_table_ibl_only = false;
   int yarn_quadrature_nodes = 0;
   bool yarn_ibl_bins = false;
+  std::shared_ptr<const yarn_lobe::FarField> yarn_lobe;  // the start preset's (the lobe is not fitted)
   double seconds = 0.0;
 };
 
@@ -985,6 +993,7 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->yarn_table_ibl_only = opt.yarn_table_ibl_only;
   p->yarn_quadrature_nodes = opt.yarn_quadrature_nodes;
   p->yarn_ibl_bins = opt.yarn_ibl_bins;
+  p->yarn_lobe = opt.start.yarn_lobe;
   p->seconds = SecondsSince(t0);
   return p;
 }
@@ -1030,7 +1039,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
         prepared->yarn_far_field != opt.yarn_far_field || prepared->yarn_table != opt.yarn_table ||
         prepared->yarn_table_ibl_only != opt.yarn_table_ibl_only ||
         prepared->yarn_quadrature_nodes != opt.yarn_quadrature_nodes ||
-        prepared->yarn_ibl_bins != opt.yarn_ibl_bins)
+        prepared->yarn_ibl_bins != opt.yarn_ibl_bins || prepared->yarn_lobe != opt.start.yarn_lobe)
       throw FitError("fit: the prepared scenes were built with other options");
   } else {
     own = PrepareScenes(inputs, opt);

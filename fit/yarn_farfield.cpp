@@ -8,10 +8,10 @@
 #include <algorithm>
 #include <stdexcept>
 
-#include <tbb/parallel_for.h>
 
 #include <chrono>
 
+#include "brdf/yarn_lobe.h"
 #include "fit/image_fit.h"
 #include "render/reference/fabric.h"
 #include "render/reference/irawan.h"
@@ -90,42 +90,47 @@ YarnFarField::YarnFarField(const std::string& fabric_path, int positions)
   }
 }
 
-void YarnFarField::EvalQuadrature(const Vec3<double>& wo, const Vec3<double>& wi, double out[2],
-                                  int nodes) const {
-  out[0] = out[1] = 0.0;
-  if (nodes < 1 || nodes > 256)
+yarn_lobe::FarField YarnFarField::Description(int nodes, int table_theta) const {
+  if (nodes < 1 || nodes > yarn_lobe::FarField::kMaxNodes)
     throw std::invalid_argument("yarn far-field: quadrature nodes " + std::to_string(nodes) +
-                                " not in [1, 256]");
-  if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
+                                " not in [1, 64]");
   const render::IrawanBsdf& b = *impl_->irawan;
   const auto& pat = b.pattern();
-  const double mean_intensity = pat.fineness > 0.0 ? 1.0 - std::exp(-10.0) : 1.0;
+  yarn_lobe::FarField f;
+  f.fabric = impl_->path;
+  f.nodes = nodes;
+  f.alpha = pat.alpha;
+  f.beta = pat.beta;
+  f.h_width = pat.h_width;
+  f.ss = pat.ss;
+  f.scale = (pat.fineness > 0.0 ? 1.0 - std::exp(-10.0) : 1.0) * b.specular_normalisation();
   for (const Impl::Group& g : impl_->groups) {
     const render::Yarn& y = pat.yarns[size_t(g.yarn)];
-    const double umax = y.umax * kDegToRad;
-    double sum = 0.0;
-    for (int j = 0; j < nodes; ++j) {
-      const double s = -1.0 + (2.0 * j + 1.0) / nodes;  // midpoints of (-1, 1)
-      render::IrawanPoint p;
-      p.yarn = g.yarn;
-      p.umax = umax;
-      // as LocateDraft: u and v from the position, clamped
-      if (y.psi != 0.0) {  // staple: u along the segment's cells, the band across them
-        p.along = s * g.along;
-        p.u = std::clamp(p.along / (0.5 * y.length) * umax, -umax, umax);
-        p.sin_u = std::sin(p.u);
-        p.cos_u = std::cos(p.u);
-        p.spine_radius = render::SpineRadius(std::abs(p.u), umax, y.kappa, y.width, y.length);
-        sum += b.SpecularBandAverage(p, wo, wi, g.across);
-      } else {  // filament: v across the segment's cells, the band along them
-        p.across = s * g.across;
-        p.v = std::clamp(p.across * kPi / y.width, -0.5 * kPi, 0.5 * kPi);
-        sum += b.SpecularBandAverage(p, wo, wi, g.along);
-      }
-    }
-    out[y.type == render::YarnType::kWarp ? 0 : 1] +=
-        g.share * sum / nodes * mean_intensity * b.specular_normalisation();
+    yarn_lobe::FarField::Group q;
+    q.warp = y.type == render::YarnType::kWarp;
+    q.share = g.share;
+    q.psi = y.psi;
+    q.umax = y.umax;
+    q.kappa = y.kappa;
+    q.width = y.width;
+    q.length = y.length;
+    q.across = g.across;
+    q.along = g.along;
+    q.area_factor = (pat.warp_area + pat.weft_area) / (q.warp ? pat.warp_area : pat.weft_area);
+    f.groups.push_back(q);
   }
+  if (table_theta > 0) {
+    const yarn_lobe::Lobe lobe(f);
+    f.ibl = yarn_lobe::Bake([&lobe](const Vec3<double>& wo, const Vec3<double>& wi,
+                                    double out[2]) { lobe.Eval(wo, wi, out); },
+                            table_theta, 2 * table_theta, false);
+  }
+  return f;
+}
+
+void YarnFarField::EvalQuadrature(const Vec3<double>& wo, const Vec3<double>& wi, double out[2],
+                                  int nodes) const {
+  yarn_lobe::Lobe(Description(nodes, 0)).Eval(wo, wi, out);
 }
 
 YarnFarField::~YarnFarField() = default;
@@ -183,65 +188,46 @@ yarn_table::Table YarnFarField::Bake(int n_theta, int n_phi, int jitter, int qua
   if (n_theta < 2 || n_theta > 64 || n_phi < 3 || n_phi > 128)
     throw std::invalid_argument("yarn table: resolution " + std::to_string(n_theta) + " x " +
                                 std::to_string(n_phi) + " not in [2, 64] x [3, 128]");
-  yarn_table::Table t;
-  t.n_theta = n_theta;
-  t.n_phi = n_phi;
-  const size_t D = size_t(n_theta) * size_t(n_phi);
-  t.lobe.assign(2 * D * D, 0.f);
-  t.ibl.assign(2 * D * 5, 0.f);
-  std::vector<Vec3<double>> dirs(D);
-  std::vector<double> solid(D);
+  if (quadrature_nodes > 0) {
+    const yarn_lobe::Lobe lobe(Description(quadrature_nodes, 0));
+    return yarn_lobe::Bake([&lobe](const Vec3<double>& wo, const Vec3<double>& wi,
+                                   double out[2]) { lobe.Eval(wo, wi, out); },
+                           n_theta, n_phi, true);
+  }
+  if (jitter <= 0)
+    return yarn_lobe::Bake([this](const Vec3<double>& wo, const Vec3<double>& wi,
+                                  double out[2]) { Eval(wo, wi, out); },
+                           n_theta, n_phi, true);
+  // The bin average: wo and wi jittered within their bins, hashed on the pair of bins.
   const double dth = 0.5 * kPi / n_theta, dph = 2.0 * kPi / n_phi;
-  for (int it = 0; it < n_theta; ++it)
-    for (int ip = 0; ip < n_phi; ++ip) {
-      dirs[size_t(it) * size_t(n_phi) + size_t(ip)] = t.Direction(it, ip);
-      solid[size_t(it) * size_t(n_phi) + size_t(ip)] = std::sin((it + 0.5) * dth) * dth * dph;
-    }
-  tbb::parallel_for(size_t(0), D, [&](size_t o) {
-    double A[2] = {0, 0};
-    Vec3<double> m[2] = {{0, 0, 0}, {0, 0, 0}};
-    for (size_t i = 0; i < D; ++i) {
-      double v[2] = {0.0, 0.0};
-      if (quadrature_nodes > 0) {
-        EvalQuadrature(dirs[o], dirs[i], v, quadrature_nodes);
-      } else if (jitter <= 0) {
-        Eval(dirs[o], dirs[i], v);
-      } else {  // the bin average: wo and wi jittered within their bins
-        uint64_t h = Mix(o * 0x9E3779B97F4A7C15ull + i);
+  auto bin_of = [&](const Vec3<double>& d) {
+    const int it = std::clamp(int(std::acos(std::clamp(d.z, -1.0, 1.0)) / dth), 0, n_theta - 1);
+    double ph = std::atan2(d.y, d.x);
+    if (ph < 0.0) ph += 2.0 * kPi;
+    const int ip = std::clamp(int(ph / dph), 0, n_phi - 1);
+    return size_t(it) * size_t(n_phi) + size_t(ip);
+  };
+  return yarn_lobe::Bake(
+      [&, this](const Vec3<double>& wo, const Vec3<double>& wi, double v[2]) {
+        v[0] = v[1] = 0.0;
+        uint64_t h = Mix(bin_of(wo) * 0x9E3779B97F4A7C15ull + bin_of(wi));
+        auto jit = [&](size_t bin) {
+          const int it = int(bin) / n_phi, ip = int(bin) % n_phi;
+          h = Mix(h);
+          const double th = (it + Unit(h)) * dth;
+          h = Mix(h);
+          const double ph = (ip + Unit(h)) * dph;
+          return Vec3<double>(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th));
+        };
+        const size_t bo = bin_of(wo), bi = bin_of(wi);
         for (int j = 0; j < jitter; ++j) {
-          auto jit = [&](size_t bin) {
-            const int it = int(bin) / n_phi, ip = int(bin) % n_phi;
-            h = Mix(h);
-            const double th = (it + Unit(h)) * dth;
-            h = Mix(h);
-            const double ph = (ip + Unit(h)) * dph;
-            return Vec3<double>(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th));
-          };
           double q[2];
-          Eval(jit(o), jit(i), q);
+          Eval(jit(bo), jit(bi), q);
           v[0] += q[0] / jitter;
           v[1] += q[1] / jitter;
         }
-      }
-      const double w = dirs[i].z * solid[i];
-      for (int k = 0; k < 2; ++k) {
-        t.lobe[(size_t(k) * D + o) * D + i] = float(v[k]);
-        A[k] += v[k] * w;
-        m[k] = m[k] + dirs[i] * (v[k] * w);
-      }
-    }
-    for (int k = 0; k < 2; ++k) {
-      float* e = &t.ibl[(size_t(k) * D + o) * 5];
-      const double len = Length(m[k]);
-      const Vec3<double> d = len > 0.0 ? m[k] * (1.0 / len) : Vec3<double>(0, 0, 1);
-      e[0] = float(A[k]);
-      e[1] = float(d.x);
-      e[2] = float(d.y);
-      e[3] = float(d.z);
-      e[4] = float(A[k] > 0.0 ? yarn_table::RoughnessForMeanCosine(len / A[k]) : 1.0);
-    }
-  });
-  return t;
+      },
+      n_theta, n_phi, true);
 }
 
 std::string YarnFarField::Describe() const {
@@ -277,7 +263,7 @@ YarnLobeSettings YarnLobeSettingsFromJson(const nlohmann::json& j, const std::st
                              "\"farfield-split\" or \"quadrature\"");
   s.fabric = str("fabric");
   s.positions = num("positions", 1, 4096);
-  s.nodes = num("nodes", 1, 256);
+  s.nodes = num("nodes", 1, 64);
   s.table_theta = num("table_theta", 2, 64);
   s.table_jitter = num("table_jitter", 0, 4096);
   if (j.contains("ibl")) {
@@ -286,6 +272,31 @@ YarnLobeSettings YarnLobeSettingsFromJson(const nlohmann::json& j, const std::st
       throw std::runtime_error(where + ".ibl: expected \"summary\" or \"bins\"");
   }
   return s;
+}
+
+namespace {
+void LockLobeIgnored(FitOptions* o) {
+  for (const char* n : {"roughness", "anisotropy", "twist", "specular_f0", "forward_scattering"})
+    if (std::find(o->locked.begin(), o->locked.end(), n) == o->locked.end()) o->locked.push_back(n);
+}
+}  // namespace
+
+std::string ApplyPresetYarnLobe(const YarnLobeSettings& s, FitOptions* o) {
+  if (o->start.woven.yarn_layer != woven::YarnLayer::kAdditive)
+    throw std::invalid_argument("yarn lobe: the far-field lobe needs the additive yarn layer");
+  const auto t0 = std::chrono::steady_clock::now();
+  const YarnFarField ff(s.fabric, s.positions);
+  o->start.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(ff.Description(s.nodes, s.table_theta));
+  o->start.woven.ibl = woven::IblMode::kSplit;
+  LockLobeIgnored(o);
+  char buf[200];
+  std::snprintf(buf, sizeof buf,
+                "yarn lobe: the far-field lobe of %s, %zu yarn groups x %d nodes, environment "
+                "summary %d x %d baked in %.2f s",
+                s.fabric.c_str(), o->start.yarn_lobe->groups.size(), s.nodes, s.table_theta,
+                2 * s.table_theta,
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  return buf;
 }
 
 std::string ApplyYarnLobe(const YarnLobeSettings& s, FitOptions* o) {
@@ -318,8 +329,7 @@ std::string ApplyYarnLobe(const YarnLobeSettings& s, FitOptions* o) {
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     line = buf + o->yarn_far_field->Describe() + ")";
   }
-  for (const char* n : {"roughness", "anisotropy", "twist", "specular_f0", "forward_scattering"})
-    if (std::find(o->locked.begin(), o->locked.end(), n) == o->locked.end()) o->locked.push_back(n);
+  LockLobeIgnored(o);
   return line;
 }
 

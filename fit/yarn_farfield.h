@@ -23,6 +23,7 @@
 #include <nlohmann/json.hpp>
 
 #include "brdf/math.h"
+#include "brdf/yarn_lobe.h"
 #include "brdf/yarn_table.h"
 
 namespace clothfit::render {
@@ -49,9 +50,16 @@ class YarnFarField {
   // of the other coordinate's extent (staple: along, u = clamp(along / (l/2) umax); filament:
   // across, v = clamp(across pi / w)), as LocateDraft maps them, times E[I] = 1 - e^-10
   // (fineness > 0) and specNorm. The pattern's umax noise (period > 0) is not modelled: the
-  // nominal umax is used. nodes in [1, 256] (std::invalid_argument otherwise).
+  // nominal umax is used. nodes in [1, 64] (std::invalid_argument otherwise).
+  // Evaluated as yarn_lobe::Lobe(Description(nodes, 0)) (brdf/yarn_lobe.h), built per call:
+  // for checks; a renderer builds the Lobe once. nodes in [1, 64].
   void EvalQuadrature(const Vec3<double>& wo, const Vec3<double>& wi, double out[2],
                       int nodes = 16) const;
+  // The lobe's preset description (brdf/yarn_lobe.h FarField; a preset's "woven": {"yarn_lobe"}):
+  // the groups above and the pattern's constants, scale = specNorm E[I]; table_theta > 0: with
+  // its environment summary on a table_theta x 2 table_theta grid baked from the quadrature
+  // (deterministic). Throws std::invalid_argument on nodes outside [1, 64].
+  yarn_lobe::FarField Description(int nodes, int table_theta) const;
   // The warp's share of the tile-averaged yarn specular albedo (deterministic estimate over
   // cosine-distributed wo, wi), for the record: m = warp_share at which the preview's
   // 2 m T_w + 2 (1 - m) T_f weights the lobes as the reference with equal ks does is 0.5.
@@ -94,5 +102,12 @@ YarnLobeSettings YarnLobeSettingsFromJson(const nlohmann::json& j, const std::st
 // forward_scattering). Throws std::invalid_argument on a bad mode or fabric, or a bake of more
 // than 2e10 lobe evaluations. Returns a log line (empty when no table is baked).
 std::string ApplyYarnLobe(const YarnLobeSettings& s, FitOptions* options);
+// The product form (session 12): the fabric's lobe as a preset description (YarnFarField::
+// Description(s.nodes, s.table_theta)) in options->start.yarn_lobe, so every preview of the fit
+// and the written preset draw it (render/preview/preview.h ApplyPresetYarnLobe); sets the start's
+// woven "ibl" to "split" and locks the parameters the lobe ignores, as ApplyYarnLobe. Throws
+// std::invalid_argument on a fabric without yarns, a bad node count or a start whose woven yarn
+// layer is not additive. Returns a log line.
+std::string ApplyPresetYarnLobe(const YarnLobeSettings& s, FitOptions* options);
 
 }  // namespace clothfit::fit

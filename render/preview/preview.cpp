@@ -1235,4 +1235,13 @@ std::vector<float> ComposeFrame(const PreviewCache& c, const std::vector<Rgb<dou
   return frame;
 }
 
+void ApplyPresetYarnLobe(const MaterialPreset& p, PreviewOptions* o) {
+  if (!p.yarn_lobe) return;
+  auto lobe = std::make_shared<const yarn_lobe::Lobe>(*p.yarn_lobe);
+  o->yarn_lobe = [lobe](const Vec3d& wo, const Vec3d& wi, double out[2]) { lobe->Eval(wo, wi, out); };
+  o->yarn_ibl = [lobe](const Vec3d& wo, yarn_table::IblLobe out[2]) {
+    lobe->description().ibl.Ibl(wo, out);
+  };
+}
+
 }  // namespace clothfit::render

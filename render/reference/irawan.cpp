@@ -16,19 +16,6 @@ namespace {
 
 constexpr double kDegToRad = kPi / 180.0;
 
-double SmoothStep01(double x) {
-  const double c = std::clamp(x, 0.0, 1.0);
-  return c * c * (3.0 - 2.0 * c);
-}
-
-// Seeliger's law (Irawan thesis 4.2): A = (1/4pi) c1 c2 / (c1 + c2), single-scattering
-// albedo 1 (the fibres' colour is carried by ks).
-double Seeliger(double cos1, double cos2) {
-  const double c1 = std::max(0.0, cos1), c2 = std::max(0.0, cos2);
-  if (c1 <= 0.0 || c2 <= 0.0) return 0.0;
-  return (1.0 / (4.0 * kPi)) * c1 * c2 / (c1 + c2);
-}
-
 // Uniform double in (0, 1) from a 64-bit key (SplitMix64 finaliser, render/scene/sampler.h).
 double Hash01(uint64_t key) { return (double(Mix64(key) >> 11) + 0.5) * 0x1.0p-53; }
 
@@ -54,70 +41,11 @@ uint64_t Bits(double x) { return std::bit_cast<uint64_t>(x); }
 
 }  // namespace
 
-double BesselI0(double x) {
-  // sum_k (x^2/4)^k / (k!)^2; terms decrease once k > |x|/2, converged to 1e-17 relative.
-  const double q = 0.25 * x * x;
-  double term = 1.0, sum = 1.0;
-  for (int k = 1; k < 500; ++k) {
-    term *= q / (double(k) * double(k));
-    sum += term;
-    if (term < 1e-17 * sum) break;
-  }
-  return sum;
-}
-
 Vec3d ToYarnFrame(const Vec3d& d, YarnType type) {
   return type == YarnType::kWarp ? Vec3d(-d.y, d.x, d.z) : Vec3d(-d.x, -d.y, d.z);
 }
 Vec3d FromYarnFrame(const Vec3d& d, YarnType type) {
   return type == YarnType::kWarp ? Vec3d(d.y, -d.x, d.z) : Vec3d(-d.x, -d.y, d.z);
-}
-
-// Yarn spine in the (along, height) plane: a conic arc whose slope angle runs over
-// [-umax, umax] and whose half-extent is hx = l/2 - a sin(umax) (the surface, offset by
-// a = w/2 from the spine, then spans l). With rhat = 1 + kappa (1 + 1/tan umax):
-//   circle    (rhat = 1): R = hx / sin(umax).
-//   ellipse   (rhat > 0): x = B sin t, z = C cos t, tan u = (C/B) tan t, C = B / rhat;
-//             t_max = atan(rhat tan umax), B = hx / sin(t_max);
-//             R = (B^2 cos^2 t + C^2 sin^2 t)^(3/2) / (B C), t = atan(rhat tan u).
-//   parabola  (rhat = 0): z = -x^2 tan(umax) / (2 hx); R = hx / tan(umax) (1 + tan^2 u)^(3/2).
-//   hyperbola (rhat < 0): x = B sinh s, z = -C cosh s, tan u = (C/B) tanh s, C = B / |rhat|;
-//             s = atanh(|rhat| tan u), B = hx / sinh(s_max);
-//             R = (B^2 cosh^2 s + C^2 sinh^2 s)^(3/2) / (B C).
-// kappa >= -1 gives |rhat| tan(umax) <= 1; at kappa = -1 exactly the hyperbola degenerates
-// (s_max infinite), so |rhat| tan is clamped to 1 - 1e-9 (documented guard).
-double SpineRadius(double u_abs, double umax, double kappa, double width, double length) {
-  const double a = 0.5 * width;
-  const double hx = 0.5 * length - a * std::sin(umax);
-  const double rhat = kappa == 0.0 ? 1.0 : 1.0 + kappa * (1.0 + 1.0 / std::tan(umax));
-  const double u = std::min(u_abs, umax);
-  if (std::abs(rhat - 1.0) < 1e-12) return hx / std::sin(umax);
-  if (rhat > 1e-9) {
-    const double tmax = std::atan(rhat * std::tan(umax));
-    const double b = hx / std::sin(tmax);
-    const double c = b / rhat;
-    const double t = std::atan(rhat * std::tan(u));
-    const double ct = std::cos(t), st = std::sin(t);
-    return std::pow(b * b * ct * ct + c * c * st * st, 1.5) / (b * c);
-  }
-  if (rhat > -1e-9) {
-    const double tu = std::tan(u);
-    return hx / std::tan(umax) * std::pow(1.0 + tu * tu, 1.5);
-  }
-  const double rho = -rhat;
-  const double smax = std::atanh(std::min(rho * std::tan(umax), 1.0 - 1e-9));
-  const double b = hx / std::sinh(smax);
-  const double c = b / rho;
-  const double s = std::atanh(std::min(rho * std::tan(u), 1.0 - 1e-9));
-  const double ch = std::cosh(s), sh = std::sinh(s);
-  return std::pow(b * b * ch * ch + c * c * sh * sh, 1.5) / (b * c);
-}
-
-double FilamentRadius(double u_h_abs, double umax, double ss, double kappa, double width,
-                      double length) {
-  if (ss <= 0.0) return SpineRadius(u_h_abs, umax, kappa, width, length);
-  const double umax_s = (1.0 - ss) * umax;
-  return SpineRadius(std::min(u_h_abs, umax_s), umax_s, kappa, width, length);
 }
 
 IrawanBsdf::IrawanBsdf(WeavePattern pattern, double repeat_u, double repeat_v)
@@ -128,7 +56,11 @@ IrawanBsdf::IrawanBsdf(WeavePattern pattern, double repeat_u, double repeat_v)
   }
   DeriveSegmentCentres(&pattern_, "IrawanBsdf(" + pattern_.name + ")");
   ValidateWeave(pattern_, "IrawanBsdf(" + pattern_.name + ")");
-  von_mises_norm_ = 1.0 / (2.0 * kPi * BesselI0(std::abs(pattern_.beta)));
+  phase_.alpha = pattern_.alpha;
+  phase_.beta = pattern_.beta;
+  phase_.von_mises_norm = 1.0 / (2.0 * kPi * BesselI0(std::abs(pattern_.beta)));
+  phase_.h_width = pattern_.h_width;
+  phase_.ss = pattern_.ss;
   instance_id_ = g_next_instance_id.fetch_add(1, std::memory_order_relaxed);
   for (const Yarn& y : pattern_.yarns) {
     YarnConst yc;
@@ -139,6 +71,16 @@ IrawanBsdf::IrawanBsdf(WeavePattern pattern, double repeat_u, double repeat_v)
     yc.area_factor = (pattern_.warp_area + pattern_.weft_area) /
                      (y.type == YarnType::kWarp ? pattern_.warp_area : pattern_.weft_area);
     yarn_const_.push_back(yc);
+    yarn_lobe::Yarn ys;
+    ys.warp = y.type == YarnType::kWarp;
+    ys.psi = yc.psi;
+    ys.sin_psi = yc.sin_psi;
+    ys.tan_psi = yc.tan_psi;
+    ys.width = y.width;
+    ys.length = y.length;
+    ys.kappa = y.kappa;
+    ys.area_factor = yc.area_factor;
+    yarn_shape_.push_back(ys);
   }
 
   // Specular normalisation: 10 000 deterministic draws over 16 x 16 tiles (so the umax
@@ -224,74 +166,8 @@ double IrawanBsdf::SpecularBandAverage(const IrawanPoint& p, const Vec3d& wo_s,
 
 double IrawanBsdf::Specular(const IrawanPoint& p, const Vec3d& wo_s, const Vec3d& wi_s,
                             double band_extent) const {
-  const bool band_average = band_extent > 0.0;
-  // The band indicator's mean over the band coordinate uniform in [-band_extent, band_extent]:
-  // the overlap of [centre - delta/2, centre + delta/2] with it, over its length.
-  auto band_mean = [band_extent](double centre, double delta) {
-    const double lo = std::max(centre - 0.5 * delta, -band_extent);
-    const double hi = std::min(centre + 0.5 * delta, band_extent);
-    return std::max(hi - lo, 0.0) / (2.0 * band_extent);
-  };
-  if (!(wo_s.z > 0.0) || !(wi_s.z > 0.0)) return 0.0;
-  const Yarn& y = pattern_.yarns[size_t(p.yarn)];
-  const YarnConst& yc = yarn_const_[size_t(p.yarn)];
-  const Vec3d wi = ToYarnFrame(wi_s, y.type), wo = ToYarnFrame(wo_s, y.type);
-  const Vec3d sum = wi + wo;
-  const double len = Length(sum);
-  if (!(len > 1e-12)) return 0.0;
-  const Vec3d h = sum * (1.0 / len);
-  const double umax = p.umax, w = y.width, l = y.length, a = 0.5 * w;
-  // Phase function: uniform + von Mises about the forward direction.
-  const double fc = pattern_.alpha + std::exp(pattern_.beta * -Dot(wi, wo)) * von_mises_norm_;
-  double fs = 0.0;
-  if (yc.psi == 0.0) {
-    // u_h = atan(h_y / h_z) with h_z > 0 (wi, wo above the surface): cos u_h = 1/sqrt(1 + q^2),
-    // sin u_h = q cos u_h, q = h_y / h_z.
-    const double q = h.y / h.z;
-    const double u_h = std::atan(q);
-    if (!(std::abs(u_h) < umax)) return 0.0;
-    const double delta = l * pattern_.h_width;
-    // Band centre clamped so the band stays inside the segment.
-    const double y_h = std::clamp(u_h / umax * 0.5 * l, -0.5 * (l - delta), 0.5 * (l - delta));
-    if (!band_average && !(std::abs(p.along - y_h) < 0.5 * delta)) return 0.0;
-    const double cos_uh = 1.0 / std::sqrt(1.0 + q * q), sin_uh = q * cos_uh;
-    const double v = p.v, sv = std::sin(v), cv = std::cos(v);
-    const Vec3d n(sv, sin_uh * cv, cos_uh * cv);
-    const Vec3d t(0.0, cos_uh, -sin_uh);
-    const double R = FilamentRadius(std::abs(u_h), umax, pattern_.ss, y.kappa, w, l);
-    const double txh_x = t.y * h.z - t.z * h.y;
-    const double G = a * (R + a * cv) / (len * std::abs(txh_x));
-    double A = Seeliger(Dot(n, wi), Dot(n, wo));
-    if (pattern_.ss > 0.0) {
-      A *= 1.0 - SmoothStep01((std::abs(u_h) - (1.0 - pattern_.ss) * umax) / (pattern_.ss * umax));
-    }
-    // band_average: the band indicator's mean over `along` in place of the indicator
-    fs = G * fc * A * kPi * l / delta * (band_average ? band_mean(y_h, delta) : 1.0);
-  } else {
-    const double su = p.sin_u, cu = p.cos_u;
-    const double bterm = h.y * su + h.z * cu;
-    const double r = std::sqrt(h.x * h.x + bterm * bterm);
-    const double D = (h.y * cu - h.z * su) / (r * yc.tan_psi);
-    if (!(std::abs(D) < 1.0)) return 0.0;  // also rejects r = 0 (D infinite or NaN)
-    // v_h = atan2(-bterm, h_x) + acos(D), wrapped to (-pi, pi]: its sine and cosine by the
-    // angle-sum formulas (cos of the atan2 = h_x / r, sin = -bterm / r; sin acos D =
-    // sqrt(1 - D^2)), the angle itself by one atan2.
-    const double ca = h.x / r, sa = -bterm / r, sb = std::sqrt(1.0 - D * D);
-    const double cos_vh = ca * D - sa * sb, sin_vh = sa * D + ca * sb;
-    const double v_h = std::atan2(sin_vh, cos_vh);
-    if (!(std::abs(v_h) < 0.5 * kPi)) return 0.0;
-    const double delta = w * pattern_.h_width;
-    const double x_h = std::clamp(v_h * w / kPi, -0.5 * (w - delta), 0.5 * (w - delta));
-    if (!band_average && !(std::abs(p.across - x_h) < 0.5 * delta)) return 0.0;
-    const Vec3d n(sin_vh, su * cos_vh, cu * cos_vh);
-    const double NoH = Dot(n, h);
-    if (!(NoH > 0.0)) return 0.0;
-    const double R = p.spine_radius;
-    const double G = a * (R + a * cos_vh) / (len * NoH * std::abs(yc.sin_psi));
-    const double A = Seeliger(Dot(n, wi), Dot(n, wo));
-    fs = G * fc * A * 2.0 * w * umax / delta * (band_average ? band_mean(x_h, delta) : 1.0);
-  }
-  return fs * yc.area_factor;
+  const yarn_lobe::Point q{p.umax, p.across, p.along, p.u, p.v, p.sin_u, p.cos_u, p.spine_radius};
+  return yarn_lobe::SegmentSpecular(phase_, yarn_shape_[size_t(p.yarn)], q, wo_s, wi_s, band_extent);
 }
 
 struct IrawanBsdf::Memo {

@@ -45,6 +45,7 @@
 #include <string>
 #include <vector>
 
+#include "brdf/yarn_lobe.h"
 #include "render/reference/bsdf.h"
 #include "render/reference/weave_pattern.h"
 #include "render/reference/woven_sampling.h"
@@ -130,7 +131,8 @@ class IrawanBsdf final : public Bsdf {
 
   WeavePattern pattern_;
   double repeat_u_, repeat_v_;
-  double von_mises_norm_ = 0.0;  // 1 / (2 pi I0(|beta|))
+  yarn_lobe::Phase phase_;               // the specular's pattern constants
+  std::vector<yarn_lobe::Yarn> yarn_shape_;  // per yarn: the specular's constants
   double spec_norm_ = 0.0;
 };
 
@@ -138,19 +140,10 @@ class IrawanBsdf final : public Bsdf {
 Vec3d ToYarnFrame(const Vec3d& d, YarnType type);
 Vec3d FromYarnFrame(const Vec3d& d, YarnType type);
 
-// Radius of curvature of the yarn spine at inclination |u| (see docs/woven-cloth.md 1.3).
-double SpineRadius(double u_abs, double umax, double kappa, double width, double length);
-
-// Radius of curvature the specular term of a filament yarn (psi = 0) uses at the highlight's
-// inclination u_h, with filament smoothing ss (0 <= ss < 1): following Mitsuba 0.5
-// (src/bsdfs/irawan.cpp, specular term), the spine is taken as the arc of maximum inclination
-// (1 - ss) umax and the radius is read at min(|u_h|, (1 - ss) umax):
-//   R = SpineRadius(min(|u_h|, (1 - ss) umax), (1 - ss) umax, kappa, width, length).
-// ss = 0 gives SpineRadius(|u_h|, umax, ...) exactly.
-double FilamentRadius(double u_h_abs, double umax, double ss, double kappa, double width,
-                      double length);
-
-// Modified Bessel function of the first kind, order 0 (power series).
-double BesselI0(double x);
+// The yarn geometry functions live with the specular in brdf/yarn_lobe.h (SpineRadius,
+// FilamentRadius: the spine's radius of curvature; BesselI0).
+using yarn_lobe::BesselI0;
+using yarn_lobe::FilamentRadius;
+using yarn_lobe::SpineRadius;
 
 }  // namespace clothfit::render

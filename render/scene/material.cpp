@@ -155,9 +155,99 @@ void ParseClothOptions(const json& c, const std::string& where, cloth::Options* 
   }
 }
 
+// "woven": {"yarn_lobe"}: the far-field yarn lobe (brdf/yarn_lobe.h FarField; docs/preset-format.md
+// "The far-field yarn lobe"). Every key is required except "fabric"; sizes are checked before
+// anything is read or allocated; the values' ranges by yarn_lobe::Validate.
+std::shared_ptr<const yarn_lobe::FarField> ParseYarnLobe(const json& y, const std::string& where) {
+  const std::string base = "woven.yarn_lobe";
+  if (!y.is_object()) Fail(where, base, "expected an object");
+  auto need = [&](const json& o, const std::string& field, const char* k) -> const json& {
+    if (!o.contains(k)) Fail(where, field + "." + k, "missing");
+    return o[k];
+  };
+  auto integer = [&](const json& v, const std::string& field, int lo, int hi) {
+    if (!v.is_number_integer() || v.get<long long>() < lo || v.get<long long>() > hi ||
+        (v.is_number_unsigned() && v.get<unsigned long long>() > (unsigned long long)hi))
+      Fail(where, field, "expected an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+    return int(v.get<long long>());
+  };
+  static const char* kKeys[] = {"model", "fabric", "nodes", "alpha", "beta", "h_width", "ss",
+                                "scale", "groups", "ibl"};
+  for (auto it = y.begin(); it != y.end(); ++it) {
+    bool known = false;
+    for (const char* k : kKeys) known = known || it.key() == k;
+    if (!known)
+      Fail(where, base + "." + it.key(),
+           "unknown key (valid: model, fabric, nodes, alpha, beta, h_width, ss, scale, groups, ibl)");
+  }
+  auto f = std::make_shared<yarn_lobe::FarField>();
+  const json& model = need(y, base, "model");
+  if (!model.is_string() || model.get<std::string>() != "irawan-far-field")
+    Fail(where, base + ".model", "expected \"irawan-far-field\"");
+  if (y.contains("fabric")) {
+    if (!y["fabric"].is_string()) Fail(where, base + ".fabric", "expected a string");
+    f->fabric = y["fabric"].get<std::string>();
+  }
+  f->nodes = integer(need(y, base, "nodes"), base + ".nodes", 1, yarn_lobe::FarField::kMaxNodes);
+  f->alpha = Number(need(y, base, "alpha"), where, base + ".alpha");
+  f->beta = Number(need(y, base, "beta"), where, base + ".beta");
+  f->h_width = Number(need(y, base, "h_width"), where, base + ".h_width");
+  f->ss = Number(need(y, base, "ss"), where, base + ".ss");
+  f->scale = Number(need(y, base, "scale"), where, base + ".scale");
+  const json& groups = need(y, base, "groups");
+  if (!groups.is_array() || groups.empty() || groups.size() > size_t(yarn_lobe::FarField::kMaxGroups))
+    Fail(where, base + ".groups", "expected an array of 1 to " +
+                                      std::to_string(yarn_lobe::FarField::kMaxGroups) + " groups");
+  for (size_t i = 0; i < groups.size(); ++i) {
+    const json& g = groups[i];
+    const std::string gf = base + ".groups[" + std::to_string(i) + "]";
+    if (!g.is_object() || g.size() != 10)
+      Fail(where, gf, "expected an object with type, share, psi, umax, kappa, width, length, "
+                      "across, along, area_factor");
+    yarn_lobe::FarField::Group q;
+    const json& type = need(g, gf, "type");
+    if (!type.is_string() || (type.get<std::string>() != "warp" && type.get<std::string>() != "weft"))
+      Fail(where, gf + ".type", "expected \"warp\" or \"weft\"");
+    q.warp = type.get<std::string>() == "warp";
+    q.share = Number(need(g, gf, "share"), where, gf + ".share");
+    q.psi = Number(need(g, gf, "psi"), where, gf + ".psi");
+    q.umax = Number(need(g, gf, "umax"), where, gf + ".umax");
+    q.kappa = Number(need(g, gf, "kappa"), where, gf + ".kappa");
+    q.width = Number(need(g, gf, "width"), where, gf + ".width");
+    q.length = Number(need(g, gf, "length"), where, gf + ".length");
+    q.across = Number(need(g, gf, "across"), where, gf + ".across");
+    q.along = Number(need(g, gf, "along"), where, gf + ".along");
+    q.area_factor = Number(need(g, gf, "area_factor"), where, gf + ".area_factor");
+    f->groups.push_back(q);
+  }
+  const json& ibl = need(y, base, "ibl");
+  const std::string bf = base + ".ibl";
+  if (!ibl.is_object() || ibl.size() != 3) Fail(where, bf, "expected an object with n_theta, n_phi, summary");
+  f->ibl.n_theta = integer(need(ibl, bf, "n_theta"), bf + ".n_theta", 2, 64);
+  f->ibl.n_phi = integer(need(ibl, bf, "n_phi"), bf + ".n_phi", 3, 128);
+  const json& sum = need(ibl, bf, "summary");
+  const size_t n = size_t(2) * size_t(f->ibl.n_theta) * size_t(f->ibl.n_phi) * 5;
+  if (!sum.is_array() || sum.size() != n)
+    Fail(where, bf + ".summary", "expected an array of 2 x n_theta x n_phi x 5 = " + std::to_string(n) +
+                                     " numbers");
+  f->ibl.ibl.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const double v = Number(sum[i], where, bf + ".summary[" + std::to_string(i) + "]");
+    if (std::abs(v) > 1e30) Fail(where, bf + ".summary[" + std::to_string(i) + "]", "out of float range");
+    f->ibl.ibl[i] = float(v);
+  }
+  try {
+    yarn_lobe::Validate(*f, where + ": " + base);  // "<where>: woven.yarn_lobe.<field>: ..."
+  } catch (const std::invalid_argument& e) {
+    throw MaterialError(e.what());
+  }
+  return f;
+}
+
 // The "woven" object: brdf/woven.h woven::Options (the same keys and meaning as
 // web/clothfit.js loadClothfitPreset).
-void ParseWovenOptions(const json& w, const std::string& where, woven::Options* o) {
+void ParseWovenOptions(const json& w, const std::string& where, woven::Options* o,
+                       std::shared_ptr<const yarn_lobe::FarField>* lobe) {
   if (!w.is_object()) Fail(where, "woven", "expected an object");
   for (auto it = w.begin(); it != w.end(); ++it) {
     const std::string k = it.key();
@@ -197,10 +287,12 @@ void ParseWovenOptions(const json& w, const std::string& where, woven::Options* 
         Fail(where, f, "expected an integer in [" + std::to_string(lo) + ", " +
                            std::to_string(woven::kMaxFisTaps) + "], got " + std::to_string(t));
       (k == "fis_taps" ? o->fis_taps : o->fis_diffuse_taps) = int(t);
+    } else if (k == "yarn_lobe") {
+      *lobe = ParseYarnLobe(*it, where);
     } else {
       Fail(where, f,
            "unknown key (valid: yarn_layer, tint_warp, tint_weft, ibl, fis_taps, "
-           "fis_diffuse_taps)");
+           "fis_diffuse_taps, yarn_lobe)");
     }
   }
   // The tap counts belong to filtered importance sampling (docs/preset-format.md).
@@ -208,6 +300,12 @@ void ParseWovenOptions(const json& w, const std::string& where, woven::Options* 
     for (const char* k : {"fis_taps", "fis_diffuse_taps"})
       if (w.contains(k))
         Fail(where, std::string("woven.") + k, "only allowed with \"ibl\": \"fis\"");
+  // The far-field lobe replaces the yarn lobes of the additive layer; its environment is its own
+  // split sum (render/preview/preview.h PreviewOptions::yarn_lobe).
+  if (*lobe && o->yarn_layer != woven::YarnLayer::kAdditive)
+    Fail(where, "woven.yarn_lobe", "needs \"yarn_layer\": \"additive\"");
+  if (*lobe && o->ibl != woven::IblMode::kSplit)
+    Fail(where, "woven.yarn_lobe", "needs \"ibl\": \"split\" (the lobe's own split sum)");
 }
 
 // One entry of "parameters": looked up in the model's table, range-checked, stored in p->values.
@@ -252,6 +350,21 @@ void ParseParameter(const std::string& name, const json& value, const std::strin
   }
 }
 
+json YarnLobeToJson(const yarn_lobe::FarField& f) {
+  json groups = json::array();
+  for (const yarn_lobe::FarField::Group& g : f.groups)
+    groups.push_back({{"type", g.warp ? "warp" : "weft"}, {"share", g.share}, {"psi", g.psi},
+                      {"umax", g.umax}, {"kappa", g.kappa}, {"width", g.width},
+                      {"length", g.length}, {"across", g.across}, {"along", g.along},
+                      {"area_factor", g.area_factor}});
+  json summary = json::array();
+  for (float v : f.ibl.ibl) summary.push_back(double(v));
+  return {{"model", "irawan-far-field"}, {"fabric", f.fabric}, {"nodes", f.nodes},
+          {"alpha", f.alpha}, {"beta", f.beta}, {"h_width", f.h_width}, {"ss", f.ss},
+          {"scale", f.scale}, {"groups", groups},
+          {"ibl", {{"n_theta", f.ibl.n_theta}, {"n_phi", f.ibl.n_phi}, {"summary", summary}}}};
+}
+
 }  // namespace
 
 MaterialPreset ParsePreset(const json& j, const std::string& where) {
@@ -262,7 +375,7 @@ MaterialPreset ParsePreset(const json& j, const std::string& where) {
   }
   if (j.contains("woven")) {
     if (p.model != ModelKind::kWoven) Fail(where, "woven", "only allowed with model \"woven\"");
-    ParseWovenOptions(j["woven"], where, &p.woven);
+    ParseWovenOptions(j["woven"], where, &p.woven, &p.yarn_lobe);
   }
   if (!j.contains("parameters") || !j["parameters"].is_object())
     Fail(where, "parameters", "missing or not an object");
@@ -334,6 +447,7 @@ json PresetToJson(const MaterialPreset& p) {
       j["woven"]["fis_taps"] = p.woven.fis_taps;
       j["woven"]["fis_diffuse_taps"] = p.woven.fis_diffuse_taps;
     }
+    if (p.yarn_lobe) j["woven"]["yarn_lobe"] = YarnLobeToJson(*p.yarn_lobe);
   }
   j["conventions"] = {{"colour_space", "linear sRGB (Rec.709 primaries), not gamma-encoded"},
                       {"roughness", "perceptual r in [0, 1]; the models use alpha = r^2"}};

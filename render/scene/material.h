@@ -15,7 +15,9 @@
 //               [1, 1, 1]; "ibl" missing = "split"; the tap counts (integers; defaults 16 and
 //               0) only with "ibl": "fis" (filtered importance sampling of the three.js PMREM
 //               for the yarn lobes; the writer writes "ibl" always and the taps with "fis");
-//               web/clothfit.js reads the same keys)
+//               web/clothfit.js reads the same keys;
+//               "yarn_lobe": {...}: the far-field yarn lobe, brdf/yarn_lobe.h FarField, with
+//               "yarn_layer": "additive" and "ibl": "split" only; docs/preset-format.md)
 //     "conventions": {"colour_space": "linear sRGB (Rec.709 primaries)",
 //                     "roughness": "perceptual r; alpha = r^2"}          (written, informative)
 //     "parameters": {"<name>": number | [r, g, b], ...}   names from the model's parameter
@@ -28,6 +30,7 @@
 #pragma once
 
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
@@ -36,6 +39,7 @@
 #include "brdf/cloth.h"
 #include "brdf/params.h"
 #include "brdf/woven.h"
+#include "brdf/yarn_lobe.h"
 
 namespace clothfit::render {
 
@@ -55,6 +59,9 @@ struct MaterialPreset {
   ModelKind model = ModelKind::kCloth;
   cloth::Options cloth;                             // used when model == kCloth
   ::clothfit::woven::Options woven;                 // used when model == kWoven ("woven")
+  // "woven": {"yarn_lobe"} (woven only; null: none): the far-field yarn lobe that replaces the
+  // model's GGX yarn lobes (brdf/yarn_lobe.h; render/preview/preview.h ApplyPresetYarnLobe).
+  std::shared_ptr<const yarn_lobe::FarField> yarn_lobe;
   std::vector<double> values;                       // flat, in parameter-table order
   nlohmann::json extra = nlohmann::json::object();  // uninterpreted top-level keys
 

@@ -1,0 +1,295 @@
+// brdf/yarn_lobe.cpp: see yarn_lobe.h.
+#include "brdf/yarn_lobe.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <tbb/parallel_for.h>
+
+namespace clothfit::yarn_lobe {
+
+namespace {
+constexpr double kDegToRad = kPi / 180.0;
+}
+
+double SmoothStep01(double x) {
+  const double c = std::clamp(x, 0.0, 1.0);
+  return c * c * (3.0 - 2.0 * c);
+}
+
+double Seeliger(double cos1, double cos2) {
+  const double c1 = std::max(0.0, cos1), c2 = std::max(0.0, cos2);
+  if (c1 <= 0.0 || c2 <= 0.0) return 0.0;
+  return (1.0 / (4.0 * kPi)) * c1 * c2 / (c1 + c2);
+}
+
+double BesselI0(double x) {
+  // sum_k (x^2/4)^k / (k!)^2; terms decrease once k > |x|/2, converged to 1e-17 relative.
+  const double q = 0.25 * x * x;
+  double term = 1.0, sum = 1.0;
+  for (int k = 1; k < 500; ++k) {
+    term *= q / (double(k) * double(k));
+    sum += term;
+    if (term < 1e-17 * sum) break;
+  }
+  return sum;
+}
+
+// Yarn spine in the (along, height) plane: a conic arc whose slope angle runs over
+// [-umax, umax] and whose half-extent is hx = l/2 - a sin(umax) (the surface, offset by
+// a = w/2 from the spine, then spans l). With rhat = 1 + kappa (1 + 1/tan umax):
+//   circle    (rhat = 1): R = hx / sin(umax).
+//   ellipse   (rhat > 0): x = B sin t, z = C cos t, tan u = (C/B) tan t, C = B / rhat;
+//             t_max = atan(rhat tan umax), B = hx / sin(t_max);
+//             R = (B^2 cos^2 t + C^2 sin^2 t)^(3/2) / (B C), t = atan(rhat tan u).
+//   parabola  (rhat = 0): z = -x^2 tan(umax) / (2 hx); R = hx / tan(umax) (1 + tan^2 u)^(3/2).
+//   hyperbola (rhat < 0): x = B sinh s, z = -C cosh s, tan u = (C/B) tanh s, C = B / |rhat|;
+//             s = atanh(|rhat| tan u), B = hx / sinh(s_max);
+//             R = (B^2 cosh^2 s + C^2 sinh^2 s)^(3/2) / (B C).
+// kappa >= -1 gives |rhat| tan(umax) <= 1; at kappa = -1 exactly the hyperbola degenerates
+// (s_max infinite), so |rhat| tan is clamped to 1 - 1e-9 (documented guard).
+double SpineRadius(double u_abs, double umax, double kappa, double width, double length) {
+  const double a = 0.5 * width;
+  const double hx = 0.5 * length - a * std::sin(umax);
+  const double rhat = kappa == 0.0 ? 1.0 : 1.0 + kappa * (1.0 + 1.0 / std::tan(umax));
+  const double u = std::min(u_abs, umax);
+  if (std::abs(rhat - 1.0) < 1e-12) return hx / std::sin(umax);
+  if (rhat > 1e-9) {
+    const double tmax = std::atan(rhat * std::tan(umax));
+    const double b = hx / std::sin(tmax);
+    const double c = b / rhat;
+    const double t = std::atan(rhat * std::tan(u));
+    const double ct = std::cos(t), st = std::sin(t);
+    return std::pow(b * b * ct * ct + c * c * st * st, 1.5) / (b * c);
+  }
+  if (rhat > -1e-9) {
+    const double tu = std::tan(u);
+    return hx / std::tan(umax) * std::pow(1.0 + tu * tu, 1.5);
+  }
+  const double rho = -rhat;
+  const double smax = std::atanh(std::min(rho * std::tan(umax), 1.0 - 1e-9));
+  const double b = hx / std::sinh(smax);
+  const double c = b / rho;
+  const double s = std::atanh(std::min(rho * std::tan(u), 1.0 - 1e-9));
+  const double ch = std::cosh(s), sh = std::sinh(s);
+  return std::pow(b * b * ch * ch + c * c * sh * sh, 1.5) / (b * c);
+}
+
+double FilamentRadius(double u_h_abs, double umax, double ss, double kappa, double width,
+                      double length) {
+  if (ss <= 0.0) return SpineRadius(u_h_abs, umax, kappa, width, length);
+  const double umax_s = (1.0 - ss) * umax;
+  return SpineRadius(std::min(u_h_abs, umax_s), umax_s, kappa, width, length);
+}
+
+double SegmentSpecular(const Phase& ph, const Yarn& y, const Point& p, const Vec3<double>& wo_s,
+                       const Vec3<double>& wi_s, double band_extent) {
+  using Vec3d = Vec3<double>;
+  const bool band_average = band_extent > 0.0;
+  // The band indicator's mean over the band coordinate uniform in [-band_extent, band_extent]:
+  // the overlap of [centre - delta/2, centre + delta/2] with it, over its length.
+  auto band_mean = [band_extent](double centre, double delta) {
+    const double lo = std::max(centre - 0.5 * delta, -band_extent);
+    const double hi = std::min(centre + 0.5 * delta, band_extent);
+    return std::max(hi - lo, 0.0) / (2.0 * band_extent);
+  };
+  if (!(wo_s.z > 0.0) || !(wi_s.z > 0.0)) return 0.0;
+  const Vec3d wi = ToYarnFrame(wi_s, y.warp), wo = ToYarnFrame(wo_s, y.warp);
+  const Vec3d sum = wi + wo;
+  const double len = Length(sum);
+  if (!(len > 1e-12)) return 0.0;
+  const Vec3d h = sum * (1.0 / len);
+  const double umax = p.umax, w = y.width, l = y.length, a = 0.5 * w;
+  // Phase function: uniform + von Mises about the forward direction.
+  const double fc = ph.alpha + std::exp(ph.beta * -Dot(wi, wo)) * ph.von_mises_norm;
+  double fs = 0.0;
+  if (y.psi == 0.0) {
+    // u_h = atan(h_y / h_z) with h_z > 0 (wi, wo above the surface): cos u_h = 1/sqrt(1 + q^2),
+    // sin u_h = q cos u_h, q = h_y / h_z.
+    const double q = h.y / h.z;
+    const double u_h = std::atan(q);
+    if (!(std::abs(u_h) < umax)) return 0.0;
+    const double delta = l * ph.h_width;
+    // Band centre clamped so the band stays inside the segment.
+    const double y_h = std::clamp(u_h / umax * 0.5 * l, -0.5 * (l - delta), 0.5 * (l - delta));
+    if (!band_average && !(std::abs(p.along - y_h) < 0.5 * delta)) return 0.0;
+    const double cos_uh = 1.0 / std::sqrt(1.0 + q * q), sin_uh = q * cos_uh;
+    const double v = p.v, sv = std::sin(v), cv = std::cos(v);
+    const Vec3d n(sv, sin_uh * cv, cos_uh * cv);
+    const Vec3d t(0.0, cos_uh, -sin_uh);
+    const double R = FilamentRadius(std::abs(u_h), umax, ph.ss, y.kappa, w, l);
+    const double txh_x = t.y * h.z - t.z * h.y;
+    const double G = a * (R + a * cv) / (len * std::abs(txh_x));
+    double A = Seeliger(Dot(n, wi), Dot(n, wo));
+    if (ph.ss > 0.0) {
+      A *= 1.0 - SmoothStep01((std::abs(u_h) - (1.0 - ph.ss) * umax) / (ph.ss * umax));
+    }
+    // band_average: the band indicator's mean over `along` in place of the indicator
+    fs = G * fc * A * kPi * l / delta * (band_average ? band_mean(y_h, delta) : 1.0);
+  } else {
+    const double su = p.sin_u, cu = p.cos_u;
+    const double bterm = h.y * su + h.z * cu;
+    const double r = std::sqrt(h.x * h.x + bterm * bterm);
+    const double D = (h.y * cu - h.z * su) / (r * y.tan_psi);
+    if (!(std::abs(D) < 1.0)) return 0.0;  // also rejects r = 0 (D infinite or NaN)
+    // v_h = atan2(-bterm, h_x) + acos(D), wrapped to (-pi, pi]: its sine and cosine by the
+    // angle-sum formulas (cos of the atan2 = h_x / r, sin = -bterm / r; sin acos D =
+    // sqrt(1 - D^2)), the angle itself by one atan2.
+    const double ca = h.x / r, sa = -bterm / r, sb = std::sqrt(1.0 - D * D);
+    const double cos_vh = ca * D - sa * sb, sin_vh = sa * D + ca * sb;
+    const double v_h = std::atan2(sin_vh, cos_vh);
+    if (!(std::abs(v_h) < 0.5 * kPi)) return 0.0;
+    const double delta = w * ph.h_width;
+    const double x_h = std::clamp(v_h * w / kPi, -0.5 * (w - delta), 0.5 * (w - delta));
+    if (!band_average && !(std::abs(p.across - x_h) < 0.5 * delta)) return 0.0;
+    const Vec3d n(sin_vh, su * cos_vh, cu * cos_vh);
+    const double NoH = Dot(n, h);
+    if (!(NoH > 0.0)) return 0.0;
+    const double R = p.spine_radius;
+    const double G = a * (R + a * cos_vh) / (len * NoH * std::abs(y.sin_psi));
+    const double A = Seeliger(Dot(n, wi), Dot(n, wo));
+    fs = G * fc * A * 2.0 * w * umax / delta * (band_average ? band_mean(x_h, delta) : 1.0);
+  }
+  return fs * y.area_factor;
+}
+
+void Validate(const FarField& f, const std::string& where, bool need_ibl) {
+  auto bad = [&](const std::string& field, const std::string& what) {
+    throw std::invalid_argument(where + "." + field + ": " + what);
+  };
+  auto finite = [](double x) { return std::isfinite(x); };
+  if (f.nodes < 1 || f.nodes > FarField::kMaxNodes) bad("nodes", "expected an integer in [1, 64]");
+  if (!finite(f.alpha) || f.alpha < 0.0) bad("alpha", "expected a finite number >= 0");
+  if (!finite(f.beta) || f.beta < 0.0) bad("beta", "expected a finite number >= 0");
+  if (!finite(f.h_width) || !(f.h_width > 0.0) || f.h_width > 1.0) bad("h_width", "expected a number in (0, 1]");
+  if (!finite(f.ss) || f.ss < 0.0 || !(f.ss < 1.0)) bad("ss", "expected a number in [0, 1)");
+  if (!finite(f.scale) || f.scale < 0.0) bad("scale", "expected a finite number >= 0");
+  if (f.groups.empty() || f.groups.size() > size_t(FarField::kMaxGroups))
+    bad("groups", "expected 1 to 8 groups");
+  for (size_t i = 0; i < f.groups.size(); ++i) {
+    const FarField::Group& g = f.groups[i];
+    const std::string gi = "groups[" + std::to_string(i) + "].";
+    if (!finite(g.share) || !(g.share > 0.0) || g.share > 1.0) bad(gi + "share", "expected a number in (0, 1]");
+    for (auto [name, v] : {std::pair<const char*, double>{"width", g.width}, {"length", g.length},
+                           {"across", g.across}, {"along", g.along}})
+      if (!finite(v) || !(v > 0.0) || v > 1e6) bad(gi + name, "expected a number in (0, 1e6]");
+    if (!finite(g.umax) || !(g.umax > 0.0) || !(g.umax < 90.0)) bad(gi + "umax", "expected degrees in (0, 90)");
+    if (!(g.width * std::sin(g.umax * kDegToRad) < g.length))
+      bad(gi + "umax", "width sin(umax) must be < length");
+    if (!finite(g.psi) || !(std::abs(g.psi) < 90.0)) bad(gi + "psi", "expected degrees in (-90, 90)");
+    if (!finite(g.kappa) || g.kappa < -1.0 || g.kappa > 1e6) bad(gi + "kappa", "expected a number in [-1, 1e6]");
+    if (!finite(g.area_factor) || g.area_factor < 1.0 || g.area_factor > 1e6)
+      bad(gi + "area_factor", "expected a number in [1, 1e6]");
+  }
+  const yarn_table::Table& t = f.ibl;
+  if (!need_ibl && t.n_theta == 0 && t.n_phi == 0 && t.ibl.empty()) return;
+  if (t.n_theta < 2 || t.n_theta > 64) bad("ibl.n_theta", "expected an integer in [2, 64]");
+  if (t.n_phi < 3 || t.n_phi > 128) bad("ibl.n_phi", "expected an integer in [3, 128]");
+  if (t.ibl.size() != size_t(2) * size_t(t.n_theta) * size_t(t.n_phi) * 5)
+    bad("ibl.summary", "expected 2 n_theta n_phi 5 = " +
+                           std::to_string(2 * t.n_theta * t.n_phi * 5) + " numbers, got " +
+                           std::to_string(t.ibl.size()));
+  for (size_t i = 0; i < t.ibl.size(); ++i)
+    if (!std::isfinite(t.ibl[i])) bad("ibl.summary[" + std::to_string(i) + "]", "not finite");
+}
+
+Lobe::Lobe(const FarField& f) : f_(f) {
+  Validate(f, "yarn lobe", false);
+  phase_.alpha = f.alpha;
+  phase_.beta = f.beta;
+  phase_.von_mises_norm = 1.0 / (2.0 * kPi * BesselI0(std::abs(f.beta)));
+  phase_.h_width = f.h_width;
+  phase_.ss = f.ss;
+  for (const FarField::Group& g : f.groups) {
+    G q;
+    q.yarn.warp = g.warp;
+    q.yarn.psi = g.psi * kDegToRad;
+    q.yarn.sin_psi = std::sin(q.yarn.psi);
+    q.yarn.tan_psi = std::tan(q.yarn.psi);
+    q.yarn.width = g.width;
+    q.yarn.length = g.length;
+    q.yarn.kappa = g.kappa;
+    q.yarn.area_factor = g.area_factor;
+    // (SegmentSpecular multiplies by area_factor itself)
+    q.weight = f.scale * g.share / f.nodes;
+    const double umax = g.umax * kDegToRad;
+    const bool staple = g.psi != 0.0;
+    q.band_extent = staple ? g.across : g.along;
+    for (int j = 0; j < f.nodes; ++j) {
+      const double s = -1.0 + (2.0 * j + 1.0) / f.nodes;  // midpoints of (-1, 1)
+      Point p;
+      p.umax = umax;
+      if (staple) {  // u along the segment's cells, the band across them
+        p.along = s * g.along;
+        p.u = std::clamp(p.along / (0.5 * g.length) * umax, -umax, umax);
+        p.sin_u = std::sin(p.u);
+        p.cos_u = std::cos(p.u);
+        p.spine_radius = SpineRadius(std::abs(p.u), umax, g.kappa, g.width, g.length);
+      } else {  // filament: v across the segment's cells, the band along them
+        p.across = s * g.across;
+        p.v = std::clamp(p.across * kPi / g.width, -0.5 * kPi, 0.5 * kPi);
+      }
+      q.nodes.push_back(p);
+    }
+    groups_.push_back(std::move(q));
+  }
+}
+
+void Lobe::Eval(const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) const {
+  out[0] = out[1] = 0.0;
+  if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
+  for (const G& g : groups_) {
+    double sum = 0.0;
+    for (const Point& p : g.nodes) sum += SegmentSpecular(phase_, g.yarn, p, wo, wi, g.band_extent);
+    out[g.yarn.warp ? 0 : 1] += g.weight * sum;
+  }
+}
+
+yarn_table::Table Bake(const std::function<void(const Vec3<double>&, const Vec3<double>&, double[2])>& eval,
+                       int n_theta, int n_phi, bool with_lobe) {
+  if (n_theta < 2 || n_theta > 64 || n_phi < 3 || n_phi > 128)
+    throw std::invalid_argument("yarn table: resolution " + std::to_string(n_theta) + " x " +
+                                std::to_string(n_phi) + " not in [2, 64] x [3, 128]");
+  yarn_table::Table t;
+  t.n_theta = n_theta;
+  t.n_phi = n_phi;
+  const size_t D = size_t(n_theta) * size_t(n_phi);
+  if (with_lobe) t.lobe.assign(2 * D * D, 0.f);
+  t.ibl.assign(2 * D * 5, 0.f);
+  std::vector<Vec3<double>> dirs(D);
+  std::vector<double> solid(D);
+  const double dth = 0.5 * kPi / n_theta, dph = 2.0 * kPi / n_phi;
+  for (int it = 0; it < n_theta; ++it)
+    for (int ip = 0; ip < n_phi; ++ip) {
+      dirs[size_t(it) * size_t(n_phi) + size_t(ip)] = t.Direction(it, ip);
+      solid[size_t(it) * size_t(n_phi) + size_t(ip)] = std::sin((it + 0.5) * dth) * dth * dph;
+    }
+  tbb::parallel_for(size_t(0), D, [&](size_t o) {
+    double A[2] = {0, 0};
+    Vec3<double> m[2] = {{0, 0, 0}, {0, 0, 0}};
+    for (size_t i = 0; i < D; ++i) {
+      double v[2] = {0.0, 0.0};
+      eval(dirs[o], dirs[i], v);
+      const double w = dirs[i].z * solid[i];
+      for (int k = 0; k < 2; ++k) {
+        if (with_lobe) t.lobe[(size_t(k) * D + o) * D + i] = float(v[k]);
+        A[k] += v[k] * w;
+        m[k] = m[k] + dirs[i] * (v[k] * w);
+      }
+    }
+    for (int k = 0; k < 2; ++k) {
+      float* e = &t.ibl[(size_t(k) * D + o) * 5];
+      const double len = Length(m[k]);
+      const Vec3<double> d = len > 0.0 ? m[k] * (1.0 / len) : Vec3<double>(0, 0, 1);
+      e[0] = float(A[k]);
+      e[1] = float(d.x);
+      e[2] = float(d.y);
+      e[3] = float(d.z);
+      e[4] = float(A[k] > 0.0 ? yarn_table::RoughnessForMeanCosine(len / A[k]) : 1.0);
+    }
+  });
+  return t;
+}
+
+}  // namespace clothfit::yarn_lobe
