@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "bin/commands.h"
+#include "fit/yarn_farfield.h"
 #include "brdf/models.h"
 #include "fit/bench_fit.h"
 #include "render/reference/fabric.h"
@@ -116,6 +117,7 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
     render::IblEngine engine = render::IblEngine::kFilament;
     woven::IblMode woven_ibl = woven::IblMode::kSplit;
     int map_anisotropy = 0;  // > 0: weave maps (synthetic, below) with this max anisotropy
+    const char* yarn_lobe_fabric = nullptr;  // the far-field yarn lobe of this irawan fabric
   };
   const Def defs[] = {{"full (direct+ibl+subsurface+shadows)", &scene, env.get(), true, true},
                       {"direct+ibl", &scene, env.get(), false, false},
@@ -138,7 +140,17 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
                       {"threejs: woven direct+ibl, maps anisotropy 1", &scene, env.get(), false,
                        false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 1},
                       {"threejs: woven direct+ibl, maps anisotropy 16", &scene, env.get(), false,
-                       false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 16}};
+                       false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 16},
+                      // session 12: the far-field yarn lobe ("woven": {"yarn_lobe"}, the fit
+                      // default for irawan fabrics): evaluated per light sample at cache build
+                      // (printed above the table), its split sum cached per pixel: the frame
+                      // evaluates cached values (web/ evaluates the quadrature per fragment)
+                      {"threejs: woven direct+ibl, far-field lobe (canvas)", &scene, env.get(),
+                       false, false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 0,
+                       "datasets/fabrics/canvas.json"},
+                      {"threejs: woven direct+ibl, far-field lobe (twill)", &scene, env.get(),
+                       false, false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 0,
+                       "datasets/fabrics/twill.json"}};
   // Synthetic maps for the map sets: 64 x 64 per period, 60 periods per uv unit (the canvas's),
   // a fixed pseudo-random pattern (the cost does not depend on the values).
   std::vector<float> level0(64 * 64 * render::WeaveMaps::kChannels);
@@ -161,6 +173,12 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
       auto maps = std::make_shared<render::WeaveMaps>(base_maps);
       maps->anisotropy = d.map_anisotropy;
       o.weave_maps = maps;
+    }
+    if (d.yarn_lobe_fabric) {  // run from the repository root (datasets/ relative)
+      render::MaterialPreset p = render::DefaultPreset(render::ModelKind::kWoven);
+      p.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(
+          fit::YarnFarField(d.yarn_lobe_fabric).Description(16, 16));
+      render::ApplyPresetYarnLobe(p, &o);
     }
     auto cache = render::PreviewCache::Build(*d.s, d.e, o);
     std::fprintf(stderr, "bench preview: cache '%s': %zu fabric pixels, %zu light samples, built in %.3f s\n",

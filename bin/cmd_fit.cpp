@@ -531,6 +531,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
                                   "--woven-ibl fis|bent (the lobe has its own split sum)");
     fit::YarnLobeSettings s = YarnLobeSettingsOf(a);
     s.mode = "quadrature";
+    s.fabric = a.fabric;  // as given: the preset records it (informative), no machine paths
     const std::string line = fit::ApplyPresetYarnLobe(s, &o);
     std::printf("fit: %s\n", line.c_str());
   } else if (lobe != "none") {  // session 11 measurement (docs/fitting.md "far-field yarn lobe")

@@ -281,6 +281,33 @@ const std::vector<DirectionPair>& CanonicalDirections() {
 BrdfSamples SampleAnalytic(const render::MaterialPreset& preset) {
   const auto& dirs = CanonicalDirections();
   BrdfSamples s;
+  if (preset.model == render::ModelKind::kWoven && preset.yarn_lobe) {
+    // "woven": {"yarn_lobe"}: the far-field lobe in place of the GGX yarn lobes, as the preview's
+    // light term (render/preview/preview.cpp WovenKernel far_field: additive layer, the yarn
+    // term scaled by the sheen's min(S(NoV), S(NoL))), at the pair's own directions (x = t).
+    const yarn_lobe::Lobe lobe(*preset.yarn_lobe);
+    const woven::Params<double> p = woven::FromFlat(preset.values.data());
+    woven::Params<double> rest = p;
+    rest.specular_color = Rgb<double>(0.0, 0.0, 0.0);
+    const woven::Lobes<double> lb = woven::PrepareLobes(p);
+    const Table2D& dfg = lut::DefaultDfg();
+    for (const DirectionPair& d : dirs) {
+      Rgb<double> v = woven::EvalDirect(rest, preset.woven, d.cos, woven::TangentCosinesInPlane(d.cos),
+                                        woven::WeaveSample<double>{}, dfg, lut::DefaultWovenPhase());
+      double t[2];
+      lobe.Eval(d.v, d.l, t);
+      const double NoV = std::clamp(d.cos.NoV, kMinNoV, 1.0), NoL = std::clamp(d.cos.NoL, 0.0, 1.0);
+      const double sh = std::min(woven::SheenScaling(p, lb, dfg, NoV), woven::SheenScaling(p, lb, dfg, NoL));
+      const double m = lb.m;
+      for (int c = 0; c < 3; ++c)
+        v[c] += p.specular_color[c] *
+                (preset.woven.tint_warp[c] * 2.0 * m * t[0] + preset.woven.tint_weft[c] * 2.0 * (1.0 - m) * t[1]) *
+                sh * NoL;
+      s.value.push_back(v);
+      s.valid.push_back(1);
+    }
+    return s;
+  }
   for (const DirectionPair& d : dirs) {
     s.value.push_back(EvalDirectFlat(preset.model, preset.cloth, preset.values.data(), d.cos));
     s.valid.push_back(1);

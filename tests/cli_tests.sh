@@ -131,6 +131,15 @@ PY
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
       --yarn-lobe quadrature --ao --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe with --ao accepted"
     echo "$err" | grep -q -- "not with --sheen-tilt, --ao or --indirect" || fail "--yarn-lobe with --ao: $err"
+    # --yarn-lobe preset (session 12; the default "auto" for irawan fabrics): refused on a fabric
+    # without yarns and with what the lobe has no path for, nothing written.
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
+      --yarn-lobe preset --fabric "$D/fabrics/velvet.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe preset on velvet accepted"
+    echo "$err" | grep -q "velvet.json: model 'sadeghi' has no yarns" || fail "--yarn-lobe preset on velvet: $err"
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
+      --yarn-lobe preset --woven-ibl fis --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe preset with FIS accepted"
+    echo "$err" | grep -q -- "--yarn-lobe preset: not with" || fail "--yarn-lobe preset with FIS: $err"
+    [ ! -e "$TMP/y.json" ] || fail "preset written despite a --yarn-lobe preset error"
     # a preset fitted with --yarn-lobe is not evaluated as an ordinary woven preset
     printf '{"schema":"clothfit.preset","version":1,"model":"woven","parameters":{},"fit":{"yarn_lobe":"x","scenes":[]}}' > "$TMP/yl.json"
     err=$("$BIN" --quiet evaluate --preset "$TMP/yl.json" 2>&1) && fail "evaluate of a --yarn-lobe preset accepted"

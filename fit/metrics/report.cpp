@@ -53,6 +53,18 @@ std::string ModelTitle(const std::string& model) {
   return model;
 }
 
+// The title of one fitted model: ModelTitle, plus the yarn lobe a woven preset carries
+// ("woven": {"yarn_lobe"}, session 12), so the page says which woven it shows.
+std::string ModelTitle(const ModelSpec& m) {
+  std::string t = ModelTitle(m.model);
+  const nlohmann::json* w = m.preset.is_object() && m.preset.contains("woven") ? &m.preset.at("woven") : nullptr;
+  if (m.model == "woven" && w && w->is_object() && w->contains("yarn_lobe"))
+    t += ", far-field yarn lobe";
+  else if (m.model == "woven")
+    t += ", GGX yarn lobes";
+  return t;
+}
+
 // Resolves a path written in a preset: absolute as is, relative to the preset's directory.
 std::string Resolve(const std::string& path, const std::string& preset_path) {
   const fs::path p(path);
@@ -919,7 +931,7 @@ void FabricPageSummary(std::ostream& h, const FabricReport& rep) {
     rows.push_back({NoiseFloorLabel(rep.noise_floor_source), &*rep.noise_floor_mean, true,
                     rep.noise_floor_source == kReferenceHalves ? "second half" : "second reference"});
   for (size_t mi = 0; mi < spec.models.size(); ++mi)
-    rows.push_back({ModelTitle(spec.models[mi].model), &rep.model_means[mi], false, "preview"});
+    rows.push_back({ModelTitle(spec.models[mi]), &rep.model_means[mi], false, "preview"});
   h << "<h2>Metrics, mean over " << spec.scenes.size() << " scenes</h2>\n" << MetricsTable(rows);
 }
 
@@ -951,7 +963,7 @@ void ScenePictures(std::ostream& h, const FabricSpec& spec, const SceneResult& s
     const Numbers& n = s.models[mi].numbers;
     h << "<figure>"
       << Img(s.models[mi].preview_png, spec.models[mi].model + " preview " + sc.name)
-      << "<figcaption>" << EscapeHtml(ModelTitle(spec.models[mi].model)) << " preview<br>RMSE "
+      << "<figcaption>" << EscapeHtml(ModelTitle(spec.models[mi])) << " preview<br>RMSE "
       << EscapeHtml(Cell(n, Columns()[0])) << "</figcaption></figure>\n";
   }
   if (s.noise_floor)
@@ -967,7 +979,7 @@ void ScenePictures(std::ostream& h, const FabricSpec& spec, const SceneResult& s
   for (size_t mi = 0; mi < spec.models.size(); ++mi) {
     const Numbers& n = s.models[mi].numbers;
     h << "<figure>" << Img(s.models[mi].flip_png, spec.models[mi].model + " FLIP " + sc.name)
-      << "<figcaption>FLIP: " << EscapeHtml(ModelTitle(spec.models[mi].model)) << "<br>mean "
+      << "<figcaption>FLIP: " << EscapeHtml(ModelTitle(spec.models[mi])) << "<br>mean "
       << EscapeHtml(Cell(n, Columns()[3])) << "</figcaption></figure>\n";
   }
   h << "</div>\n<p class=\"meta\">FLIP error maps (LDR-FLIP of the display images): 0 "
@@ -985,7 +997,7 @@ void FabricPageScene(std::ostream& h, const FabricSpec& spec, const SceneResult&
     rows.push_back({NoiseFloorLabel(s.noise_floor_source), &*s.noise_floor, true,
                     s.noise_floor_source == kReferenceHalves ? "second half" : "second reference"});
   for (size_t mi = 0; mi < spec.models.size(); ++mi)
-    rows.push_back({ModelTitle(spec.models[mi].model), &s.models[mi].numbers, false, "preview"});
+    rows.push_back({ModelTitle(spec.models[mi]), &s.models[mi].numbers, false, "preview"});
   h << MetricsTable(rows);
 }
 
