@@ -389,6 +389,320 @@ export function wovenLobes(p) {
   };
 }
 
+// ---------------------------------------------------------------------------------------------
+// The far-field yarn lobe (session 12; a woven preset's "woven": {"yarn_lobe": {...}}, written by
+// `clothfit fit --yarn-lobe quadrature`; docs/web.md "The far-field yarn lobe"). The fabric's
+// Irawan-Marschner yarn specular averaged over the weave tile by quadrature, per group of
+// identical yarns (fit/yarn_farfield.cpp YarnFarField::EvalQuadrature, render/reference/irawan.cpp
+// IrawanBsdf::Specular with a band extent, SpineRadius / FilamentRadius), replaces woven's GGX
+// yarn lobes: per light ks (tint_w 2 m_w T_w + tint_f 2 m_f T_f) glint s_l, and for the
+// environment one PMREM read per lobe at the lobe's tabulated IBL summary (brdf/yarn_table.h
+// Table::Ibl). Local frame: x = t (+u, warp), y = b (+v, weft), z = n.
+// yarnLobeOptions checks the block (errors name the field), yarnLobeEval is a double-precision
+// port of the lobe for node-side tests, yarnLobePack makes the shader's uniforms and textures.
+
+export const YARN_LOBE_MAX_GROUPS = 8, YARN_LOBE_MAX_NODES = 64;
+const YL_DEG = Math.PI / 180;
+
+// Modified Bessel I0 (render/reference/irawan.cpp BesselI0): sum (x^2/4)^k / (k!)^2.
+export function besselI0(x) {
+  const q = 0.25 * x * x;
+  let term = 1, sum = 1;
+  for (let k = 1; k < 500; ++k) {
+    term *= q / (k * k);
+    sum += term;
+    if (term < 1e-17 * sum) break;
+  }
+  return sum;
+}
+
+// The yarn spine's radius of curvature at slope |u| (render/reference/irawan.cpp SpineRadius):
+// a conic arc chosen by rhat = 1 + kappa (1 + 1/tan umax): circle, ellipse, parabola, hyperbola.
+export function yarnSpineRadius(uAbs, umax, kappa, width, length) {
+  const a = 0.5 * width;
+  const hx = 0.5 * length - a * Math.sin(umax);
+  const rhat = kappa === 0 ? 1 : 1 + kappa * (1 + 1 / Math.tan(umax));
+  const u = Math.min(uAbs, umax);
+  if (Math.abs(rhat - 1) < 1e-12) return hx / Math.sin(umax);
+  if (rhat > 1e-9) {
+    const tmax = Math.atan(rhat * Math.tan(umax));
+    const b = hx / Math.sin(tmax), c = b / rhat;
+    const t = Math.atan(rhat * Math.tan(u));
+    const ct = Math.cos(t), st = Math.sin(t);
+    return Math.pow(b * b * ct * ct + c * c * st * st, 1.5) / (b * c);
+  }
+  if (rhat > -1e-9) {
+    const tu = Math.tan(u);
+    return hx / Math.tan(umax) * Math.pow(1 + tu * tu, 1.5);
+  }
+  const rho = -rhat;
+  const smax = Math.atanh(Math.min(rho * Math.tan(umax), 1 - 1e-9));
+  const b = hx / Math.sinh(smax), c = b / rho;
+  const s = Math.atanh(Math.min(rho * Math.tan(u), 1 - 1e-9));
+  const ch = Math.cosh(s), sh = Math.sinh(s);
+  return Math.pow(b * b * ch * ch + c * c * sh * sh, 1.5) / (b * c);
+}
+
+export function yarnFilamentRadius(uhAbs, umax, ss, kappa, width, length) {
+  if (ss <= 0) return yarnSpineRadius(uhAbs, umax, kappa, width, length);
+  const umaxS = (1 - ss) * umax;
+  return yarnSpineRadius(Math.min(uhAbs, umaxS), umaxS, kappa, width, length);
+}
+
+const YARN_LOBE_KEYS = ['model', 'fabric', 'nodes', 'alpha', 'beta', 'h_width', 'ss', 'scale', 'groups', 'ibl'];
+const YARN_GROUP_KEYS = ['type', 'share', 'psi', 'umax', 'kappa', 'width', 'length', 'across', 'along', 'area_factor'];
+
+/**
+ * A preset's "woven": {"yarn_lobe": {...}} checked; throws naming the field
+ * (`woven.yarn_lobe.groups[1].umax: ...`). Returns {model, fabric, nodes, alpha, beta, h_width,
+ * ss, scale, groups: [{type, share, psi, umax, kappa, width, length, across, along,
+ * area_factor}], ibl: {n_theta, n_phi, summary: Float32Array}} (angles still in degrees).
+ */
+export function yarnLobeOptions(v, f = 'woven.yarn_lobe') {
+  const fail = (field, msg) => { throw new Error(`loadClothfitPreset: ${field}: ${msg}`); };
+  const obj = (x, field, keys) => {
+    if (x === null || typeof x !== 'object' || Array.isArray(x)) fail(field, 'expected an object');
+    for (const k of Object.keys(x)) if (!keys.includes(k)) fail(`${field}.${k}`, `unknown key (valid: ${keys.join(', ')})`);
+    for (const k of keys) if (x[k] === undefined && k !== 'fabric') fail(`${field}.${k}`, 'missing');
+  };
+  const num = (x, field, ok = () => true, range = '') => {
+    if (typeof x !== 'number') fail(field, 'expected a number');
+    if (!Number.isFinite(x)) fail(field, 'not finite');
+    if (!ok(x)) fail(field, `must be ${range}`);
+    return x;
+  };
+  const int = (x, field, lo, hi) => {
+    if (typeof x !== 'number' || !Number.isInteger(x)) fail(field, 'expected an integer');
+    if (x < lo || x > hi) fail(field, `must be in [${lo}, ${hi}]`);
+    return x;
+  };
+  obj(v, f, YARN_LOBE_KEYS);
+  if (v.model !== 'irawan-far-field') fail(`${f}.model`, 'expected "irawan-far-field"');
+  if (v.fabric !== undefined && typeof v.fabric !== 'string') fail(`${f}.fabric`, 'expected a string');
+  const out = {
+    model: v.model, fabric: v.fabric ?? '',
+    nodes: int(v.nodes, `${f}.nodes`, 1, YARN_LOBE_MAX_NODES),
+    alpha: num(v.alpha, `${f}.alpha`, (x) => x >= 0, '>= 0'),
+    beta: num(v.beta, `${f}.beta`, (x) => x >= 0, '>= 0'),
+    h_width: num(v.h_width, `${f}.h_width`, (x) => x > 0 && x <= 1, 'in (0, 1]'),
+    ss: num(v.ss, `${f}.ss`, (x) => x >= 0 && x < 1, 'in [0, 1)'),
+    scale: num(v.scale, `${f}.scale`, (x) => x >= 0, '>= 0'),
+  };
+  if (!Array.isArray(v.groups)) fail(`${f}.groups`, 'expected an array');
+  if (v.groups.length < 1 || v.groups.length > YARN_LOBE_MAX_GROUPS) fail(`${f}.groups`, `${v.groups.length} groups, expected 1 to ${YARN_LOBE_MAX_GROUPS}`);
+  out.groups = v.groups.map((g, i) => {
+    const gf = `${f}.groups[${i}]`;
+    obj(g, gf, YARN_GROUP_KEYS);
+    if (g.type !== 'warp' && g.type !== 'weft') fail(`${gf}.type`, 'expected "warp" or "weft"');
+    const pos = (k) => num(g[k], `${gf}.${k}`, (x) => x > 0 && x <= 1e6, 'in (0, 1e6]');
+    const q = {
+      type: g.type,
+      share: num(g.share, `${gf}.share`, (x) => x > 0 && x <= 1, 'in (0, 1]'),
+      psi: num(g.psi, `${gf}.psi`, (x) => Math.abs(x) < 90, 'in (-90, 90) degrees'),
+      umax: num(g.umax, `${gf}.umax`, (x) => x > 0 && x < 90, 'in (0, 90) degrees'),
+      kappa: num(g.kappa, `${gf}.kappa`, (x) => x >= -1 && x <= 1e6, 'in [-1, 1e6]'),
+      width: pos('width'), length: pos('length'), across: pos('across'), along: pos('along'),
+      area_factor: num(g.area_factor, `${gf}.area_factor`, (x) => x >= 1 && x <= 1e6, 'in [1, 1e6]'),
+    };
+    if (!(q.width * Math.sin(q.umax * YL_DEG) < q.length)) fail(`${gf}.umax`, 'width sin(umax) must be < length');
+    return q;
+  });
+  const ibl = v.ibl;
+  obj(ibl, `${f}.ibl`, ['n_theta', 'n_phi', 'summary']);
+  const nt = int(ibl.n_theta, `${f}.ibl.n_theta`, 2, 64), np = int(ibl.n_phi, `${f}.ibl.n_phi`, 3, 128);
+  const want = 2 * nt * np * 5;
+  if (!Array.isArray(ibl.summary) && !(ibl.summary instanceof Float32Array)) fail(`${f}.ibl.summary`, 'expected an array');
+  if (ibl.summary.length !== want) fail(`${f}.ibl.summary`, `${ibl.summary.length} numbers, expected 2 x n_theta x n_phi x 5 = ${want}`);
+  const summary = new Float32Array(want);
+  ibl.summary.forEach((x, i) => {
+    if (typeof x !== 'number') fail(`${f}.ibl.summary[${i}]`, 'expected a number');
+    if (!Number.isFinite(x)) fail(`${f}.ibl.summary[${i}]`, 'not finite');
+    if (Math.abs(x) > 1e30) fail(`${f}.ibl.summary[${i}]`, 'out of float range');
+    summary[i] = x;
+  });
+  out.ibl = { n_theta: nt, n_phi: np, summary };
+  return out;
+}
+
+const ylSmoothStep01 = (x) => { const c = clamp01(x); return c * c * (3 - 2 * c); };
+const ylSeeliger = (cos1, cos2) => {
+  const c1 = Math.max(0, cos1), c2 = Math.max(0, cos2);
+  if (c1 <= 0 || c2 <= 0) return 0;
+  return (1 / (4 * Math.PI)) * c1 * c2 / (c1 + c2);
+};
+const ylBandMean = (c, delta, e) => Math.max(Math.min(c + 0.5 * delta, e) - Math.max(c - 0.5 * delta, -e), 0) / (2 * e);
+const ylToYarn = (d, weft) => (weft ? [-d[0], -d[1], d[2]] : [-d[1], d[0], d[2]]);
+
+/**
+ * The far-field lobe [T_warp, T_weft] at local unit directions wo, wi ([x, y, z] in the frame
+ * t, b, n), in double precision: yarnLobeOptions' result `lobe`. Zero unless wo.z, wi.z > 0.
+ * The shader evaluates the same (wovenYarnLobe), in float.
+ */
+export function yarnLobeEval(lobe, wo, wi) {
+  const T = [0, 0];
+  if (!(wo[2] > 0) || !(wi[2] > 0)) return T;
+  const N = lobe.nodes, vmNorm = 1 / (2 * Math.PI * besselI0(Math.abs(lobe.beta)));
+  for (const g of lobe.groups) {
+    const weft = g.type === 'weft';
+    const o = ylToYarn(wo, weft), i = ylToYarn(wi, weft);
+    const sum = [i[0] + o[0], i[1] + o[1], i[2] + o[2]];
+    const len = Math.hypot(sum[0], sum[1], sum[2]);
+    if (!(len > 1e-12)) continue;
+    const h = sum.map((x) => x / len);
+    const umax = g.umax * YL_DEG, w = g.width, l = g.length, a = 0.5 * w;
+    const fc = lobe.alpha + Math.exp(lobe.beta * -(i[0] * o[0] + i[1] * o[1] + i[2] * o[2])) * vmNorm;
+    let s = 0;
+    for (let j = 0; j < N; ++j) {
+      const sj = -1 + (2 * j + 1) / N;
+      if (g.psi === 0) {
+        const q = h[1] / h[2], uh = Math.atan(q);
+        if (!(Math.abs(uh) < umax)) break;
+        const delta = l * lobe.h_width;
+        const yh = Math.min(Math.max(uh / umax * 0.5 * l, -0.5 * (l - delta)), 0.5 * (l - delta));
+        const cuh = 1 / Math.sqrt(1 + q * q), suh = q * cuh;
+        const v = Math.min(Math.max(sj * g.across * Math.PI / w, -0.5 * Math.PI), 0.5 * Math.PI);
+        const sv = Math.sin(v), cv = Math.cos(v);
+        const n = [sv, suh * cv, cuh * cv];
+        const R = yarnFilamentRadius(Math.abs(uh), umax, lobe.ss, g.kappa, w, l);
+        const txh = cuh * h[2] + suh * h[1];
+        const G = a * (R + a * cv) / (len * Math.abs(txh));
+        let A = ylSeeliger(n[0] * i[0] + n[1] * i[1] + n[2] * i[2], n[0] * o[0] + n[1] * o[1] + n[2] * o[2]);
+        if (lobe.ss > 0) A *= 1 - ylSmoothStep01((Math.abs(uh) - (1 - lobe.ss) * umax) / (lobe.ss * umax));
+        s += G * fc * A * Math.PI * l / delta * ylBandMean(yh, delta, g.along);
+      } else {
+        const psi = g.psi * YL_DEG;
+        const u = Math.min(Math.max(sj * g.along / (0.5 * l) * umax, -umax), umax);
+        const su = Math.sin(u), cu = Math.cos(u);
+        const R = yarnSpineRadius(Math.abs(u), umax, g.kappa, w, l);
+        const bterm = h[1] * su + h[2] * cu;
+        const r = Math.sqrt(h[0] * h[0] + bterm * bterm);
+        const D = (h[1] * cu - h[2] * su) / (r * Math.tan(psi));
+        if (!(Math.abs(D) < 1)) continue;
+        const ca = h[0] / r, sa = -bterm / r, sb = Math.sqrt(1 - D * D);
+        const cvh = ca * D - sa * sb, svh = sa * D + ca * sb;
+        const vh = Math.atan2(svh, cvh);
+        if (!(Math.abs(vh) < 0.5 * Math.PI)) continue;
+        const delta = w * lobe.h_width;
+        const xh = Math.min(Math.max(vh * w / Math.PI, -0.5 * (w - delta)), 0.5 * (w - delta));
+        const n = [svh, su * cvh, cu * cvh];
+        const NoH = n[0] * h[0] + n[1] * h[1] + n[2] * h[2];
+        if (!(NoH > 0)) continue;
+        const G = a * (R + a * cvh) / (len * NoH * Math.abs(Math.sin(psi)));
+        const A = ylSeeliger(n[0] * i[0] + n[1] * i[1] + n[2] * i[2], n[0] * o[0] + n[1] * o[1] + n[2] * o[2]);
+        s += G * fc * A * 2 * w * umax / delta * ylBandMean(xh, delta, g.across);
+      }
+    }
+    T[weft ? 1 : 0] += g.share * g.area_factor * lobe.scale * s / N;
+  }
+  return T;
+}
+
+/**
+ * The lobes' IBL summary at wo (brdf/yarn_table.h Table::Ibl): [{albedo, dir: [x, y, z],
+ * roughness}] for warp and weft, bilinear in (theta, phi) of wo, phi periodic.
+ */
+export function yarnLobeIbl(lobe, woIn) {
+  const { n_theta: nt, n_phi: np, summary } = lobe.ibl;
+  const wo = [woIn[0], woIn[1], Math.max(woIn[2], 1e-4)];
+  const th = Math.acos(Math.min(Math.max(wo[2], -1), 1));
+  let ph = Math.atan2(wo[1], wo[0]);
+  if (ph < 0) ph += 2 * Math.PI;
+  const u = Math.min(Math.max(th / (0.5 * Math.PI) * nt - 0.5, 0), nt - 1);
+  const t0 = Math.min(Math.trunc(u), nt - 2), ft = u - t0;
+  let v = ph / (2 * Math.PI) * np - 0.5;
+  if (v < 0) v += np;
+  const p0 = Math.min(Math.trunc(v), np - 1), fp = v - p0, p1 = (p0 + 1) % np;
+  return [0, 1].map((k) => {
+    const e = [0, 0, 0, 0, 0];
+    for (const [t, wt] of [[t0, 1 - ft], [t0 + 1, ft]]) {
+      for (const [p, wp] of [[p0, 1 - fp], [p1, fp]]) {
+        for (let c = 0; c < 5; ++c) e[c] += wt * wp * summary[((k * nt + t) * np + p) * 5 + c];
+      }
+    }
+    const d = Math.hypot(e[1], e[2], e[3]);
+    return { albedo: Math.max(e[0], 0), dir: d > 1e-12 ? [e[1] / d, e[2] / d, e[3] / d] : [0, 0, 1], roughness: clamp01(e[4]) };
+  });
+}
+
+// The shader's per-group constants (vec4 x 4 per group), per-node constants (an RGBA32F texture,
+// nodes x groups: staple (sin u_j, cos u_j, SpineRadius(|u_j|), 0), filament (sin v_j, cos v_j,
+// 0, 0)) and the IBL summary (an RGBA32F texture, 2 n_phi x 2 n_theta: texel (2 p, k n_theta + t)
+// = entries 0..3 of (lobe k, theta bin t, phi bin p), texel (2 p + 1, ...) = (entry 4, 0, 0, 0)),
+// all read with texelFetch (no filtering, no float-linear extension). Group vec4s:
+//   g0 = (weft ? 1 : 0, staple ? 1 : 0, umax (rad), weight): weight = share area_factor scale /
+//        nodes x (staple: 2 w umax / delta, filament: pi l / delta), the term's constant factor;
+//   g1 = staple (tan psi, |sin psi|, w, delta = w h_width); filament (umax_s, l, delta = l
+//        h_width, ss), umax_s = (1 - ss) umax when ss > 0 (FilamentRadius);
+//   g2 = (band extent e (staple: across, filament: along), a = w / 2, (extent - delta) / 2, 0);
+//   g3 = the filament's SpineRadius at umax_s as a function of tan u: (branch, p0, p1, rhat):
+//        0 circle R = p0; 1 ellipse (b, c); 2 parabola p0 = hx / tan umax_s; 3 hyperbola (b, c).
+export function yarnLobePack(lobe) {
+  const G = lobe.groups.length, N = lobe.nodes;
+  const g0 = [], g1 = [], g2 = [], g3 = [];
+  const nodes = new Float32Array(N * G * 4);
+  lobe.groups.forEach((g, k) => {
+    const staple = g.psi !== 0, umax = g.umax * YL_DEG, w = g.width, l = g.length;
+    const delta = (staple ? w : l) * lobe.h_width;
+    const gain = staple ? 2 * w * umax / delta : Math.PI * l / delta;
+    g0.push(new THREE.Vector4(g.type === 'weft' ? 1 : 0, staple ? 1 : 0, umax, g.share * g.area_factor * lobe.scale / N * gain));
+    const psi = g.psi * YL_DEG;
+    const umaxS = lobe.ss > 0 ? (1 - lobe.ss) * umax : umax;
+    g1.push(staple ? new THREE.Vector4(Math.tan(psi), Math.abs(Math.sin(psi)), w, delta) : new THREE.Vector4(umaxS, l, delta, lobe.ss));
+    g2.push(new THREE.Vector4(staple ? g.across : g.along, 0.5 * w, 0.5 * ((staple ? w : l) - delta), 0));
+    // SpineRadius(., umax_s, kappa, w, l)'s branch and constants (yarnSpineRadius, same guards)
+    const hx = 0.5 * l - 0.5 * w * Math.sin(umaxS);
+    const rhat = g.kappa === 0 ? 1 : 1 + g.kappa * (1 + 1 / Math.tan(umaxS));
+    if (Math.abs(rhat - 1) < 1e-12) g3.push(new THREE.Vector4(0, hx / Math.sin(umaxS), 0, rhat));
+    else if (rhat > 1e-9) {
+      const b = hx / Math.sin(Math.atan(rhat * Math.tan(umaxS)));
+      g3.push(new THREE.Vector4(1, b, b / rhat, rhat));
+    } else if (rhat > -1e-9) g3.push(new THREE.Vector4(2, hx / Math.tan(umaxS), 0, rhat));
+    else {
+      const b = hx / Math.sinh(Math.atanh(Math.min(-rhat * Math.tan(umaxS), 1 - 1e-9)));
+      g3.push(new THREE.Vector4(3, b, b / -rhat, rhat));
+    }
+    for (let j = 0; j < N; ++j) {
+      const s = -1 + (2 * j + 1) / N, o = (k * N + j) * 4;
+      if (staple) {
+        const u = Math.min(Math.max(s * g.along / (0.5 * l) * umax, -umax), umax);
+        nodes[o] = Math.sin(u); nodes[o + 1] = Math.cos(u);
+        nodes[o + 2] = yarnSpineRadius(Math.abs(u), umax, g.kappa, w, l);
+      } else {
+        const v = Math.min(Math.max(s * g.across * Math.PI / w, -0.5 * Math.PI), 0.5 * Math.PI);
+        nodes[o] = Math.sin(v); nodes[o + 1] = Math.cos(v);
+      }
+    }
+  });
+  const { n_theta: nt, n_phi: np, summary } = lobe.ibl;
+  const ibl = new Float32Array(2 * np * 2 * nt * 4);
+  for (let k = 0; k < 2; ++k) {
+    for (let t = 0; t < nt; ++t) {
+      for (let p = 0; p < np; ++p) {
+        const e = ((k * nt + t) * np + p) * 5, row = k * nt + t, o = (row * 2 * np + 2 * p) * 4;
+        for (let c = 0; c < 4; ++c) ibl[o + c] = summary[e + c];
+        ibl[o + 4] = summary[e + 4];
+      }
+    }
+  }
+  const tex = (data, w, h) => {
+    const t = new THREE.DataTexture(data, w, h, THREE.RGBAFormat, THREE.FloatType);
+    t.minFilter = THREE.NearestFilter; t.magFilter = THREE.NearestFilter;
+    t.generateMipmaps = false; t.flipY = false; t.colorSpace = THREE.NoColorSpace;
+    t.needsUpdate = true;
+    return t;
+  };
+  return {
+    groups: G, nodes: N, nTheta: nt, nPhi: np,
+    uniforms: {
+      wovenYlG0: g0, wovenYlG1: g1, wovenYlG2: g2, wovenYlG3: g3,
+      wovenYlPhase: new THREE.Vector3(lobe.alpha, lobe.beta, 1 / (2 * Math.PI * besselI0(Math.abs(lobe.beta)))),
+    },
+    nodesTexture: tex(nodes, N, G),
+    iblTexture: tex(ibl, 2 * np, 2 * nt),
+    dispose() { this.nodesTexture.dispose(); this.iblTexture.dispose(); },
+  };
+}
+
 const WOVEN_VERTEX_PARS = /* glsl */ `
 #ifndef USE_TANGENT
 attribute vec4 tangent;
@@ -513,6 +827,146 @@ float wovenCharlie( const in float alpha, const in float NoH ) {
 	return ( 2.0 + invAlpha ) * pow( sin2h, invAlpha * 0.5 ) * ( 0.5 * RECIPROCAL_PI );
 }
 
+// The far-field yarn lobe (WOVEN_YARN_LOBE, a preset's "woven": {"yarn_lobe": {...}}; the CPU
+// side and the constants' layout: yarnLobePack). wovenYarnLobe(wo, wi) = (T_warp, T_weft) at local
+// unit directions (x = t, y = b, z = n), fit/yarn_farfield.cpp EvalQuadrature term by term, in
+// float; wovenYarnLobeIbl reads the lobes' IBL summary (brdf/yarn_table.h Table::Ibl) and the
+// PMREM once per lobe.
+#if defined( WOVEN_YARN_LOBE )
+uniform vec4 wovenYlG0[ WOVEN_YL_GROUPS ];
+uniform vec4 wovenYlG1[ WOVEN_YL_GROUPS ];
+uniform vec4 wovenYlG2[ WOVEN_YL_GROUPS ];
+uniform vec4 wovenYlG3[ WOVEN_YL_GROUPS ];
+uniform vec3 wovenYlPhase;  // alpha, beta, 1 / (2 pi I0(|beta|))
+uniform sampler2D wovenYlNodes;
+uniform sampler2D wovenYlIbl;
+
+// Seeliger's law, (1/4pi) c1 c2 / (c1 + c2), 0 unless both cosines are > 0.
+float wovenYlSeeliger( float c1, float c2 ) {
+	c1 = max( c1, 0.0 );
+	c2 = max( c2, 0.0 );
+	return ( c1 <= 0.0 || c2 <= 0.0 ) ? 0.0 : ( 0.25 * RECIPROCAL_PI ) * c1 * c2 / ( c1 + c2 );
+}
+// The highlight band's mean over its coordinate uniform in [-e, e].
+float wovenYlBand( const in float c, const in float delta, const in float e ) {
+	return max( min( c + 0.5 * delta, e ) - max( c - 0.5 * delta, -e ), 0.0 ) / ( 2.0 * e );
+}
+// FilamentRadius(|u|): SpineRadius at umax_s (g1.x) by branch k.x with tau = rhat tan u
+// (ellipse: cos^2 t = 1 / (1 + tau^2); hyperbola: cosh^2 s = 1 / (1 - tau^2), tau <= 1 - 1e-9 as
+// the C++ clamp, its 1 - tau^2 floored at 2e-9 since float rounds 1 - 1e-9 to 1).
+float wovenYlRadius( const in vec4 k, const in float umaxS, const in float uAbs ) {
+	if ( k.x < 0.5 ) return k.y;
+	float tu = tan( min( uAbs, umaxS ) );
+	float q;
+	if ( k.x < 1.5 ) {
+		float tau = k.w * tu;
+		q = ( k.y * k.y + k.z * k.z * tau * tau ) / ( 1.0 + tau * tau );
+	} else if ( k.x < 2.5 ) {
+		q = 1.0 + tu * tu;
+		return k.y * q * sqrt( q );
+	} else {
+		float tau = min( -k.w * tu, 1.0 - 1e-9 );
+		q = ( k.y * k.y + k.z * k.z * tau * tau ) / max( 1.0 - tau * tau, 2e-9 );
+	}
+	return q * sqrt( q ) / ( k.y * k.z );
+}
+vec2 wovenYarnLobe( const in vec3 wo, const in vec3 wi ) {
+	vec2 T = vec2( 0.0 );
+	if ( !( wo.z > 0.0 ) || !( wi.z > 0.0 ) ) return T;
+	// the phase function (uniform + von Mises about the forward direction); dot is frame-free
+	float fc = wovenYlPhase.x + exp( wovenYlPhase.y * -dot( wi, wo ) ) * wovenYlPhase.z;
+	for ( int g = 0; g < WOVEN_YL_GROUPS; ++g ) {
+		vec4 g0 = wovenYlG0[ g ], g1 = wovenYlG1[ g ], g2 = wovenYlG2[ g ];
+		bool weft = g0.x > 0.5;
+		vec3 o = weft ? vec3( -wo.x, -wo.y, wo.z ) : vec3( -wo.y, wo.x, wo.z );
+		vec3 i = weft ? vec3( -wi.x, -wi.y, wi.z ) : vec3( -wi.y, wi.x, wi.z );
+		vec3 sum = i + o;
+		float len = length( sum );
+		if ( !( len > 1e-12 ) ) continue;
+		vec3 h = sum / len;
+		float umax = g0.z, a = g2.y, s = 0.0;
+		if ( g0.y > 0.5 ) {  // staple: u_j along the cells, the band across them
+			for ( int j = 0; j < WOVEN_YL_NODES; ++j ) {
+				vec4 nd = texelFetch( wovenYlNodes, ivec2( j, g ), 0 );
+				float su = nd.x, cu = nd.y;
+				float bterm = h.y * su + h.z * cu;
+				float r = sqrt( h.x * h.x + bterm * bterm );
+				if ( !( r > 0.0 ) ) continue;
+				float D = ( h.y * cu - h.z * su ) / ( r * g1.x );
+				if ( !( abs( D ) < 1.0 ) ) continue;
+				float ca = h.x / r, sa = -bterm / r, sb = sqrt( 1.0 - D * D );
+				float cosVh = ca * D - sa * sb, sinVh = sa * D + ca * sb;
+				float vh = atan( sinVh, cosVh );
+				if ( !( abs( vh ) < 0.5 * PI ) ) continue;
+				float xh = clamp( vh * g1.z * RECIPROCAL_PI, -g2.z, g2.z );
+				vec3 n = vec3( sinVh, su * cosVh, cu * cosVh );
+				float NoH = dot( n, h );
+				if ( !( NoH > 0.0 ) ) continue;
+				float G = a * ( nd.z + a * cosVh ) / ( len * NoH * g1.y );
+				s += G * fc * wovenYlSeeliger( dot( n, i ), dot( n, o ) ) * wovenYlBand( xh, g1.w, g2.x );
+			}
+		} else {  // filament: v_j across the cells, the band along them
+			float q = h.y / h.z;
+			float uh = atan( q );
+			if ( !( abs( uh ) < umax ) ) continue;
+			float yh = clamp( uh / umax * 0.5 * g1.y, -g2.z, g2.z );
+			float cuh = 1.0 / sqrt( 1.0 + q * q ), suh = q * cuh;
+			float R = wovenYlRadius( wovenYlG3[ g ], g1.x, abs( uh ) );
+			float txh = cuh * h.z + suh * h.y;
+			float smoothA = 1.0;
+			if ( g1.w > 0.0 ) smoothA = 1.0 - smoothstep( 0.0, 1.0, ( abs( uh ) - ( 1.0 - g1.w ) * umax ) / ( g1.w * umax ) );
+			for ( int j = 0; j < WOVEN_YL_NODES; ++j ) {
+				vec4 nd = texelFetch( wovenYlNodes, ivec2( j, g ), 0 );
+				vec3 n = vec3( nd.x, suh * nd.y, cuh * nd.y );
+				float G = a * ( R + a * nd.y ) / ( len * abs( txh ) );
+				s += G * fc * wovenYlSeeliger( dot( n, i ), dot( n, o ) );
+			}
+			s *= smoothA * wovenYlBand( yh, g1.z, g2.x );
+		}
+		if ( weft ) T.y += g0.w * s;
+		else T.x += g0.w * s;
+	}
+	return T;
+}
+// Table::Ibl's entry of lobe k at wo: (A, dir) and r (bilinear in theta, phi; phi periodic).
+vec4 wovenYlIblEntry( const in int k, const in vec3 woIn, out float r ) {
+	const int NT = WOVEN_YL_N_THETA, NP = WOVEN_YL_N_PHI;
+	float th = acos( clamp( max( woIn.z, 1e-4 ), -1.0, 1.0 ) );
+	float ph = ( woIn.x == 0.0 && woIn.y == 0.0 ) ? 0.0 : atan( woIn.y, woIn.x );
+	if ( ph < 0.0 ) ph += 2.0 * PI;
+	float u = clamp( th / ( 0.5 * PI ) * float( NT ) - 0.5, 0.0, float( NT - 1 ) );
+	int t0 = min( int( u ), NT - 2 );
+	float ft = u - float( t0 );
+	float v = ph / ( 2.0 * PI ) * float( NP ) - 0.5;
+	if ( v < 0.0 ) v += float( NP );
+	int p0 = min( int( v ), NP - 1 );
+	float fp = v - float( p0 );
+	int p1 = ( p0 + 1 ) % NP;
+	int r0 = k * NT + t0, r1 = r0 + 1;
+	vec4 e = ( 1.0 - ft ) * ( ( 1.0 - fp ) * texelFetch( wovenYlIbl, ivec2( 2 * p0, r0 ), 0 ) + fp * texelFetch( wovenYlIbl, ivec2( 2 * p1, r0 ), 0 ) ) +
+		ft * ( ( 1.0 - fp ) * texelFetch( wovenYlIbl, ivec2( 2 * p0, r1 ), 0 ) + fp * texelFetch( wovenYlIbl, ivec2( 2 * p1, r1 ), 0 ) );
+	float e4 = ( 1.0 - ft ) * ( ( 1.0 - fp ) * texelFetch( wovenYlIbl, ivec2( 2 * p0 + 1, r0 ), 0 ).x + fp * texelFetch( wovenYlIbl, ivec2( 2 * p1 + 1, r0 ), 0 ).x ) +
+		ft * ( ( 1.0 - fp ) * texelFetch( wovenYlIbl, ivec2( 2 * p0 + 1, r1 ), 0 ).x + fp * texelFetch( wovenYlIbl, ivec2( 2 * p1 + 1, r1 ), 0 ).x );
+	r = clamp( e4, 0.0, 1.0 );
+	float dl = length( e.yzw );
+	return vec4( max( e.x, 0.0 ), dl > 1e-12 ? e.yzw / dl : vec3( 0.0, 0.0, 1.0 ) );
+}
+#if defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM )
+// A_k L_pref(dir_k, r_k) for both lobes (rgb each): the PMREM read as getIBLRadiance reads it
+// (world direction, envMapRotation, roughnessToMip, envMapIntensity), t, b, n in view space.
+void wovenYarnLobeIbl( const in vec3 wo, const in vec3 t, const in vec3 b, const in vec3 n, out vec3 yw, out vec3 yf ) {
+	for ( int k = 0; k < 2; ++k ) {
+		float r;
+		vec4 e = wovenYlIblEntry( k, wo, r );
+		vec3 d = transformDirectionByInverseViewMatrix( normalize( t * e.y + b * e.z + n * e.w ), viewMatrix );
+		vec3 L = textureLod( envMap, envMapRotation * d, roughnessToMip( r ) ).rgb * envMapIntensity;
+		if ( k == 0 ) yw = e.x * L;
+		else yf = e.x * L;
+	}
+}
+#endif
+#endif
+
 void RE_Direct_Woven( const in IncidentLight directLight, const in vec3 geometryPosition, const in vec3 geometryNormal, const in vec3 geometryViewDir, const in vec3 geometryClearcoatNormal, const in PhysicalMaterial material, inout ReflectedLight reflectedLight ) {
 	vec3 n = geometryNormal, v = geometryViewDir, l = directLight.direction;
 	vec3 h = normalize( l + v );
@@ -527,12 +981,19 @@ void RE_Direct_Woven( const in IncidentLight directLight, const in vec3 geometry
 	float AoV = cr * ToV + sr * BoV, CoV = cr * BoV - sr * ToV;
 	float AoL = cr * ToL + sr * BoL, CoL = cr * BoL - sr * ToL;
 	float AoH = cr * ToH + sr * BoH, CoH = cr * BoH - sr * ToH;
-	float Lw = wovenLobeDV( NoV, NoL, NoH, AoV, CoV, AoL, CoL, AoH, CoH );
-	float Lf = wovenLobeDV( NoV, NoL, NoH, CoV, AoV, CoL, AoL, CoH, AoH );
 	WovenWeave ws = wovenWeaveSample();
-	vec3 lobes = wovenTintWarp * ( wovenM * ws.warp * Lw ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft * Lf );
-	float Fp = wovenF0 + ( 1.0 - wovenF0 ) * exp( -2.0 * wovenBeta * LoH * LoH );
-	vec3 yarn = wovenSpecularColor * lobes * ( Fp * ws.glint );
+	#if defined( WOVEN_YARN_LOBE )
+		// the far-field lobe in place of woven's GGX yarn lobes: ks (tint_w 2 m_w T_w + tint_f
+		// 2 m_f T_f) glint (preview.cpp WovenKernel far_field), raw cosines (the lobe gates on them)
+		vec2 Ty = wovenYarnLobe( vec3( ToV, BoV, dot( n, v ) ), vec3( ToL, BoL, dot( n, l ) ) );
+		vec3 yarn = wovenSpecularColor * ( wovenTintWarp * ( 2.0 * wovenM * ws.warp * Ty.x ) + wovenTintWeft * ( 2.0 * ( 1.0 - wovenM ) * ws.weft * Ty.y ) ) * ws.glint;
+	#else
+		float Lw = wovenLobeDV( NoV, NoL, NoH, AoV, CoV, AoL, CoL, AoH, CoH );
+		float Lf = wovenLobeDV( NoV, NoL, NoH, CoV, AoV, CoL, AoL, CoH, AoH );
+		vec3 lobes = wovenTintWarp * ( wovenM * ws.warp * Lw ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft * Lf );
+		float Fp = wovenF0 + ( 1.0 - wovenF0 ) * exp( -2.0 * wovenBeta * LoH * LoH );
+		vec3 yarn = wovenSpecularColor * lobes * ( Fp * ws.glint );
+	#endif
 	vec3 diffuse = material.diffuseColor * ws.kd * RECIPROCAL_PI;
 	float rE = material.roughness;
 	float y = min( wovenYarnScaling( NoV, rE ), wovenYarnScaling( NoL, rE ) );
@@ -650,7 +1111,15 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 	float s = wovenSheenScaling( NoV );
 	vec3 yarn = wovenSpecularColor * ( s * ws.glint * wovenYarnAlbedo( NoV, rE ) );
 	vec3 lobes = yarn * ( wovenTintWarp * ( wovenM * ws.warp ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft ) );
-	#if defined( WOVEN_FIS ) && defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM )
+	#if defined( WOVEN_YARN_LOBE )
+		// far-field lobe: ks (tint_w 2 m_w A_w L_w + tint_f 2 m_f A_f L_f) s_v glint
+		#if defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM )
+			vec3 ylT, ylB, ylW, ylF;
+			wovenFrame( geometryNormal, ylT, ylB );
+			wovenYarnLobeIbl( vec3( dot( ylT, geometryViewDir ), dot( ylB, geometryViewDir ), dot( geometryNormal, geometryViewDir ) ), ylT, ylB, geometryNormal, ylW, ylF );
+			reflectedLight.indirectSpecular += wovenSpecularColor * ( wovenTintWarp * ( 2.0 * wovenM * ws.warp ) * ylW + wovenTintWeft * ( 2.0 * ( 1.0 - wovenM ) * ws.weft ) * ylF ) * ( s * ws.glint );
+		#endif
+	#elif defined( WOVEN_FIS ) && defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM )
 		reflectedLight.indirectSpecular += lobes * wovenFisRadiance( geometryNormal, geometryViewDir, rE, radiance );
 	#elif defined( WOVEN_BENT ) && defined( USE_ENVMAP ) && defined( STANDARD )
 		// brdf/woven.h IblMode::kBent: each lobe's radiance about its bent normal, the fibre axis
@@ -711,7 +1180,8 @@ material.roughness = wovenRE;
 export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
   constructor(parameters = {}, {
     yarnLayer = 'additive', tintWarp = null, tintWeft = null,
-    ibl = 'split', fisTaps = WOVEN_OPTION_DEFAULTS.fis_taps, fisDiffuseTaps = WOVEN_OPTION_DEFAULTS.fis_diffuse_taps, ...standard
+    ibl = 'split', fisTaps = WOVEN_OPTION_DEFAULTS.fis_taps, fisDiffuseTaps = WOVEN_OPTION_DEFAULTS.fis_diffuse_taps,
+    yarnLobe = null, ...standard
   } = {}) {
     const p = { ...WOVEN_DEFAULTS, ...parameters };
     super({ metalness: 0, roughness: 1, color: linear(p.base_color), ...standard });
@@ -722,6 +1192,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     if (ibl !== 'split' && ibl !== 'fis' && ibl !== 'bent') throw new Error(`MeshWovenMaterial: ibl '${ibl}' (valid: split, fis, bent)`);
     if (!Number.isInteger(fisTaps) || fisTaps < 1 || fisTaps > WOVEN_FIS_MAX_TAPS) throw new Error(`MeshWovenMaterial: fisTaps ${fisTaps} (an integer in [1, ${WOVEN_FIS_MAX_TAPS}])`);
     if (!Number.isInteger(fisDiffuseTaps) || fisDiffuseTaps < 0 || fisDiffuseTaps > WOVEN_FIS_MAX_TAPS) throw new Error(`MeshWovenMaterial: fisDiffuseTaps ${fisDiffuseTaps} (an integer in [0, ${WOVEN_FIS_MAX_TAPS}])`);
+    if (yarnLobe && (yarnLayer !== 'additive' || ibl !== 'split')) throw new Error(`MeshWovenMaterial: a yarnLobe needs yarnLayer 'additive' and ibl 'split' (got '${yarnLayer}', '${ibl}')`);
     this.ibl = ibl;
     this.fisTaps = fisTaps;
     this.fisDiffuseTaps = fisDiffuseTaps;
@@ -738,6 +1209,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       wovenWeaveTransform: { value: new THREE.Matrix3() },
     };
     this.weaveMaps = null;  // a WeaveMaps (weaveMapsFromExr) or null: the uniform material
+    this._setYarnLobe(yarnLobe);
     this._updateWovenUniforms();
     if (!wovenPhaseTexture) wovenPhaseTable().then(() => { this.needsUpdate = true; });
     if (!clothDGTexture) clothDGTable().then(() => { this.needsUpdate = true; });
@@ -759,6 +1231,35 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     u.wovenWeaveWeights.value = wm ? wm.weightsTexture : null;
     u.wovenWeaveKd.value = wm ? wm.kdTexture : null;
     if (wm) u.wovenWeaveTransform.value.copy(wm.uvTransform);
+  }
+
+  // The far-field yarn lobe (yarnLobeOptions' result or a preset's raw "yarn_lobe" block, checked
+  // here) or null; its uniforms and textures (yarnLobePack) join the material's uniforms.
+  _setYarnLobe(block) {
+    this._yarnLobePack?.dispose();
+    this.yarnLobe = block ? yarnLobeOptions(block) : null;
+    this._yarnLobePack = this.yarnLobe ? yarnLobePack(this.yarnLobe) : null;
+    const u = this._wovenUniforms;
+    for (const k of Object.keys(u)) if (k.startsWith('wovenYl')) delete u[k];
+    const pk = this._yarnLobePack;
+    if (pk) {
+      for (const [k, v] of Object.entries(pk.uniforms)) u[k] = { value: v };
+      u.wovenYlNodes = { value: pk.nodesTexture };
+      u.wovenYlIbl = { value: pk.iblTexture };
+    }
+  }
+
+  /** Sets (a "yarn_lobe" block) or removes (null) the far-field yarn lobe; recompiles the program. */
+  setYarnLobe(block) {
+    if (block && (this.yarnLayer !== 'additive' || this.ibl !== 'split')) throw new Error('MeshWovenMaterial: a yarnLobe needs yarnLayer \'additive\' and ibl \'split\'');
+    this._setYarnLobe(block);
+    this.needsUpdate = true;
+    return this;
+  }
+
+  dispose() {
+    this._yarnLobePack?.dispose();
+    super.dispose();
   }
 
   /** Attaches weave maps (weaveMapsFromExr) or removes them (null); recompiles the program. */
@@ -783,6 +1284,11 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     if (this.ibl === 'fis') {
       defs.push('#define WOVEN_FIS', `#define WOVEN_FIS_TAPS ${this.fisTaps}`, `#define WOVEN_FIS_DIFFUSE_TAPS ${this.fisDiffuseTaps}`);
     }
+    const yl = this._yarnLobePack;
+    if (yl) {
+      defs.push('#define WOVEN_YARN_LOBE', `#define WOVEN_YL_GROUPS ${yl.groups}`, `#define WOVEN_YL_NODES ${yl.nodes}`,
+        `#define WOVEN_YL_N_THETA ${yl.nTheta}`, `#define WOVEN_YL_N_PHI ${yl.nPhi}`);
+    }
     injectPhysicalChunks(shader, 'MeshWovenMaterial', defs.join('\n') + '\nuniform float wovenRE;\n', WOVEN_PARS, WOVEN_ROUGHNESS);
     const vs = shader.vertexShader;
     if (!vs.includes('void main() {') || !vs.includes('#include <project_vertex>')) throw new Error('MeshWovenMaterial: unexpected three.js vertex shader');
@@ -792,7 +1298,9 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
 
   customProgramCacheKey() {
     const ibl = this.ibl === 'fis' ? `fis${this.fisTaps}/${this.fisDiffuseTaps}` : this.ibl;
-    return ['woven', this.yarnLayer, this.weaveMaps ? 'maps' : 'uniform', ibl].join(':');
+    const yl = this._yarnLobePack;
+    const lobe = yl ? [`yarn-lobe${yl.groups}x${yl.nodes}/${yl.nTheta}x${yl.nPhi}`] : [];
+    return ['woven', this.yarnLayer, this.weaveMaps ? 'maps' : 'uniform', ibl, ...lobe].join(':');
   }
 
   copy(source) {
@@ -807,6 +1315,8 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       this.tintWeft = source.tintWeft.clone();
       this.weaveMaps = source.weaveMaps;
       this._wovenUniforms = THREE.UniformsUtils.clone(source._wovenUniforms);
+      this._yarnLobePack = null;
+      this._setYarnLobe(source.yarnLobe);
       this._updateWovenUniforms();
     }
     return this;
@@ -976,6 +1486,9 @@ const PRESET_INTEGER_FIELDS = new Map([
   ['woven.fis_taps', 'loadClothfitPreset: woven.fis_taps: expected an integer (JSON integer literal)'],
   ['woven.fis_diffuse_taps', 'loadClothfitPreset: woven.fis_diffuse_taps: expected an integer (JSON integer literal)'],
   ['weave_maps.anisotropy', 'weave_maps.anisotropy: expected an integer in [1, 16] (JSON integer literal)'],
+  ['woven.yarn_lobe.nodes', 'loadClothfitPreset: woven.yarn_lobe.nodes: expected an integer (JSON integer literal)'],
+  ['woven.yarn_lobe.ibl.n_theta', 'loadClothfitPreset: woven.yarn_lobe.ibl.n_theta: expected an integer (JSON integer literal)'],
+  ['woven.yarn_lobe.ibl.n_phi', 'loadClothfitPreset: woven.yarn_lobe.ibl.n_phi: expected an integer (JSON integer literal)'],
 ]);
 export function presetIntegerLiterals(text) {
   const keys = [];  // per open container: the current key (object) or '#' (array)
@@ -1168,6 +1681,7 @@ registerClothfitModel('woven', {
       ibl: w.ibl,
       fisTaps: w.fis_taps,
       fisDiffuseTaps: w.fis_diffuse_taps,
+      yarnLobe: w.yarn_lobe,
     });
   },
   weaveMaps: (m, maps) => m.setWeaveMaps(maps),
@@ -1183,6 +1697,7 @@ registerClothfitModel('woven', {
 const WOVEN_FIS_MAX_TAPS = 64;
 export const WOVEN_OPTION_DEFAULTS = Object.freeze({
   yarn_layer: 'additive', tint_warp: [1, 1, 1], tint_weft: [1, 1, 1], ibl: 'split', fis_taps: 16, fis_diffuse_taps: 0,
+  yarn_lobe: null,
 });
 export function wovenOptions(w) {
   if (w === undefined) return { ...WOVEN_OPTION_DEFAULTS };
@@ -1210,10 +1725,14 @@ export function wovenOptions(w) {
       if (typeof v !== 'number' || !Number.isInteger(v)) fail(f, 'expected an integer');
       if (v < lo || v > WOVEN_FIS_MAX_TAPS) fail(f, `must be in [${lo}, ${WOVEN_FIS_MAX_TAPS}]`);
       out[k] = v;
+    } else if (k === 'yarn_lobe') {
+      out.yarn_lobe = yarnLobeOptions(v, f);
     } else {
-      fail(f, 'unknown key (valid: yarn_layer, tint_warp, tint_weft, ibl, fis_taps, fis_diffuse_taps)');
+      fail(f, 'unknown key (valid: yarn_layer, tint_warp, tint_weft, ibl, fis_taps, fis_diffuse_taps, yarn_lobe)');
     }
   }
+  if (out.yarn_lobe && out.yarn_layer !== 'additive') fail('woven.yarn_layer', 'must be "additive" with a yarn_lobe');
+  if (out.yarn_lobe && out.ibl !== 'split') fail('woven.ibl', 'must be "split" with a yarn_lobe');
   if (out.ibl !== 'fis') {
     for (const k of ['fis_taps', 'fis_diffuse_taps']) if (k in w) fail(`woven.${k}`, 'only allowed with "ibl": "fis"');
   }

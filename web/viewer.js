@@ -46,7 +46,9 @@ async function main() {
     sc.setMaterial(m);
     const p = m.userData.clothfit;
     info.textContent = `${sc.card.description ?? ''}\nmodel ${p.model}${p.cloth ? ` (${p.cloth.variant}${p.cloth.subsurface ? ', subsurface' : ''})` : ''}: ${JSON.stringify(p.parameters)}\n` +
-      (p.woven ? `woven options ${JSON.stringify(p.woven)} (ibl ${m.ibl ?? 'split'}${m.ibl === 'fis' ? `, ${m.fisTaps} + ${m.fisDiffuseTaps} taps` : ''})\n` : '') +
+      // a far-field yarn lobe is summarised (its IBL table is thousands of numbers)
+      (p.woven ? `woven options ${JSON.stringify({ ...p.woven, yarn_lobe: undefined })} (ibl ${m.ibl ?? 'split'}${m.ibl === 'fis' ? `, ${m.fisTaps} + ${m.fisDiffuseTaps} taps` : ''})\n` : '') +
+      (m.yarnLobe ? `far-field yarn lobe: ${m.yarnLobe.fabric || 'fabric not named'}, ${m.yarnLobe.groups.length} yarn groups x ${m.yarnLobe.nodes} nodes, IBL table ${m.yarnLobe.ibl.n_theta} x ${m.yarnLobe.ibl.n_phi}\n` : '') +
       `tone mapping ${sc.card.tone_mapping ?? 'ACESFilmic'}, exposure ${sc.exposure}, three.js r${THREE.REVISION}`;
   };
   // renderer: the weave maps' texture.anisotropy (the preset's weave_maps.anisotropy) is clamped

@@ -8,11 +8,11 @@
 //   by a 1-pixel readPixels; SwiftShader runs on the CPU, so only ratios between cases mean
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 25 materials (6 + 3 woven + 2 physical-aniso
+// Cases: each canonical scene (datasets/scenes/*.json) x 30 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
-// bent-normal IBL) x 2 environments
+// bent-normal IBL + 5 woven with the far-field yarn lobe) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
-// 7 of the materials under blender-city with its sun split off as a directional light. The page posts
+// 9 of the materials under blender-city with its sun split off as a directional light. The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
 // Metric: 8-bit sRGB (tone-mapped as the card says), over the fabric pixels the browser draws,
@@ -147,6 +147,30 @@ Object.assign(MATERIALS, {
   'woven-forward-bent': withWoven('woven-forward', { ibl: 'bent' }),
   'woven-maps-twill-bent': withWoven('woven-maps-twill', { ibl: 'bent' }),
 });
+// s12-web: the far-field yarn lobe ("woven": {"yarn_lobe": {...}}, docs/web.md "The far-field yarn
+// lobe"): the presets `clothfit fit --model woven --fabric datasets/fabrics/{canvas,twill}.json
+// --level 4 --stride 4 --ibl-engine threejs` writes (the lobe is its default for irawan fabrics)
+// against the demo's references, committed in web/test/: yarn-lobe-{canvas,twill}.json with
+// --weave-maps none, yarn-lobe-{canvas,twill}-maps.json with the default maps (their own
+// yarn-lobe-*-maps.weave.exr, anisotropy 16; ratio maps pattern the lobe weights and kd); and the
+// twill lobe with a strong tinted specular and sheen by hand, so the lobe's shape dominates the
+// frame (the fitted specular is about 0.1) and the sheen scaling s_l of the lights is exercised.
+const lobePreset = (name, over = {}) => {
+  const j = JSON.parse(fs.readFileSync(path.join(repo, 'web', 'test', `yarn-lobe-${name}.json`), 'utf8'));
+  const extra = { woven: j.woven };
+  if (j.weave_maps) {  // the map next to the committed preset, named by file (the page's resolver)
+    const { uri, file, ...wm } = j.weave_maps;
+    extra.weave_maps = { ...wm, file: path.join(repo, 'web', 'test', path.basename(uri ?? file)) };
+  }
+  return preset('woven', { ...j.parameters, ...over }, extra);
+};
+Object.assign(MATERIALS, {
+  'woven-lobe-canvas': lobePreset('canvas'),
+  'woven-lobe-twill': lobePreset('twill'),
+  'woven-lobe-maps-canvas': lobePreset('canvas-maps'),
+  'woven-lobe-maps-twill': lobePreset('twill-maps'),
+  'woven-lobe-twill-shiny': lobePreset('twill', { specular_color: [0.5, 0.45, 0.3], sheen_color: [0.25, 0.25, 0.3], sheen_roughness: 0.5, warp_share: 0.7 }),
+});
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
 // s10-sun: the sun split is on by default in both renderers ("environment": {"sun": "auto"}
@@ -160,7 +184,8 @@ const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, ro
 // a subset of the materials (the lit models and a sharp metal highlight of the sun).
 const SUN_ENV = `${HIGH}-rot60-sun`;
 ENVS[SUN_ENV] = { path: HIGH, intensity: 0.8, rotation_y_degrees: 60, sun: 'auto' };
-const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-seed', 'cloth-filament', 'woven', 'woven-fis']);
+const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-seed', 'cloth-filament', 'woven', 'woven-fis',
+  'woven-lobe-canvas', 'woven-lobe-twill-shiny']);
 
 fs.mkdirSync(work, { recursive: true });
 for (const [name, p] of Object.entries(MATERIALS)) fs.writeFileSync(path.join(work, `${name}.json`), JSON.stringify(p, null, 1));

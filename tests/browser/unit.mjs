@@ -4,6 +4,8 @@
 //     honoured by loadClothfitPreset for MeshPhysicalMaterial and MeshClothMaterial JSON, and a
 //     preset's "side" ('front' | 'double' or 0 / 2) too; without one, three.js's FrontSide stays;
 //   - woven presets load as MeshWovenMaterial with the table defaults and reject unknown names;
+//   - the far-field yarn lobe ("woven": {"yarn_lobe"}): program, defines, textures, the port
+//     against C++ values (web/test/yarn-lobe-reference.json), bad blocks refused naming the field;
 //   - weave maps: web/exr.js reads tests/browser/maps/canvas.weave.exr as OpenImageIO does
 //     (oiiotool, when installed), tile means 1, box mips, texture settings, uv_repeats, the
 //     anisotropyMap encoding, the preset's "weave_maps" required / refused / fetched.
@@ -28,7 +30,7 @@ globalThis.fetch = async (url, ...rest) => {
   return realFetch(url, ...rest);
 };
 const THREE = await import(pathToFileURL(path.join(repo, 'web', 'node_modules', 'three', 'build', 'three.module.js')).href);
-const { loadClothfitPreset, MeshWovenMaterial, MeshClothMaterial } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+const { loadClothfitPreset, MeshWovenMaterial, MeshClothMaterial, yarnLobeOptions, yarnLobeEval, yarnLobeIbl } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
 
 const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, all) => {
   if (a.startsWith('--')) acc.push([a.slice(2), all[i + 1]]);
@@ -104,6 +106,91 @@ for (const [opt, re] of [[{ ibl: 'FIS' }, /woven\.ibl: expected "split", "fis" o
 check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'exact' }), /MeshWovenMaterial: ibl 'exact'/), 'material ibl refused');
 check(() => assert.equal(new MeshWovenMaterial({}, { ibl: 'bent' }).customProgramCacheKey(), 'woven:additive:uniform:bent'), 'bent ibl: its own program');
 check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps: 0 }), /MeshWovenMaterial: fisTaps 0/), 'material taps refused');
+
+// The far-field yarn lobe ("woven": {"yarn_lobe"}; docs/web.md "The far-field yarn lobe"): the
+// canvas preset of the browser cases loads with its own program (#defines for the loop bounds),
+// uniforms and textures; the double-precision port agrees with the committed C++ values
+// (web/test/yarn-lobe-reference.json: fit/yarn_farfield.cpp EvalQuadrature and Table::Ibl at 400
+// direction pairs per fabric); a bad block is refused with the field named.
+{
+  const lobeFile = JSON.parse(fs.readFileSync(path.join(repo, 'web', 'test', 'yarn-lobe-canvas.json'), 'utf8'));
+  const wl = loadClothfitPreset(lobeFile);
+  const yl = wl.yarnLobe;
+  check(() => assert.ok(yl && yl.groups.length === 2 && yl.nodes === 16 && yl.ibl.summary.length === 2 * 16 * 32 * 5), 'yarn lobe loaded');
+  check(() => assert.equal(wl.customProgramCacheKey(), 'woven:additive:uniform:split:yarn-lobe2x16/16x32'), 'yarn lobe: its own program');
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n';
+  const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: 'void main() {\n#include <project_vertex>\n}' };
+  wl.onBeforeCompile(sh);
+  check(() => assert.ok(['WOVEN_YARN_LOBE\n', 'WOVEN_YL_GROUPS 2\n', 'WOVEN_YL_NODES 16\n', 'WOVEN_YL_N_THETA 16\n', 'WOVEN_YL_N_PHI 32\n'].every((d) => sh.fragmentShader.includes(`#define ${d}`))), 'yarn lobe defines');
+  check(() => assert.ok(sh.uniforms.wovenYlG0.value.length === 2 && sh.uniforms.wovenYlNodes.value.image.width === 16 && sh.uniforms.wovenYlNodes.value.image.height === 2
+    && sh.uniforms.wovenYlIbl.value.image.width === 64 && sh.uniforms.wovenYlIbl.value.image.height === 32 && sh.uniforms.wovenYlIbl.value.type === THREE.FloatType), 'yarn lobe uniforms and textures');
+  // the IBL texture holds the summary as laid out (entry 4 in the odd texel)
+  const it = sh.uniforms.wovenYlIbl.value.image.data, sm = yl.ibl.summary, at = ((1 * 16 + 5) * 32 + 7) * 5;
+  check(() => assert.deepEqual([...it.slice(((16 + 5) * 64 + 14) * 4, ((16 + 5) * 64 + 14) * 4 + 5)], [...sm.slice(at, at + 5)]), 'yarn lobe IBL texture layout');
+  check(() => assert.ok(!loadClothfitPreset(wp()).customProgramCacheKey().includes('yarn-lobe')), 'no yarn lobe: the old program');
+  const clone = wl.clone();
+  check(() => assert.ok(clone.yarnLobe && clone.customProgramCacheKey() === wl.customProgramCacheKey() && clone._wovenUniforms.wovenYlIbl.value !== wl._wovenUniforms.wovenYlIbl.value), 'yarn lobe survives clone');
+  // the port against the C++ quadrature (staple circle, ellipse and hyperbola spines; filament
+  // with smoothing, ellipse and hyperbola; 10 groups evaluated as two blocks of 5)
+  const ref = JSON.parse(fs.readFileSync(path.join(repo, 'web', 'test', 'yarn-lobe-reference.json'), 'utf8'));
+  for (const [name, r] of Object.entries(ref.fabrics)) {
+    const parts = [];
+    for (let i = 0; i < r.block.groups.length; i += 5) parts.push(yarnLobeOptions({ ...r.block, groups: r.block.groups.slice(i, i + 5) }));
+    let worst = 0, lit = 0;
+    for (const q of r.pairs) {
+      const T = parts.map((pp) => yarnLobeEval(pp, q.wo, q.wi)).reduce((a, b) => [a[0] + b[0], a[1] + b[1]]);
+      for (let k = 0; k < 2; ++k) {
+        if (q.T[k] > 0) ++lit;
+        worst = Math.max(worst, Math.abs(T[k] - q.T[k]) / Math.max(Math.abs(q.T[k]), 1e-9));
+      }
+    }
+    check(() => assert.ok(worst < 1e-9 && lit > r.pairs.length / 2, `${name}: worst relative ${worst}, ${lit} lit`), `yarn lobe port = EvalQuadrature (${name})`);
+  }
+  for (const q of ref.ibl.pairs) {
+    const got = yarnLobeIbl(yl, q.wo);
+    check(() => assert.ok([0, 1].every((k) => [got[k].albedo, ...got[k].dir, got[k].roughness].every((x, c) => Math.abs(x - q.ibl[k][c]) < 1e-6))), 'yarn lobe IBL summary = Table::Ibl');
+  }
+  // bad blocks, the field named
+  const lobe = lobeFile.woven.yarn_lobe;
+  const bad = (edit) => { const b = JSON.parse(JSON.stringify(lobe)); edit(b); return wp({ yarn_lobe: b }); };
+  for (const [edit, re] of [
+    [(b) => { b.groups = []; }, /woven\.yarn_lobe\.groups: 0 groups, expected 1 to 8/],
+    [(b) => { b.groups = Array(9).fill(b.groups[0]); }, /woven\.yarn_lobe\.groups: 9 groups, expected 1 to 8/],
+    [(b) => { b.groups = 'warp'; }, /woven\.yarn_lobe\.groups: expected an array/],
+    [(b) => { b.ibl.summary.pop(); }, /woven\.yarn_lobe\.ibl\.summary: 5119 numbers, expected 2 x n_theta x n_phi x 5 = 5120/],
+    [(b) => { b.ibl.n_phi = 16; }, /woven\.yarn_lobe\.ibl\.summary: 5120 numbers, expected .* = 2560/],
+    [(b) => { b.ibl.summary[17] = null; }, /woven\.yarn_lobe\.ibl\.summary\[17\]: expected a number/],
+    [(b) => { b.ibl.summary[3] = 1e31; }, /woven\.yarn_lobe\.ibl\.summary\[3\]: out of float range/],
+    [(b) => { b.scale = Infinity; }, /woven\.yarn_lobe\.scale: not finite/],
+    [(b) => { b.alpha = NaN; }, /woven\.yarn_lobe\.alpha: not finite/],
+    [(b) => { b.groups[1].umax = '24'; }, /woven\.yarn_lobe\.groups\[1\]\.umax: expected a number/],
+    [(b) => { b.groups[1].umax = 90; }, /woven\.yarn_lobe\.groups\[1\]\.umax: must be in \(0, 90\)/],
+    [(b) => { b.groups[0].width = 3; }, /woven\.yarn_lobe\.groups\[0\]\.umax: width sin\(umax\) must be < length/],
+    [(b) => { b.groups[0].type = 'both'; }, /woven\.yarn_lobe\.groups\[0\]\.type: expected "warp" or "weft"/],
+    [(b) => { b.groups[0].share = 0; }, /woven\.yarn_lobe\.groups\[0\]\.share: must be in \(0, 1\]/],
+    [(b) => { b.groups[0].kappa = -1.5; }, /woven\.yarn_lobe\.groups\[0\]\.kappa/],
+    [(b) => { b.groups[0].area_factor = 0.5; }, /woven\.yarn_lobe\.groups\[0\]\.area_factor/],
+    [(b) => { delete b.groups[0].along; }, /woven\.yarn_lobe\.groups\[0\]\.along: missing/],
+    [(b) => { b.groups[0].extra = 1; }, /woven\.yarn_lobe\.groups\[0\]\.extra: unknown key/],
+    [(b) => { b.nodes = 0; }, /woven\.yarn_lobe\.nodes: must be in \[1, 64\]/],
+    [(b) => { b.nodes = 65; }, /woven\.yarn_lobe\.nodes: must be in \[1, 64\]/],
+    [(b) => { b.nodes = 2.5; }, /woven\.yarn_lobe\.nodes: expected an integer/],
+    [(b) => { b.ss = 1; }, /woven\.yarn_lobe\.ss: must be in \[0, 1\)/],
+    [(b) => { b.h_width = 0; }, /woven\.yarn_lobe\.h_width: must be in \(0, 1\]/],
+    [(b) => { b.beta = -1; }, /woven\.yarn_lobe\.beta: must be >= 0/],
+    [(b) => { b.model = 'table'; }, /woven\.yarn_lobe\.model: expected "irawan-far-field"/],
+    [(b) => { delete b.ibl; }, /woven\.yarn_lobe\.ibl: missing/],
+    [(b) => { b.ibl.n_theta = 1; }, /woven\.yarn_lobe\.ibl\.n_theta: must be in \[2, 64\]/],
+    [(b) => { b.table = 1; }, /woven\.yarn_lobe\.table: unknown key/],
+  ]) {
+    check(() => assert.throws(() => loadClothfitPreset(bad(edit)), re), `bad yarn_lobe ${edit}`);
+  }
+  check(() => assert.throws(() => loadClothfitPreset(wp({ yarn_layer: 'albedo-scaled', yarn_lobe: lobe })), /woven\.yarn_layer: must be "additive" with a yarn_lobe/), 'yarn lobe needs the additive layer');
+  check(() => assert.throws(() => loadClothfitPreset(wp({ ibl: 'fis', yarn_lobe: lobe })), /woven\.ibl: must be "split" with a yarn_lobe/), 'yarn lobe needs the split sum');
+  check(() => assert.throws(() => loadClothfitPreset({ ...wp(), woven: { yarn_lobe: null } }), /woven\.yarn_lobe: expected an object/), 'yarn lobe null refused');
+  check(() => assert.throws(() => loadClothfitPreset(JSON.stringify(wp({ yarn_lobe: lobe })).replace('"nodes":16', '"nodes":16.0')), /woven\.yarn_lobe\.nodes: expected an integer/), 'nodes 16.0 literal refused');
+  check(() => assert.throws(() => new MeshWovenMaterial({}, { yarnLayer: 'albedo-scaled', yarnLobe: lobe }), /MeshWovenMaterial: a yarnLobe needs yarnLayer 'additive'/), 'material: yarn lobe with albedo-scaled refused');
+}
 
 // From the real converter: a glTF with one single-sided and one double-sided material.
 if (args.clothfit) {
