@@ -155,9 +155,10 @@ Object.assign(MATERIALS, {
 // yarn-lobe-*-maps.weave.exr, anisotropy 16; ratio maps pattern the lobe weights and kd); and the
 // twill lobe with a strong tinted specular and sheen by hand, so the lobe's shape dominates the
 // frame (the fitted specular is about 0.1) and the sheen scaling s_l of the lights is exercised.
-const lobePreset = (name, over = {}) => {
+// lobe: fields of the yarn_lobe block replaced (the shiny case runs the fit default, 8 nodes).
+const lobePreset = (name, over = {}, lobe = {}) => {
   const j = JSON.parse(fs.readFileSync(path.join(repo, 'web', 'test', `yarn-lobe-${name}.json`), 'utf8'));
-  const extra = { woven: j.woven };
+  const extra = { woven: { ...j.woven, yarn_lobe: { ...j.woven.yarn_lobe, ...lobe } } };
   if (j.weave_maps) {  // the map next to the committed preset, named by file (the page's resolver)
     const { uri, file, ...wm } = j.weave_maps;
     extra.weave_maps = { ...wm, file: path.join(repo, 'web', 'test', path.basename(uri ?? file)) };
@@ -169,7 +170,7 @@ Object.assign(MATERIALS, {
   'woven-lobe-twill': lobePreset('twill'),
   'woven-lobe-maps-canvas': lobePreset('canvas-maps'),
   'woven-lobe-maps-twill': lobePreset('twill-maps'),
-  'woven-lobe-twill-shiny': lobePreset('twill', { specular_color: [0.5, 0.45, 0.3], sheen_color: [0.25, 0.25, 0.3], sheen_roughness: 0.5, warp_share: 0.7 }),
+  'woven-lobe-twill-shiny': lobePreset('twill', { specular_color: [0.5, 0.45, 0.3], sheen_color: [0.25, 0.25, 0.3], sheen_roughness: 0.5, warp_share: 0.7 }, { nodes: 8 }),
 });
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
