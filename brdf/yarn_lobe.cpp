@@ -180,7 +180,7 @@ void Validate(const FarField& f, const std::string& where, bool need_ibl) {
   if (!finite(f.ss) || f.ss < 0.0 || !(f.ss < 1.0)) bad("ss", "expected a number in [0, 1)");
   if (!finite(f.scale) || f.scale < 0.0) bad("scale", "expected a finite number >= 0");
   if (f.groups.empty() || f.groups.size() > size_t(FarField::kMaxGroups))
-    bad("groups", "expected 1 to 8 groups");
+    bad("groups", "expected 1 to " + std::to_string(FarField::kMaxGroups) + " groups");
   for (size_t i = 0; i < f.groups.size(); ++i) {
     const FarField::Group& g = f.groups[i];
     const std::string gi = "groups[" + std::to_string(i) + "].";

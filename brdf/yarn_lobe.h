@@ -95,7 +95,7 @@ struct FarField {
     double across = 0.5, along = 0.5;  // half extents of the group's cells
     double area_factor = 1.0;
   };
-  static constexpr int kMaxGroups = 8, kMaxNodes = 64;
+  static constexpr int kMaxGroups = 16, kMaxNodes = 64;  // silk charmeuse has 10 groups
   std::string fabric;  // where it was derived from (informative)
   int nodes = 16;
   double alpha = 0.0, beta = 0.0, h_width = 0.5, ss = 0.0, scale = 1.0;
@@ -106,7 +106,7 @@ struct FarField {
 };
 
 // Throws std::invalid_argument "<where>.<field>: <what>" (where names the object) on a value out of its documented
-// range: nodes in [1, 64], 1..8 groups, share in (0, 1], width, length, across, along > 0,
+// range: nodes in [1, 64], 1..16 groups, share in (0, 1], width, length, across, along > 0,
 // umax in (0, 90) deg with width sin(umax) < length, |psi| < 90 deg, kappa >= -1, area_factor
 // >= 1, 0 <= ss < 1, 0 < h_width <= 1, alpha, beta >= 0, scale >= 0, all finite; an ibl
 // table with n_theta in [2, 64], n_phi in [3, 128], 2 n_theta n_phi 5 finite values (or none:

@@ -78,7 +78,8 @@ render::PreviewOptions PreviewOptionsFor(const FitOptions& opt, const render::Ma
   po.model = p.model;
   po.cloth = p.cloth;
   po.woven = render::PreviewWovenOptions(p);  // yarn layering, tints, IBL mode (split / FIS) and taps
-  render::ApplyPresetYarnLobe(p, &po);  // "woven": {"yarn_lobe"} (the measurement modes below override it)
+  // "woven": {"yarn_lobe"}; a measurement mode (yarn_far_field / yarn_table) replaces it below
+  if (!opt.yarn_far_field && !opt.yarn_table) render::ApplyPresetYarnLobe(p, &po);
   po.ibl_engine = opt.ibl_engine;
   po.weave_maps = render::LoadPresetWeaveMaps(p);  // woven weave maps (null: none)
   po.exact_ibl_samples = opt.exact_ibl_samples;

@@ -189,7 +189,7 @@ TEST(S12YarnLobe, BadFieldsAreNamed) {
       {"h_width 0", [](json& y) { y["h_width"] = 0.0; }, "woven.yarn_lobe.h_width"},
       {"ss 1", [](json& y) { y["ss"] = 1.0; }, "woven.yarn_lobe.ss"},
       {"no groups", [](json& y) { y["groups"] = json::array(); }, "woven.yarn_lobe.groups"},
-      {"9 groups", [](json& y) { for (int i = 0; i < 7; ++i) y["groups"].push_back(y["groups"][0]); },
+      {"17 groups", [](json& y) { for (int i = 0; i < 15; ++i) y["groups"].push_back(y["groups"][0]); },
        "woven.yarn_lobe.groups"},
       {"group type", [](json& y) { y["groups"][1]["type"] = "both"; }, "woven.yarn_lobe.groups[1].type"},
       {"group key missing", [](json& y) { y["groups"][0].erase("kappa"); }, "woven.yarn_lobe.groups[0]"},
@@ -275,12 +275,15 @@ namespace clothfit {
 namespace {
 
 // convert's BRDF samples of a preset with the lobe (fit/brdf_fit.h SampleAnalytic): the model
-// without its yarn specular plus ks (x) 2 [m T_w, (1 - m) T_f] NoL at the pair's directions
-// (sheen off: no scaling); the GGX lobes' parameters no longer matter.
+// without its yarn specular plus ks (x) 2 [m tint_w T_w + (1 - m) tint_f T_f] s NoL at the pairs,
+// with the tints and the sheen's min(S(NoV), S(NoL)); the GGX lobes' parameters no longer matter.
 TEST(S12YarnLobe, ConvertSamplesTheLobe) {
   const fit::YarnFarField ff(Fabric("canvas.json"));
   render::MaterialPreset p = render::DefaultPreset(render::ModelKind::kWoven);
   p.values = render::WovenFlat({0.4, 0.35, 0.3}, {0.2, 0.1, 0.05}, 0.5, 0.5, 0.3, 0.04, 0.5);
+  p.values[12] = p.values[13] = p.values[14] = 0.3;  // sheen_color on: the yarn term is scaled
+  p.woven.tint_warp = {1.0, 0.5, 0.25};
+  p.woven.tint_weft = {0.2, 0.9, 1.0};
   p.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(ff.Description(8, 0));
   render::MaterialPreset no_spec = p;
   for (int c = 3; c < 6; ++c) no_spec.values[size_t(c)] = 0.0;
@@ -296,15 +299,61 @@ TEST(S12YarnLobe, ConvertSamplesTheLobe) {
     double t[2];
     lobe.Eval(dirs[i].v, dirs[i].l, t);
     const double NoL = std::clamp(dirs[i].cos.NoL, 0.0, 1.0);
+    const double NoV = std::clamp(dirs[i].cos.NoV, kMinNoV, 1.0);
+    const woven::Params<double> wp = woven::FromFlat(p.values.data());
+    const woven::Lobes<double> lb = woven::PrepareLobes(wp);
+    const double sh = std::min(woven::SheenScaling(wp, lb, lut::DefaultDfg(), NoV),
+                               woven::SheenScaling(wp, lb, lut::DefaultDfg(), NoL));
+    if (t[0] + t[1] > 0.0) EXPECT_LT(sh, 1.0);  // the sheen's scaling is exercised
     const double ks[3] = {0.2, 0.1, 0.05};
     for (int c = 0; c < 3; ++c) {
-      const double want = b.value[i][c] + ks[c] * (2.0 * 0.3 * t[0] + 2.0 * 0.7 * t[1]) * NoL;
+      const double want = b.value[i][c] + ks[c] * (2.0 * 0.3 * p.woven.tint_warp[c] * t[0] +
+                                                   2.0 * 0.7 * p.woven.tint_weft[c] * t[1]) * sh * NoL;
       EXPECT_NEAR(a.value[i][c], want, 1e-12 * std::max(1.0, want)) << i;
       EXPECT_EQ(a.value[i][c], r.value[i][c]);
     }
     lit += t[0] + t[1];
   }
   EXPECT_GT(lit, 0.0);
+}
+
+}  // namespace
+}  // namespace clothfit
+
+#include <fstream>
+
+namespace clothfit {
+namespace {
+
+// The lobe against values stored before the specular moved to brdf/ (web/test/yarn-lobe-
+// reference.json: fit::YarnFarField::EvalQuadrature at a6d4dae, 120 direction pairs per block;
+// canvas, twill, elliptic and hyperbolic spines, silk charmeuse's 10 filament groups with
+// smoothing): the move and the preset reader keep every value.
+TEST(S12YarnLobe, MatchesThePreMoveQuadrature) {
+  std::ifstream in(fs::path(CLOTHFIT_TEST_SOURCE_DIR) / "web" / "test" / "yarn-lobe-reference.json");
+  ASSERT_TRUE(in.good());
+  const json ref = json::parse(in);
+  int checked = 0, lit = 0;
+  for (const auto& [name, f] : ref.at("fabrics").items()) {
+    const json preset = {{"schema", "clothfit.preset"}, {"version", 1}, {"model", "woven"},
+                         {"woven", {{"yarn_lobe", f.at("block")}}}, {"parameters", json::object()}};
+    const render::MaterialPreset p = render::ParsePreset(preset, name);
+    ASSERT_TRUE(p.yarn_lobe);
+    const yarn_lobe::Lobe lobe(*p.yarn_lobe);
+    for (const json& q : f.at("pairs")) {
+      const Vec3<double> wo(q["wo"][0], q["wo"][1], q["wo"][2]), wi(q["wi"][0], q["wi"][1], q["wi"][2]);
+      double t[2];
+      lobe.Eval(wo, wi, t);
+      for (int k = 0; k < 2; ++k) {
+        const double want = q["T"][size_t(k)].get<double>();
+        EXPECT_NEAR(t[k], want, 1e-12 * std::max(1.0, std::abs(want))) << name << " lobe " << k;
+        lit += want > 0.0;
+      }
+      ++checked;
+    }
+  }
+  EXPECT_GE(checked, 600);
+  EXPECT_GT(lit, 300);
 }
 
 }  // namespace

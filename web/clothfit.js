@@ -391,7 +391,7 @@ export function wovenLobes(p) {
 
 // ---------------------------------------------------------------------------------------------
 // The far-field yarn lobe (session 12; a woven preset's "woven": {"yarn_lobe": {...}}, written by
-// `clothfit fit --yarn-lobe quadrature`; docs/web.md "The far-field yarn lobe"). The fabric's
+// `clothfit fit --model woven --fabric <irawan fabric>` (--yarn-lobe auto / preset); docs/web.md "The far-field yarn lobe"). The fabric's
 // Irawan-Marschner yarn specular averaged over the weave tile by quadrature, per group of
 // identical yarns (fit/yarn_farfield.cpp YarnFarField::EvalQuadrature, render/reference/irawan.cpp
 // IrawanBsdf::Specular with a band extent, SpineRadius / FilamentRadius), replaces woven's GGX
@@ -401,7 +401,7 @@ export function wovenLobes(p) {
 // yarnLobeOptions checks the block (errors name the field), yarnLobeEval is a double-precision
 // port of the lobe for node-side tests, yarnLobePack makes the shader's uniforms and textures.
 
-export const YARN_LOBE_MAX_GROUPS = 8, YARN_LOBE_MAX_NODES = 64;
+export const YARN_LOBE_MAX_GROUPS = 16, YARN_LOBE_MAX_NODES = 64;
 const YL_DEG = Math.PI / 180;
 
 // Modified Bessel I0 (render/reference/irawan.cpp BesselI0): sum (x^2/4)^k / (k!)^2.
@@ -1239,13 +1239,18 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     this._yarnLobePack?.dispose();
     this.yarnLobe = block ? yarnLobeOptions(block) : null;
     this._yarnLobePack = this.yarnLobe ? yarnLobePack(this.yarnLobe) : null;
+    // The uniform objects are created once and only their values change: a compiled program
+    // whose key is unchanged (same group count, nodes and table size) is reused by three.js
+    // without onBeforeCompile, and keeps reading the objects it was given then.
     const u = this._wovenUniforms;
-    for (const k of Object.keys(u)) if (k.startsWith('wovenYl')) delete u[k];
+    const set = (k, v) => { if (u[k]) u[k].value = v; else u[k] = { value: v }; };
     const pk = this._yarnLobePack;
+    for (const k of ['wovenYlG0', 'wovenYlG1', 'wovenYlG2', 'wovenYlG3', 'wovenYlPhase', 'wovenYlNodes', 'wovenYlIbl'])
+      set(k, null);
     if (pk) {
-      for (const [k, v] of Object.entries(pk.uniforms)) u[k] = { value: v };
-      u.wovenYlNodes = { value: pk.nodesTexture };
-      u.wovenYlIbl = { value: pk.iblTexture };
+      for (const [k, v] of Object.entries(pk.uniforms)) set(k, v);
+      set('wovenYlNodes', pk.nodesTexture);
+      set('wovenYlIbl', pk.iblTexture);
     }
   }
 

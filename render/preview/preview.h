@@ -168,7 +168,6 @@ struct PreviewOptions {
   std::vector<unsigned char> sample_mask;
 };
 
-// Whether the preview uses three.js r187's IBL for these options (see IblEngine).
 // A preset's far-field yarn lobe ("woven": {"yarn_lobe"}; MaterialPreset::yarn_lobe): sets
 // o->yarn_lobe to its quadrature (brdf/yarn_lobe.h Lobe::Eval) and o->yarn_ibl to its table's
 // split sum (yarn_table::Table::Ibl), as web/clothfit.js MeshWovenMaterial draws it. A preset
@@ -176,6 +175,7 @@ struct PreviewOptions {
 // evaluate, fits: fit/image_fit.cpp PreviewOptionsFor).
 void ApplyPresetYarnLobe(const MaterialPreset& p, PreviewOptions* o);
 
+// Whether the preview uses three.js r187's IBL for these options (see IblEngine).
 bool UsesThreejsIbl(const PreviewOptions& o);
 // Whether the woven yarn lobes use filtered importance sampling (woven, ibl == kFis, three.js
 // IBL engine, no exact IBL).

@@ -128,6 +128,18 @@ check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps:
   const it = sh.uniforms.wovenYlIbl.value.image.data, sm = yl.ibl.summary, at = ((1 * 16 + 5) * 32 + 7) * 5;
   check(() => assert.deepEqual([...it.slice(((16 + 5) * 64 + 14) * 4, ((16 + 5) * 64 + 14) * 4 + 5)], [...sm.slice(at, at + 5)]), 'yarn lobe IBL texture layout');
   check(() => assert.ok(!loadClothfitPreset(wp()).customProgramCacheKey().includes('yarn-lobe')), 'no yarn lobe: the old program');
+  // setYarnLobe keeps the uniform objects a compiled program holds (three.js reuses a program of
+  // the same key without onBeforeCompile): a second lobe of the same shape changes their values.
+  {
+    const g0 = sh.uniforms.wovenYlG0, ibl = sh.uniforms.wovenYlIbl;
+    const other = JSON.parse(JSON.stringify(lobeFile.woven.yarn_lobe));
+    other.groups[0].umax = 15;
+    other.ibl.summary[0] = 0.123;
+    wl.setYarnLobe(other);
+    check(() => assert.ok(sh.uniforms.wovenYlG0 === g0 && sh.uniforms.wovenYlIbl === ibl && ibl.value.image.data[0] === Math.fround(0.123)
+      && wl.customProgramCacheKey() === 'woven:additive:uniform:split:yarn-lobe2x16/16x32'), 'setYarnLobe updates the compiled program\'s uniforms');
+    wl.setYarnLobe(lobeFile.woven.yarn_lobe);
+  }
   const clone = wl.clone();
   check(() => assert.ok(clone.yarnLobe && clone.customProgramCacheKey() === wl.customProgramCacheKey() && clone._wovenUniforms.wovenYlIbl.value !== wl._wovenUniforms.wovenYlIbl.value), 'yarn lobe survives clone');
   // the port against the C++ quadrature (staple circle, ellipse and hyperbola spines; filament
@@ -154,8 +166,8 @@ check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps:
   const lobe = lobeFile.woven.yarn_lobe;
   const bad = (edit) => { const b = JSON.parse(JSON.stringify(lobe)); edit(b); return wp({ yarn_lobe: b }); };
   for (const [edit, re] of [
-    [(b) => { b.groups = []; }, /woven\.yarn_lobe\.groups: 0 groups, expected 1 to 8/],
-    [(b) => { b.groups = Array(9).fill(b.groups[0]); }, /woven\.yarn_lobe\.groups: 9 groups, expected 1 to 8/],
+    [(b) => { b.groups = []; }, /woven\.yarn_lobe\.groups: 0 groups, expected 1 to 16/],
+    [(b) => { b.groups = Array(17).fill(b.groups[0]); }, /woven\.yarn_lobe\.groups: 17 groups, expected 1 to 16/],
     [(b) => { b.groups = 'warp'; }, /woven\.yarn_lobe\.groups: expected an array/],
     [(b) => { b.ibl.summary.pop(); }, /woven\.yarn_lobe\.ibl\.summary: 5119 numbers, expected 2 x n_theta x n_phi x 5 = 5120/],
     [(b) => { b.ibl.n_phi = 16; }, /woven\.yarn_lobe\.ibl\.summary: 5120 numbers, expected .* = 2560/],
