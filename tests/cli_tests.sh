@@ -140,6 +140,17 @@ PY
       --yarn-lobe preset --woven-ibl fis --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe preset with FIS accepted"
     echo "$err" | grep -q -- "--yarn-lobe preset: not with" || fail "--yarn-lobe preset with FIS: $err"
     [ ! -e "$TMP/y.json" ] || fail "preset written despite a --yarn-lobe preset error"
+    # --yarn-lobe auto (the default) chooses none where the lobe has no path (--ao, --woven-ibl
+    # fis, a fabric without yarns): no yarn-lobe refusal; the fit gets as far as the references.
+    for extra in "--ao" "--woven-ibl fis" "--fabric-velvet"; do
+      fab="$D/fabrics/canvas.json"; x=$extra
+      [ "$extra" = "--fabric-velvet" ] && fab="$D/fabrics/velvet.json" && x=
+      # shellcheck disable=SC2086
+      err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
+        $x --fabric "$fab" --out "$TMP/y.json" 2>&1) && fail "fit without references accepted ($extra)"
+      echo "$err" | grep -q -- "yarn-lobe" && fail "--yarn-lobe auto refused with $extra: $err"
+      echo "$err" | grep -q "none.exr" || fail "auto with $extra did not reach the references: $err"
+    done
     # a preset fitted with --yarn-lobe is not evaluated as an ordinary woven preset
     printf '{"schema":"clothfit.preset","version":1,"model":"woven","parameters":{},"fit":{"yarn_lobe":"x","scenes":[]}}' > "$TMP/yl.json"
     err=$("$BIN" --quiet evaluate --preset "$TMP/yl.json" 2>&1) && fail "evaluate of a --yarn-lobe preset accepted"
