@@ -250,7 +250,8 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
       ->check(CLI::Range(0, 65536));
   cmd->add_option("--yarn-lobe", a.yarn_lobe,
                   "woven's yarn lobes: auto (default: 'preset' when --fabric is an irawan fabric "
-                  "and no --sheen-tilt, --ao, --indirect or --woven-ibl fis|bent, else 'none'), "
+                  "and no --sheen-tilt or --woven-ibl fis|bent, else 'none'; with the visibility "
+                  "flags --shadows, --ao, --indirect too), "
                   "none (woven's anisotropic GGX lobes), preset (the fabric's far-field lobe "
                   "written into the preset, \"woven\": {\"yarn_lobe\"}: a deterministic quadrature "
                   "for lights, its table's split sum for the environment; brdf/yarn_lobe.h, drawn "
@@ -515,7 +516,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   // Woven's yarn lobes (session 12): "auto" is the fabric's far-field lobe in the preset when
   // the fabric has yarns (irawan) and nothing asks for what the lobe cannot do.
   std::string lobe = a.yarn_lobe;
-  const bool lobe_compatible = a.sheen_tilt == 0.0 && !a.visibility.ao && !a.visibility.indirect &&
+  const bool lobe_compatible = a.sheen_tilt == 0.0 &&
                                (a.woven_ibl == "auto" || a.woven_ibl == "split");
   if (lobe == "auto")
     lobe = o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && lobe_compatible &&
@@ -528,8 +529,8 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
     if (a.fabric.empty())
       throw std::invalid_argument("--yarn-lobe preset: needs --fabric (an irawan fabric)");
     if (!lobe_compatible)
-      throw std::invalid_argument("--yarn-lobe preset: not with --sheen-tilt, --ao, --indirect or "
-                                  "--woven-ibl fis|bent (the lobe has its own split sum)");
+      throw std::invalid_argument("--yarn-lobe preset: not with --sheen-tilt or --woven-ibl "
+                                  "fis|bent (the lobe has its own split sum)");
     fit::YarnLobeSettings s = YarnLobeSettingsOf(a);
     s.mode = "quadrature";
     // 8 nodes: the fits match 16's (canvas 0.009795 vs 0.009817, twill 0.01672 vs 0.01668;

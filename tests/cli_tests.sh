@@ -140,9 +140,10 @@ PY
       --yarn-lobe preset --woven-ibl fis --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe preset with FIS accepted"
     echo "$err" | grep -q -- "--yarn-lobe preset: not with" || fail "--yarn-lobe preset with FIS: $err"
     [ ! -e "$TMP/y.json" ] || fail "preset written despite a --yarn-lobe preset error"
-    # --yarn-lobe auto (the default) chooses none where the lobe has no path (--ao, --woven-ibl
-    # fis, a fabric without yarns): no yarn-lobe refusal; the fit gets as far as the references.
-    for extra in "--ao" "--woven-ibl fis" "--fabric-velvet"; do
+    # --yarn-lobe auto (the default) chooses none where the lobe has no path (--sheen-tilt,
+    # --woven-ibl fis, a fabric without yarns; since session 13 the visibility flags keep the
+    # lobe): no yarn-lobe refusal; the fit gets as far as the references.
+    for extra in "--sheen-tilt 10" "--woven-ibl fis" "--fabric-velvet" "--ao --shadows --indirect"; do
       fab="$D/fabrics/canvas.json"; x=$extra
       [ "$extra" = "--fabric-velvet" ] && fab="$D/fabrics/velvet.json" && x=
       # shellcheck disable=SC2086

@@ -257,6 +257,74 @@ TEST(S9Visibility, AoAppliesSpecularOcclusionToTheRadianceTables) {
   EXPECT_GT(occluded, 10);
 }
 
+// Session 13: the far-field yarn lobe with the visibility terms. The AO map's specular occlusion
+// applies to each yarn lobe's environment read at that lobe's roughness (three.js
+// computeSpecularOcclusion at the read's roughness); shadows and the light map touch only the
+// lights' visibility and E_d, so the lobe's per-light values are the option-off ones. ao per pixel
+// is recovered from the diffuse irradiance, as above.
+TEST(S9Visibility, YarnLobeReadsGetTheSpecularOcclusionOfTheirRoughness) {
+  const Scene s = SphereOnFloor(32);
+  const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
+  PreviewOptions off;
+  off.model = ModelKind::kWoven;
+  // A smooth hand-made lobe (no fabric file): the values do not matter, only where they go.
+  off.yarn_lobe = [](const Vec3d& wo, const Vec3d& wi, double out[2]) {
+    out[0] = 0.2 + 0.1 * wo.x * wi.x;
+    out[1] = 0.3 + 0.1 * wo.y * wi.y;
+  };
+  const double rough[2] = {0.2, 0.75};
+  off.yarn_ibl = [rough](const Vec3d&, yarn_table::IblLobe out[2]) {
+    for (int k = 0; k < 2; ++k) {
+      out[k].albedo = 0.5 + 0.25 * k;
+      out[k].dir = Vec3d(0.3 * (k ? -1 : 1), 0.0, 0.95);
+      out[k].roughness = rough[k];
+    }
+  };
+  PreviewOptions on = off;
+  on.visibility.ao = true;
+  on.visibility.samples = 32;
+  const auto a = PreviewCache::Build(s, &env, on), b = PreviewCache::Build(s, &env, off);
+  ASSERT_EQ(a->pixels, b->pixels);
+  ASSERT_EQ(a->yarn_ibl.size(), a->pixels.size() * 6);
+  ASSERT_EQ(a->yarn_lobe, b->yarn_lobe);  // the lights' lobe values are not visibility's
+  int occluded = 0;
+  for (size_t i = 0; i < a->pixels.size(); ++i) {
+    if (!(b->irradiance[i * 3 + 1] > 1e-3f)) continue;
+    const double ao = double(a->irradiance[i * 3 + 1]) / double(b->irradiance[i * 3 + 1]);
+    if (ao > 0.99) continue;
+    ++occluded;
+    for (int k = 0; k < 2; ++k) {
+      const double so = SpecularOcclusion(std::clamp(double(a->NoV[i]), 0.0, 1.0), ao, rough[k]);
+      for (int c = 0; c < 3; ++c) {
+        const size_t j = i * 6 + size_t(k) * 3 + size_t(c);
+        EXPECT_NEAR(a->yarn_ibl[j], double(b->yarn_ibl[j]) * so, 1e-5 * double(b->yarn_ibl[j]) + 1e-8)
+            << "pixel " << a->pixels[i] << " lobe " << k << " ao " << ao;
+      }
+    }
+  }
+  EXPECT_GT(occluded, 10);
+  // Shadows and the light map with the lobe: a frame is drawn and changes; the light map alone
+  // leaves the lobe's per-light values as they are; shadows drop the occluded light samples.
+  PreviewOptions sh = off;
+  sh.shadows = true;
+  sh.visibility.indirect = true;
+  sh.visibility.samples = 32;
+  sh.visibility.hit_samples = 4;
+  const std::vector<double> x = WovenFlat({0.4, 0.35, 0.3}, {0.1, 0.1, 0.1}, 0.5, 0.5, 0.5, 0.04, 0.5);
+  std::unique_ptr<PreviewCache> cs, co, ci;
+  const auto fs = PreviewFrame(s, env, sh, x, &cs);
+  const auto fo = PreviewFrame(s, env, off, x, &co);
+  PreviewOptions ind = sh;  // the light map alone keeps every light sample
+  ind.shadows = false;
+  PreviewFrame(s, env, ind, x, &ci);
+  ASSERT_EQ(ci->yarn_lobe, co->yarn_lobe);
+  EXPECT_LT(cs->yarn_lobe.size(), co->yarn_lobe.size());  // shadowed samples are dropped
+  ASSERT_EQ(fs.size(), fo.size());
+  int changed = 0;
+  for (size_t i = 0; i < fs.size(); ++i) changed += fs[i].g != fo[i].g;
+  EXPECT_GT(changed, int(fs.size()) / 4);
+}
+
 // Options off (ao and indirect false) with every other visibility field changed: bit-identical.
 TEST(S9Visibility, OptionsOffAreBitIdentical) {
   const Scene s = SphereOnFloor(32);

@@ -609,7 +609,9 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       x.opt.yarn_ibl_taps(Vec3d(Dot(hit.t, hit.v), Dot(hit.b, hit.v), hit.NoV), &taps);
       for (const yarn_table::IblTap& tp : taps) {
         const Vec3d dd = Normalize(hit.t * tp.dir.x + hit.b * tp.dir.y + hit.n * tp.dir.z);
-        const Rgb<double> L = PrefilteredRead(x, dd, tp.roughness);
+        const double so =  // the AO map's specular occlusion at the read's roughness
+            vis_on ? SpecularOcclusion(std::clamp(hit.NoV, 0.0, 1.0), vis.ao, tp.roughness) : 1.0;
+        const Rgb<double> L = PrefilteredRead(x, dd, tp.roughness) * so;
         for (int k = 0; k < 2; ++k)
           for (int ch = 0; ch < 3; ++ch) pd.yibl[size_t(k * 3 + ch)] += float(tp.weight[k] * L[ch]);
       }
@@ -619,8 +621,12 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       for (int k = 0; k < 2; ++k) {
         const Vec3d& ld = lobes[k].dir;
         const Vec3d dd = Normalize(hit.t * ld.x + hit.b * ld.y + hit.n * ld.z);
+        const double so =  // the AO map's specular occlusion at the lobe's roughness
+            vis_on ? SpecularOcclusion(std::clamp(hit.NoV, 0.0, 1.0), vis.ao, lobes[k].roughness)
+                   : 1.0;
         const Rgb<double> L = PrefilteredRead(x, dd, lobes[k].roughness);
-        for (int ch = 0; ch < 3; ++ch) pd.yibl[size_t(k * 3 + ch)] = float(lobes[k].albedo * L[ch]);
+        for (int ch = 0; ch < 3; ++ch)
+          pd.yibl[size_t(k * 3 + ch)] = float(lobes[k].albedo * so * L[ch]);
       }
     }
     if (split_sum && SheenTiltOn(x.opt)) {  // the sheen lobe's table about n_s (sheen_tilt.h)
@@ -727,12 +733,10 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
         opt.woven_reference_kernel)
       throw std::invalid_argument("preview: a yarn_lobe needs the additive yarn layer, no sheen "
                                   "tilt and the fast woven kernel");
-    // The AO map's specular occlusion is not applied to the yarn_ibl reads. (Weave maps are
-    // allowed: their warp / weft / kd channels are ratios to the tile mean, so they give the
+    // The AO map's specular occlusion applies to the yarn_ibl reads at each read's roughness
+    // (session 13), as three.js's computeSpecularOcclusion at the lobe's roughness. (Weave maps
+    // are allowed: their warp / weft / kd channels are ratios to the tile mean, so they give the
     // tile-averaged lobe a per-texel pattern without changing its tile mean.)
-    if (opt.visibility.enabled())
-      throw std::invalid_argument("preview: a yarn_lobe is not implemented with the visibility "
-                                  "(AO / light map) prototype");
   } else if (opt.yarn_ibl || opt.yarn_ibl_taps) {
     throw std::invalid_argument("preview: a yarn_ibl needs a yarn_lobe");
   }
