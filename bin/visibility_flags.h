@@ -16,7 +16,7 @@ namespace clothfit::cli {
 
 struct VisibilityFlags {
   bool shadows = false, ao = false, indirect = false;
-  int samples = 64, hit_samples = 8, bounces = 1;
+  int samples = 64, hit_samples = 8, bounces = 1, uv_size = 0;
   double max_distance = 0.0;
   unsigned seed = 1;
   std::string fabric_albedo;  // "r,g,b" (empty: the fabric mesh's glTF base colour)
@@ -51,6 +51,11 @@ inline void AddVisibilityFlags(CLI::App* cmd, VisibilityFlags& f) {
                   "--ao / --indirect: occluders farther than this (scene units) are ignored "
                   "(default 0 = infinite)")
       ->check(CLI::Range(0.0, 1e30));
+  cmd->add_option("--vis-uv-size", f.uv_size,
+                  "--ao / --indirect: bake the fabric's terms into an N x N texture over its uv "
+                  "(the aoMap / lightMap an engine draws) and sample it bilinearly per pixel; "
+                  "0 (default) = per pixel")
+      ->check(CLI::Range(0, 2048));
   cmd->add_option("--vis-seed", f.seed, "--ao / --indirect: seed of the directions (default 1)");
   cmd->add_option("--indirect-albedo", f.fabric_albedo,
                   "--indirect: linear albedo r,g,b of fabric bounce points (default: the fabric "
@@ -73,6 +78,7 @@ inline void ApplyVisibilityFlags(const VisibilityFlags& f, fit::FitOptions* o) {
     if (f.samples != d.samples) unused("--vis-samples", "--ao or --indirect");
     if (f.max_distance != d.max_distance) unused("--vis-max-distance", "--ao or --indirect");
     if (f.seed != d.seed) unused("--vis-seed", "--ao or --indirect");
+    if (f.uv_size != d.uv_size) unused("--vis-uv-size", "--ao or --indirect");
   }
   o->shadows = f.shadows;
   o->visibility.ao = f.ao;
@@ -85,6 +91,7 @@ inline void ApplyVisibilityFlags(const VisibilityFlags& f, fit::FitOptions* o) {
   o->visibility.bounces = f.bounces;
   o->visibility.max_distance = f.max_distance;
   o->visibility.seed = f.seed;
+  o->visibility.uv_size = f.uv_size;
   if (!f.fabric_albedo.empty()) {
     std::vector<double> v;
     std::string item;
@@ -119,6 +126,7 @@ inline nlohmann::json VisibilityJson(const fit::FitOptions& o) {
     j["bounces"] = o.visibility.bounces;
     j["max_distance"] = o.visibility.max_distance;
     j["seed"] = o.visibility.seed;
+    j["uv_size"] = o.visibility.uv_size;  // 0: per pixel; N: an N x N uv texture (session 13)
     if (o.visibility.fabric_albedo[0] >= 0)
       j["fabric_albedo"] = {o.visibility.fabric_albedo[0], o.visibility.fabric_albedo[1],
                             o.visibility.fabric_albedo[2]};

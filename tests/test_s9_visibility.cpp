@@ -325,6 +325,117 @@ TEST(S9Visibility, YarnLobeReadsGetTheSpecularOcclusionOfTheirRoughness) {
   EXPECT_GT(changed, int(fs.size()) / 4);
 }
 
+// Session 13: the terms baked over the fabric's uv (VisibilityOptions::uv_size), the texture an
+// engine draws as aoMap / lightMap. (1) A texel holds ComputeVisibility at the surface point of
+// its centre (the sphere's uv -> position by hand: u = longitude, v = latitude as SphereMesh
+// lays them out), seeded by the texel index. (2) Sampling reproduces a texel exactly at its
+// centre and interpolates bilinearly between centres. (3) A cache built with the texture is close
+// to the per-pixel one on average (the terms are smooth; texture resolution and the seed pattern
+// differ) and still darkens the floor-facing lower sphere.
+TEST(S9Visibility, UvBakedMapIsThePerPointTermsAtTexelCentres) {
+  const Scene s = SphereOnFloor(48);
+  const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
+  VisibilityOptions o;
+  o.ao = true;
+  o.indirect = true;
+  o.samples = 32;
+  o.hit_samples = 4;
+  o.uv_size = 32;
+  const EmbreeScene bvh(s);
+  const double eps = 1e-5 * bvh.scale();
+  const IrradianceOverPiFn sky = [](const Vec3d& n) {
+    return Rgb<double>(0.5 + 0.2 * n.y, 0.5 + 0.2 * n.y, 0.5 + 0.2 * n.y);
+  };
+  const UvVisibilityMap map = BakeUvVisibility(s, bvh, o, sky, 0, eps);
+  ASSERT_EQ(map.size, 32);
+  EXPECT_EQ(map.covered, size_t(32 * 32));  // a UV sphere's charts cover the unit square
+  EXPECT_THROW(BakeUvVisibility(s, bvh, o, sky, 5, eps), std::invalid_argument);
+  // (1) texel (i, j) against the point of its uv, by the mesh's own interpolation: find the
+  // surface point with a ray from the centre outwards along the sphere direction of that uv.
+  const Mesh& m = s.meshes[0];
+  int checked = 0, floor_facing = 0;
+  for (int j = 1; j < 31; j += 5)
+    for (int i = 0; i < 32; i += 7) {
+      const size_t t = size_t(j) * 32 + size_t(i);
+      const double u = map.uv_min[0] + (i + 0.5) / 32.0 * (map.uv_max[0] - map.uv_min[0]);
+      const double v = map.uv_min[1] + (j + 0.5) / 32.0 * (map.uv_max[1] - map.uv_min[1]);
+      // the triangle holding (u, v) and its barycentrics, searched over the mesh
+      for (size_t f = 0; f + 2 < m.indices.size(); f += 3) {
+        const auto& a = m.uvs[m.indices[f]];
+        const auto& b = m.uvs[m.indices[f + 1]];
+        const auto& c = m.uvs[m.indices[f + 2]];
+        const double area = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        if (!(std::abs(area) > 0.0)) continue;
+        const double b0 = ((b[0] - u) * (c[1] - v) - (c[0] - u) * (b[1] - v)) / area;
+        const double b1 = ((c[0] - u) * (a[1] - v) - (a[0] - u) * (c[1] - v)) / area;
+        const double b2 = 1.0 - b0 - b1;
+        if (b0 < -1e-9 || b1 < -1e-9 || b2 < -1e-9) continue;
+        auto P = [&](int k) {
+          const auto& q = m.positions[m.indices[f + size_t(k)]];
+          return Vec3d(q[0], q[1], q[2]);
+        };
+        auto Nn = [&](int k) {
+          const auto& q = m.normals[m.indices[f + size_t(k)]];
+          return Vec3d(q[0], q[1], q[2]);
+        };
+        const Vec3d p = P(0) * b0 + P(1) * b1 + P(2) * b2;
+        const Vec3d n = Normalize(Nn(0) * b0 + Nn(1) * b1 + Nn(2) * b2);
+        Vec3d ng = Normalize(Cross(P(1) - P(0), P(2) - P(0)));
+        if (Dot(ng, n) < 0.0) ng = ng * -1.0;
+        const VisibilityTerms want = ComputeVisibility(s, bvh, o, sky, p + ng * eps, n, ng, t, eps);
+        EXPECT_NEAR(map.ao[t], want.ao, 1e-6) << "texel " << i << "," << j;
+        EXPECT_NEAR(map.indirect[t * 3 + 1], want.indirect_over_pi.g, 1e-6) << "texel " << i << "," << j;
+        floor_facing += n.y < -0.5 && want.ao < 0.9;
+        ++checked;
+        break;
+      }
+    }
+  EXPECT_GT(checked, 25);
+  EXPECT_GT(floor_facing, 0);  // some checked texels are occluded (the test sees the floor)
+  // (2) centre and midpoint reads.
+  const auto centre = [&](int i, int j) {
+    return std::array<double, 2>{map.uv_min[0] + (i + 0.5) / 32.0 * (map.uv_max[0] - map.uv_min[0]),
+                                 map.uv_min[1] + (j + 0.5) / 32.0 * (map.uv_max[1] - map.uv_min[1])};
+  };
+  const auto c0 = centre(10, 27), c1 = centre(11, 27);
+  EXPECT_NEAR(map.Sample(c0[0], c0[1]).ao, map.ao[27 * 32 + 10], 1e-6);
+  EXPECT_NEAR(map.Sample(0.5 * (c0[0] + c1[0]), c0[1]).indirect_over_pi.r,
+              0.5 * (map.indirect[(27 * 32 + 10) * 3] + map.indirect[(27 * 32 + 11) * 3]), 1e-6);
+  // (3) the cache with the texture against the per-pixel cache.
+  PreviewOptions px;
+  px.model = ModelKind::kStandard;
+  px.visibility = o;
+  px.visibility.uv_size = 0;
+  px.visibility.samples = 64;
+  PreviewOptions tx = px;
+  tx.visibility.uv_size = 64;
+  PreviewOptions off;
+  off.model = ModelKind::kStandard;
+  const auto a = PreviewCache::Build(s, &env, px), b = PreviewCache::Build(s, &env, tx),
+             z = PreviewCache::Build(s, &env, off);
+  ASSERT_EQ(a->pixels, b->pixels);
+  ASSERT_EQ(b->uv_visibility.size(), s.meshes.size());
+  EXPECT_EQ(b->uv_visibility[0].size, 64);
+  EXPECT_EQ(b->uv_visibility[1].size, 0);  // the floor is not fabric: no texture
+  double sa = 0.0, sb = 0.0, sz = 0.0, lower_a = 0.0, lower_b = 0.0, lower_z = 0.0;
+  for (size_t i = 0; i < a->pixels.size(); ++i) {
+    sa += double(a->irradiance[i * 3 + 1]);
+    sb += double(b->irradiance[i * 3 + 1]);
+    sz += double(z->irradiance[i * 3 + 1]);
+    if (a->pixels[i] / s.card.width > s.card.height * 3 / 4) {
+      lower_a += double(a->irradiance[i * 3 + 1]);
+      lower_b += double(b->irradiance[i * 3 + 1]);
+      lower_z += double(z->irradiance[i * 3 + 1]);
+    }
+  }
+  EXPECT_NEAR(sb / sa, 1.0, 0.02);
+  // where the floor matters (occlusion of the sky, bounce off the lit floor) the texture's terms
+  // change E_d as much as the per-pixel ones do
+  EXPECT_GT(std::abs(lower_a - lower_z), 0.1 * lower_z);
+  EXPECT_NEAR(lower_b / lower_a, 1.0, 0.03);
+  EXPECT_NE(sb, sz);
+}
+
 // Options off (ao and indirect false) with every other visibility field changed: bit-identical.
 TEST(S9Visibility, OptionsOffAreBitIdentical) {
   const Scene s = SphereOnFloor(32);

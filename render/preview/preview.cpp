@@ -138,6 +138,8 @@ struct PixelContext {
   const FisPattern* fis_diffuse = nullptr;  // woven FIS with fis_diffuse_taps > 0, else null
   const std::vector<Light>* lights = nullptr;     // scene.lights (+ the environment's sun)
   const Environment* background_env = nullptr;    // what escaping rays see: the full map
+  // VisibilityOptions::uv_size > 0: the baked maps, indexed by mesh (size 0 = none), else null.
+  const std::vector<UvVisibilityMap>* uv_vis = nullptr;
 };
 
 // A visible surface point: position (offset off the surface), shading normal on the viewer's
@@ -283,6 +285,27 @@ Rgb<double> ShadeNonFabric(const PixelContext& x, const PreviewCache& c, const P
 // point, with the engine's own unoccluded irradiance for the bounce hit points. Applied as
 // three.js r187 applies aoMap and lightMap (docs/visibility.md): E_d -> ao E_d + E_ind / pi,
 // specular radiance x computeSpecularOcclusion(n.v, ao, r). Off: ao 1, no bounce.
+IrradianceOverPiFn EnvIrradianceFn(const PixelContext& x) {
+  IrradianceOverPiFn env;
+  if (x.env)
+    env = [&x](const Vec3d& n) {
+      return x.e.pmrem ? x.e.pmrem->IrradianceOverPi(n) : IrradianceOverPi(x.e.sh, n);
+    };
+  return env;
+}
+
+// VisibilityOptions::uv_size > 0: each fabric mesh's terms baked over its uv (visibility.h).
+std::vector<UvVisibilityMap> BakeFabricUvVisibility(const PixelContext& x) {
+  std::vector<UvVisibilityMap> maps(x.scene.meshes.size());
+  RadianceFn radiance;
+  if (x.env) radiance = [&x](const Vec3d& l) { return x.env->Eval(l); };
+  for (size_t i = 0; i < x.scene.meshes.size(); ++i)
+    if (x.scene.meshes[i].is_fabric)
+      maps[i] = BakeUvVisibility(x.scene, x.bvh, x.opt.visibility, EnvIrradianceFn(x), int(i),
+                                 x.eps, radiance, x.lights);
+  return maps;
+}
+
 VisibilityTerms PointVisibility(const PixelContext& x, const PrimaryHit& hit, const Hit& h,
                                 size_t pix) {
   IrradianceOverPiFn env;
@@ -575,7 +598,16 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     const bool vis_on = x.opt.visibility.enabled() &&
                         (hit.mesh->is_fabric || x.opt.sample_mask.empty());
     if (vis_on) {
-      vis = PointVisibility(x, hit, h, pix);
+      const UvVisibilityMap* um =  // the texture's terms at the pixel's uv (uv_size > 0)
+          x.uv_vis && size_t(h.mesh) < x.uv_vis->size() && (*x.uv_vis)[size_t(h.mesh)].size > 0
+              ? &(*x.uv_vis)[size_t(h.mesh)]
+              : nullptr;
+      if (um) {
+        vis = um->Sample(uv[0], uv[1]);
+        if (!x.opt.visibility.ao) vis.ao = 1.0;
+      } else {
+        vis = PointVisibility(x, hit, h, pix);
+      }
       Ed = Ed * vis.ao + vis.indirect_over_pi;
     }
     const Vec3d R = hit.n * (2.0 * hit.NoV) - hit.v;
@@ -797,11 +829,16 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
     if (opt.woven.fis_diffuse_taps > 0)
       fis_diffuse = std::make_unique<FisPattern>(opt.woven.fis_diffuse_taps);
   }
+  std::vector<UvVisibilityMap> uv_vis;  // VisibilityOptions::uv_size > 0 (filled below)
+  const bool uv_bake = opt.visibility.enabled() && opt.visibility.uv_size > 0;
   const PixelContext x{scene,          env,      opt,           bvh, e, eps, wrap_past_terminator,
-                       fis_yarn.get(), fis_diffuse.get(), &lights, background_env};
+                       fis_yarn.get(), fis_diffuse.get(), &lights, background_env,
+                       uv_bake ? &uv_vis : nullptr};
+  if (uv_bake) uv_vis = BakeFabricUvVisibility(x);
   tbb::parallel_for(0, H, [&](int y) { BuildRow(x, y, c.get(), &rows[size_t(y)]); });
 
   AssembleFabricPixels(rows, c.get());
+  c->uv_visibility = std::move(uv_vis);
   if (opt.yarn_lobe) {  // the far-field lobe per light sample, local frame (t, b, n)
     c->yarn_lobe.assign(c->light_samples.size() * 2, 0.f);
     tbb::parallel_for(size_t(0), c->pixels.size(), [&](size_t i) {

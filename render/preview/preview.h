@@ -248,6 +248,10 @@ class PreviewCache {
   // PreviewOptions::yarn_ibl set with a split-sum environment (else empty): 6 per fabric pixel,
   // A_w L_w (RGB) then A_f L_f (RGB).
   std::vector<float> yarn_ibl;
+  // VisibilityOptions::uv_size > 0: the baked AO / light map of each mesh (indexed by mesh; a
+  // map of size 0 where none was baked), else empty. What an engine would load as aoMap /
+  // lightMap (clothfit evaluate --light-map-out writes them).
+  std::vector<UvVisibilityMap> uv_visibility;
   const Table2D* woven_phase = nullptr;   // lut::DefaultWovenPhase() (woven only)
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
   const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tbb/parallel_for.h>
 #include <stdexcept>
 #include <string>
 
@@ -150,6 +151,9 @@ void ValidateVisibilityOptions(const VisibilityOptions& o) {
   if (!(o.max_distance >= 0.0) || !std::isfinite(o.max_distance))
     throw std::invalid_argument("preview: visibility.max_distance " +
                                 std::to_string(o.max_distance) + " must be finite and >= 0");
+  if (o.uv_size < 0 || o.uv_size > 2048)
+    throw std::invalid_argument("preview: visibility.uv_size " + std::to_string(o.uv_size) +
+                                " not in [0, 2048]");
   for (double a : o.fabric_albedo)
     if (!std::isfinite(a) || a > 1.0)
       throw std::invalid_argument("preview: visibility.fabric_albedo " + std::to_string(a) +
@@ -198,6 +202,143 @@ VisibilityTerms ComputeVisibility(const Scene& scene, const EmbreeScene& bvh,
   t.ao = Ratio(open, all);
   if (o.indirect) t.indirect_over_pi = sum * (1.0 / double(o.samples));
   return t;
+}
+
+VisibilityTerms UvVisibilityMap::Sample(double u, double v) const {
+  VisibilityTerms t;
+  if (size <= 0) return t;
+  const double fu = (u - uv_min[0]) / (uv_max[0] - uv_min[0]) * size - 0.5;
+  const double fv = (v - uv_min[1]) / (uv_max[1] - uv_min[1]) * size - 0.5;
+  const double cu = std::clamp(fu, 0.0, double(size - 1)), cv = std::clamp(fv, 0.0, double(size - 1));
+  const int i0 = std::min(int(std::floor(cu)), size - 1), j0 = std::min(int(std::floor(cv)), size - 1);
+  const int i1 = std::min(i0 + 1, size - 1), j1 = std::min(j0 + 1, size - 1);
+  const double a = cu - i0, b = cv - j0;
+  const size_t q[4] = {size_t(j0) * size_t(size) + size_t(i0), size_t(j0) * size_t(size) + size_t(i1),
+                       size_t(j1) * size_t(size) + size_t(i0), size_t(j1) * size_t(size) + size_t(i1)};
+  const double w[4] = {(1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b};
+  t.ao = 0.0;
+  for (int k = 0; k < 4; ++k) {
+    t.ao += w[k] * double(ao[q[k]]);
+    for (int c = 0; c < 3; ++c) t.indirect_over_pi[c] += w[k] * double(indirect[q[k] * 3 + size_t(c)]);
+  }
+  return t;
+}
+
+UvVisibilityMap BakeUvVisibility(const Scene& scene, const EmbreeScene& bvh,
+                                 const VisibilityOptions& o, const IrradianceOverPiFn& env,
+                                 int mesh_index, double eps, const RadianceFn& env_radiance,
+                                 const std::vector<Light>* lights) {
+  ValidateVisibilityOptions(o);
+  if (mesh_index < 0 || size_t(mesh_index) >= scene.meshes.size())
+    throw std::invalid_argument("preview: visibility uv bake: no mesh " + std::to_string(mesh_index));
+  const Mesh& m = scene.meshes[size_t(mesh_index)];
+  if (m.uvs.size() != m.positions.size() || m.normals.size() != m.positions.size())
+    throw std::invalid_argument("preview: visibility uv bake: mesh '" + m.name +
+                                "' has no TEXCOORD_0 (or no normals) for the uv_size bake");
+  UvVisibilityMap map;
+  map.mesh = mesh_index;
+  map.size = o.uv_size;
+  map.uv_min = {1e300, 1e300};
+  map.uv_max = {-1e300, -1e300};
+  for (const auto& uv : m.uvs)
+    for (int k = 0; k < 2; ++k) {
+      map.uv_min[size_t(k)] = std::min(map.uv_min[size_t(k)], double(uv[size_t(k)]));
+      map.uv_max[size_t(k)] = std::max(map.uv_max[size_t(k)], double(uv[size_t(k)]));
+    }
+  if (!(map.uv_max[0] > map.uv_min[0]) || !(map.uv_max[1] > map.uv_min[1]) ||
+      !std::isfinite(map.uv_max[0] - map.uv_min[0]) || !std::isfinite(map.uv_max[1] - map.uv_min[1]))
+    throw std::invalid_argument("preview: visibility uv bake: mesh '" + m.name +
+                                "' has a degenerate or non-finite TEXCOORD_0 box");
+  const int N = map.size;
+  const size_t texels = size_t(N) * size_t(N);
+  // Which triangle covers each texel centre, and where (barycentrics): rasterised serially in
+  // uv (the first triangle wins where charts overlap).
+  std::vector<int> tri(texels, -1);
+  std::vector<std::array<double, 3>> bary(texels);
+  const double su = N / (map.uv_max[0] - map.uv_min[0]), sv = N / (map.uv_max[1] - map.uv_min[1]);
+  for (size_t f = 0; f + 2 < m.indices.size(); f += 3) {
+    double x[3], y[3];
+    for (int k = 0; k < 3; ++k) {
+      const auto& uv = m.uvs[m.indices[f + size_t(k)]];
+      x[k] = (double(uv[0]) - map.uv_min[0]) * su;
+      y[k] = (double(uv[1]) - map.uv_min[1]) * sv;
+    }
+    const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
+    if (!(std::abs(area) > 0.0)) continue;
+    const int i0 = std::max(0, int(std::floor(std::min({x[0], x[1], x[2]}) - 0.5)));
+    const int i1 = std::min(N - 1, int(std::ceil(std::max({x[0], x[1], x[2]}) - 0.5)));
+    const int j0 = std::max(0, int(std::floor(std::min({y[0], y[1], y[2]}) - 0.5)));
+    const int j1 = std::min(N - 1, int(std::ceil(std::max({y[0], y[1], y[2]}) - 0.5)));
+    for (int j = j0; j <= j1; ++j)
+      for (int i = i0; i <= i1; ++i) {
+        const double px = i + 0.5, py = j + 0.5;
+        const double b0 = ((x[1] - px) * (y[2] - py) - (x[2] - px) * (y[1] - py)) / area;
+        const double b1 = ((x[2] - px) * (y[0] - py) - (x[0] - px) * (y[2] - py)) / area;
+        const double b2 = 1.0 - b0 - b1;
+        const double tol = -1e-9;
+        const size_t t = size_t(j) * size_t(N) + size_t(i);
+        if (b0 < tol || b1 < tol || b2 < tol || tri[t] >= 0) continue;
+        tri[t] = int(f / 3);
+        bary[t] = {b0, b1, b2};
+      }
+  }
+  map.ao.assign(texels, 1.f);
+  map.indirect.assign(texels * 3, 0.f);
+  auto v3 = [](const std::array<float, 3>& q) { return Vec3d(q[0], q[1], q[2]); };
+  tbb::parallel_for(0, N, [&](int j) {
+    for (int i = 0; i < N; ++i) {
+      const size_t t = size_t(j) * size_t(N) + size_t(i);
+      if (tri[t] < 0) continue;
+      const uint32_t* idx = &m.indices[size_t(tri[t]) * 3];
+      const auto& b = bary[t];
+      const Vec3d P[3] = {v3(m.positions[idx[0]]), v3(m.positions[idx[1]]), v3(m.positions[idx[2]])};
+      const Vec3d p = P[0] * b[0] + P[1] * b[1] + P[2] * b[2];
+      const Vec3d ns = v3(m.normals[idx[0]]) * b[0] + v3(m.normals[idx[1]]) * b[1] +
+                       v3(m.normals[idx[2]]) * b[2];
+      Vec3d ng = Cross(P[1] - P[0], P[2] - P[0]);
+      if (!(Length(ns) > 0.0) || !(Length(ng) > 0.0)) continue;
+      const Vec3d n = Normalize(ns);
+      ng = Normalize(ng);
+      if (Dot(ng, n) < 0.0) ng = ng * -1.0;
+      const VisibilityTerms v = ComputeVisibility(scene, bvh, o, env, p + ng * eps, n, ng, t, eps,
+                                                  env_radiance, lights);
+      map.ao[t] = float(v.ao);
+      for (int c = 0; c < 3; ++c) map.indirect[t * 3 + size_t(c)] = float(v.indirect_over_pi[c]);
+    }
+  });
+  // Fill the uncovered texels outwards from the covered ones (mean of covered 4-neighbours).
+  std::vector<char> done(texels, 0);
+  for (size_t t = 0; t < texels; ++t) done[t] = tri[t] >= 0;
+  map.covered = size_t(std::count(done.begin(), done.end(), char(1)));
+  for (int pass = 0; pass < 2 * N && map.covered > 0; ++pass) {
+    std::vector<char> next = done;
+    bool any = false;
+    for (int j = 0; j < N; ++j)
+      for (int i = 0; i < N; ++i) {
+        const size_t t = size_t(j) * size_t(N) + size_t(i);
+        if (done[t]) continue;
+        double ao_sum = 0.0, e[3] = {0, 0, 0};
+        int n = 0;
+        const int di[4] = {-1, 1, 0, 0}, dj[4] = {0, 0, -1, 1};
+        for (int k = 0; k < 4; ++k) {
+          const int a = i + di[k], c = j + dj[k];
+          if (a < 0 || a >= N || c < 0 || c >= N) continue;
+          const size_t q = size_t(c) * size_t(N) + size_t(a);
+          if (!done[q]) continue;
+          ao_sum += double(map.ao[q]);
+          for (int ch = 0; ch < 3; ++ch) e[ch] += double(map.indirect[q * 3 + size_t(ch)]);
+          ++n;
+        }
+        if (n == 0) continue;
+        map.ao[t] = float(ao_sum / n);
+        for (int ch = 0; ch < 3; ++ch) map.indirect[t * 3 + size_t(ch)] = float(e[ch] / n);
+        next[t] = 1;
+        any = true;
+      }
+    done.swap(next);
+    if (!any) break;
+  }
+  return map;
 }
 
 }  // namespace clothfit::render

@@ -26,6 +26,7 @@
 #include <array>
 #include <cstddef>
 #include <functional>
+#include <vector>
 
 #include "brdf/math.h"
 #include "render/scene/scene.h"
@@ -63,12 +64,37 @@ struct VisibilityOptions {
   // Albedo of fabric hit points for the bounce (linear RGB); any component < 0: the fabric
   // mesh's glTF base colour. A scene property here (the same for every model fitted).
   std::array<double, 3> fabric_albedo{-1.0, -1.0, -1.0};
+  // Where the terms are baked (session 13). 0 (default): per shaded pixel, as above. N > 0: for
+  // the fabric meshes, once per texel of an N x N texture over the mesh's TEXCOORD_0 bounding
+  // box (UvVisibilityMap; the side the mesh's vertex normals face), then sampled bilinearly at
+  // each fabric pixel's uv: the AO map / light map a real-time engine draws (three.js aoMap,
+  // lightMap on uv channel 0 with the box as the texture's offset and repeat). Non-fabric
+  // pixels keep the per-pixel terms (full frames only). In [0, 2048].
+  int uv_size = 0;
   bool enabled() const { return ao || indirect; }
 };
 
 struct VisibilityTerms {
   double ao = 1.0;
   Rgb<double> indirect_over_pi{0.0, 0.0, 0.0};
+};
+
+// The visibility terms of one fabric mesh baked over its TEXCOORD_0 (VisibilityOptions::uv_size):
+// texel (i, j), i along u and j along v (row j of the image is v = uv_min[1] + (j + 0.5) / size
+// x extent: glTF's v, which three.js samples with flipY false), holds the terms at the surface
+// point whose uv is the texel centre, on the side the interpolated vertex normal faces, with the
+// texel index seeding its directions. Texels whose centre no triangle covers take the mean of
+// their covered neighbours (repeated outwards), so bilinear reads at a chart's edge see no zeros.
+struct UvVisibilityMap {
+  int mesh = -1;
+  int size = 0;
+  std::array<double, 2> uv_min{0.0, 0.0}, uv_max{1.0, 1.0};
+  std::vector<float> ao;        // size x size, row-major (j * size + i)
+  std::vector<float> indirect;  // size x size x 3: E_ind / pi, linear RGB
+  size_t covered = 0;           // texels a triangle covers
+  // Bilinear, clamped to the edge texels, as a GPU samples it with LinearFilter and
+  // ClampToEdgeWrapping (texel centres at (i + 0.5) / size).
+  VisibilityTerms Sample(double u, double v) const;
 };
 
 // three.js r187 computeSpecularOcclusion (lights_physical_pars_fragment):
@@ -103,6 +129,13 @@ VisibilityTerms ComputeVisibility(const Scene& scene, const EmbreeScene& bvh,
                                   const Vec3<double>& ng, size_t pixel, double eps,
                                   const RadianceFn& env_radiance = {},
                                   const std::vector<Light>* lights = nullptr);
+// The terms of fabric mesh `mesh` baked over its TEXCOORD_0 at o.uv_size x o.uv_size texels (see
+// UvVisibilityMap); the same arguments as ComputeVisibility. Throws std::invalid_argument when
+// the mesh has no uvs or a degenerate uv box.
+UvVisibilityMap BakeUvVisibility(const Scene& scene, const EmbreeScene& bvh,
+                                 const VisibilityOptions& o, const IrradianceOverPiFn& env,
+                                 int mesh, double eps, const RadianceFn& env_radiance = {},
+                                 const std::vector<Light>* lights = nullptr);
 // lights: the punctual lights the bounce points see (null: scene.lights); the preview passes
 // the scene's lights plus an environment sun split off as a light (render/scene/sun.h), since
 // `env` / `env_radiance` are then the sun-free map's (review s10).
