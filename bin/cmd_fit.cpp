@@ -80,12 +80,27 @@ render::Scene LoadSceneAtWidth(const std::string& scene_path, int width) {
   return scene;
 }
 
+// The card's text for the reference key: the file as it is, or, when it has a "visibility"
+// block (session 13: how the engine draws the scene; the reference renderer ignores it), the
+// card without that block, dumped canonically, so adding or changing it keeps its references.
+std::string CardKeyText(const std::string& scene_path) {
+  const std::string text = ReadFileOrEmpty(scene_path);
+  try {
+    nlohmann::json j = nlohmann::json::parse(text);
+    if (!j.is_object() || !j.contains("visibility")) return text;
+    j.erase("visibility");
+    return "card-without-visibility|" + j.dump();
+  } catch (const nlohmann::json::exception&) {
+    return text;  // LoadScene has already refused a malformed card
+  }
+}
+
 std::string CachedReference(const std::string& scene_path, const std::string& fabric_path,
                             int spp, uint64_t seed, bool quiet, int width, double target_error) {
   const render::Scene scene = LoadSceneAtWidth(scene_path, width);
   std::string key_text = "clothfit-reference-v1|renderer=" +
                          std::to_string(render::kReferenceRendererVersion) + "|" + std::to_string(spp) + "|" +
-                         std::to_string(seed) + "|" + ReadFileOrEmpty(scene_path) + "|" +
+                         std::to_string(seed) + "|" + CardKeyText(scene_path) + "|" +
                          ReadFileOrEmpty(scene.card.gltf) + "|" + ReadFileOrEmpty(fabric_path);
   // The card's own size is already in its content; an override is part of the key.
   if (width > 0) key_text += "|width=" + std::to_string(scene.card.width) + "x" + std::to_string(scene.card.height);
@@ -650,6 +665,9 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
   }
   if (o.sheen_tilt_degrees != 0.0) fitj["sheen_tilt_degrees"] = o.sheen_tilt_degrees;  // s10-velvet
   if (o.shadows || o.visibility.enabled()) fitj["visibility"] = VisibilityJson(o);  // s9-vis
+  fitj["card_visibility"] = o.card_visibility;  // session 13: the cards' "visibility" applied
+  if (res.albedo_pass)  // the light map's second pass baked with the first pass's albedo
+    fitj["light_map_albedo_pass"] = true;
   {  // the IBL engine the previews reproduced (resolved; `evaluate` defaults to it)
     render::PreviewOptions po;
     po.model = o.start.model;

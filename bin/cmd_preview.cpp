@@ -83,6 +83,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
     std::string scene, material, model, out, ibl_engine = "filament", map_aniso_rule = "spec";
     std::string env_sun;  // "": the card's environment.sun (else auto, the commands' default)
     bool shadows = false;
+    bool no_card_visibility = false;
+    std::string light_map_out;
     int exact_ibl = 0, exact_irradiance = 0;
     unsigned exact_ibl_seed = 1;
   };
@@ -97,7 +99,15 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "preset is another model");
   cmd->add_option("--out", args->out, "output: .png (tone-mapped, sRGB) or .exr (linear)")
       ->required();
-  cmd->add_flag("--shadows", args->shadows, "ray-traced light visibility (off by default)");
+  cmd->add_flag("--shadows", args->shadows, "ray-traced light visibility (off by default; on "
+                "when the scene card's \"visibility\" says \"shadows\": true)");
+  cmd->add_flag("--no-card-visibility", args->no_card_visibility,
+                "ignore the scene card's \"visibility\" block (its shadows and light map)");
+  cmd->add_option("--light-map-out", args->light_map_out,
+                  "write the fabric's baked light map (the card's \"visibility\": "
+                  "{\"light_map\"}) as an EXR: RGB = irradiance E (three.js lightMap, "
+                  "intensity 1), A = 1; metadata: the uv box");
+  
   cmd->add_option("--map-aniso-rule", args->map_aniso_rule,
                   "weave maps with weave_maps.anisotropy > 1: spec (EXT_texture_filter_anisotropic, "
                   "default; what the fit uses) or swiftshader (SwiftShader's rule, the WebGL2 of "
@@ -151,6 +161,13 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       for (const std::string& w : scene.warnings)
         if (!g.quiet) std::fprintf(stderr, "clothfit: warning: %s\n", w.c_str());
       const auto env = LoadSceneEnvironment(scene, g.quiet);
+      if (!args->light_map_out.empty() &&  // checked before any work
+          (!scene.card.visibility || !scene.card.visibility->light_map ||
+           args->no_card_visibility || args->exact_ibl > 0))
+        throw std::invalid_argument(
+            "--light-map-out: " + limits::EscapeForMessage(args->scene) +
+            " bakes no light map (the card needs \"visibility\": {\"light_map\": ...}, and "
+            "not --no-card-visibility or --exact-ibl)");
       render::PreviewOptions o;
       o.model = preset.model;
       o.cloth = preset.cloth;
@@ -164,6 +181,9 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
         o.weave_maps = m;
       }
       o.shadows = args->shadows;
+      // the card's light map bounces off the fabric with the material's own albedo (session 13)
+      o.visibility.fabric_albedo = render::DiffuseAlbedo(preset);
+      o.card_visibility = !args->no_card_visibility;
       if (preset.model == render::ModelKind::kPhysicalAniso)  // brdf/physical_aniso.h FromFlat
         o.anisotropy_rotation = preset.values.at(10);
       o.ibl_engine = args->ibl_engine == "threejs"    ? render::IblEngine::kThreejs
@@ -211,6 +231,40 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
         std::vector<Rgb<double>> fabric;
         render::EvaluatePreview(*cache, preset.values.data(), fabric);
         frame = render::ComposeFrame(*cache, fabric);
+      }
+      if (!args->light_map_out.empty()) {  // the fabric's baked light map (session 13)
+        const render::UvVisibilityMap* lm = nullptr;
+        for (const auto& m : cache->uv_visibility)
+          if (m.size > 0 && !lm) lm = &m;
+        if (!lm || !cache->options.visibility.indirect)
+          throw std::invalid_argument(
+              "--light-map-out: " + limits::EscapeForMessage(args->scene) +
+              " bakes no light map (the card needs \"visibility\": {\"light_map\": ...}, and "
+              "not --no-card-visibility or --exact-ibl)");
+        io::Image img;
+        img.width = lm->size;
+        img.height = lm->size;
+        img.channel_names = {"R", "G", "B"};
+        img.pixels.resize(size_t(lm->size) * size_t(lm->size) * 3);
+        for (size_t i = 0; i < img.pixels.size(); ++i)
+          img.pixels[i] = float(kPi * double(lm->indirect[i]));  // E = pi x (E_ind / pi)
+        img.metadata["clothfit:content"] =
+            "light map: indirect irradiance E (linear Rec.709, W/m^2 in the lights' units) of "
+            "the fabric mesh, three.js material.lightMap at lightMapIntensity 1";
+        img.metadata["clothfit:mesh"] = scene.meshes[size_t(lm->mesh)].name;
+        char box[160];
+        std::snprintf(box, sizeof box, "%.9g %.9g %.9g %.9g", lm->uv_min[0], lm->uv_min[1],
+                      lm->uv_max[0], lm->uv_max[1]);
+        img.metadata["clothfit:uv_box"] = box;  // u0 v0 u1 v1
+        img.metadata["clothfit:uv_convention"] =
+            "texel (i, j) at uv = uv0 + (i + 0.5, j + 0.5) / size x (uv1 - uv0); row j = 0 is the "
+            "first row of the file (glTF v, flipY false); bilinear, clamp to edge; offset = "
+            "-uv0 / (uv1 - uv0), repeat = 1 / (uv1 - uv0) on uv channel 0";
+        img.metadata["clothfit:side"] = "the side the mesh's vertex normals face";
+        io::WriteExr(args->light_map_out, img);
+        if (!g.quiet)
+          std::printf("render-preview: light map %dx%d -> %s\n", lm->size, lm->size,
+                      args->light_map_out.c_str());
       }
       if (ext == ".exr") {
         io::Image img;

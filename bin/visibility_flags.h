@@ -15,7 +15,7 @@
 namespace clothfit::cli {
 
 struct VisibilityFlags {
-  bool shadows = false, ao = false, indirect = false;
+  bool shadows = false, ao = false, indirect = false, no_card_visibility = false;
   int samples = 64, hit_samples = 8, bounces = 1, uv_size = 0;
   double max_distance = 0.0;
   unsigned seed = 1;
@@ -32,6 +32,9 @@ inline void AddVisibilityFlags(CLI::App* cmd, VisibilityFlags& f) {
   cmd->add_flag("--indirect", f.indirect,
                 "measurement: a ray-traced one-bounce indirect-irradiance light map, applied as "
                 "three.js's lightMap");
+  cmd->add_flag("--no-card-visibility", f.no_card_visibility,
+                "ignore the scene cards' \"visibility\" blocks (their shadows and light maps; "
+                "docs/scene-card.md)");
   cmd->add_option("--ao-weighting", f.ao_weighting,
                   "--ao: how the AO map is baked: cosine (default: the visible fraction of the "
                   "cosine-weighted hemisphere) or environment (weighted by the environment's "
@@ -81,6 +84,7 @@ inline void ApplyVisibilityFlags(const VisibilityFlags& f, fit::FitOptions* o) {
     if (f.uv_size != d.uv_size) unused("--vis-uv-size", "--ao or --indirect");
   }
   o->shadows = f.shadows;
+  o->card_visibility = !f.no_card_visibility;
   o->visibility.ao = f.ao;
   o->visibility.indirect = f.indirect;
   o->visibility.weighting = f.ao_weighting == "environment"

@@ -88,6 +88,9 @@ render::PreviewOptions PreviewOptionsFor(const FitOptions& opt, const render::Ma
   po.sheen_tilt_degrees = opt.sheen_tilt_degrees;
   po.shadows = opt.shadows;
   po.visibility = opt.visibility;
+  po.card_visibility = opt.card_visibility;
+  // a light map's bounce off the fabric: the material's own albedo unless a flag set one
+  if (po.visibility.fabric_albedo[0] < 0) po.visibility.fabric_albedo = render::DiffuseAlbedo(p);
   po.env_sun = opt.env_sun;
   po.env_sun_default = opt.env_sun_default;
   if (opt.yarn_table)  // the table's split sum for the environment (every table mode)
@@ -1005,8 +1008,47 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
   return FitImages(inputs, opt, nullptr);
 }
 
+namespace {
+FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions& opt,
+                        const PreparedScenes* prepared);
+
+// Whether some scene bakes a light map whose fabric bounce takes the fitted albedo (a card's
+// light map or --indirect, without an explicit fabric albedo): FitOptions::card_visibility.
+bool NeedsAlbedoPass(const std::vector<SceneInput>& inputs, const FitOptions& opt) {
+  if (opt.visibility.fabric_albedo[0] >= 0 || opt.exact_ibl_samples > 0) return false;
+  if (opt.visibility.indirect) return true;
+  if (!opt.card_visibility || opt.visibility.enabled()) return false;
+  for (const SceneInput& in : inputs)
+    if (in.scene && in.scene->card.visibility && in.scene->card.visibility->light_map) return true;
+  return false;
+}
+}  // namespace
+
 FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt,
                     const PreparedScenes* prepared) {
+  const auto t0 = std::chrono::steady_clock::now();
+  FitResult first = FitImagesOnce(inputs, opt, prepared);
+  if (!first.usable || !NeedsAlbedoPass(inputs, opt)) return first;
+  // Second pass: the light map baked with the fitted diffuse albedo, one start at the solution.
+  FitOptions o2 = opt;
+  o2.visibility.fabric_albedo = render::DiffuseAlbedo(first.preset);
+  if (o2.visibility.fabric_albedo[0] < 0) return first;  // no base colour to bounce
+  o2.start = first.preset;
+  o2.init_from_reference = false;
+  o2.start_roughness = {0.0};
+  FitResult second = FitImagesOnce(inputs, o2, nullptr);
+  if (!second.usable) return first;
+  second.starts += first.starts;
+  second.iterations += first.iterations;
+  second.setup_seconds += first.setup_seconds;
+  second.albedo_pass = true;
+  second.seconds = SecondsSince(t0);
+  return second;
+}
+
+namespace {
+FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions& opt,
+                        const PreparedScenes* prepared) {
   const auto t0 = std::chrono::steady_clock::now();
   if (inputs.empty()) throw FitError("fit: no (scene, reference) pairs");
   const render::ModelKind model = opt.start.model;
@@ -1080,5 +1122,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
   best.seconds = SecondsSince(t0);
   return best;
 }
+
+}  // namespace
 
 }  // namespace clothfit::fit

@@ -109,6 +109,12 @@ struct FitOptions {
   // and ::visibility (AO map, light map); every model of a comparison gets the same.
   bool shadows = false;
   render::VisibilityOptions visibility;
+  // The scene cards' "visibility" blocks (shadows, a light map baked over the fabric's uv;
+  // PreviewOptions::card_visibility, session 13). When a light map bounces off the fabric and
+  // visibility.fabric_albedo is not set, the fit runs twice: the second pass bakes the light map
+  // with the first pass's fitted diffuse albedo (render::DiffuseAlbedo) and restarts from its
+  // solution, so the light map is the one an engine bakes for the fitted material.
+  bool card_visibility = true;
   // Whose image-based lighting the previews reproduce (render/preview/preview.h IblEngine).
   // kFilament here keeps library callers unchanged; `clothfit fit` defaults to kAuto (the
   // engine web/ draws the model with). The woven IBL mode (split / FIS) is start.woven's.
@@ -170,6 +176,9 @@ struct FitResult {
   double final_cost = 0.0, initial_cost = 0.0;
   int iterations = 0, starts = 0, residuals = 0;
   double seconds = 0.0, setup_seconds = 0.0;
+  // The fit ran the light map's second pass (FitOptions::card_visibility); the preset's
+  // fit.visibility records the albedo it baked with.
+  bool albedo_pass = false;
   std::string termination;
   bool converged = false;             // the winning start's termination was CONVERGENCE
   std::vector<AtBound> at_bound;      // free parameters at a bound (fit/convergence.h)

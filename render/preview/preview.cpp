@@ -595,8 +595,12 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
         for (int k = 0; k < 3; ++k) Ed[k] += double(q.NoL) * double(q.irradiance[k]) * kInvPi;
     }
     VisibilityTerms vis;  // visibility prototype (off: ao 1, no bounce)
+    // Per pixel: fabric pixels (and, in full frames, every shaded pixel); baked over uv
+    // (uv_size > 0): the fabric only, the meshes that have the texture, as an engine draws it.
     const bool vis_on = x.opt.visibility.enabled() &&
-                        (hit.mesh->is_fabric || x.opt.sample_mask.empty());
+                        (x.opt.visibility.uv_size > 0
+                             ? hit.mesh->is_fabric
+                             : (hit.mesh->is_fabric || x.opt.sample_mask.empty()));
     if (vis_on) {
       const UvVisibilityMap* um =  // the texture's terms at the pixel's uv (uv_size > 0)
           x.uv_vis && size_t(h.mesh) < x.uv_vis->size() && (*x.uv_vis)[size_t(h.mesh)].size > 0
@@ -712,10 +716,46 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
 
 PreviewCache::~PreviewCache() = default;
 
+std::array<double, 3> DiffuseAlbedo(const MaterialPreset& p) {
+  std::array<double, 3> a{-1.0, -1.0, -1.0};
+  int base = -1;
+  try {
+    base = p.Offset("base_color");
+  } catch (const std::invalid_argument&) {
+    return a;  // no base colour: the glTF's
+  }
+  double metal = 0.0;
+  try {
+    metal = std::clamp(p.values.at(size_t(p.Offset("metalness"))), 0.0, 1.0);
+  } catch (const std::invalid_argument&) {
+  }
+  for (int c = 0; c < 3; ++c)
+    a[size_t(c)] = std::clamp(p.values.at(size_t(base + c)) * (1.0 - metal), 0.0, 1.0);
+  return a;
+}
+
+PreviewOptions WithCardVisibility(const PreviewOptions& in, const SceneCard& card) {
+  if (!in.card_visibility || !card.visibility) return in;
+  PreviewOptions o = in;
+  const CardVisibility& v = *card.visibility;
+  if (v.shadows) o.shadows = true;
+  // The card's light map, unless the caller asked for its own terms or integrates the
+  // environment exactly (a measurement without visibility).
+  if (v.light_map && !o.visibility.enabled() && o.exact_ibl_samples <= 0) {
+    o.visibility.indirect = true;
+    o.visibility.uv_size = v.size;
+    o.visibility.samples = v.samples;
+    o.visibility.hit_samples = v.hit_samples;
+    o.visibility.bounces = v.bounces;
+  }
+  return o;
+}
+
 std::unique_ptr<PreviewCache> PreviewCache::Build(
-    const Scene& scene, const Environment* env, const PreviewOptions& opt,
+    const Scene& scene, const Environment* env, const PreviewOptions& opt_in,
     const std::function<void(const std::string&)>& log) {
   const auto t0 = std::chrono::steady_clock::now();
+  const PreviewOptions opt = WithCardVisibility(opt_in, scene.card);  // the card's "visibility"
   auto c = std::make_unique<PreviewCache>();
   c->width = scene.card.width;
   c->height = scene.card.height;

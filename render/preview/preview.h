@@ -158,6 +158,11 @@ struct PreviewOptions {
   // yarn_table.h IblTap): A_k L_k = sum_taps weight_k L_pref(dir, roughness). Thread-safe;
   // needs yarn_lobe.
   std::function<void(const Vec3<double>& wo, std::vector<yarn_table::IblTap>* taps)> yarn_ibl_taps;
+  // Whether the scene card's "visibility" block applies (session 13, WithCardVisibility):
+  // its shadows, and its light map (baked over the fabric's uv with visibility.fabric_albedo,
+  // which the caller sets from the material: render::DiffuseAlbedo) unless `visibility` already
+  // has terms or exact_ibl_samples > 0. false: the card's block is ignored (measurement).
+  bool card_visibility = true;
   int roughness_nodes = 33;  // K: radiance table nodes over r in [0, 1]
   int prefilter_levels = 6;  // mip levels of the prefiltered environment
   int prefilter_base_width = 256;
@@ -174,6 +179,14 @@ struct PreviewOptions {
 // without one leaves o unchanged. Every place that previews a preset calls it (render-preview,
 // evaluate, fits: fit/image_fit.cpp PreviewOptionsFor).
 void ApplyPresetYarnLobe(const MaterialPreset& p, PreviewOptions* o);
+
+// A preset's linear diffuse albedo: base_color x (1 - metalness) where the model has a
+// metalness, clamped to [0, 1]; {-1, -1, -1} (the glTF's colour) without a base_color. The
+// fabric's albedo for the light map's bounce (VisibilityOptions::fabric_albedo).
+std::array<double, 3> DiffuseAlbedo(const MaterialPreset& p);
+
+// The options with the scene card's "visibility" block applied (see card_visibility).
+PreviewOptions WithCardVisibility(const PreviewOptions& o, const SceneCard& card);
 
 // Whether the preview uses three.js r187's IBL for these options (see IblEngine).
 bool UsesThreejsIbl(const PreviewOptions& o);

@@ -1015,6 +1015,40 @@ EnvironmentSpec ReadCardEnvironment(const FieldReader& r, const fs::path& card_d
   return env;
 }
 
+// "visibility": {"shadows": bool, "light_map": false | {"size", "samples", "hit_samples",
+// "bounces"}} (session 13).
+CardVisibility ReadCardVisibility(const FieldReader& r) {
+  const Json& j = r.object()["visibility"];
+  if (!j.is_object())
+    r.Bad("visibility", "expected an object {shadows, light_map}, got " + FieldReader::Show(j));
+  const FieldReader v(r.file(), j, "visibility.");
+  v.RejectUnknown({"shadows", "light_map"});
+  CardVisibility out;
+  if (v.Has("shadows")) {
+    if (!j["shadows"].is_boolean())
+      v.Bad("shadows", "expected true or false, got " + FieldReader::Show(j["shadows"]));
+    out.shadows = j["shadows"].get<bool>();
+  }
+  if (v.Has("light_map")) {
+    const Json& lm = j["light_map"];
+    if (lm.is_boolean()) {
+      out.light_map = lm.get<bool>();
+    } else if (lm.is_object()) {
+      const FieldReader l(r.file(), lm, "visibility.light_map.");
+      l.RejectUnknown({"size", "samples", "hit_samples", "bounces"});
+      out.light_map = true;
+      out.size = l.Int("size", out.size, 1, 2048);
+      out.samples = l.Int("samples", out.samples, 1, 65536);
+      out.hit_samples = l.Int("hit_samples", out.hit_samples, 0, 4096);
+      out.bounces = l.Int("bounces", out.bounces, 1, 4);
+    } else {
+      v.Bad("light_map", "expected true, false or an object {size, samples, hit_samples, "
+                         "bounces}, got " + FieldReader::Show(lm));
+    }
+  }
+  return out;
+}
+
 // Tone mapping, exposure, fabric material, light scale, camera and background.
 void ReadCardLook(const FieldReader& r, SceneCard* card) {
   card->tone_mapping = r.String("tone_mapping", card->tone_mapping, false);
@@ -1064,7 +1098,7 @@ SceneCard LoadSceneCard(const std::string& card_path) {
          "glTF in the `gltf` field (e.g. datasets/scenes/sphere.json)");
   r.RejectUnknown({"version", "description", "gltf", "width", "height", "environment",
                    "tone_mapping", "exposure", "fabric_material", "light_scale", "camera",
-                   "background", "uv_metres_per_unit"});
+                   "background", "uv_metres_per_unit", "visibility"});
 
   if (!r.Has("version")) r.Bad("version", "missing (required; this build reads version 1)");
   const int version = r.Int("version", 0, 0, std::numeric_limits<int>::max(), true);
@@ -1091,6 +1125,7 @@ SceneCard LoadSceneCard(const std::string& card_path) {
   ReadCardLook(r, &card);
   card.uv_metres_per_unit =
       r.Number("uv_metres_per_unit", card.uv_metres_per_unit, 0.0, 1e6, true, "> 0");
+  if (r.Has("visibility")) card.visibility = ReadCardVisibility(r);
   return card;
 }
 

@@ -89,6 +89,19 @@ struct EnvironmentSpec {
   std::optional<SunMode> sun;
 };
 
+// How the engine lights the scene beyond its lights and environment (session 13,
+// docs/scene-card.md "visibility"; the preview follows it unless PreviewOptions::card_visibility
+// is false, the reference renderer ignores it): shadow maps for the punctual lights, and a light
+// map baked over the fabric mesh's uv (render/preview/visibility.h, one bounce by default).
+struct CardVisibility {
+  bool shadows = false;
+  bool light_map = false;
+  int size = 128;        // light map texels per side
+  int samples = 64;      // directions per texel
+  int hit_samples = 8;   // AO directions at each bounce point
+  int bounces = 1;
+};
+
 struct SceneCard {
   std::string path;               // the card file itself
   std::string gltf;               // resolved path of the glTF
@@ -104,6 +117,7 @@ struct SceneCard {
   double uv_metres_per_unit = 0.0;            // surface length of one UV unit on the fabric (0: not
                                               // stated), so a weave period in metres maps to UVs
   std::string description;                    // free text, for reports
+  std::optional<CardVisibility> visibility;   // absent: no shadows, no light map
 };
 
 struct Scene {
