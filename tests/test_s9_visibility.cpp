@@ -436,6 +436,83 @@ TEST(S9Visibility, UvBakedMapIsThePerPointTermsAtTexelCentres) {
   EXPECT_NE(sb, sz);
 }
 
+// Session 13: a scene card's "visibility" block is the options it names (shadows, the uv light
+// map with its size, samples, hit samples and bounces), bit for bit; card_visibility = false
+// ignores it; the caller's own terms and exact IBL keep the card's light map out.
+TEST(S9Visibility, CardBlockIsTheOptionsItNames) {
+  Scene s = SphereOnFloor(32);
+  const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
+  PreviewOptions base;
+  base.model = ModelKind::kStandard;
+  base.visibility.fabric_albedo = {0.3, 0.25, 0.2};
+  PreviewOptions hand = base;
+  hand.shadows = true;
+  hand.visibility.indirect = true;
+  hand.visibility.uv_size = 32;
+  hand.visibility.samples = 16;
+  hand.visibility.hit_samples = 2;
+  hand.visibility.bounces = 2;
+  const auto x = StandardFlat(0.5);
+  const auto by_hand = PreviewFrame(s, env, hand, x);
+  const auto plain = PreviewFrame(s, env, base, x);
+  CardVisibility v;
+  v.shadows = true;
+  v.light_map = true;
+  v.size = 32;
+  v.samples = 16;
+  v.hit_samples = 2;
+  v.bounces = 2;
+  s.card.visibility = v;
+  std::unique_ptr<PreviewCache> cc;
+  const auto by_card = PreviewFrame(s, env, base, x, &cc);
+  ASSERT_EQ(by_card.size(), by_hand.size());
+  int differs = 0;
+  for (size_t i = 0; i < by_card.size(); ++i) {
+    ASSERT_EQ(by_card[i].g, by_hand[i].g) << "pixel " << i;
+    differs += by_card[i].g != plain[i].g;
+  }
+  EXPECT_GT(differs, int(by_card.size()) / 4);
+  EXPECT_TRUE(cc->options.shadows);
+  EXPECT_EQ(cc->options.visibility.uv_size, 32);
+  ASSERT_EQ(cc->uv_visibility.size(), s.meshes.size());
+  EXPECT_EQ(cc->uv_visibility[0].size, 32);
+  PreviewOptions ignore = base;
+  ignore.card_visibility = false;
+  const auto ignored = PreviewFrame(s, env, ignore, x);
+  for (size_t i = 0; i < ignored.size(); ++i) ASSERT_EQ(ignored[i].g, plain[i].g);
+  // The caller's own terms win over the card's light map; exact IBL drops it (shadows stay).
+  PreviewOptions own = base;
+  own.visibility.ao = true;
+  const PreviewOptions e1 = WithCardVisibility(own, s.card);
+  EXPECT_TRUE(e1.visibility.ao);
+  EXPECT_FALSE(e1.visibility.indirect);
+  EXPECT_EQ(e1.visibility.uv_size, 0);
+  EXPECT_TRUE(e1.shadows);
+  PreviewOptions exact = base;
+  exact.exact_ibl_samples = 16;
+  const PreviewOptions e2 = WithCardVisibility(exact, s.card);
+  EXPECT_FALSE(e2.visibility.enabled());
+  EXPECT_TRUE(e2.shadows);
+}
+
+// render::DiffuseAlbedo: base colour x (1 - metalness), clamped; a model without a base colour
+// gives -1 (the glTF's colour).
+TEST(S9Visibility, DiffuseAlbedoOfPresets) {
+  MaterialPreset st = DefaultPreset(ModelKind::kStandard);
+  st.values[size_t(st.Offset("base_color"))] = 0.8;
+  st.values[size_t(st.Offset("base_color")) + 1] = 0.4;
+  st.values[size_t(st.Offset("base_color")) + 2] = 0.2;
+  st.values[size_t(st.Offset("metalness"))] = 0.25;
+  const auto a = DiffuseAlbedo(st);
+  EXPECT_DOUBLE_EQ(a[0], 0.6);
+  EXPECT_DOUBLE_EQ(a[1], 0.30000000000000004);
+  EXPECT_DOUBLE_EQ(a[2], 0.15000000000000002);
+  MaterialPreset w = DefaultPreset(ModelKind::kWoven);
+  for (int c = 0; c < 3; ++c) w.values[size_t(w.Offset("base_color") + c)] = 0.1 * (c + 1);
+  const auto b = DiffuseAlbedo(w);
+  for (int c = 0; c < 3; ++c) EXPECT_DOUBLE_EQ(b[size_t(c)], 0.1 * (c + 1));
+}
+
 // Options off (ao and indirect false) with every other visibility field changed: bit-identical.
 TEST(S9Visibility, OptionsOffAreBitIdentical) {
   const Scene s = SphereOnFloor(32);

@@ -845,3 +845,58 @@ TEST(SceneBadInput, BrokenGltfFilesGiveErrorsNotCrashes) {
 
 }  // namespace
 }  // namespace clothfit::render
+
+namespace clothfit::render {
+namespace {
+
+// Session 13: the card's "visibility" block (docs/scene-card.md): read with its defaults, and
+// every bad field named with the card's path.
+TEST(SceneVisibility, BlockIsReadAndBadFieldsAreNamed) {
+  TempDir dir;
+  const SceneCard none = LoadSceneCard(dir.Write("n.json", Card("x.gltf", [](Json&) {}).dump()));
+  EXPECT_FALSE(none.visibility.has_value());
+  const SceneCard on = LoadSceneCard(dir.Write("a.json", Card("x.gltf", [](Json& c) {
+                                                  c["visibility"] = {{"shadows", true},
+                                                                     {"light_map", true}};
+                                                }).dump()));
+  ASSERT_TRUE(on.visibility.has_value());
+  EXPECT_TRUE(on.visibility->shadows);
+  EXPECT_TRUE(on.visibility->light_map);
+  EXPECT_EQ(on.visibility->size, 128);
+  EXPECT_EQ(on.visibility->samples, 64);
+  EXPECT_EQ(on.visibility->hit_samples, 8);
+  EXPECT_EQ(on.visibility->bounces, 1);
+  const SceneCard sized = LoadSceneCard(dir.Write("b.json", Card("x.gltf", [](Json& c) {
+                                                     c["visibility"] = {
+                                                         {"light_map", {{"size", 32}, {"bounces", 2}}}};
+                                                   }).dump()));
+  EXPECT_FALSE(sized.visibility->shadows);
+  EXPECT_TRUE(sized.visibility->light_map);
+  EXPECT_EQ(sized.visibility->size, 32);
+  EXPECT_EQ(sized.visibility->bounces, 2);
+  const std::pair<Json, std::string> bad[] = {
+      {Json("yes"), "visibility"},
+      {Json{{"shadows", 1}}, "visibility.shadows"},
+      {Json{{"light_map", "on"}}, "visibility.light_map"},
+      {Json{{"light_map", {{"size", 0}}}}, "visibility.light_map.size"},
+      {Json{{"light_map", {{"size", 4096}}}}, "visibility.light_map.size"},
+      {Json{{"light_map", {{"bounces", 9}}}}, "visibility.light_map.bounces"},
+      {Json{{"light_map", {{"sise", 64}}}}, "sise"},
+      {Json{{"ao_map", true}}, "ao_map"},
+  };
+  int k = 0;
+  for (const auto& [v, field] : bad) {
+    const std::string path = dir.Write("bad" + std::to_string(k++) + ".json",
+                                       Card("x.gltf", [&](Json& c) { c["visibility"] = v; }).dump());
+    try {
+      LoadSceneCard(path);
+      ADD_FAILURE() << "accepted " << v.dump();
+    } catch (const SceneError& e) {
+      EXPECT_NE(std::string(e.what()).find(field), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    }
+  }
+}
+
+}  // namespace
+}  // namespace clothfit::render
