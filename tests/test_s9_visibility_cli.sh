@@ -31,4 +31,32 @@ check --vis-bounces fit --references "$TMP/ref.exr" --scenes "$SCENE" --ao --vis
 check --ao-weighting fit --references "$TMP/ref.exr" --scenes "$SCENE" --indirect \
   --ao-weighting environment --out "$TMP/f.json"
 [ ! -e "$TMP/f.json" ] || fail "preset written despite a bad option"
+check --vis-uv-size fit --references "$TMP/ref.exr" --scenes "$SCENE" --vis-uv-size 64 --out "$TMP/f.json"
+[ ! -e "$TMP/f.json" ] || fail "preset written despite --vis-uv-size without a term"
+
+# Session 13: a card's "visibility" block. render-preview --light-map-out writes the fabric's
+# baked light map (RGB irradiance, the uv box in the metadata); a card without the block is
+# refused before any work, nothing written; a fit records that it ran the albedo pass.
+python3 - "$SCENE" "$TMP/lm.json" <<'PY'
+import json, os, sys
+c = json.load(open(sys.argv[1]))
+c["gltf"] = os.path.join(os.path.dirname(os.path.abspath(sys.argv[1])), c["gltf"])
+c["width"] = c["height"] = 48
+c["visibility"] = {"shadows": True, "light_map": {"size": 16, "samples": 8, "hit_samples": 2}}
+json.dump(c, open(sys.argv[2], "w"))
+PY
+printf '{"schema":"clothfit.preset","version":1,"model":"standard","parameters":{"base_color":[0.5,0.4,0.3],"roughness":0.6,"metalness":0}}' > "$TMP/std.json"
+"$BIN" --quiet render-preview --scene "$TMP/lm.json" --material "$TMP/std.json" --out "$TMP/lm.png"   --light-map-out "$TMP/lm.exr" > /dev/null 2>&1 || fail "render-preview --light-map-out failed"
+[ -s "$TMP/lm.exr" ] || fail "no light map written"
+if command -v oiiotool > /dev/null; then
+  oiiotool --info -v "$TMP/lm.exr" | grep -q "clothfit:uv_box" || fail "light map without its uv box"
+  oiiotool --info "$TMP/lm.exr" | grep -Eq "16 x +16," || fail "light map is not 16 x 16"
+fi
+check -- --light-map-out render-preview --scene "$SCENE" --material "$TMP/std.json" --out "$TMP/x.png"   --light-map-out "$TMP/x.exr"
+check -- --light-map-out render-preview --scene "$TMP/lm.json" --material "$TMP/std.json" --out "$TMP/x.png"   --light-map-out "$TMP/x.exr" --no-card-visibility
+[ ! -e "$TMP/x.exr" ] && [ ! -e "$TMP/x.png" ] || fail "output written despite a --light-map-out error"
+# a bad block is named with the card
+python3 -c "
+import json,sys; c=json.load(open('$TMP/lm.json')); c['visibility']={'light_map':{'size':0}}; json.dump(c,open('$TMP/bad.json','w'))"
+check visibility.light_map.size render-preview --scene "$TMP/bad.json" --material "$TMP/std.json" --out "$TMP/x.png"
 echo "ok"
