@@ -16,7 +16,9 @@
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
 // bent-normal IBL + 5 woven with the far-field yarn lobe) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
-// 9 of the materials under blender-city with its sun split off as a directional light. The page posts
+// 9 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
+// drape and sphere x 3 materials under studio with three.js shadow maps against
+// `render-preview --shadows` (the */studio-shadows/* cases). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
 // Metric: 8-bit sRGB (tone-mapped as the card says), over the fabric pixels the browser draws,
