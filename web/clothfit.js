@@ -1905,6 +1905,109 @@ async function loadEquirect(url) {
   return envCache.get(url);
 }
 
+// ---------------------------------------------------------------------------------------------
+// Shadow maps (session 13, opt-in; docs/web.md "Shadows (session 13, measured)").
+// three.js's own renderer.shadowMap for the card's punctual lights (and the environment's sun),
+// every mesh casting and receiving. Off unless asked for (loadSceneCard options.shadows, the
+// card's "visibility": {"shadows": true}, or sc.setShadows(spec)); off leaves the renderer, the
+// lights and the meshes at three.js's defaults, so frames without shadows are unchanged.
+//   spec: true (the defaults below) or an object overriding any of
+//     type        'pcf' (PCFShadowMap: r187's 5 Vogel-disk taps of a hardware 2 x 2 compare,
+//                 rotated per pixel by interleaved gradient noise) | 'basic' (one nearest
+//                 compare, a hard edge) | 'vsm' (no point-light shadows in r187)
+//                 ('pcfsoft' is refused: r187 removed PCFSoftShadowMap, it falls back to PCF)
+//     mapSize     shadow map texels per side (cube face for the point light), 64..8192
+//     radius      PCF disk radius in texels (three.js default 1)
+//     bias        added to the normalised depth (negative: fewer self-shadowing artefacts)
+//     normalBias  world metres along the vertex normal
+//     fit         'fabric' (default): each shadow camera frames the fabric meshes' bounding box
+//                 (as receivers) and reaches back to the scene's box towards the light (casters),
+//                 which is exact for the fabric: anything that can shadow it lies in that
+//                 volume; the floor outside it is unshadowed. 'scene': frames the whole scene.
+export const SHADOW_DEFAULTS = Object.freeze({ type: 'basic', mapSize: 2048, radius: 1, bias: -0.001, normalBias: 0, fit: 'fabric' });
+const SHADOW_TYPES = { basic: THREE.BasicShadowMap, pcf: THREE.PCFShadowMap, vsm: THREE.VSMShadowMap };
+
+export function shadowOptions(spec, where = 'shadows') {
+  if (spec === undefined || spec === null || spec === false) return null;
+  if (spec === true) return { ...SHADOW_DEFAULTS };
+  if (typeof spec !== 'object' || Array.isArray(spec)) throw new Error(`${where}: expected true, false or an object {${Object.keys(SHADOW_DEFAULTS).join(', ')}}`);
+  const out = { ...SHADOW_DEFAULTS };
+  for (const [k, v] of Object.entries(spec)) {
+    if (!(k in SHADOW_DEFAULTS)) throw new Error(`${where}.${k}: unknown field (fields: ${Object.keys(SHADOW_DEFAULTS).join(', ')})`);
+    const num = (lo, hi) => {
+      if (typeof v !== 'number' || !Number.isFinite(v) || v < lo || v > hi) throw new Error(`${where}.${k}: expected a number in [${lo}, ${hi}], got ${JSON.stringify(v)}`);
+      return v;
+    };
+    if (k === 'type') {
+      if (v === 'pcfsoft') throw new Error(`${where}.type: 'pcfsoft' (PCFSoftShadowMap) was removed in three.js r187; use 'pcf' with a larger radius`);
+      if (!(v in SHADOW_TYPES)) throw new Error(`${where}.type: expected one of ${Object.keys(SHADOW_TYPES).join(', ')}, got ${JSON.stringify(v)}`);
+      out.type = v;
+    } else if (k === 'fit') {
+      if (v !== 'fabric' && v !== 'scene') throw new Error(`${where}.fit: expected 'fabric' or 'scene', got ${JSON.stringify(v)}`);
+      out.fit = v;
+    } else if (k === 'mapSize') {
+      if (!Number.isInteger(num(64, 8192))) throw new Error(`${where}.mapSize: expected an integer`);
+      out.mapSize = v;
+    } else if (k === 'radius') out.radius = num(0, 64);
+    else if (k === 'bias') out.bias = num(-1, 1);
+    else out.normalBias = num(-1, 1);
+  }
+  return out;
+}
+
+const boxCorners = (b) => [0, 1, 2, 3, 4, 5, 6, 7].map((i) => new THREE.Vector3(i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z));
+
+// Points the shadow camera of `light` at its target and fits its frustum: receivers = the box
+// whose shadows are wanted, casters = the scene's box (everything that can occlude them).
+export function fitShadowCamera(light, receivers, casters, mapSize) {
+  const shadow = light.shadow, cam = shadow.camera;
+  const margin = 1.02;
+  light.updateMatrixWorld(true);
+  const lightPos = new THREE.Vector3().setFromMatrixPosition(light.matrixWorld);
+  if (light.isPointLight) {
+    // A cube around the light: near below the nearest caster, far past the farthest receiver
+    // (three.js uses light.distance instead when the light has a range).
+    const dNear = casters.distanceToPoint(lightPos);
+    cam.near = Math.max(1e-3, 0.5 * dNear);
+    cam.far = Math.max(cam.near * 2, Math.max(...boxCorners(receivers).map((p) => p.distanceTo(lightPos))) * margin);
+    cam.updateProjectionMatrix();
+    return;
+  }
+  // The view the shadow camera will have (LightShadow.updateMatrices: at the light, looking at
+  // the target).
+  light.target.updateMatrixWorld(true);
+  cam.position.copy(lightPos);
+  cam.lookAt(new THREE.Vector3().setFromMatrixPosition(light.target.matrixWorld));
+  cam.updateMatrixWorld(true);
+  const view = cam.matrixWorldInverse.clone();
+  const rv = boxCorners(receivers).map((p) => p.applyMatrix4(view));
+  const cv = boxCorners(casters).map((p) => p.applyMatrix4(view));
+  if (light.isDirectionalLight) {
+    let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity, d0 = Infinity, d1 = -Infinity;
+    for (const p of rv) { x0 = Math.min(x0, p.x); x1 = Math.max(x1, p.x); y0 = Math.min(y0, p.y); y1 = Math.max(y1, p.y); d1 = Math.max(d1, -p.z); d0 = Math.min(d0, -p.z); }
+    for (const p of cv) d0 = Math.min(d0, -p.z);
+    // square texels: the larger extent on both axes, centred; a margin of 2 texels
+    const half = 0.5 * Math.max(x1 - x0, y1 - y0) * (1 + 4 / mapSize), cx = 0.5 * (x0 + x1), cy = 0.5 * (y0 + y1);
+    cam.left = cx - half; cam.right = cx + half; cam.bottom = cy - half; cam.top = cy + half;
+    const pad = 0.01 * (d1 - d0) + 1e-3;
+    cam.near = d0 - pad; cam.far = d1 + pad;
+    cam.updateProjectionMatrix();
+  } else if (light.isSpotLight) {
+    // The cone, narrowed to the receivers' box when it is smaller (shadow.focus scales the cone
+    // angle into the camera's fov in SpotLightShadow.updateMatrices).
+    let half = 0, d1 = 0, behind = false;
+    for (const p of rv) {
+      if (-p.z <= 1e-6) { behind = true; continue; }
+      half = Math.max(half, Math.atan2(Math.hypot(p.x, p.y), -p.z));
+      d1 = Math.max(d1, p.length());
+    }
+    shadow.focus = behind ? 1 : Math.min(1, (half * margin) / light.angle);
+    cam.near = Math.max(1e-3, 0.5 * casters.distanceToPoint(lightPos));
+    cam.far = Math.max(cam.near * 2, (d1 || Math.max(...rv.map((p) => p.length()))) * margin);
+    cam.updateProjectionMatrix();
+  }
+}
+
 /**
  * Load a scene card: returns {card, gltf, scene, camera, fabricMeshes, setMaterial(m),
  * setEnvironment(pathOrNull, {intensity, rotationYDegrees}), apply(renderer), width, height}.
@@ -2013,17 +2116,63 @@ export async function loadSceneCard(url, options = {}) {
       scene.backgroundIntensity = intensity;
       scene.backgroundRotation.set(0, rot, 0);
     },
+    shadows: null,    // the shadow settings in force (shadowOptions), null = no shadow maps
+    // Shadow maps on or off (see shadowOptions): castShadow on the punctual lights (the card's and
+    // the environment's sun) with fitted shadow cameras, castShadow + receiveShadow on every mesh.
+    // Takes effect on the renderer at apply(renderer). null / false: three.js's defaults.
+    setShadows(spec) {
+      const o = shadowOptions(spec);
+      this.shadows = o;
+      const receivers = new THREE.Box3(), casters = new THREE.Box3();
+      if (o) {
+        scene.updateMatrixWorld(true);
+        for (const m of fabricMeshes) receivers.expandByObject(m);
+        casters.setFromObject(gltf.scene);
+        if (o.fit === 'scene') receivers.copy(casters);
+      }
+      scene.traverse((obj) => {
+        if (obj.isMesh) { obj.castShadow = !!o; obj.receiveShadow = !!o; }
+        if (!(obj.isDirectionalLight || obj.isSpotLight || obj.isPointLight)) return;
+        obj.castShadow = !!o;
+        if (!o) return;
+        const sh = obj.shadow;
+        if (sh.map && sh.mapSize.x !== o.mapSize) { sh.map.dispose(); sh.map = null; }
+        sh.mapSize.set(o.mapSize, o.mapSize);
+        sh.radius = o.radius;
+        sh.bias = o.bias;
+        sh.normalBias = o.normalBias;
+        fitShadowCamera(obj, receivers, casters, o.mapSize);
+        sh.needsUpdate = true;
+      });
+    },
     apply(renderer) {
       renderer.toneMapping = this.toneMapping;
       renderer.toneMappingExposure = this.exposure;
       renderer.outputColorSpace = THREE.SRGBColorSpace;
       renderer.setPixelRatio(1);
+      renderer.shadowMap.enabled = !!this.shadows;
+      if (this.shadows) {
+        renderer.shadowMap.type = SHADOW_TYPES[this.shadows.type];
+        this.setShadows(this.shadows);  // a sun light added since is fitted too
+      }
     },
   };
   if (card.environment) {
     const e = card.environment;
     await out.setEnvironment(e.path, { intensity: e.intensity ?? 1, rotationYDegrees: e.rotation_y_degrees ?? 0, sun: e.sun ?? 'auto' });
   }
+  // Shadows: options.shadows (true / false / an object, shadowOptions) wins over the card's
+  // "visibility": {"shadows": bool} (the block of session 13's C++ preview, docs/scene-card.md);
+  // web/ draws no light map, so visibility.light_map is only reported.
+  let shadowSpec = options.shadows;
+  if (shadowSpec === undefined && card.visibility !== undefined) {
+    const v = card.visibility;
+    if (typeof v !== 'object' || v === null || Array.isArray(v)) throw new Error(`${cardUrl}: visibility: expected an object {shadows, light_map}`);
+    if (v.shadows !== undefined && typeof v.shadows !== 'boolean') throw new Error(`${cardUrl}: visibility.shadows: expected true or false, got ${JSON.stringify(v.shadows)}`);
+    shadowSpec = v.shadows ?? false;
+    if (v.light_map) console.info(`${cardUrl}: visibility.light_map is not drawn by web/ (shadows only)`);
+  }
+  if (shadowSpec) out.setShadows(shadowSpec);
   await Promise.all([clothDGTable(), wovenPhaseTable()]);
   return out;
 }

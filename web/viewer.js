@@ -2,7 +2,7 @@
 // environment / preset switching. Query: card, preset, presets (comma list), env, sun (auto |
 // off: the environment's sun as a directional light, docs/sun.md; default the card's
 // environment.sun, else auto), shot (=1: POST the first finished frame as PNG to /shot, for
-// web/tools/screenshot.mjs).
+// web/tools/screenshot.mjs), shadows (1 | 0 | a JSON object of shadow settings; session 13).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { loadSceneCard, fetchClothfitPreset } from './clothfit.js';
@@ -27,7 +27,12 @@ async function main() {
   fill(document.getElementById('preset'), presets, presetUrl, base);
   const names = await fetch('/hdri/index.json').then((r) => (r.ok ? r.json() : [])).catch(() => []);
   fill(document.getElementById('env'), ['card', 'none', ...names], q.get('env') ?? 'card');
-  const sc = await loadSceneCard(cardUrl, { renderer });
+  // shadows=1: three.js shadow maps with web/clothfit.js's defaults (SHADOW_DEFAULTS); a JSON
+  // object overrides fields (?shadows={"type":"pcf","mapSize":4096}); 0: off; absent: the card's
+  // visibility.shadows.
+  const sq = q.get('shadows');
+  const shadows = sq === null ? undefined : sq === '1' || sq === 'true' ? true : sq === '0' || sq === 'false' ? false : JSON.parse(sq);
+  const sc = await loadSceneCard(cardUrl, { renderer, shadows });
   sc.apply(renderer);
   renderer.setSize(Math.max(sc.width, 512), Math.max(sc.width, 512) * sc.height / sc.width);
   sc.camera.aspect = sc.width / sc.height;

@@ -4,6 +4,10 @@
 //
 //   node tests/browser/run.mjs --clothfit build/bin/clothfit [--work DIR] [--chromium PATH]
 //        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS] [--frames N]
+//        [--diff-png] [--shadow-settings JSON]
+//   --diff-png: also write <case>.diff.png (browser | C++ | |a - b| x 8) in the work dir.
+//   --shadow-settings JSON: the studio-shadows cases' three.js shadow settings (web/clothfit.js
+//   shadowOptions fields, over its defaults), for measuring other settings; default: the defaults.
 //   --frames N: also time N more frames per case in the browser (mean ms per frame, each ended
 //   by a 1-pixel readPixels; SwiftShader runs on the CPU, so only ratios between cases mean
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
@@ -12,7 +16,9 @@
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
 // bent-normal IBL + 5 woven with the far-field yarn lobe) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
-// 9 of the materials under blender-city with its sun split off as a directional light. The page posts
+// 9 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
+// drape and sphere x 3 materials under studio with three.js shadow maps against
+// `render-preview --shadows` (the */studio-shadows/* cases). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
 // Metric: 8-bit sRGB (tone-mapped as the card says), over the fabric pixels the browser draws,
@@ -206,6 +212,25 @@ for (const s of scenes) {
     }
   }
 }
+// s13-web: shadows. Three.js shadow maps (web/clothfit.js setShadows; settings SHADOW_SETTINGS,
+// the web default unless --shadow-settings JSON overrides fields for a measurement) against
+// `render-preview --shadows` (ray-traced light visibility) on the drape (cloth over a sphere on
+// a floor: self-shadowing folds, the sphere's shadow) and the sphere as a control (convex, no
+// other caster: only the terminator and self-shadowing artefacts can differ). Own card files, so
+// the scenes without shadows are never touched.
+const SHADOW_SCENES = ['drape', 'sphere'];
+const SHADOW_MATERIALS = ['standard-grey', 'cloth-filament', 'woven-lobe-canvas'];
+const SHADOW_SETTINGS = args['shadow-settings'] ? JSON.parse(args['shadow-settings']) : true;
+for (const s of SHADOW_SCENES) {
+  const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
+  const cardPath = path.join(work, `${s}-studio-shadows.card.json`);
+  fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf) }, null, 1));
+  for (const m of SHADOW_MATERIALS) {
+    const name = `${s}/studio-shadows/${m}`;
+    if (args.only && !name.includes(args.only)) continue;
+    cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png: path.join(work, `${s}-studio-shadows-${m}.png`), shadows: SHADOW_SETTINGS, cppArgs: ['--shadows'] });
+  }
+}
 fs.writeFileSync(path.join(work, 'plan.json'), JSON.stringify({ hdri_dir: hdriDir, frames: Number(args.frames ?? 0), cases }, null, 1));
 say(`${cases.length} cases, work dir ${work}`);
 
@@ -233,7 +258,7 @@ async function cppAll() {
   const worker = async () => {
     for (let c = queue.shift(); c; c = queue.shift()) {
       try {
-        await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png, ...cppExtra]);
+        await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png, ...cppExtra, ...(c.cppArgs ?? [])]);
       } catch (e) {
         cppErrors.set(c.name, String(e.message).split('\n').filter(Boolean).slice(-1)[0] ?? 'failed');
       }
@@ -323,6 +348,50 @@ function decodePng(file) {
   return { w, h, bpp, data: out };
 }
 
+// ---- PNG encode (8-bit RGB, filter 0), for --diff-png ---------------------------------------------
+const CRC_TABLE = Array.from({ length: 256 }, (_, n) => {
+  let c = n;
+  for (let k = 0; k < 8; ++k) c = c & 1 ? 0xedb88320 ^ (c >>> 1) : c >>> 1;
+  return c >>> 0;
+});
+function crc32(buf) {
+  let c = 0xffffffff;
+  for (const x of buf) c = CRC_TABLE[(c ^ x) & 255] ^ (c >>> 8);
+  return (c ^ 0xffffffff) >>> 0;
+}
+function encodePng(w, h, rgb) {
+  const chunk = (type, data) => {
+    const len = Buffer.alloc(4); len.writeUInt32BE(data.length);
+    const td = Buffer.concat([Buffer.from(type, 'ascii'), data]);
+    const crc = Buffer.alloc(4); crc.writeUInt32BE(crc32(td));
+    return Buffer.concat([len, td, crc]);
+  };
+  const ihdr = Buffer.alloc(13);
+  ihdr.writeUInt32BE(w, 0); ihdr.writeUInt32BE(h, 4); ihdr[8] = 8; ihdr[9] = 2;
+  const raw = Buffer.alloc(h * (w * 3 + 1));
+  for (let y = 0; y < h; ++y) rgb.copy(raw, y * (w * 3 + 1) + 1, y * w * 3, (y + 1) * w * 3);
+  return Buffer.concat([Buffer.from([137, 80, 78, 71, 13, 10, 26, 10]), chunk('IHDR', ihdr), chunk('IDAT', zlib.deflateSync(raw)), chunk('IEND', Buffer.alloc(0))]);
+}
+// --diff-png: <case>.diff.png = browser | C++ preview | max-channel |a - b| x 8 (grey outside the
+// eroded mask: dark blue), for looking at where the frames differ.
+function writeDiffPng(file, w, h, body, ref, inMask) {
+  const W = 3 * w, out = Buffer.alloc(W * h * 3);
+  for (let y = 0; y < h; ++y) {
+    for (let x = 0; x < w; ++x) {
+      const i = y * w + x;
+      let mx = 0;
+      for (let k = 0; k < 3; ++k) {
+        const a = body[i * 4 + k], b = ref.data[i * ref.bpp + k];
+        out[(y * W + x) * 3 + k] = a; out[(y * W + w + x) * 3 + k] = b;
+        mx = Math.max(mx, Math.abs(a - b));
+      }
+      const v = Math.min(255, 8 * mx), o = (y * W + 2 * w + x) * 3;
+      if (inMask[i]) { out[o] = v; out[o + 1] = v; out[o + 2] = v; } else { out[o] = 0; out[o + 1] = 0; out[o + 2] = mx ? 60 + Math.min(195, 8 * mx) : 40; }
+    }
+  }
+  fs.writeFileSync(file, encodePng(W, h, out));
+}
+
 // ---- compare ----------------------------------------------------------------------------------
 const bounds = JSON.parse(fs.readFileSync(path.join(here, 'bounds.json'), 'utf8'));
 const ACCEPT = { mean: 0.5, p99: 2 };
@@ -341,12 +410,14 @@ for (const c of cases) {
   if (ref.w !== w || ref.h !== h) { rows.push({ name: c.name, error: 'size mismatch' }); failures++; continue; }
   const mask = body.subarray(w * h * 4);
   const diffs = [];
+  const inMask = new Uint8Array(w * h);
   let sum = 0;
   for (let y = 1; y < h - 1; ++y) {
     for (let x = 1; x < w - 1; ++x) {
       let inside = true;
       for (let dy = -1; dy <= 1 && inside; ++dy) for (let dx = -1; dx <= 1; ++dx) if (!mask[(y + dy) * w + x + dx]) { inside = false; break; }
       if (!inside) continue;
+      inMask[y * w + x] = 1;
       let mx = 0;
       for (let k = 0; k < 3; ++k) {
         const d = Math.abs(body[(y * w + x) * 4 + k] - ref.data[(y * w + x) * ref.bpp + k]);
@@ -355,6 +426,7 @@ for (const c of cases) {
       diffs.push(mx);
     }
   }
+  if (args['diff-png']) writeDiffPng(c.png.replace(/\.png$/, '.diff.png'), w, h, body, ref, inMask);
   diffs.sort((a, b) => a - b);
   const n = diffs.length;
   const mean = n ? sum / (3 * n) : NaN;

@@ -335,4 +335,46 @@ if (args.clothfit) {
   checks++;
   fs.rmSync(mapsWork, { recursive: true, force: true });
 }
+// ---- shadows (session 13): shadowOptions validation, fitted shadow cameras ------------------
+{
+  const { shadowOptions, fitShadowCamera, SHADOW_DEFAULTS } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+  check(() => assert.equal(shadowOptions(undefined), null), 'shadows off by default');
+  check(() => assert.equal(shadowOptions(false), null), 'shadows false');
+  check(() => assert.deepEqual(shadowOptions(true), { ...SHADOW_DEFAULTS }), 'shadows true = defaults');
+  check(() => assert.deepEqual(shadowOptions({ type: 'pcf', mapSize: 4096 }), { ...SHADOW_DEFAULTS, type: 'pcf', mapSize: 4096 }), 'shadows override');
+  for (const [bad, why] of [[{ typ: 'pcf' }, /shadows\.typ: unknown field/], [{ type: 'pcfsoft' }, /removed in three\.js r187/], [{ type: 'x' }, /shadows\.type: expected one of/],
+    [{ mapSize: 2048.5 }, /mapSize: expected an integer/], [{ mapSize: 32 }, /mapSize: expected a number in \[64, 8192\]/], [{ bias: 'a' }, /bias: expected a number/],
+    [{ normalBias: NaN }, /normalBias/], [{ fit: 'floor' }, /fit: expected 'fabric' or 'scene'/], ['yes', /expected true, false or an object/], [[1], /expected true, false or an object/]]) {
+    check(() => assert.throws(() => shadowOptions(bad), why), `bad shadows ${JSON.stringify(bad)}`);
+  }
+  // Fitted cameras: every receiver corner inside the shadow frustum, every caster corner in
+  // front of its near plane (directional: depth >= near; spot: inside the cone too when the
+  // receivers are), for a light from a slanted direction.
+  const receivers = new THREE.Box3(new THREE.Vector3(-0.5, 0, -0.45), new THREE.Vector3(0.5, 0.72, 0.49));
+  const casters = new THREE.Box3(new THREE.Vector3(-2, 0, -2), new THREE.Vector3(2, 0.72, 2));
+  const corners = (b) => [0, 1, 2, 3, 4, 5, 6, 7].map((i) => new THREE.Vector3(i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z));
+  const inFrustum = (light, p) => {
+    light.shadow.updateMatrices(light);
+    const q = p.clone().applyMatrix4(light.shadow.camera.matrixWorldInverse).applyMatrix4(light.shadow.camera.projectionMatrix);
+    return Math.abs(q.x) <= 1 && Math.abs(q.y) <= 1 && q.z >= -1 && q.z <= 1;
+  };
+  const dir = new THREE.DirectionalLight();
+  dir.position.set(0, 0, 0); dir.add(dir.target); dir.target.position.set(0.3, -0.8, -0.5); dir.updateMatrixWorld(true);
+  fitShadowCamera(dir, receivers, casters, 2048);
+  check(() => assert.ok(corners(receivers).every((p) => inFrustum(dir, p))), 'directional: receivers inside the fitted frustum');
+  check(() => assert.ok(dir.shadow.camera.right - dir.shadow.camera.left < 2), 'directional: the frustum frames the receivers, not the floor');
+  const view = dir.shadow.camera.matrixWorldInverse;
+  check(() => assert.ok(corners(casters).every((p) => -p.clone().applyMatrix4(view).z >= dir.shadow.camera.near)), 'directional: casters behind the near plane');
+  const spot = new THREE.SpotLight(0xffffff, 1, 0, 0.5);
+  spot.position.set(-1.2, 2, 1.4); spot.add(spot.target); spot.target.position.set(0, 0, -1);
+  spot.lookAt(0, 0.3, 0); spot.updateMatrixWorld(true);
+  fitShadowCamera(spot, receivers, casters, 2048);
+  check(() => assert.ok(spot.shadow.focus > 0 && spot.shadow.focus <= 1), 'spot: focus in (0, 1]');
+  check(() => assert.ok(corners(receivers).every((p) => inFrustum(spot, p))), 'spot: receivers inside the fitted frustum');
+  const point = new THREE.PointLight(0xffffff, 1, 0);
+  point.position.set(0.4, 1.2, -1.2); point.updateMatrixWorld(true);
+  fitShadowCamera(point, receivers, casters, 1024);
+  check(() => assert.ok(point.shadow.camera.near > 0 && point.shadow.camera.near < casters.distanceToPoint(point.position) &&
+    corners(receivers).every((p) => p.distanceTo(point.position) < point.shadow.camera.far)), 'point: near before the casters, far past the receivers');
+}
 console.log(`unit: ${checks} checks passed`);

@@ -40,6 +40,9 @@ async function run() {
     const wmap = material.userData.clothfit?.weave_maps;
     if (wmap) log(`${c.name}: weave maps ${wmap.file}${wmap.anisotropy ? `, anisotropy ${wmap.anisotropy} (max ${renderer.capabilities.getMaxAnisotropy()})` : ''}`);
     sc.setMaterial(material);
+    // Shadow cases (run.mjs SHADOW_CASES, session 13): three.js shadow maps with the case's
+    // settings; a case without them leaves the scene as loaded (no shadows).
+    if (c.shadows || sc.shadows) sc.setShadows(c.shadows ?? null);
     sc.apply(renderer);
     renderer.setSize(sc.width, sc.height, false);
     renderer.render(sc.scene, sc.camera);
