@@ -166,6 +166,8 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
     }
     for (size_t k = 0; k < 3; ++k)
       if (!full.irradiance.empty()) c->irradiance.push_back(full.irradiance[ui * 3 + k]);
+    for (size_t k = 0; k < 3; ++k)  // the light map's fabric bounce per unit albedo
+      if (!full.irradiance_unit.empty()) c->irradiance_unit.push_back(full.irradiance_unit[ui * 3 + k]);
     if (!full.radiance.empty())
       c->radiance.insert(c->radiance.end(), full.radiance.begin() + long(ui * KR),
                          full.radiance.begin() + long((ui + 1) * KR));
@@ -968,8 +970,19 @@ nlohmann::json WeaveMapsField(const render::MaterialPreset& p) {
 }
 }  // namespace
 
+namespace {
+std::shared_ptr<PreparedScenes> BuildPrepared(const std::vector<SceneInput>& inputs,
+                                              const FitOptions& opt);
+}  // namespace
+
 std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput>& inputs,
                                                     const FitOptions& opt) {
+  return BuildPrepared(inputs, opt);
+}
+
+namespace {
+std::shared_ptr<PreparedScenes> BuildPrepared(const std::vector<SceneInput>& inputs,
+                                              const FitOptions& opt) {
   const auto t0 = std::chrono::steady_clock::now();
   if (inputs.empty()) throw FitError("fit: no (scene, reference) pairs");
   auto p = std::make_shared<PreparedScenes>();
@@ -1001,6 +1014,7 @@ std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput
   p->seconds = SecondsSince(t0);
   return p;
 }
+}  // namespace
 
 double PreparedSeconds(const PreparedScenes& prepared) { return prepared.seconds; }
 
@@ -1009,8 +1023,33 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
 }
 
 namespace {
+// `trusted`: `prepared` was built here for these options (no check).
 FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions& opt,
-                        const PreparedScenes* prepared);
+                        const PreparedScenes* prepared, bool trusted = false);
+
+// The second pass's scenes from the first's, in place: every cache with a one-bounce light map
+// gets irradiance += (kd' - kd) x irradiance_unit (exact: the bounce is linear in the fabric's
+// albedo, render/preview/visibility.h). False when some light map cannot be re-weighted (more
+// bounces): the caller rebuilds.
+bool ReweightLightMaps(PreparedScenes* p, const std::array<double, 3>& kd_new) {
+  for (const auto& d : p->data) {
+    const render::PreviewCache& c = *d->cache;
+    if (c.options.visibility.indirect && c.irradiance_unit.size() != c.irradiance.size())
+      return false;
+  }
+  for (auto& d : p->data) {
+    render::PreviewCache& c = *d->cache;
+    if (c.irradiance_unit.empty()) continue;
+    const std::array<double, 3> kd = c.options.visibility.fabric_albedo;
+    if (kd[0] < 0 || kd[1] < 0 || kd[2] < 0) return false;  // the glTF's colour: not known here
+    for (size_t i = 0; i < c.irradiance.size(); ++i)
+      c.irradiance[i] = float(double(c.irradiance[i]) +
+                              (kd_new[i % 3] - kd[i % 3]) * double(c.irradiance_unit[i]));
+    c.options.visibility.fabric_albedo = kd_new;
+  }
+  p->visibility.fabric_albedo = kd_new;
+  return true;
+}
 
 // Whether some scene bakes a light map whose fabric bounce takes the fitted albedo (a card's
 // light map or --indirect, without an explicit fabric albedo): FitOptions::card_visibility.
@@ -1027,8 +1066,13 @@ bool NeedsAlbedoPass(const std::vector<SceneInput>& inputs, const FitOptions& op
 FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt,
                     const PreparedScenes* prepared) {
   const auto t0 = std::chrono::steady_clock::now();
-  FitResult first = FitImagesOnce(inputs, opt, prepared);
-  if (!first.usable || !NeedsAlbedoPass(inputs, opt)) return first;
+  if (!NeedsAlbedoPass(inputs, opt)) return FitImagesOnce(inputs, opt, prepared);
+  std::shared_ptr<PreparedScenes> own;
+  if (!prepared) own = BuildPrepared(inputs, opt);
+  FitResult first = own ? FitImagesOnce(inputs, opt, own.get(), true)
+                        : FitImagesOnce(inputs, opt, prepared);
+  if (own) first.setup_seconds += own->seconds;  // the preparation was done here
+  if (!first.usable) return first;
   // Second pass: the light map baked with the fitted diffuse albedo, one start at the solution.
   FitOptions o2 = opt;
   o2.visibility.fabric_albedo = render::DiffuseAlbedo(first.preset);
@@ -1036,7 +1080,9 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
   o2.start = first.preset;
   o2.init_from_reference = false;
   o2.start_roughness = {0.0};
-  FitResult second = FitImagesOnce(inputs, o2, nullptr);
+  const bool reweighted = own && ReweightLightMaps(own.get(), o2.visibility.fabric_albedo);
+  FitResult second = reweighted ? FitImagesOnce(inputs, o2, own.get(), true)
+                                : FitImagesOnce(inputs, o2, nullptr);
   if (!second.usable) return first;
   second.starts += first.starts;
   second.iterations += first.iterations;
@@ -1048,7 +1094,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
 
 namespace {
 FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions& opt,
-                        const PreparedScenes* prepared) {
+                        const PreparedScenes* prepared, bool trusted) {
   const auto t0 = std::chrono::steady_clock::now();
   if (inputs.empty()) throw FitError("fit: no (scene, reference) pairs");
   const render::ModelKind model = opt.start.model;
@@ -1064,7 +1110,9 @@ FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions&
   // Per scene: cache, blocks, transformed reference, weights (built here, or prepared by the
   // caller for the same inputs and cache-relevant options: checked).
   std::shared_ptr<const PreparedScenes> own;
-  if (prepared) {
+  if (prepared && trusted) {
+    // built here for these options (FitImages' light-map passes)
+  } else if (prepared) {
     if (prepared->data.size() != inputs.size() || prepared->level != opt.level ||
         prepared->stride != opt.pixel_stride || prepared->space != opt.space ||
         prepared->min_coverage != opt.min_coverage || prepared->model != opt.start.model ||

@@ -513,6 +513,42 @@ TEST(S9Visibility, DiffuseAlbedoOfPresets) {
   for (int c = 0; c < 3; ++c) EXPECT_DOUBLE_EQ(b[size_t(c)], 0.1 * (c + 1));
 }
 
+// Session 13: with one bounce the light map is linear in the fabric's albedo, so a cache baked
+// with kd0 plus (kd1 - kd0) x irradiance_unit is the cache baked with kd1 (what a fit's second
+// pass uses instead of baking again). A fabric wall beside the fabric sphere makes fabric
+// bounce points; with two bounces there is no unit part.
+TEST(S9Visibility, LightMapIsLinearInTheFabricAlbedo) {
+  Scene s = SphereOnFloor(32);
+  s.meshes.push_back(Quad({Vec3d(0.7, -0.5, 1), Vec3d(0.7, -0.5, -1), Vec3d(0.7, 1.5, -1),
+                           Vec3d(0.7, 1.5, 1)},
+                          Vec3d(-1, 0, 0), true, 0.8f));
+  const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
+  PreviewOptions o;
+  o.model = ModelKind::kStandard;
+  o.visibility.indirect = true;
+  o.visibility.samples = 32;
+  o.visibility.hit_samples = 4;
+  o.visibility.uv_size = 32;
+  o.visibility.fabric_albedo = {0.2, 0.5, 0.7};
+  PreviewOptions o1 = o;
+  o1.visibility.fabric_albedo = {0.9, 0.1, 0.4};
+  const auto a = PreviewCache::Build(s, &env, o), b = PreviewCache::Build(s, &env, o1);
+  ASSERT_EQ(a->pixels, b->pixels);
+  ASSERT_EQ(a->irradiance_unit.size(), a->irradiance.size());
+  double unit_max = 0.0;
+  for (size_t i = 0; i < a->irradiance.size(); ++i) {
+    const double kd0 = o.visibility.fabric_albedo[i % 3], kd1 = o1.visibility.fabric_albedo[i % 3];
+    const double want = double(b->irradiance[i]);
+    const double got = double(a->irradiance[i]) + (kd1 - kd0) * double(a->irradiance_unit[i]);
+    EXPECT_NEAR(got, want, 1e-5 * std::abs(want) + 1e-7) << "value " << i;
+    unit_max = std::max(unit_max, double(a->irradiance_unit[i]));
+  }
+  EXPECT_GT(unit_max, 1e-3);  // the wall bounces light onto the sphere
+  PreviewOptions two = o;
+  two.visibility.bounces = 2;
+  EXPECT_TRUE(PreviewCache::Build(s, &env, two)->irradiance_unit.empty());
+}
+
 // Options off (ao and indirect false) with every other visibility field changed: bit-identical.
 TEST(S9Visibility, OptionsOffAreBitIdentical) {
   const Scene s = SphereOnFloor(32);

@@ -123,6 +123,7 @@ struct PixelData {
   std::vector<float> lt;      // woven: t.l, b.l, t.h, b.h per light sample
   std::array<float, WeaveMaps::kChannels> weave{};  // woven with maps: the sampled maps
   std::array<float, 6> yibl{};  // PreviewOptions::yarn_ibl: A_w L_w, A_f L_f
+  std::array<float, 3> irr_unit{};  // VisibilityTerms::fabric_unit (light map, one bounce)
 };
 
 // What the per-pixel work of a cache build reads.
@@ -633,6 +634,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     pd.lt = std::move(lt);
     pd.weave = weave;
     for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
+    for (int k = 0; k < 3; ++k) pd.irr_unit[size_t(k)] = float(vis.fabric_unit[k]);
     const bool split_sum = x.env && x.opt.exact_ibl_samples <= 0;
     if (split_sum && x.opt.model == ModelKind::kPhysicalAniso)
       FillAnisoRadianceTables(x, hit, x.opt.weave_maps ? weave.data() : nullptr, &pd);
@@ -696,6 +698,8 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       // < 2^28 by the budget check in Build, so an int holds it.
       c->light_begin.push_back(int(c->light_samples.size()));
       c->irradiance.insert(c->irradiance.end(), pd.irr.begin(), pd.irr.end());
+      if (c->options.visibility.indirect && c->options.visibility.bounces == 1)
+        c->irradiance_unit.insert(c->irradiance_unit.end(), pd.irr_unit.begin(), pd.irr_unit.end());
       c->radiance.insert(c->radiance.end(), pd.rad.begin(), pd.rad.end());
       c->sheen_radiance.insert(c->sheen_radiance.end(), pd.srad.begin(), pd.srad.end());
       c->yarn_radiance.insert(c->yarn_radiance.end(), pd.yrad.begin(), pd.yrad.end());

@@ -265,6 +265,11 @@ class PreviewCache {
   // map of size 0 where none was baked), else empty. What an engine would load as aoMap /
   // lightMap (clothfit evaluate --light-map-out writes them).
   std::vector<UvVisibilityMap> uv_visibility;
+  // A light map with one bounce (visibility.indirect, bounces 1), else empty: 3 per fabric
+  // pixel, the part of `irradiance` that bounced off the fabric per unit fabric albedo
+  // (VisibilityTerms::fabric_unit), so irradiance + (kd' - kd) x irradiance_unit is the cache
+  // baked with albedo kd' instead of options.visibility.fabric_albedo's kd (fit: second pass).
+  std::vector<float> irradiance_unit;
   const Table2D* woven_phase = nullptr;   // lut::DefaultWovenPhase() (woven only)
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
   const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table

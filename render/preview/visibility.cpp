@@ -65,7 +65,7 @@ Rgb<double> BounceRadiance(const Scene& scene, const std::vector<Light>& lights,
                            const EmbreeScene& bvh, const VisibilityOptions& o,
                            const IrradianceOverPiFn& env, const RadianceFn& env_radiance,
                            const Mesh& mesh, const Vec3d& q, const Vec3d& nq, Pcg32& rng,
-                           int depth, double eps) {
+                           int depth, double eps, Rgb<double>* unit = nullptr) {
   Rgb<double> kd(mesh.base_color[0], mesh.base_color[1], mesh.base_color[2]);
   if (mesh.is_fabric && o.fabric_albedo[0] >= 0.0 && o.fabric_albedo[1] >= 0.0 &&
       o.fabric_albedo[2] >= 0.0)
@@ -115,6 +115,7 @@ Rgb<double> BounceRadiance(const Scene& scene, const std::vector<Light>& lights,
     next = next * (1.0 / double(o.hit_samples));  // E_next / pi (cosine-weighted estimate)
   }
   if (env) e += env(nq) * ao_q;
+  if (unit) *unit = e + next;  // the radiance per unit albedo
   return kd * (e + next);
 }
 
@@ -171,7 +172,7 @@ VisibilityTerms ComputeVisibility(const Scene& scene, const EmbreeScene& bvh,
   const CosineSet dirs(n, o.samples, rng);
   const double tfar = TFar(o);
   double open = 0.0, all = 0.0;
-  Rgb<double> sum(0.0, 0.0, 0.0);
+  Rgb<double> sum(0.0, 0.0, 0.0), fabric(0.0, 0.0, 0.0);
   for (int j = 0; j < o.samples; ++j) {
     const Vec3d l = dirs[j];
     const double w = AoWeight(o, env_radiance, l);
@@ -196,11 +197,16 @@ VisibilityTerms ComputeVisibility(const Scene& scene, const EmbreeScene& bvh,
     if (Dot(nq, wo) < 0.0) nq = nq * -1.0;
     const Vec3d gq = V(h.ng);
     const Vec3d q = V(a.position) + gq * (Dot(gq, wo) > 0.0 ? eps : -eps);
+    Rgb<double> unit(0.0, 0.0, 0.0);
     sum += BounceRadiance(scene, lights ? *lights : scene.lights, bvh, o, env, env_radiance, mesh, q,
-                          nq, rng, 0, eps);
+                          nq, rng, 0, eps, &unit);
+    if (mesh.is_fabric && o.bounces == 1) fabric += unit;
   }
   t.ao = Ratio(open, all);
-  if (o.indirect) t.indirect_over_pi = sum * (1.0 / double(o.samples));
+  if (o.indirect) {
+    t.indirect_over_pi = sum * (1.0 / double(o.samples));
+    t.fabric_unit = fabric * (1.0 / double(o.samples));
+  }
   return t;
 }
 
@@ -217,9 +223,13 @@ VisibilityTerms UvVisibilityMap::Sample(double u, double v) const {
                        size_t(j1) * size_t(size) + size_t(i0), size_t(j1) * size_t(size) + size_t(i1)};
   const double w[4] = {(1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b};
   t.ao = 0.0;
+  const bool unit = !indirect_unit.empty();
   for (int k = 0; k < 4; ++k) {
     t.ao += w[k] * double(ao[q[k]]);
-    for (int c = 0; c < 3; ++c) t.indirect_over_pi[c] += w[k] * double(indirect[q[k] * 3 + size_t(c)]);
+    for (int c = 0; c < 3; ++c) {
+      t.indirect_over_pi[c] += w[k] * double(indirect[q[k] * 3 + size_t(c)]);
+      if (unit) t.fabric_unit[c] += w[k] * double(indirect_unit[q[k] * 3 + size_t(c)]);
+    }
   }
   return t;
 }
@@ -284,6 +294,7 @@ UvVisibilityMap BakeUvVisibility(const Scene& scene, const EmbreeScene& bvh,
   }
   map.ao.assign(texels, 1.f);
   map.indirect.assign(texels * 3, 0.f);
+  if (o.indirect && o.bounces == 1) map.indirect_unit.assign(texels * 3, 0.f);
   auto v3 = [](const std::array<float, 3>& q) { return Vec3d(q[0], q[1], q[2]); };
   tbb::parallel_for(0, N, [&](int j) {
     for (int i = 0; i < N; ++i) {
@@ -304,6 +315,8 @@ UvVisibilityMap BakeUvVisibility(const Scene& scene, const EmbreeScene& bvh,
                                                   env_radiance, lights);
       map.ao[t] = float(v.ao);
       for (int c = 0; c < 3; ++c) map.indirect[t * 3 + size_t(c)] = float(v.indirect_over_pi[c]);
+      if (!map.indirect_unit.empty())
+        for (int c = 0; c < 3; ++c) map.indirect_unit[t * 3 + size_t(c)] = float(v.fabric_unit[c]);
     }
   });
   // Fill the uncovered texels outwards from the covered ones (mean of covered 4-neighbours).
@@ -317,7 +330,7 @@ UvVisibilityMap BakeUvVisibility(const Scene& scene, const EmbreeScene& bvh,
       for (int i = 0; i < N; ++i) {
         const size_t t = size_t(j) * size_t(N) + size_t(i);
         if (done[t]) continue;
-        double ao_sum = 0.0, e[3] = {0, 0, 0};
+        double ao_sum = 0.0, e[3] = {0, 0, 0}, eu[3] = {0, 0, 0};
         int n = 0;
         const int di[4] = {-1, 1, 0, 0}, dj[4] = {0, 0, -1, 1};
         for (int k = 0; k < 4; ++k) {
@@ -327,11 +340,15 @@ UvVisibilityMap BakeUvVisibility(const Scene& scene, const EmbreeScene& bvh,
           if (!done[q]) continue;
           ao_sum += double(map.ao[q]);
           for (int ch = 0; ch < 3; ++ch) e[ch] += double(map.indirect[q * 3 + size_t(ch)]);
+          if (!map.indirect_unit.empty())
+            for (int ch = 0; ch < 3; ++ch) eu[ch] += double(map.indirect_unit[q * 3 + size_t(ch)]);
           ++n;
         }
         if (n == 0) continue;
         map.ao[t] = float(ao_sum / n);
         for (int ch = 0; ch < 3; ++ch) map.indirect[t * 3 + size_t(ch)] = float(e[ch] / n);
+        if (!map.indirect_unit.empty())
+          for (int ch = 0; ch < 3; ++ch) map.indirect_unit[t * 3 + size_t(ch)] = float(eu[ch] / n);
         next[t] = 1;
         any = true;
       }

@@ -77,6 +77,10 @@ struct VisibilityOptions {
 struct VisibilityTerms {
   double ao = 1.0;
   Rgb<double> indirect_over_pi{0.0, 0.0, 0.0};
+  // The part of indirect_over_pi that bounced off fabric points, per unit fabric albedo: with
+  // one bounce L_o at a fabric point is linear in its albedo kd, so indirect_over_pi =
+  // (the rest) + kd x fabric_unit exactly. Zero when bounces > 1 (not linear).
+  Rgb<double> fabric_unit{0.0, 0.0, 0.0};
 };
 
 // The visibility terms of one fabric mesh baked over its TEXCOORD_0 (VisibilityOptions::uv_size):
@@ -91,6 +95,7 @@ struct UvVisibilityMap {
   std::array<double, 2> uv_min{0.0, 0.0}, uv_max{1.0, 1.0};
   std::vector<float> ao;        // size x size, row-major (j * size + i)
   std::vector<float> indirect;  // size x size x 3: E_ind / pi, linear RGB
+  std::vector<float> indirect_unit;  // size x size x 3: VisibilityTerms::fabric_unit (bounces 1)
   size_t covered = 0;           // texels a triangle covers
   // Bilinear, clamped to the edge texels, as a GPU samples it with LinearFilter and
   // ClampToEdgeWrapping (texel centres at (i + 0.5) / size).
