@@ -859,6 +859,7 @@ int RunFit(const FitArgs& a, const Globals& g) {
   fit::FitOptions o = MakeFitOptions(a, StartPreset(a));
   // woven: one start (roughness 0.6) unless --starts asks for more: measured, the second
   // start (0.9) changed no fabric's block RMSE beyond 0.0002 (docs/fitting.md, "Fit speed").
+  // Since session 13 the cloth-basin start runs besides it (fit/woven_fit.h; --no-cloth-basin).
   if (o.start.model == render::ModelKind::kWoven && a.starts.empty() && a.start_values.empty())
     o.start_roughness = {0.6};
   if (o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && a.weave_maps != "none") {
