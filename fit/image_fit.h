@@ -92,6 +92,9 @@ struct FitOptions {
   double function_tolerance = 1e-7;
   bool verbose = false;
   bool init_from_reference = true;  // start colours from the reference's mean colour
+  // woven only (fit/woven_fit.h FitWovenImages): also fit from the cloth basin (yarn lobes off,
+  // broad sheen) and keep the better result; false = the session-5 stages alone.
+  bool cloth_basin_start = true;
   // Jacobian: a channel-separable colour block takes one derivative slot instead of three
   // (fit/image_fit.cpp, kJetWidths; docs/fitting.md "Fit speed"). Same Jacobian up to
   // rounding; false only to compare.
@@ -185,6 +188,14 @@ struct FitResult {
   std::vector<SceneError> scenes;
   double rmse = 0.0;          // over all blocks of all scenes, fit space, unweighted
   std::string solver_report;  // Ceres BriefReport of the winning start
+  // woven (fit/woven_fit.h FitWovenImages): each path's RMSE, iterations and fit seconds (setup
+  // excluded), in the order run: "two-stage", "cloth-basin", "cloth-basin+two-stage".
+  struct Candidate {
+    std::string name;
+    double rmse = 0.0, seconds = 0.0;
+    int iterations = 0;
+  };
+  std::vector<Candidate> candidates;
 };
 
 // Block size from the weave scale: the smallest level whose block spans at least two weave

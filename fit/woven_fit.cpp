@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <string>
 
 #include "render/reference/fabric.h"
@@ -59,16 +60,19 @@ std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& m
   return line;
 }
 
-FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options) {
-  if (options.start.model != render::ModelKind::kWoven)
-    throw FitError("FitWovenImages: the start preset is not a woven preset");
-  // Both stages fit over the same caches, blocks and targets: built once.
-  const auto prepared = PrepareScenes(inputs, options);
+namespace {
+
+bool Has(const std::vector<std::string>& v, const char* name) {
+  return std::find(v.begin(), v.end(), name) != v.end();
+}
+
+// The two stages (yarn, then sheen) from `options` (its start preset and start roughness
+// values), over `prepared`; seconds and setup_seconds exclude the preparation.
+FitResult FitTwoStages(const std::vector<SceneInput>& inputs, const FitOptions& options,
+                       const PreparedScenes* prepared) {
   FitOptions yarn = options;
   yarn.locked = Union(options.locked, {"anisotropy", "twist", "sheen_color", "sheen_roughness"});
-  FitResult r1 = FitImages(inputs, yarn, prepared.get());
-  r1.setup_seconds += PreparedSeconds(*prepared);
-  r1.seconds += PreparedSeconds(*prepared);
+  FitResult r1 = FitImages(inputs, yarn, prepared);
   if (!r1.usable) return r1;
 
   FitOptions sheen = options;
@@ -80,7 +84,7 @@ FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions
     sheen.start.values[size_t(off + c)] = std::max(sheen.start.values[size_t(off + c)], 0.02);
   sheen.locked = Union(options.locked, {"roughness", "anisotropy", "twist", "warp_share",
                                         "specular_f0", "forward_scattering"});
-  FitResult r2 = FitImages(inputs, sheen, prepared.get());
+  FitResult r2 = FitImages(inputs, sheen, prepared);
   const double seconds = r1.seconds + r2.seconds, setup = r1.setup_seconds + r2.setup_seconds;
   const int iterations = r1.iterations + r2.iterations, starts = r1.starts + r2.starts;
   FitResult best = (r2.usable && r2.rmse < r1.rmse) ? std::move(r2) : std::move(r1);
@@ -88,6 +92,80 @@ FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions
   best.setup_seconds = setup;
   best.iterations = iterations;
   best.starts = starts;
+  return best;
+}
+
+FitResult::Candidate CandidateOf(const std::string& name, const FitResult& r) {
+  return {name, r.usable ? r.rmse : std::numeric_limits<double>::quiet_NaN(),
+          r.seconds - r.setup_seconds, r.iterations};
+}
+
+// Makes `r` the result when it is usable with a lower RMSE than `into`; the costs (seconds,
+// iterations, starts) and the candidate lists add up either way.
+void TakeBetter(FitResult&& r, FitResult& into) {
+  const double seconds = into.seconds + r.seconds, setup = into.setup_seconds + r.setup_seconds;
+  const int iterations = into.iterations + r.iterations, starts = into.starts + r.starts;
+  std::vector<FitResult::Candidate> candidates = into.candidates;
+  candidates.insert(candidates.end(), r.candidates.begin(), r.candidates.end());
+  if (r.usable && (!into.usable || r.rmse < into.rmse)) into = std::move(r);
+  into.seconds = seconds;
+  into.setup_seconds = setup;
+  into.iterations = iterations;
+  into.starts = starts;
+  into.candidates = std::move(candidates);
+}
+
+}  // namespace
+
+bool UsesClothBasinStart(const FitOptions& options) {
+  return options.cloth_basin_start && options.init_from_reference &&
+         options.start.model == render::ModelKind::kWoven &&
+         !Has(options.locked, "sheen_color") && !Has(options.locked, "sheen_roughness") &&
+         !Has(options.locked, "specular_color");
+}
+
+FitOptions ClothBasinOptions(const FitOptions& options) {
+  FitOptions c = options;
+  const int off = c.start.Offset("specular_color");
+  for (int k = 0; k < 3; ++k) c.start.values[size_t(off + k)] = 0.0;  // yarn lobes off
+  c.locked = Union(options.locked, {"specular_color", "roughness", "anisotropy", "twist",
+                                    "warp_share", "specular_f0", "forward_scattering"});
+  c.init_from_reference = true;  // base from the reference, sheen colour 0.5: cloth's start
+  c.start_roughness = {kClothBasinSheenRoughness};  // the sheen roughness (roughness is locked)
+  return c;
+}
+
+FitOptions FromClothBasin(const FitOptions& options, const render::MaterialPreset& basin) {
+  FitOptions from = options;
+  from.start = basin;
+  const int off = from.start.Offset("specular_color");
+  for (int k = 0; k < 3; ++k)  // the yarn lobes back on at the start preset's colour
+    from.start.values[size_t(off + k)] = options.start.values[size_t(off + k)];
+  from.init_from_reference = false;
+  from.start_roughness = {0.0};  // unused without init_from_reference: one start
+  return from;
+}
+
+FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options) {
+  if (options.start.model != render::ModelKind::kWoven)
+    throw FitError("FitWovenImages: the start preset is not a woven preset");
+  // Every path fits over the same caches, blocks and targets: built once.
+  const auto prepared = PrepareScenes(inputs, options);
+  FitResult best = FitTwoStages(inputs, options, prepared.get());
+  best.candidates = {CandidateOf("two-stage", best)};
+  if (UsesClothBasinStart(options)) {
+    // The cloth basin (woven_fit.h; docs/fitting.md "Woven's starts (session 13)").
+    FitResult basin = FitImages(inputs, ClothBasinOptions(options), prepared.get());
+    basin.candidates = {CandidateOf("cloth-basin", basin)};
+    if (basin.usable && (!best.usable || basin.rmse <= kClothBasinContinueRatio * best.rmse)) {
+      FitResult nested = FitTwoStages(inputs, FromClothBasin(options, basin.preset), prepared.get());
+      nested.candidates = {CandidateOf("cloth-basin+two-stage", nested)};
+      TakeBetter(std::move(nested), basin);
+    }
+    TakeBetter(std::move(basin), best);
+  }
+  best.setup_seconds += PreparedSeconds(*prepared);
+  best.seconds += PreparedSeconds(*prepared);
   return best;
 }
 

@@ -13,7 +13,8 @@
 //      optimum with the sheen at a small value).
 // Parameters the caller locks stay locked in both stages. Each stage carries 6 derivative
 // slots with colour packing (fit/image_fit.h); both use one PrepareScenes (caches, blocks);
-// the stages run once per options.start_roughness value (clothfit fit: one, 0.6).
+// stage 1 multi-starts over options.start_roughness (clothfit fit: one, 0.6). Then the
+// cloth-basin start below (session 13) runs the stages again from cloth's basin.
 //
 // Weave maps (fit/weave_maps.h): AttachWeaveMaps bakes them for an Irawan fabric BEFORE the
 // stages, writes the EXR and names it in the start preset's "weave_maps" field; FitImages
@@ -37,6 +38,32 @@ std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& m
                             FitOptions* options, const WeaveBakeOptions& bake = {});
 
 FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options);
+
+// The cloth-basin start (session 13; docs/fitting.md "Woven's starts (session 13)"). Woven
+// with specular_color = 0 has the cloth model's form (Lambert + Charlie sheen; woven scales
+// the diffuse by the sheen albedo and Filament cloth does not, so the two agree exactly when
+// the base colour is 0; the previews' IBL engines may differ too), and the yarn-first stages
+// above start with the sheen off, so they can miss the sheen-dominated basin cloth finds.
+// So, besides the two stages, FitWovenImages
+//   (a) fits that sub-model: yarn lobes off and locked; free = base_color, sheen_color,
+//       sheen_roughness; started as a cloth fit starts (base colour from the reference, sheen
+//       colour 0.5) with the sheen broad, sheen_roughness = kClothBasinSheenRoughness (the
+//       cloth preset's default roughness, the Filament cloth default);
+//   (b) when (a)'s RMSE is within kClothBasinContinueRatio of the two stages' (the sheen-only
+//       form explains the images about as well as the yarn-first fit; where it is several
+//       times worse the images are yarn-dominated), runs the two stages again from (a)'s
+//       result: the yarn stage with (a)'s sheen held and the yarn lobes back at the start
+//       preset's values, then the sheen stage,
+// and returns the candidate with the lowest fit-space RMSE ((a) included). Runs when
+// UsesClothBasinStart: FitOptions::cloth_basin_start, the start comes from the reference (not
+// explicit --start values), and no colour or sheen parameter is locked.
+inline constexpr double kClothBasinSheenRoughness = 1.0;
+inline constexpr double kClothBasinContinueRatio = 2.0;
+bool UsesClothBasinStart(const FitOptions& options);
+// The options of step (a) for a woven fit's `options`.
+FitOptions ClothBasinOptions(const FitOptions& options);
+// The options of step (b): `options` started from (a)'s fitted preset `basin`.
+FitOptions FromClothBasin(const FitOptions& options, const render::MaterialPreset& basin);
 
 // The per-model defaults every image fit shares (clothfit fit, bench fit): metalness /
 // metallic locked for the three.js and glTF baselines (fabrics are dielectric); physical-aniso

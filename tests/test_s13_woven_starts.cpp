@@ -1,0 +1,136 @@
+// Session 13: woven's cloth-basin start (fit/woven_fit.h, docs/fitting.md "Woven's starts
+// (session 13)"): the options of the extra start, when it runs, and a synthetic fit whose
+// truth lies in cloth's basin (yarn lobes off, broad sheen) and which the default woven fit
+// must therefore recover.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <string>
+
+#include "fit/image_fit.h"
+#include "fit/woven_fit.h"
+#include "render/preview/preview.h"
+#include "tests/scene_fixtures.h"
+
+namespace clothfit::fit {
+namespace {
+using render::ModelKind;
+
+bool Locked(const FitOptions& o, const std::string& name) {
+  return std::find(o.locked.begin(), o.locked.end(), name) != o.locked.end();
+}
+
+FitOptions WovenDefaults() {
+  FitOptions o;
+  o.start = render::DefaultPreset(ModelKind::kWoven);
+  o.start_roughness = {0.6};  // clothfit fit's woven default
+  return o;
+}
+
+TEST(S13WovenStarts, ClothBasinStartHasTheYarnLobesOffAndABroadSheen) {
+  const FitOptions o = WovenDefaults();
+  ASSERT_TRUE(UsesClothBasinStart(o));
+  const FitOptions c = ClothBasinOptions(o);
+  const int spec = c.start.Offset("specular_color");
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(c.start.values[size_t(spec + k)], 0.0);
+  for (const char* n : {"specular_color", "roughness", "anisotropy", "twist", "warp_share",
+                        "specular_f0", "forward_scattering"})
+    EXPECT_TRUE(Locked(c, n)) << n;
+  for (const char* n : {"base_color", "sheen_color", "sheen_roughness"})
+    EXPECT_FALSE(Locked(c, n)) << n;
+  EXPECT_TRUE(c.init_from_reference);
+  ASSERT_EQ(c.start_roughness.size(), 1u);
+  EXPECT_EQ(c.start_roughness[0], kClothBasinSheenRoughness);
+  EXPECT_EQ(kClothBasinSheenRoughness, 1.0);  // the cloth preset's default (sheen) roughness
+  EXPECT_EQ(render::DefaultPreset(ModelKind::kCloth).values[size_t(
+                render::DefaultPreset(ModelKind::kCloth).Offset("roughness"))],
+            kClothBasinSheenRoughness);
+
+  // (b) starts from the basin's preset with the yarn colour back at the start preset's.
+  render::MaterialPreset basin = c.start;
+  basin.values[size_t(basin.Offset("sheen_roughness"))] = 0.93;
+  const FitOptions from = FromClothBasin(o, basin);
+  for (int k = 0; k < 3; ++k)
+    EXPECT_EQ(from.start.values[size_t(spec + k)], o.start.values[size_t(spec + k)]);
+  EXPECT_EQ(from.start.values[size_t(from.start.Offset("sheen_roughness"))], 0.93);
+  EXPECT_FALSE(from.init_from_reference);
+}
+
+TEST(S13WovenStarts, ClothBasinStartRunsOnlyForReferenceStartsWithTheSheenFree) {
+  FitOptions o = WovenDefaults();
+  o.cloth_basin_start = false;
+  EXPECT_FALSE(UsesClothBasinStart(o));
+  o = WovenDefaults();
+  o.init_from_reference = false;  // clothfit fit --start: exactly the given values
+  EXPECT_FALSE(UsesClothBasinStart(o));
+  for (const char* n : {"sheen_color", "sheen_roughness", "specular_color"}) {
+    o = WovenDefaults();
+    o.locked = {n};
+    EXPECT_FALSE(UsesClothBasinStart(o)) << n;
+  }
+  o = WovenDefaults();
+  o.start = render::DefaultPreset(ModelKind::kCloth);
+  EXPECT_FALSE(UsesClothBasinStart(o));
+}
+
+// A woven reference in cloth's basin: no yarn specular, dark base, a broad sheen lit from
+// behind (the velvet situation). The default fit must reach it (RMSE ~0) and report the paths
+// it ran; the answer is at least as good as every path's.
+TEST(S13WovenStarts, SyntheticSheenDominatedReferenceIsRecovered) {
+  render::Scene s = render::CameraScene(32, 32, {0, 0, 3}, {0, 0, -1}, 0.4);
+  s.meshes.push_back(render::SphereMesh(0.5, 64, 32, true, 0.f));
+  render::Light key, rim;
+  key.type = rim.type = render::Light::Type::kDirectional;
+  key.intensity = 2.5;
+  key.direction = {0.4, -0.5, -0.768};
+  rim.intensity = 3.0;
+  rim.direction = {-0.6, 0.2, 0.77};  // from behind: grazing sheen
+  s.lights = {key, rim};
+  s.card.tone_mapping = "ACESFilmic";
+  const render::Environment env = render::Environment::ProceduralSky(1.0, 0.7);
+
+  render::MaterialPreset truth = render::DefaultPreset(ModelKind::kWoven);
+  auto set = [&](const char* name, std::initializer_list<double> v) {
+    int off = truth.Offset(name), k = 0;
+    for (double x : v) truth.values[size_t(off + k++)] = x;
+  };
+  set("base_color", {0.02, 0.015, 0.012});
+  set("specular_color", {0.0, 0.0, 0.0});
+  set("sheen_color", {0.35, 0.3, 0.28});
+  set("sheen_roughness", {1.0});
+  render::PreviewOptions po;
+  po.model = ModelKind::kWoven;
+  auto cache = render::PreviewCache::Build(s, &env, po);
+  std::vector<Rgb<double>> px;
+  render::EvaluatePreview(*cache, truth.values.data(), px);
+  Reference ref;
+  ref.path = "synthetic";
+  ref.width = s.card.width;
+  ref.height = s.card.height;
+  ref.rgb = render::ComposeFrame(*cache, px);
+  ref.std_error.assign(ref.rgb.size(), 0.f);
+  ref.fabric = cache->fabric_mask;
+
+  FitOptions o = WovenDefaults();
+  o.level = 0;
+  o.loss = Loss::kNone;
+  const std::vector<SceneInput> in = {{&s, &env, &ref, nullptr, "test"}};
+  const FitResult r = FitWovenImages(in, o);
+  ASSERT_TRUE(r.usable) << r.message;
+  ASSERT_GE(r.candidates.size(), 2u);
+  EXPECT_EQ(r.candidates[0].name, "two-stage");
+  EXPECT_EQ(r.candidates[1].name, "cloth-basin");
+  for (const auto& c : r.candidates) EXPECT_LE(r.rmse, c.rmse) << c.name;
+  EXPECT_LT(r.rmse, 2e-3);
+
+  o.cloth_basin_start = false;  // the session-5 stages alone
+  const FitResult old = FitWovenImages(in, o);
+  ASSERT_TRUE(old.usable);
+  ASSERT_EQ(old.candidates.size(), 1u);
+  EXPECT_LE(r.rmse, old.rmse);
+  std::printf("synthetic cloth-basin truth: default rmse %.6f, two-stage alone %.6f\n", r.rmse,
+              old.rmse);
+}
+
+}  // namespace
+}  // namespace clothfit::fit
