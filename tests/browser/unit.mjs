@@ -87,7 +87,7 @@ check(() => assert.notEqual(wf.customProgramCacheKey(), loadClothfitPreset(wp({ 
 check(() => assert.equal(loadClothfitPreset(wp({ ibl: 'split' })).customProgramCacheKey(), wd.customProgramCacheKey()), 'explicit split = the default program');
 {
   // The defines the shader sees (onBeforeCompile on a stand-in of three.js r187's shader).
-  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n';
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
   const vsrc = 'void main() {\n#include <project_vertex>\n}';
   const compiled = (m) => { const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: vsrc }; m.onBeforeCompile(sh); return sh.fragmentShader; };
   const ff = compiled(wf), fd = compiled(wd);
@@ -118,7 +118,7 @@ check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps:
   const yl = wl.yarnLobe;
   check(() => assert.ok(yl && yl.groups.length === 2 && yl.nodes === 16 && yl.ibl.summary.length === 2 * 16 * 32 * 5), 'yarn lobe loaded');
   check(() => assert.equal(wl.customProgramCacheKey(), 'woven:additive:uniform:split:yarn-lobe2x16/16x32'), 'yarn lobe: its own program');
-  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n';
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
   const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: 'void main() {\n#include <project_vertex>\n}' };
   wl.onBeforeCompile(sh);
   check(() => assert.ok(['WOVEN_YARN_LOBE\n', 'WOVEN_YL_GROUPS 2\n', 'WOVEN_YL_NODES 16\n', 'WOVEN_YL_N_THETA 16\n', 'WOVEN_YL_N_PHI 32\n'].every((d) => sh.fragmentShader.includes(`#define ${d}`))), 'yarn lobe defines');
