@@ -16,7 +16,7 @@
 // bent-normal IBL + 5 woven with the far-field yarn lobe) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
 // 9 of the materials under blender-city with its sun split off as a directional light, plus (s13-lm)
-// 8 cases on the drape with the card's baked light map (env "studio-lightmap*", below). The page posts
+// 11 cases on the drape with the card's baked light map (env "studio-lightmap*", below). The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
 // Metric: 8-bit sRGB (tone-mapped as the card says), over the fabric pixels the browser draws,
@@ -198,8 +198,14 @@ const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-shee
 // map), draws its frame with it and writes the texture (--light-map-out); the page draws the same
 // texture as material.lightMap (web/clothfit.js applyLightMap). No shadows on either side. The
 // drape only (the other cards' fabric sees little of the rest of the scene), studio environment.
+// cloth-subsurface (the wrap) and woven-tinted (the albedo-scaled yarn layer): IBL diffuse weights
+// far from Lambert c, so a light map that went through three.js's stock path (Lambert
+// RE_IndirectDiffuse) instead of the model's IBL diffuse weight fails them (measured: 4.52 / 25
+// and 0.47 / 3; the other presets' weights are within a few % of c); woven-lobe-maps-canvas: the
+// lobe with weave maps and the light map in one program.
 const LIGHT_MAP_ENVS = {
-  'studio-lightmap': { light_map: { size: 128 }, materials: ['standard-grey', 'physical-sheen', 'cloth-filament', 'woven', 'woven-lobe-canvas', 'woven-lobe-twill', 'physical-aniso'] },
+  'studio-lightmap': { light_map: { size: 128 }, materials: ['standard-grey', 'physical-sheen', 'cloth-filament', 'woven', 'woven-lobe-canvas', 'woven-lobe-twill', 'physical-aniso',
+    'cloth-subsurface', 'woven-tinted', 'woven-lobe-maps-canvas'] },
   'studio-lightmap64': { light_map: { size: 64 }, materials: ['woven'] },
 };
 const LIGHT_MAP_SCENES = ['drape'];
