@@ -10,6 +10,7 @@
 //   --frames N: also time N more frames per case in the browser (mean ms per frame, each ended
 //   by a 1-pixel readPixels; SwiftShader runs on the CPU, so only ratios between cases mean
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
+//   A light-map case reports "with (without)": the same material timed without its light map too.
 //
 // Cases: each canonical scene (datasets/scenes/*.json) x 30 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
