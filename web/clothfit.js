@@ -180,6 +180,10 @@ void RE_IndirectSpecular_Cloth( const in vec3 radiance, const in vec3 iblIrradia
 		diffuse *= clothWrap( NoV, clothSubsurfaceIntensity ) * saturate( clothSubsurfaceColor + vec3( NoV ) );
 	#endif
 	reflectedLight.indirectDiffuse += diffuse * iblIrradiance * RECIPROCAL_PI;
+	#ifdef USE_LIGHTMAP
+		// The card's light map (applyLightMap): E_ind joins E_d under the IBL diffuse weight.
+		reflectedLight.indirectDiffuse += diffuse * clothfitLightMapIrradiance * RECIPROCAL_PI;
+	#endif
 }
 
 #undef RE_Direct
@@ -222,6 +226,25 @@ function injectPhysicalChunks(shader, who, prefix, pars, setup) {
   if (!fs.includes(parsChunk) || !fs.includes(setupChunk)) throw new Error(`${who}: unexpected three.js fragment shader (needs r187 chunks)`);
   shader.fragmentShader = prefix +
     fs.replace(parsChunk, parsChunk + '\n' + pars).replace(setupChunk, setupChunk + '\n' + setup);
+}
+
+// The light map (material.lightMap, applyLightMap) in MeshClothMaterial and MeshWovenMaterial.
+// three.js r187 adds the texel to `irradiance` (lights_fragment_maps), which reaches only
+// RE_IndirectDiffuse; these materials' RE_IndirectDiffuse is a plain Lambert for ambient lights,
+// while their IBL diffuse (in RE_IndirectSpecular) has the model's own weight (cloth: c (1 - E)
+// [wrap]; woven: c kd s y). The C++ preview adds E_ind / pi to E_d under that weight, so here the
+// texel goes to the global clothfitLightMapIrradiance instead, which RE_IndirectSpecular_Cloth /
+// _Woven add to their E_d. Everything is inside #ifdef USE_LIGHTMAP: without a light map the
+// program is the one compiled before. Call after injectPhysicalChunks.
+function routeLightMapToIblDiffuse(shader, who) {
+  const fs = shader.fragmentShader;
+  const parsChunk = '#include <lights_physical_pars_fragment>', mapsChunk = '#include <lights_fragment_maps>';
+  const add = 'irradiance += lightMapIrradiance;';
+  const maps = THREE.ShaderChunk.lights_fragment_maps;
+  if (!fs.includes(parsChunk) || !fs.includes(mapsChunk) || maps.split(add).length !== 2) throw new Error(`${who}: unexpected three.js lights_fragment_maps (the light-map routing needs r187's)`);
+  shader.fragmentShader = fs
+    .replace(parsChunk, '#ifdef USE_LIGHTMAP\nvec3 clothfitLightMapIrradiance = vec3( 0.0 );\n#endif\n' + parsChunk)
+    .replace(mapsChunk, maps.replace(add, 'clothfitLightMapIrradiance += lightMapIrradiance;'));
 }
 
 /**
@@ -291,6 +314,7 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
     if (this.geometryRoughness) defs.push('#define CLOTH_GEOMETRY_ROUGHNESS');
     defs.push(`#define CLOTH_MIN_ROUGHNESS ${clothMinRoughness(this.variant, this.platform).toFixed(6)}`);
     injectPhysicalChunks(shader, 'MeshClothMaterial', defs.join('\n') + '\n', CLOTH_PARS, CLOTH_ROUGHNESS);
+    routeLightMapToIblDiffuse(shader, 'MeshClothMaterial');
   }
 
   customProgramCacheKey() {
@@ -1143,6 +1167,10 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 	#else
 		vec3 wovenEd = iblIrradiance * RECIPROCAL_PI;
 	#endif
+	#ifdef USE_LIGHTMAP
+		// The card's light map (applyLightMap): E_d + E_ind / pi under the IBL diffuse weight.
+		wovenEd += clothfitLightMapIrradiance * RECIPROCAL_PI;
+	#endif
 	reflectedLight.indirectDiffuse += material.diffuseColor * ws.kd * ( s * wovenYarnScaling( NoV, rE ) ) * wovenEd;
 }
 
@@ -1295,6 +1323,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
         `#define WOVEN_YL_N_THETA ${yl.nTheta}`, `#define WOVEN_YL_N_PHI ${yl.nPhi}`);
     }
     injectPhysicalChunks(shader, 'MeshWovenMaterial', defs.join('\n') + '\nuniform float wovenRE;\n', WOVEN_PARS, WOVEN_ROUGHNESS);
+    routeLightMapToIblDiffuse(shader, 'MeshWovenMaterial');
     const vs = shader.vertexShader;
     if (!vs.includes('void main() {') || !vs.includes('#include <project_vertex>')) throw new Error('MeshWovenMaterial: unexpected three.js vertex shader');
     shader.vertexShader = (this.weaveMaps ? '#define WOVEN_WEAVE_MAPS\n' : '') + vs.replace('void main() {', WOVEN_VERTEX_PARS + 'void main() {')
@@ -1585,6 +1614,91 @@ export async function fetchWeaveMaps(preset, presetUrl, options = {}) {
   if (!r.ok) throw new Error(`weave_maps.${hasUri ? 'uri' : 'file'}: ${url}: HTTP ${r.status}`);
   const maxAnisotropy = options.maxAnisotropy ?? options.renderer?.capabilities?.getMaxAnisotropy?.() ?? Infinity;
   return weaveMapsFromExr(await r.arrayBuffer(), { field, name: hasUri ? field.uri : field.file, halfFloat: options.halfFloat, maxAnisotropy });
+}
+
+// ---------------------------------------------------------------------------------------------
+// The scene card's light map (session 13; docs/web.md "The light map"). A card with
+// "visibility": {"light_map": ...} makes `clothfit render-preview --light-map-out F.exr` bake the
+// fabric mesh's one-bounce indirect irradiance over its TEXCOORD_0 (render/preview/visibility.h):
+// RGB = irradiance E (linear Rec.709, the lights' units; three.js lightMapIntensity 1), size x
+// size texels, metadata clothfit:uv_box "u0 v0 u1 v1": texel (i, j) sits at uv = uv0 +
+// (i + 0.5, j + 0.5) / size x (uv1 - uv0), row j = 0 is the FIRST row of the file and is v = v0.
+// Drawn here as three.js draws material.lightMap: a float RGBA DataTexture (flipY false, so data
+// row 0 is texture t = 0 = glTF v0, as GLTFLoader does not flip uv), LinearFilter, no mipmaps,
+// ClampToEdge, NoColorSpace (linear), uv channel 0 with offset = -uv0 / (uv1 - uv0) and repeat =
+// 1 / (uv1 - uv0). Fabric material only: the preview gives non-fabric meshes no light map.
+
+/** The clothfit:uv_box of a light-map EXR ("u0 v0 u1 v1", or 4 numbers): [u0, v0, u1, v1]. */
+export function lightMapUvBox(box, name = 'light map') {
+  const v = typeof box === 'string' ? box.trim().split(/\s+/).map(Number) : Array.isArray(box) ? box.map(Number) : [];
+  if (v.length !== 4 || !v.every(Number.isFinite) || !(v[2] > v[0]) || !(v[3] > v[1])) {
+    throw new Error(`${name}: clothfit:uv_box: expected "u0 v0 u1 v1" with u1 > u0 and v1 > v0, got ${JSON.stringify(box)?.slice(0, 80)}`);
+  }
+  return v;
+}
+
+/**
+ * A light-map texture from a parsed EXR (web/exr.js parseExr) or its bytes (ArrayBuffer / typed
+ * array). meta: {name (in errors), uvBox (overrides the file's clothfit:uv_box), halfFloat}.
+ * Returns a THREE.DataTexture (RGBA, A = 1) with the conventions above; texture.userData.clothfit
+ * = {uvBox, size}.
+ */
+export function lightMapTextureFromExr(exr, meta = {}) {
+  const name = meta.name ?? 'light map';
+  const img = exr && exr.channels ? exr : parseExr(exr, name);
+  const { width: w, height: h } = img;
+  for (const c of ['R', 'G', 'B']) if (!img.channels[c]) throw new Error(`${name}: light map: no channel ${c}`);
+  const uvBox = lightMapUvBox(meta.uvBox ?? img.attributes?.['clothfit:uv_box'], name);
+  const data = new Float32Array(w * h * 4);
+  for (let t = 0; t < w * h; ++t) {
+    for (let k = 0; k < 3; ++k) {
+      const x = img.channels['RGB'[k]][t];
+      if (!Number.isFinite(x) || x < 0) throw new Error(`${name}: light map: texel ${t} channel ${'RGB'[k]} is negative or not finite (${x})`);
+      data[t * 4 + k] = x;
+    }
+    data[t * 4 + 3] = 1;
+  }
+  const type = meta.halfFloat ? THREE.HalfFloatType : THREE.FloatType;
+  const t = new THREE.DataTexture(meta.halfFloat ? Uint16Array.from(data, (x) => THREE.DataUtils.toHalfFloat(x)) : data, w, h, THREE.RGBAFormat, type);
+  t.flipY = false;                 // data row 0 (the file's first row) = t 0 = glTF v0
+  t.magFilter = THREE.LinearFilter;
+  t.minFilter = THREE.LinearFilter;
+  t.generateMipmaps = false;
+  t.wrapS = THREE.ClampToEdgeWrapping;
+  t.wrapT = THREE.ClampToEdgeWrapping;
+  t.colorSpace = THREE.NoColorSpace;  // linear irradiance
+  t.channel = 0;                   // TEXCOORD_0
+  const [u0, v0, u1, v1] = uvBox;
+  t.offset.set(-u0 / (u1 - u0), -v0 / (v1 - v0));
+  t.repeat.set(1 / (u1 - u0), 1 / (v1 - v0));
+  t.name = name;
+  t.userData.clothfit = { uvBox, width: w, height: h };
+  t.needsUpdate = true;
+  return t;
+}
+
+/**
+ * Sets the card's baked light map on a fabric material (any of loadClothfitPreset's: standard,
+ * physical-sheen / gltf-sheen / physical-aniso (three.js's own light-map path), MeshClothMaterial,
+ * MeshWovenMaterial (the light map joins their IBL diffuse, routeLightMapToIblDiffuse)).
+ * exrData: a parsed EXR, its bytes, a texture from lightMapTextureFromExr, or null (removes it).
+ * meta: as lightMapTextureFromExr, plus intensity (lightMapIntensity, default 1). Returns the
+ * texture (or null); the caller disposes it.
+ */
+export function applyLightMap(material, exrData, meta = {}) {
+  if (!material?.isMeshStandardMaterial) throw new Error('applyLightMap: expected a MeshStandardMaterial-based fabric material');
+  const texture = exrData == null ? null : exrData.isTexture ? exrData : lightMapTextureFromExr(exrData, meta);
+  if (Boolean(material.lightMap) !== Boolean(texture)) material.needsUpdate = true;  // USE_LIGHTMAP changes
+  material.lightMap = texture;
+  material.lightMapIntensity = meta.intensity ?? 1;
+  return texture;
+}
+
+/** Fetches a light-map EXR (url) and returns its texture (lightMapTextureFromExr). */
+export async function fetchLightMap(url, meta = {}) {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
+  return lightMapTextureFromExr(await r.arrayBuffer(), { name: String(url), ...meta });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -2163,14 +2277,15 @@ export async function loadSceneCard(url, options = {}) {
   }
   // Shadows: options.shadows (true / false / an object, shadowOptions) wins over the card's
   // "visibility": {"shadows": bool} (the block of session 13's C++ preview, docs/scene-card.md);
-  // web/ draws no light map, so visibility.light_map is only reported.
+  // the card's light map is a texture clothfit bakes (`render-preview --light-map-out`), which a
+  // page draws with applyLightMap: loading the card only reports it.
   let shadowSpec = options.shadows;
   if (shadowSpec === undefined && card.visibility !== undefined) {
     const v = card.visibility;
     if (typeof v !== 'object' || v === null || Array.isArray(v)) throw new Error(`${cardUrl}: visibility: expected an object {shadows, light_map}`);
     if (v.shadows !== undefined && typeof v.shadows !== 'boolean') throw new Error(`${cardUrl}: visibility.shadows: expected true or false, got ${JSON.stringify(v.shadows)}`);
     shadowSpec = v.shadows ?? false;
-    if (v.light_map) console.info(`${cardUrl}: visibility.light_map is not drawn by web/ (shadows only)`);
+    if (v.light_map) console.info(`${cardUrl}: visibility.light_map: draw the texture clothfit bakes (render-preview --light-map-out) with applyLightMap`);
   }
   if (shadowSpec) out.setShadows(shadowSpec);
   await Promise.all([clothDGTable(), wovenPhaseTable()]);

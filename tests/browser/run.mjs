@@ -4,13 +4,16 @@
 //
 //   node tests/browser/run.mjs --clothfit build/bin/clothfit [--work DIR] [--chromium PATH]
 //        [--table docs-table.md] [--only SUBSTRING] [--timeout SECONDS] [--frames N]
-//        [--diff-png] [--shadow-settings JSON]
+//        [--diff-png] [--shadow-settings JSON] [--lightmap-mutation no-uv-box|flip]
 //   --diff-png: also write <case>.diff.png (browser | C++ | |a - b| x 8) in the work dir.
 //   --shadow-settings JSON: the studio-shadows cases' three.js shadow settings (web/clothfit.js
 //   shadowOptions fields, over its defaults), for measuring other settings; default: the defaults.
+//   --lightmap-mutation: a deliberate error in how the page draws the light map (a check that the
+//   light-map cases can fail; never the default).
 //   --frames N: also time N more frames per case in the browser (mean ms per frame, each ended
 //   by a 1-pixel readPixels; SwiftShader runs on the CPU, so only ratios between cases mean
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
+//   A light-map case reports "with (without)": the same material timed without its light map too.
 //
 // Cases: each canonical scene (datasets/scenes/*.json) x 30 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
@@ -18,7 +21,10 @@
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
 // 9 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
 // drape and sphere x 3 materials under studio with three.js shadow maps against
-// `render-preview --shadows` (the */studio-shadows/* cases). The page posts
+// `render-preview --shadows` (the */studio-shadows/* cases), plus (s13-lm) 11 cases on the drape
+// with the card's baked light map (env "studio-lightmap*", below), plus (s13) the drape card as it
+// is, with its visibility block (shadows and light map: env "studio-card"). The other cases
+// drop the card's visibility block, so they compare the shading alone. The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
 // Metric: 8-bit sRGB (tone-mapped as the card says), over the fabric pixels the browser draws,
@@ -194,13 +200,34 @@ ENVS[SUN_ENV] = { path: HIGH, intensity: 0.8, rotation_y_degrees: 60, sun: 'auto
 const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-seed', 'cloth-filament', 'woven', 'woven-fis',
   'woven-lobe-canvas', 'woven-lobe-twill-shiny']);
 
+// s13-lm: the scene card's light map ("visibility": {"shadows": false, "light_map": {...}}; docs/web.md
+// "The light map"). `clothfit render-preview` bakes the fabric's one-bounce indirect irradiance over
+// its uv (bouncing off the fabric with the preset's own diffuse albedo, so each case has its own
+// map), draws its frame with it and writes the texture (--light-map-out); the page draws the same
+// texture as material.lightMap (web/clothfit.js applyLightMap). No shadows on either side. The
+// drape only (the other cards' fabric sees little of the rest of the scene), studio environment.
+// cloth-subsurface (the wrap) and woven-tinted (the albedo-scaled yarn layer): IBL diffuse weights
+// far from Lambert c, so a light map that went through three.js's stock path (Lambert
+// RE_IndirectDiffuse) instead of the model's IBL diffuse weight fails them (measured: 4.52 / 25
+// and 0.47 / 3; the other presets' weights are within a few % of c); woven-lobe-maps-canvas: the
+// lobe with weave maps and the light map in one program.
+const LIGHT_MAP_ENVS = {
+  'studio-lightmap': { light_map: { size: 128 }, materials: ['standard-grey', 'physical-sheen', 'cloth-filament', 'woven', 'woven-lobe-canvas', 'woven-lobe-twill', 'physical-aniso',
+    'cloth-subsurface', 'woven-tinted', 'woven-lobe-maps-canvas'] },
+  'studio-lightmap64': { light_map: { size: 64 }, materials: ['woven'] },
+};
+const LIGHT_MAP_SCENES = ['drape'];
+
 fs.mkdirSync(work, { recursive: true });
 for (const [name, p] of Object.entries(MATERIALS)) fs.writeFileSync(path.join(work, `${name}.json`), JSON.stringify(p, null, 1));
 const cases = [];
 for (const s of scenes) {
   const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
   for (const [env, spec] of Object.entries(ENVS)) {
-    const c = { ...card, gltf: path.join(sceneDir, card.gltf) };
+    // the shading alone: the card's visibility block (drape: shadows, light map) is dropped here
+    // and covered by the studio-shadows, studio-lightmap and studio-card cases below
+    const { visibility: _visibility, ...bare } = card;
+    const c = { ...bare, gltf: path.join(sceneDir, card.gltf) };
     if (spec) c.environment = spec;
     const cardPath = path.join(work, `${s}-${env}.card.json`);
     fs.writeFileSync(cardPath, JSON.stringify(c, null, 1));
@@ -222,7 +249,7 @@ const SHADOW_SCENES = ['drape', 'sphere'];
 const SHADOW_MATERIALS = ['standard-grey', 'cloth-filament', 'woven-lobe-canvas'];
 const SHADOW_SETTINGS = args['shadow-settings'] ? JSON.parse(args['shadow-settings']) : true;
 for (const s of SHADOW_SCENES) {
-  const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
+  const { visibility: _visibility, ...card } = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
   const cardPath = path.join(work, `${s}-studio-shadows.card.json`);
   fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf) }, null, 1));
   for (const m of SHADOW_MATERIALS) {
@@ -231,7 +258,39 @@ for (const s of SHADOW_SCENES) {
     cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png: path.join(work, `${s}-studio-shadows-${m}.png`), shadows: SHADOW_SETTINGS, cppArgs: ['--shadows'] });
   }
 }
-fs.writeFileSync(path.join(work, 'plan.json'), JSON.stringify({ hdri_dir: hdriDir, frames: Number(args.frames ?? 0), cases }, null, 1));
+for (const s of LIGHT_MAP_SCENES) {
+  const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
+  for (const [env, spec] of Object.entries(LIGHT_MAP_ENVS)) {
+    const c = { ...card, gltf: path.join(sceneDir, card.gltf), visibility: { shadows: false, light_map: spec.light_map } };
+    const cardPath = path.join(work, `${s}-${env}.card.json`);
+    fs.writeFileSync(cardPath, JSON.stringify(c, null, 1));
+    for (const m of spec.materials) {
+      const name = `${s}/${env}/${m}`;
+      if (args.only && !name.includes(args.only)) continue;
+      const png = path.join(work, `${s}-${env}-${m}.png`);
+      cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png, lightMap: png.replace(/\.png$/, '.lm.exr'),
+        ...(args['lightmap-mutation'] ? { lightMapMutation: args['lightmap-mutation'] } : {}) });
+    }
+  }
+}
+// s13: the canonical cards as they are, with their "visibility" block (the drape: shadow maps
+// and the baked light map, what `make demo` fits and reports): the page reads the block from the
+// card (shadows, web/clothfit.js defaults) and draws the texture render-preview writes.
+const CARD_MATERIALS = ['standard-grey', 'physical-sheen', 'cloth-filament', 'woven-lobe-canvas', 'woven-lobe-maps-twill'];
+for (const s of scenes) {
+  const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
+  if (!card.visibility) continue;
+  const cardPath = path.join(work, `${s}-studio-card.card.json`);
+  fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf) }, null, 1));
+  for (const m of CARD_MATERIALS) {
+    const name = `${s}/studio-card/${m}`;
+    if (args.only && !name.includes(args.only)) continue;
+    const png = path.join(work, `${s}-studio-card-${m}.png`);
+    cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png,
+      ...(card.visibility.shadows ? { shadows: true } : {}),
+      ...(card.visibility.light_map ? { lightMap: png.replace(/\.png$/, '.lm.exr') } : {}) });
+  }
+}
 say(`${cases.length} cases, work dir ${work}`);
 
 // ---- C++ previews (in parallel with the browser; 2 at a time) -------------------------------
@@ -253,20 +312,30 @@ const cppExtra = (args['cpp-args'] ?? '--ibl-engine threejs --map-aniso-rule swi
 // A case whose preview fails (e.g. a binary that does not know a preset option) is reported as
 // that case's error, not as the end of the run.
 const cppErrors = new Map();
-async function cppAll() {
-  const queue = [...cases];
+// s13-lm: the light-map cases' previews also write the texture the page draws (--light-map-out),
+// so they run first, before the browser starts (see below).
+async function cppAll(list = cases.filter((c) => !c.lightMap)) {
+  const queue = [...list];
   const worker = async () => {
     for (let c = queue.shift(); c; c = queue.shift()) {
       try {
-        await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png, ...cppExtra, ...(c.cppArgs ?? [])]);
+        await runCmd(clothfit, ['render-preview', '--scene', c.card, '--material', c.preset, '--out', c.png, ...(c.lightMap ? ['--light-map-out', c.lightMap] : []), ...cppExtra, ...(c.cppArgs ?? [])]);
       } catch (e) {
         cppErrors.set(c.name, String(e.message).split('\n').filter(Boolean).slice(-1)[0] ?? 'failed');
       }
     }
   };
   await Promise.all([worker(), worker()]);
-  say('C++ previews done');
+  say(`C++ previews done (${list.length})`);
 }
+{
+  const lm = cases.filter((c) => c.lightMap);
+  if (lm.length) {
+    await cppAll(lm);
+    for (const c of lm) if (cppErrors.has(c.name)) c.skipBrowser = true;  // no texture: no frame
+  }
+}
+fs.writeFileSync(path.join(work, 'plan.json'), JSON.stringify({ hdri_dir: hdriDir, frames: Number(args.frames ?? 0), cases: cases.filter((c) => !c.skipBrowser) }, null, 1));
 // With --frames the previews run after the browser, so they do not share the CPU with the timing.
 const cppPromise = Number(args.frames ?? 0) > 0 ? null : cppAll();
 
@@ -399,7 +468,7 @@ const rows = [];
 let failures = 0;
 for (const c of cases) {
   const r = results.get(c.name);
-  if (!r) { rows.push({ name: c.name, error: 'no browser frame' }); failures++; continue; }
+  if (!r) { rows.push({ name: c.name, error: cppErrors.has(c.name) ? `C++ preview: ${cppErrors.get(c.name)}` : 'no browser frame' }); failures++; continue; }
   const { w, h, body } = r;
   // Keep the browser frame for inspection (PPM, no encoder needed).
   const ppm = Buffer.alloc(w * h * 3);

@@ -30,7 +30,7 @@ globalThis.fetch = async (url, ...rest) => {
   return realFetch(url, ...rest);
 };
 const THREE = await import(pathToFileURL(path.join(repo, 'web', 'node_modules', 'three', 'build', 'three.module.js')).href);
-const { loadClothfitPreset, MeshWovenMaterial, MeshClothMaterial, yarnLobeOptions, yarnLobeEval, yarnLobeIbl } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+const { loadClothfitPreset, MeshWovenMaterial, MeshClothMaterial, yarnLobeOptions, yarnLobeEval, yarnLobeIbl, lightMapTextureFromExr, lightMapUvBox, applyLightMap } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
 
 const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, all) => {
   if (a.startsWith('--')) acc.push([a.slice(2), all[i + 1]]);
@@ -87,7 +87,7 @@ check(() => assert.notEqual(wf.customProgramCacheKey(), loadClothfitPreset(wp({ 
 check(() => assert.equal(loadClothfitPreset(wp({ ibl: 'split' })).customProgramCacheKey(), wd.customProgramCacheKey()), 'explicit split = the default program');
 {
   // The defines the shader sees (onBeforeCompile on a stand-in of three.js r187's shader).
-  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n';
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
   const vsrc = 'void main() {\n#include <project_vertex>\n}';
   const compiled = (m) => { const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: vsrc }; m.onBeforeCompile(sh); return sh.fragmentShader; };
   const ff = compiled(wf), fd = compiled(wd);
@@ -118,7 +118,7 @@ check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps:
   const yl = wl.yarnLobe;
   check(() => assert.ok(yl && yl.groups.length === 2 && yl.nodes === 16 && yl.ibl.summary.length === 2 * 16 * 32 * 5), 'yarn lobe loaded');
   check(() => assert.equal(wl.customProgramCacheKey(), 'woven:additive:uniform:split:yarn-lobe2x16/16x32'), 'yarn lobe: its own program');
-  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n';
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
   const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: 'void main() {\n#include <project_vertex>\n}' };
   wl.onBeforeCompile(sh);
   check(() => assert.ok(['WOVEN_YARN_LOBE\n', 'WOVEN_YL_GROUPS 2\n', 'WOVEN_YL_NODES 16\n', 'WOVEN_YL_N_THETA 16\n', 'WOVEN_YL_N_PHI 32\n'].every((d) => sh.fragmentShader.includes(`#define ${d}`))), 'yarn lobe defines');
@@ -376,5 +376,44 @@ if (args.clothfit) {
   fitShadowCamera(point, receivers, casters, 1024);
   check(() => assert.ok(point.shadow.camera.near > 0 && point.shadow.camera.near < casters.distanceToPoint(point.position) &&
     corners(receivers).every((p) => p.distanceTo(point.position) < point.shadow.camera.far)), 'point: near before the casters, far past the receivers');
+}
+// The scene card's light map (s13-lm; docs/web.md "The light map"): the texture's conventions,
+// its uv box, the material's light map, and the routing into MeshClothMaterial / MeshWovenMaterial's
+// IBL diffuse (the stand-in shader as above, with three.js r187's real lights_fragment_maps).
+{
+  const w = 4, h = 2, ch = (f) => Float32Array.from({ length: w * h }, (_, t) => f(t));
+  const img = { width: w, height: h, channels: { R: ch((t) => t), G: ch((t) => 10 + t), B: ch((t) => 20 + t) }, attributes: { 'clothfit:uv_box': '0 0.2 1.3 1.2' } };
+  const t = lightMapTextureFromExr(img, { name: 'unit.lm.exr' });
+  check(() => assert.ok(t.isDataTexture && t.type === THREE.FloatType && t.format === THREE.RGBAFormat && t.flipY === false && t.generateMipmaps === false
+    && t.magFilter === THREE.LinearFilter && t.minFilter === THREE.LinearFilter && t.wrapS === THREE.ClampToEdgeWrapping && t.wrapT === THREE.ClampToEdgeWrapping
+    && t.colorSpace === THREE.NoColorSpace && t.channel === 0), 'light map texture settings');
+  // row 0 of the file is data row 0 (t = 0 = glTF v0): texel (i=1, j=1) = file texel 5
+  check(() => assert.deepEqual([...t.image.data.slice(5 * 4, 6 * 4)], [5, 15, 25, 1]), 'light map rows in file order, A = 1');
+  check(() => assert.ok(Math.abs(t.offset.x) < 1e-12 && Math.abs(t.offset.y + 0.2) < 1e-12 && Math.abs(t.repeat.x - 1 / 1.3) < 1e-12 && Math.abs(t.repeat.y - 1) < 1e-12), 'light map offset / repeat from the uv box');
+  // the texture matrix maps the uv box onto [0, 1]^2
+  t.updateMatrix();
+  const m = t.matrix.elements, at = (u, v) => [m[0] * u + m[3] * v + m[6], m[1] * u + m[4] * v + m[7]];
+  check(() => assert.ok(at(0, 0.2).every((x) => Math.abs(x) < 1e-7) && at(1.3, 1.2).every((x) => Math.abs(x - 1) < 1e-7)), 'light map matrix: uv box -> [0, 1]');
+  check(() => assert.deepEqual(lightMapUvBox('0 0 1.29999995 1.29999995'), [0, 0, 1.29999995, 1.29999995]), 'uv box parse');
+  for (const bad of [undefined, '0 0 1', '0 0 0 1', '0 1 1 0', '0 0 1 x']) check(() => assert.throws(() => lightMapTextureFromExr({ ...img, attributes: { 'clothfit:uv_box': bad } }, { name: 'bad.exr' }), /bad\.exr: clothfit:uv_box/), `bad uv box ${bad}`);
+  check(() => assert.throws(() => lightMapTextureFromExr({ ...img, channels: { R: img.channels.R, G: img.channels.G } }), /no channel B/), 'light map needs RGB');
+  check(() => assert.throws(() => lightMapTextureFromExr({ ...img, channels: { ...img.channels, G: ch((t) => (t === 3 ? -1 : 0)) } }), /texel 3 channel G is negative/), 'light map: negative texel refused');
+  check(() => assert.deepEqual(lightMapTextureFromExr(img, { uvBox: [0, 0, 2, 2] }).userData.clothfit.uvBox, [0, 0, 2, 2]), 'uv box override');
+  const std = loadClothfitPreset(preset({}));
+  const v0 = std.version;
+  check(() => assert.ok(applyLightMap(std, t) === t && std.lightMap === t && std.lightMapIntensity === 1 && std.version > v0), 'applyLightMap: material.lightMap, intensity 1, recompiled');
+  check(() => assert.ok(applyLightMap(std, null) === null && std.lightMap === null), 'applyLightMap(null) removes it');
+  check(() => assert.throws(() => applyLightMap(new THREE.MeshBasicMaterial(), t), /MeshStandardMaterial/), 'applyLightMap: fabric materials only');
+  const fsrc = THREE.ShaderChunk.meshphysical_frag;
+  for (const [who, mat] of [['cloth', new MeshClothMaterial({})], ['woven', loadClothfitPreset(wp())]]) {
+    const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: THREE.ShaderChunk.meshphysical_vert };
+    mat.onBeforeCompile(sh);
+    const f = sh.fragmentShader;
+    check(() => assert.ok(!f.includes('#include <lights_fragment_maps>') && !f.includes('irradiance += lightMapIrradiance;') && f.includes('clothfitLightMapIrradiance += lightMapIrradiance;')
+      && f.indexOf('vec3 clothfitLightMapIrradiance = vec3( 0.0 );') < f.indexOf(who === 'cloth' ? 'void RE_IndirectSpecular_Cloth' : 'void RE_IndirectSpecular_Woven')), `${who}: the light map goes to the IBL diffuse, not to three.js's irradiance`);
+    // without USE_LIGHTMAP the routing is preprocessed away: every added line is inside #ifdef USE_LIGHTMAP
+    const added = f.split('\n').filter((l) => l.includes('clothfitLightMapIrradiance'));
+    check(() => assert.ok(added.length >= 3), `${who}: routing lines present`);
+  }
 }
 console.log(`unit: ${checks} checks passed`);

@@ -4,11 +4,23 @@
 //   POST /log   text;   POST /done   when finished (or after an error).
 // Paths in the plan and the cards are file-system paths, served by the test server under /fs.
 import * as THREE from 'three';
-import { loadSceneCard, fetchClothfitPreset } from '../clothfit.js';
+import { loadSceneCard, fetchClothfitPreset, fetchLightMap, applyLightMap } from '../clothfit.js';
 
 const post = (path, body) => fetch(path, { method: 'POST', body });
 const log = (msg) => post('/log', String(msg));
 const fsUrl = (p) => (p.startsWith('/') ? `/fs${p}` : p);
+
+// run.mjs --lightmap-mutation M (a check that the light-map cases can fail; never the default):
+// 'no-uv-box' drops the offset / repeat, 'flip' reverses the texture's rows (as flipY would).
+function mutateLightMap(t, m) {
+  if (m === 'no-uv-box') {
+    t.offset.set(0, 0); t.repeat.set(1, 1);
+  } else if (m === 'flip') {
+    const { data, width: w, height: h } = t.image, row = w * 4, tmp = data.slice();
+    for (let j = 0; j < h; ++j) data.set(tmp.subarray((h - 1 - j) * row, (h - j) * row), j * row);
+    t.needsUpdate = true;
+  } else throw new Error(`unknown light-map mutation ${m}`);
+}
 
 async function run() {
   const planUrl = new URLSearchParams(location.search).get('plan');
@@ -39,6 +51,16 @@ async function run() {
     const material = await fetchClothfitPreset(fsUrl(c.preset), { renderer, resolveWeaveMapPath: (file) => fsUrl(file) });
     const wmap = material.userData.clothfit?.weave_maps;
     if (wmap) log(`${c.name}: weave maps ${wmap.file}${wmap.anisotropy ? `, anisotropy ${wmap.anisotropy} (max ${renderer.capabilities.getMaxAnisotropy()})` : ''}`);
+    // s13-lm: the card's light map, baked by the case's own `clothfit render-preview
+    // --light-map-out` (c.lightMap, an EXR: irradiance E over the fabric's uv box), on the fabric
+    // material only (applyLightMap; the non-fabric meshes get none, as in the preview).
+    let lightMap = null;
+    if (c.lightMap) {
+      lightMap = applyLightMap(material, await fetchLightMap(fsUrl(c.lightMap)));
+      if (c.lightMapMutation) mutateLightMap(lightMap, c.lightMapMutation);
+      const { uvBox, width } = lightMap.userData.clothfit;
+      log(`${c.name}: light map ${width}x${width}, uv box ${uvBox.join(' ')}${c.lightMapMutation ? `, MUTATED: ${c.lightMapMutation}` : ''}`);
+    }
     sc.setMaterial(material);
     // Shadow cases (run.mjs SHADOW_CASES, session 13): three.js shadow maps with the case's
     // settings; a case without them leaves the scene as loaded (no shadows).
@@ -60,6 +82,26 @@ async function run() {
         gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
       }
       msFrame = ((performance.now() - f0) / plan.frames).toFixed(1);
+      // s13-lm: a light-map case also times the same material without its light map (compiled
+      // first), then with it again, under the same load: "with (without)", with = the mean of
+      // the two runs with it.
+      if (lightMap) {
+        const time = () => {
+          renderer.render(sc.scene, sc.camera);
+          gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
+          const t1 = performance.now();
+          for (let f = 0; f < plan.frames; ++f) {
+            renderer.render(sc.scene, sc.camera);
+            gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
+          }
+          return (performance.now() - t1) / plan.frames;
+        };
+        for (const mesh of sc.fabricMeshes) applyLightMap(mesh.material, null);
+        const without = time();
+        for (const mesh of sc.fabricMeshes) applyLightMap(mesh.material, lightMap);
+        const again = time();
+        msFrame = `${((Number(msFrame) + again) / 2).toFixed(1)} (${without.toFixed(1)})`;
+      }
     }
     // Mask pass: fabric white, everything else black, no tone mapping, same culling.
     const saved = [];
@@ -74,6 +116,7 @@ async function run() {
     renderer.toneMapping = tm; sc.scene.background = bg;
     for (const [o, m] of saved) o.material = m;
     material.dispose();
+    lightMap?.dispose();
     const out = new Uint8Array(W * H * 5);
     for (let y = 0; y < H; ++y) {
       const src = (H - 1 - y) * W;  // readPixels rows are bottom-up
@@ -82,7 +125,7 @@ async function run() {
         out[W * H * 4 + y * W + x] = mk[(src + x) * 4] > 127 ? 255 : 0;
       }
     }
-    await post(`/result?name=${encodeURIComponent(c.name)}&w=${W}&h=${H}&ms=${(performance.now() - t0).toFixed(0)}&msFrame=${msFrame}`, out);
+    await post(`/result?name=${encodeURIComponent(c.name)}&w=${W}&h=${H}&ms=${(performance.now() - t0).toFixed(0)}&msFrame=${encodeURIComponent(msFrame)}`, out);
   }
   await post('/done', 'ok');
 }
