@@ -920,9 +920,13 @@ int RunFit(const FitArgs& a, const Globals& g) {
   for (size_t i = 0; i < l.rr.size(); ++i)
     std::printf("fit: %s: %s; noise: %s\n", files.refs[i].c_str(), l.rr[i].layout.c_str(),
                 l.rr[i].noise.c_str());
-  const fit::FitResult res = o.start.model == render::ModelKind::kWoven
-                                   ? fit::FitWovenImages(inputs, o)
-                                   : fit::FitImages(inputs, o);
+  // the light map's second pass (the cards' "visibility", session 13) around the model's fit
+  const fit::FitResult res = fit::FitWithLightMapAlbedo(
+      inputs, o, [&](const fit::FitOptions& opt, const fit::PreparedScenes* prepared) {
+        return opt.start.model == render::ModelKind::kWoven
+                   ? fit::FitWovenImages(inputs, opt, prepared)
+                   : fit::FitImages(inputs, opt, prepared);
+      });
   if (!res.usable) {
     std::fprintf(stderr, "clothfit fit: error: the fit failed (%s); no preset written\n",
                  res.message.c_str());

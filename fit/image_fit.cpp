@@ -1023,9 +1023,8 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
 }
 
 namespace {
-// `trusted`: `prepared` was built here for these options (no check).
 FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions& opt,
-                        const PreparedScenes* prepared, bool trusted = false);
+                        const PreparedScenes* prepared);
 
 // The second pass's scenes from the first's, in place: every cache with a one-bounce light map
 // gets irradiance += (kd' - kd) x irradiance_unit (exact: the bounce is linear in the fabric's
@@ -1065,13 +1064,22 @@ bool NeedsAlbedoPass(const std::vector<SceneInput>& inputs, const FitOptions& op
 
 FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt,
                     const PreparedScenes* prepared) {
+  return FitImagesOnce(inputs, opt, prepared);
+}
+
+FitResult FitWithLightMapAlbedo(
+    const std::vector<SceneInput>& inputs, const FitOptions& opt,
+    const std::function<FitResult(const FitOptions&, const PreparedScenes*)>& fit) {
   const auto t0 = std::chrono::steady_clock::now();
-  if (!NeedsAlbedoPass(inputs, opt)) return FitImagesOnce(inputs, opt, prepared);
+  if (!NeedsAlbedoPass(inputs, opt)) return fit(opt, nullptr);
+  // cloth's caches depend on its options and are never shared (FitImages refuses them)
   std::shared_ptr<PreparedScenes> own;
-  if (!prepared) own = BuildPrepared(inputs, opt);
-  FitResult first = own ? FitImagesOnce(inputs, opt, own.get(), true)
-                        : FitImagesOnce(inputs, opt, prepared);
-  if (own) first.setup_seconds += own->seconds;  // the preparation was done here
+  if (opt.start.model != render::ModelKind::kCloth) own = BuildPrepared(inputs, opt);
+  FitResult first = fit(opt, own.get());
+  if (own) {  // the preparation was done here
+    first.setup_seconds += own->seconds;
+    first.seconds += own->seconds;
+  }
   if (!first.usable) return first;
   // Second pass: the light map baked with the fitted diffuse albedo, one start at the solution.
   FitOptions o2 = opt;
@@ -1081,8 +1089,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
   o2.init_from_reference = false;
   o2.start_roughness = {0.0};
   const bool reweighted = own && ReweightLightMaps(own.get(), o2.visibility.fabric_albedo);
-  FitResult second = reweighted ? FitImagesOnce(inputs, o2, own.get(), true)
-                                : FitImagesOnce(inputs, o2, nullptr);
+  FitResult second = fit(o2, reweighted ? own.get() : nullptr);
   if (!second.usable) return first;
   second.starts += first.starts;
   second.iterations += first.iterations;
@@ -1094,7 +1101,7 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
 
 namespace {
 FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions& opt,
-                        const PreparedScenes* prepared, bool trusted) {
+                        const PreparedScenes* prepared) {
   const auto t0 = std::chrono::steady_clock::now();
   if (inputs.empty()) throw FitError("fit: no (scene, reference) pairs");
   const render::ModelKind model = opt.start.model;
@@ -1110,9 +1117,7 @@ FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions&
   // Per scene: cache, blocks, transformed reference, weights (built here, or prepared by the
   // caller for the same inputs and cache-relevant options: checked).
   std::shared_ptr<const PreparedScenes> own;
-  if (prepared && trusted) {
-    // built here for these options (FitImages' light-map passes)
-  } else if (prepared) {
+  if (prepared) {
     if (prepared->data.size() != inputs.size() || prepared->level != opt.level ||
         prepared->stride != opt.pixel_stride || prepared->space != opt.space ||
         prepared->min_coverage != opt.min_coverage || prepared->model != opt.start.model ||

@@ -29,6 +29,7 @@
 
 #include <ceres/ceres.h>
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -215,6 +216,15 @@ FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& opt
 // cloth, whose cache depends on its options, is not shared). `setup_seconds` of such a fit
 // does not include the preparation (PreparedScenes::seconds, see PreparedSeconds).
 struct PreparedScenes;
+// A fit (`fit`: FitImages or FitWovenImages over the given prepared scenes, null = its own)
+// with the light map's second pass (FitOptions::card_visibility): when some scene bakes a light
+// map that bounces off the fabric and no fabric albedo is set, the fit runs again from its
+// solution with the map baked for the fitted diffuse albedo (the first pass's caches re-weighted,
+// PreviewCache::irradiance_unit, when the light map has one bounce; rebuilt otherwise).
+FitResult FitWithLightMapAlbedo(
+    const std::vector<SceneInput>& inputs, const FitOptions& options,
+    const std::function<FitResult(const FitOptions&, const PreparedScenes*)>& fit);
+
 std::shared_ptr<const PreparedScenes> PrepareScenes(const std::vector<SceneInput>& inputs,
                                                     const FitOptions& options);
 double PreparedSeconds(const PreparedScenes& prepared);

@@ -146,26 +146,31 @@ FitOptions FromClothBasin(const FitOptions& options, const render::MaterialPrese
   return from;
 }
 
-FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options) {
+FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options,
+                         const PreparedScenes* given) {
   if (options.start.model != render::ModelKind::kWoven)
     throw FitError("FitWovenImages: the start preset is not a woven preset");
-  // Every path fits over the same caches, blocks and targets: built once.
-  const auto prepared = PrepareScenes(inputs, options);
-  FitResult best = FitTwoStages(inputs, options, prepared.get());
+  // Every path fits over the same caches, blocks and targets: built once (or the caller's).
+  std::shared_ptr<const PreparedScenes> own;
+  if (!given) own = PrepareScenes(inputs, options);
+  const PreparedScenes* const prepared = given ? given : own.get();
+  FitResult best = FitTwoStages(inputs, options, prepared);
   best.candidates = {CandidateOf("two-stage", best)};
   if (UsesClothBasinStart(options)) {
     // The cloth basin (woven_fit.h; docs/fitting.md "Woven's starts (session 13)").
-    FitResult basin = FitImages(inputs, ClothBasinOptions(options), prepared.get());
+    FitResult basin = FitImages(inputs, ClothBasinOptions(options), prepared);
     basin.candidates = {CandidateOf("cloth-basin", basin)};
     if (basin.usable && (!best.usable || basin.rmse <= kClothBasinContinueRatio * best.rmse)) {
-      FitResult nested = FitTwoStages(inputs, FromClothBasin(options, basin.preset), prepared.get());
+      FitResult nested = FitTwoStages(inputs, FromClothBasin(options, basin.preset), prepared);
       nested.candidates = {CandidateOf("cloth-basin+two-stage", nested)};
       TakeBetter(std::move(nested), basin);
     }
     TakeBetter(std::move(basin), best);
   }
-  best.setup_seconds += PreparedSeconds(*prepared);
-  best.seconds += PreparedSeconds(*prepared);
+  if (own) {  // a caller's preparation is the caller's to count
+    best.setup_seconds += PreparedSeconds(*own);
+    best.seconds += PreparedSeconds(*own);
+  }
   return best;
 }
 

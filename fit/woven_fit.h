@@ -37,7 +37,8 @@ namespace clothfit::fit {
 std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& maps_path,
                             FitOptions* options, const WeaveBakeOptions& bake = {});
 
-FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options);
+FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options,
+                         const PreparedScenes* prepared = nullptr);
 
 // The cloth-basin start (session 13; docs/fitting.md "Woven's starts (session 13)"). Woven
 // with specular_color = 0 has the cloth model's form (Lambert + Charlie sheen; woven scales
