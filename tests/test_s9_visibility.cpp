@@ -59,6 +59,18 @@ Scene SphereOnFloor(int size) {
   return s;
 }
 
+// The cache pixels the AO map occludes (ao < 0.99), with ao recovered from the diffuse
+// irradiance: `on` built with the AO map alone, `off` without (E_d x ao).
+std::vector<std::pair<size_t, double>> OccludedPixels(const PreviewCache& on, const PreviewCache& off) {
+  std::vector<std::pair<size_t, double>> out;
+  for (size_t i = 0; i < on.pixels.size(); ++i) {
+    if (!(off.irradiance[i * 3 + 1] > 1e-3f)) continue;
+    const double ao = double(on.irradiance[i * 3 + 1]) / double(off.irradiance[i * 3 + 1]);
+    if (ao <= 0.99) out.emplace_back(i, ao);
+  }
+  return out;
+}
+
 // three.js r187 lights_physical_pars_fragment:
 // saturate(pow(dotNV + ao, exp2(-16 roughness - 1)) - 1 + ao), evaluated by hand.
 TEST(S9Visibility, SpecularOcclusionIsThreejsFormula) {
@@ -239,10 +251,7 @@ TEST(S9Visibility, AoAppliesSpecularOcclusionToTheRadianceTables) {
   const int K = on.roughness_nodes;
   ASSERT_EQ(a->radiance.size(), a->pixels.size() * size_t(K) * 3);
   int occluded = 0;
-  for (size_t i = 0; i < a->pixels.size(); ++i) {
-    if (!(b->irradiance[i * 3 + 1] > 1e-3f)) continue;
-    const double ao = double(a->irradiance[i * 3 + 1]) / double(b->irradiance[i * 3 + 1]);
-    if (ao > 0.99) continue;
+  for (const auto& [i, ao] : OccludedPixels(*a, *b)) {
     ++occluded;
     for (int k = 0; k < K; k += 4) {
       const double so = SpecularOcclusion(std::clamp(double(a->NoV[i]), 0.0, 1.0), ao,
@@ -288,10 +297,7 @@ TEST(S9Visibility, YarnLobeReadsGetTheSpecularOcclusionOfTheirRoughness) {
   ASSERT_EQ(a->yarn_ibl.size(), a->pixels.size() * 6);
   ASSERT_EQ(a->yarn_lobe, b->yarn_lobe);  // the lights' lobe values are not visibility's
   int occluded = 0;
-  for (size_t i = 0; i < a->pixels.size(); ++i) {
-    if (!(b->irradiance[i * 3 + 1] > 1e-3f)) continue;
-    const double ao = double(a->irradiance[i * 3 + 1]) / double(b->irradiance[i * 3 + 1]);
-    if (ao > 0.99) continue;
+  for (const auto& [i, ao] : OccludedPixels(*a, *b)) {
     ++occluded;
     for (int k = 0; k < 2; ++k) {
       const double so = SpecularOcclusion(std::clamp(double(a->NoV[i]), 0.0, 1.0), ao, rough[k]);
