@@ -161,13 +161,16 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       for (const std::string& w : scene.warnings)
         if (!g.quiet) std::fprintf(stderr, "clothfit: warning: %s\n", w.c_str());
       const auto env = LoadSceneEnvironment(scene, g.quiet);
-      if (!args->light_map_out.empty() &&  // checked before any work
-          (!scene.card.visibility || !scene.card.visibility->light_map ||
-           args->no_card_visibility || args->exact_ibl > 0))
-        throw std::invalid_argument(
+      const auto no_light_map = [&] {
+        return std::invalid_argument(
             "--light-map-out: " + limits::EscapeForMessage(args->scene) +
             " bakes no light map (the card needs \"visibility\": {\"light_map\": ...}, and "
             "not --no-card-visibility or --exact-ibl)");
+      };
+      if (!args->light_map_out.empty() &&  // checked before any work
+          (!scene.card.visibility || !scene.card.visibility->light_map ||
+           args->no_card_visibility || args->exact_ibl > 0))
+        throw no_light_map();
       render::PreviewOptions o;
       o.model = preset.model;
       o.cloth = preset.cloth;
@@ -236,11 +239,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
         const render::UvVisibilityMap* lm = nullptr;
         for (const auto& m : cache->uv_visibility)
           if (m.size > 0 && !lm) lm = &m;
-        if (!lm || !cache->options.visibility.indirect)
-          throw std::invalid_argument(
-              "--light-map-out: " + limits::EscapeForMessage(args->scene) +
-              " bakes no light map (the card needs \"visibility\": {\"light_map\": ...}, and "
-              "not --no-card-visibility or --exact-ibl)");
+        if (!lm || !cache->options.visibility.indirect) throw no_light_map();
         io::Image img;
         img.width = lm->size;
         img.height = lm->size;

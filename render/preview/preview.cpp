@@ -295,31 +295,30 @@ IrradianceOverPiFn EnvIrradianceFn(const PixelContext& x) {
   return env;
 }
 
+// The environment's radiance in a direction (the AO map's environment weighting); empty without
+// an environment.
+RadianceFn EnvRadianceFn(const PixelContext& x) {
+  RadianceFn radiance;
+  if (x.env) radiance = [&x](const Vec3d& l) { return x.env->Eval(l); };
+  return radiance;
+}
+
 // VisibilityOptions::uv_size > 0: each fabric mesh's terms baked over its uv (visibility.h).
 std::vector<UvVisibilityMap> BakeFabricUvVisibility(const PixelContext& x) {
   std::vector<UvVisibilityMap> maps(x.scene.meshes.size());
-  RadianceFn radiance;
-  if (x.env) radiance = [&x](const Vec3d& l) { return x.env->Eval(l); };
   for (size_t i = 0; i < x.scene.meshes.size(); ++i)
     if (x.scene.meshes[i].is_fabric)
       maps[i] = BakeUvVisibility(x.scene, x.bvh, x.opt.visibility, EnvIrradianceFn(x), int(i),
-                                 x.eps, radiance, x.lights);
+                                 x.eps, EnvRadianceFn(x), x.lights);
   return maps;
 }
 
 VisibilityTerms PointVisibility(const PixelContext& x, const PrimaryHit& hit, const Hit& h,
                                 size_t pix) {
-  IrradianceOverPiFn env;
-  if (x.env)
-    env = [&x](const Vec3d& n) {
-      return x.e.pmrem ? x.e.pmrem->IrradianceOverPi(n) : IrradianceOverPi(x.e.sh, n);
-    };
   Vec3d ng = V(h.ng);  // the geometric normal on the shading normal's side
   if (Dot(ng, hit.n) < 0.0) ng = ng * -1.0;
-  RadianceFn radiance;
-  if (x.env) radiance = [&x](const Vec3d& l) { return x.env->Eval(l); };
-  VisibilityTerms t = ComputeVisibility(x.scene, x.bvh, x.opt.visibility, env, hit.p, hit.n, ng,
-                                        pix, x.eps, radiance, x.lights);
+  VisibilityTerms t = ComputeVisibility(x.scene, x.bvh, x.opt.visibility, EnvIrradianceFn(x),
+                                        hit.p, hit.n, ng, pix, x.eps, EnvRadianceFn(x), x.lights);
   if (!x.opt.visibility.ao) t.ao = 1.0;
   return t;
 }
