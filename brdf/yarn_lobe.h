@@ -129,7 +129,10 @@ class Lobe {
     double weight = 0.0;  // scale share area_factor / nodes
     double band_extent = 0.0;
     std::vector<Point> nodes;
+    std::vector<double> sin_v, cos_v;  // per node: sin and cos of its v (filament yarns)
   };
+  // sum over g's nodes of SegmentSpecular (bit-identical), the node-independent work done once
+  double GroupSum(const G& g, const Vec3<double>& wo, const Vec3<double>& wi) const;
   std::vector<G> groups_;
 };
 

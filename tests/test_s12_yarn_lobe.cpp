@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <random>
 
 // preview_fixtures.h (material.h's woven::Options) before the reference renderer's headers,
 // whose render::woven namespace would shadow clothfit::woven inside namespace render.
@@ -98,6 +99,78 @@ TEST(S12YarnLobe, IsTheReferenceSpecularAtTheNodes) {
     }
     EXPECT_GE(lit, 4) << name;  // the directions meet highlights
   }
+}
+
+// Lobe::Eval hoists the node-independent work out of the node loop (session 14: the lobe's
+// summary bake was 0.7-0.85 s of a fit). It must stay the sum of SegmentSpecular over the
+// nodes: the points rebuilt here as the constructor documents them, the three Irawan fabrics
+// as they are (staple yarns) and made filament (with and without the smoothing's fade), 4000
+// direction pairs each, a third of them near grazing. (Equal to the last bit or two: the pre-change Eval differed from
+// this rebuild by up to ~1e-14 relative on the canvas and denim weft, the same as now.)
+TEST(S12YarnLobe, EvalIsTheSumOfSegmentSpecular) {
+  int compared = 0, lit = 0;
+  for (const char* name : {"canvas.json", "twill.json", "denim.json"}) {  // the Irawan fabrics
+    const fit::YarnFarField ff(Fabric(name));
+    // The fabrics' yarns are all staple (psi -30); variants 2 and 3 make them filament yarns
+    // (psi 0), variant 2 with the filament smoothing's fade (ss 0.3; the fabrics have ss 0).
+    for (int variant = 0; variant < 4; ++variant) {
+      const int nodes = variant == 0 ? 1 : variant == 1 ? 16 : 8;
+      yarn_lobe::FarField f = ff.Description(nodes, 0);
+      if (variant >= 2)
+        for (auto& g : f.groups) g.psi = 0.0;
+      if (variant == 2) f.ss = 0.3;
+      const yarn_lobe::Lobe lobe(f);
+      yarn_lobe::Phase ph;
+      ph.alpha = f.alpha;
+      ph.beta = f.beta;
+      ph.von_mises_norm = 1.0 / (2.0 * kPi * yarn_lobe::BesselI0(std::abs(f.beta)));
+      ph.h_width = f.h_width;
+      ph.ss = f.ss;
+      std::mt19937_64 rng(7u + unsigned(variant));
+      std::uniform_real_distribution<double> U(-1.0, 1.0);
+      for (int i = 0; i < 4000; ++i) {
+        const double zmin = i % 3 == 0 ? 0.0 : 0.05;
+        auto dir = [&] {
+          Vec3<double> d(U(rng), U(rng), zmin + std::abs(U(rng)) * (i % 3 == 0 ? 0.15 : 1.0));
+          return Normalize(d);
+        };
+        const Vec3<double> wo = dir(), wi = dir();
+        double want[2] = {0.0, 0.0};
+        for (const auto& g : f.groups) {
+          const yarn_lobe::Yarn y =
+              yarn_lobe::MakeYarn(g.warp, g.psi, g.width, g.length, g.kappa, g.area_factor);
+          const double umax = g.umax * kPi / 180.0;
+          const bool staple = g.psi != 0.0;
+          double sum = 0.0;
+          for (int j = 0; j < f.nodes; ++j) {
+            const double s = -1.0 + (2.0 * j + 1.0) / f.nodes;
+            yarn_lobe::Point p;
+            p.umax = umax;
+            if (staple) {
+              p.along = s * g.along;
+              p.u = std::clamp(p.along / (0.5 * g.length) * umax, -umax, umax);
+              p.sin_u = std::sin(p.u);
+              p.cos_u = std::cos(p.u);
+              p.spine_radius = yarn_lobe::SpineRadius(std::abs(p.u), umax, g.kappa, g.width, g.length);
+            } else {
+              p.across = s * g.across;
+              p.v = std::clamp(p.across * kPi / g.width, -0.5 * kPi, 0.5 * kPi);
+            }
+            sum += yarn_lobe::SegmentSpecular(ph, y, p, wo, wi, staple ? g.across : g.along);
+          }
+          want[g.warp ? 0 : 1] += f.scale * g.share / f.nodes * sum;
+        }
+        double got[2];
+        lobe.Eval(wo, wi, got);
+        for (int k = 0; k < 2; ++k)
+          EXPECT_NEAR(got[k], want[k], 1e-14 * std::max(1.0, want[k]))
+              << name << " variant " << variant << " pair " << i << " lobe " << k;
+        ++compared;
+        lit += want[0] + want[1] > 0.0;
+      }
+    }
+  }
+  EXPECT_GT(lit, compared / 10);  // the pairs meet highlights, not only zeros
 }
 
 // "woven": {"yarn_lobe"} survives PresetToJson -> ParsePreset exactly (the same lobe values and
