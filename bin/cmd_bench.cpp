@@ -17,6 +17,7 @@
 #include "bin/commands.h"
 #include "fit/yarn_farfield.h"
 #include "brdf/models.h"
+#include "brdf/yarn_lobe.h"
 #include "fit/bench_fit.h"
 #include "render/reference/fabric.h"
 #include "render/preview/preview.h"
@@ -429,6 +430,31 @@ void RegisterBrdfBenchmarks() {
                                  [m](benchmark::State& s) { BM_Model<double>(s, m); });
     benchmark::RegisterBenchmark(("brdf/" + name + "/jet10").c_str(),
                                  [m](benchmark::State& s) { BM_Model<Jet10>(s, m); });
+  }
+  // The far-field yarn lobe a woven fit bakes (fit --yarn-lobe defaults: 8 nodes, a 16 x 32
+  // environment summary; session 14 made it 2-3x faster): the whole bake, and one lobe
+  // evaluation (a light's read in the preview).
+  for (const char* fabric : {"canvas", "twill"}) {
+    const std::string path = std::string(CLOTHFIT_SOURCE_DATASETS) + "/fabrics/" + fabric + ".json";
+    benchmark::RegisterBenchmark(("brdf/yarn-lobe-summary-bake/" + std::string(fabric)).c_str(),
+                                 [path](benchmark::State& s) {
+                                   const fit::YarnFarField ff(path);
+                                   for (auto _ : s) benchmark::DoNotOptimize(ff.Description(8, 16));
+                                 })
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+    benchmark::RegisterBenchmark(("brdf/yarn-lobe-eval/" + std::string(fabric)).c_str(),
+                                 [path](benchmark::State& s) {
+                                   const yarn_lobe::Lobe lobe(fit::YarnFarField(path).Description(8, 0));
+                                   const Vec3<double> wo = Normalize(Vec3<double>(0.3, 0.1, 0.9));
+                                   Vec3<double> wi = Normalize(Vec3<double>(-0.4, 0.05, 0.8));
+                                   double out[2];
+                                   for (auto _ : s) {
+                                     benchmark::DoNotOptimize(wi);
+                                     lobe.Eval(wo, wi, out);
+                                     benchmark::DoNotOptimize(out);
+                                   }
+                                 });
   }
 }
 
