@@ -24,6 +24,8 @@ Usage:
   scripts/flip_decompose.py tables --out DIR RESULT.json...  (markdown tables of the above)
   scripts/flip_decompose.py contrast --out DIR --sigmas 4 PRESET...  (texture contrast, correlation)
   scripts/flip_decompose.py period --out DIR --sigmas 4  (texture autocorrelation on the sphere)
+  scripts/flip_decompose.py fold --out DIR --ref2-dir DIR PRESET...  (the texture folded by the
+                                                            weave period: periodic vs glints)
 Common options: --clothfit BIN (default build/bin/clothfit), --fabrics canvas,twill.
 """
 import argparse
@@ -488,9 +490,387 @@ def cmd_period(a):
                                                                    ac[i]))
 
 
+# ---------------------------------------------------------------- fold (session 14)
+LUM = np.array([0.2126, 0.7152, 0.0722], dtype=np.float64)
+
+
+def fabric_repeats(fabric):
+    """uv_repeats of datasets/fabrics/FABRIC.json (weave tiles per uv unit)."""
+    return float(json.load(open(os.path.join("datasets", "fabrics", fabric + ".json")))["uv_repeats"])
+
+
+def weave_phase(path, R, cov, max_periods_per_px=1.5):
+    """Per-pixel weave phase from the uv AOV (render-reference --aov uv: uv.U, uv.V = the mean
+    TEXCOORD_0 over the pixel's camera samples that hit): (frac(u R), frac(v R)); one weave
+    tile = 1/R in u and v (irawan.cpp Locate: X = -v R W, Y = u R H, tile W x H draft cells).
+    valid = fully covered (cov >= 0.999), not in the silhouette band 2, and no pixel within 1 px
+    whose uv footprint exceeds max_periods_per_px periods (uv seams, where the averaged uv is
+    meaningless). Also returns the footprint (periods per px, major axis)."""
+    uv = read_image(path, ["uv.U", "uv.V"]).astype(np.float64)
+    U, V = uv[:, :, 0] * R, uv[:, :, 1] * R
+    h, w = U.shape
+
+    def d(a, axis):
+        out = np.full_like(a, np.inf)
+        if axis == 1:
+            out[:, 1:-1] = (a[:, 2:] - a[:, :-2]) / 2
+        else:
+            out[1:-1] = (a[2:] - a[:-2]) / 2
+        return out
+    fp = np.maximum(np.hypot(d(U, 1), d(V, 1)), np.hypot(d(U, 0), d(V, 0)))
+    bad = ~(fp <= max_periods_per_px)
+    near = np.zeros_like(bad)
+    pad = np.pad(bad, 1, constant_values=True)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near |= pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+    interior = regions(cov)["interior"] & (cov >= 0.999)
+    valid = interior & ~near
+    return U - np.floor(U), V - np.floor(V), valid, interior, fp
+
+
+def texture(img, cov, sigma):
+    """t = L / S_sigma(L) - 1 (L = Rec.709 luminance; S the in-fabric low-pass), as `contrast`."""
+    L = img.astype(np.float64) @ LUM
+    sm = smooth_inside(L[:, :, None].astype(np.float32), cov, sigma)[:, :, 0].astype(np.float64)
+    return L / np.maximum(sm, 1e-6) - 1.0
+
+
+def same_bin_near(t, b, r, weight, look=None):
+    """Per pixel, the sums over the pixels within Chebyshev distance r (itself included) that
+    are in its phase bin (b, -1 = not in the mask): (sum of weight(dy, dx) t, sum of weight).
+    Subtracted from a fold so that a pixel's value is predicted only from pixels of other weave
+    tiles (a glint cell can span neighbouring pixels; docs/flip.md session 14). look: the bin
+    each pixel is predicted for (default b)."""
+    look = b if look is None else look
+    h, w = b.shape
+    num, den = np.zeros((h, w)), np.zeros((h, w))
+    tp = np.pad(t, r)
+    bp = np.pad(b, r, constant_values=-1)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            same = (bp[r + dy:r + dy + h, r + dx:r + dx + w] == look) & (look >= 0)
+            wt = weight(dy, dx)
+            num += wt * np.where(same, tp[r + dy:r + dy + h, r + dx:r + dx + w], 0.0)
+            den += wt * same
+    return num, den
+
+
+class Fold:
+    """The texture averaged per phase bin (nb x nb bins of (frac(u R), frac(v R)); axis 0 = u)."""
+
+    def __init__(self, pu, pv, mask, nb, exclude=1):
+        self.nb = nb
+        self.iu = np.minimum((pu * nb).astype(int), nb - 1)
+        self.iv = np.minimum((pv * nb).astype(int), nb - 1)
+        self.mask = mask
+        self.bins = np.where(mask, self.iu * nb + self.iv, -1)
+        self.flat = self.bins[mask]
+        self.exclude = exclude
+
+    def table(self, t):
+        s = np.bincount(self.flat, weights=t[self.mask], minlength=self.nb * self.nb)
+        n = np.bincount(self.flat, minlength=self.nb * self.nb).astype(np.float64)
+        return s, n
+
+    def mean(self, t):
+        s, n = self.table(t)
+        return (s / np.maximum(n, 1)).reshape(self.nb, self.nb), n.reshape(self.nb, self.nb)
+
+    def at(self, t, loo=False, table=None):
+        """The fold evaluated at each masked pixel's phase (1-D, over the mask). loo: without
+        that pixel and its same-bin neighbours within self.exclude px (`t` is then also the
+        texture they are left out of). table: evaluate a fold given as a (nb x nb) array."""
+        if table is not None:
+            return table.reshape(-1)[self.flat]
+        s, n = self.table(t)
+        if loo:
+            es, en = same_bin_near(np.where(self.mask, t, 0.0), self.bins, self.exclude,
+                                   lambda dy, dx: 1.0)
+            return (s[self.flat] - es[self.mask]) / np.maximum(n[self.flat] - en[self.mask], 1)
+        return s[self.flat] / np.maximum(n[self.flat], 1)
+
+    def image(self, values):
+        out = np.zeros(self.mask.shape)
+        out[self.mask] = values
+        return out
+
+
+def local_fold(t, pu, pv, mask, nb, sigma, exclude=1, shift=(0, 0)):
+    """A spatially varying fold: per pixel, the Gaussian-weighted (sigma px) mean of t over the
+    masked pixels in the same phase bin (nb x nb bins), without the pixel itself and its
+    same-bin neighbours within `exclude` px. The pattern's look changes with the view and light
+    over a scene; this follows it. shift (du, dv) bins: the fold looked up at the pixel's
+    phase bin moved by that much (a control: the same pattern out of phase)."""
+    k = gauss1d(sigma)
+    c = len(k) // 2
+    ys, xs = np.nonzero(mask)  # work on the mask's bounding box (+ the kernel's reach)
+    y0, y1 = max(ys.min() - c, 0), min(ys.max() + c + 1, mask.shape[0])
+    x0, x1 = max(xs.min() - c, 0), min(xs.max() + c + 1, mask.shape[1])
+    crop = (slice(y0, y1), slice(x0, x1))
+    m = mask[crop]
+    iu = np.minimum((pu[crop] * nb).astype(int), nb - 1)
+    iv = np.minimum((pv[crop] * nb).astype(int), nb - 1)
+    b = np.where(m, iu * nb + iv, -1)
+    look = np.where(m, ((iu + shift[0]) % nb) * nb + (iv + shift[1]) % nb, -1)
+    tm = np.where(m, t[crop], 0.0)
+    num, den = np.zeros(m.shape), np.zeros(m.shape)
+    for bi in range(nb * nb):
+        sel = look == bi
+        if not sel.any():
+            continue
+        src = b == bi
+        num[sel] = conv_sep(np.where(src, tm, 0.0), k)[sel]
+        den[sel] = conv_sep(src.astype(np.float64), k)[sel]
+    es, en = same_bin_near(tm, b, exclude, lambda dy, dx: k[c + dy] * k[c + dx], look)
+    return ((num - es) / np.maximum(den - en, 1e-9))[m]
+
+
+def cov_(x, y):
+    return float(np.mean((x - x.mean()) * (y - y.mean())))
+
+
+def corr_(x, y):
+    x = x - x.mean()
+    y = y - y.mean()
+    d = np.sqrt((x * x).sum() * (y * y).sum())
+    return float((x * y).sum() / d) if d > 0 else 0.0
+
+
+SYMMETRIES = [(swap, fu, fv) for swap in (False, True) for fu in (False, True) for fv in (False, True)]
+
+
+def sym_name(s):
+    swap, fu, fv = s
+    parts = (["u<->v"] if swap else []) + (["u->-u"] if fu else []) + (["v->-v"] if fv else [])
+    return " ".join(parts) if parts else "identity"
+
+
+def transform(F, s):
+    """A fold table (axis 0 = u phase bin, axis 1 = v) under swap / u -> -u / v -> -v (the flip of
+    a bin grid is -phase up to a shift of one bin, which the shift search covers)."""
+    swap, fu, fv = s
+    G = F.T if swap else F
+    if fu:
+        G = G[::-1, :]
+    if fv:
+        G = G[:, ::-1]
+    return G
+
+
+def align(Fref, Ftest):
+    """Correlation over the phase bins of Fref with every symmetry and circular shift of Ftest.
+    Returns (identity correlation, best (corr, symmetry, shift), best per symmetry)."""
+    nb = Fref.shape[0]
+    x = Fref - Fref.mean()
+    per = {}
+    for s in SYMMETRIES:
+        G = transform(Ftest, s)
+        best = None
+        for su in range(nb):
+            for sv in range(nb):
+                c = corr_(x, np.roll(G, (su, sv), axis=(0, 1)))
+                if best is None or c > best[0]:
+                    best = (c, (su, sv))
+        per[sym_name(s)] = best
+    ident = corr_(x, Ftest)
+    b = max(per.items(), key=lambda kv: kv[1][0])
+    return ident, (b[1][0], b[0], b[1][1]), per
+
+
+def anti_phase(tab):
+    """The circular shift (bins) that moves a fold table furthest out of phase with itself
+    (the lowest autocorrelation): the control 'same pattern, wrong phase'."""
+    nb = tab.shape[0]
+    best = None
+    for su in range(nb):
+        for sv in range(nb):
+            c = corr_(tab, np.roll(tab, (su, sv), axis=(0, 1)))
+            if best is None or c < best[0]:
+                best = (c, (su, sv))
+    return best
+
+
+def cmd_fold(a):
+    """The reference's per-pixel texture split into the weave's periodic part and the rest.
+
+    Per fabric and scene (the presets' fit.scenes; reference = seed 1; --ref2-dir holds the
+    seed-2 renders FABRIC_SCENE_seed2.exr with the uv AOV, `render-reference --seed 2 --aov uv`,
+    same spp budget and target error). Texture t = L / S4(L) - 1 over the valid interior pixels
+    (weave_phase). Fold = the mean of t per phase bin (a.bins^2 bins of (frac(uR), frac(vR)));
+    the local folds (a.local: bins:sigma) follow the pattern's look over the scene. Every fold
+    that predicts a pixel leaves out that pixel and its same-bin neighbours within 1 px (so only
+    other weave tiles, whose glints are other hash draws, predict it). Shares of var(t1):
+      periodic P  = cov(t1, fold2) / var(t1): the seed-2 fold at each pixel's phase (unbiased:
+                    the fold's estimation noise is independent of t1);
+      est. noise  = var(fold2) / var(t1) - P: the fold's own estimation noise (the part of the
+                    pattern estimate that is not the pattern);
+      determ. D   = cov(t1, t2) / var(t1) (what the two seeds share);
+      non-periodic deterministic G = D - P (glints; shading the 4 px low-pass leaves in t; the
+                    pattern's variation that the fold's bins and window smooth away); noise 1 - D.
+    Then the previews' global folds against the reference's (correlation over the bins for the 8
+    symmetries x all shifts; also per row band of the fabric), and FLIP (compare, pooled over
+    coverage > 0.5) of test images on the full pixels (cov >= 0.999; every other pixel keeps the
+    preview; the pattern only on the valid pixels):
+      smooth              S4(P)
+      + fold2 [g]         S4(P) (1 + fold2(phase))  (g: global; l B/s: local, B bins, sigma s)
+      + fold2 anti-phase  the same fold looked up at the phase moved by anti_phase's shift
+      + ref2 texture      S4(P) ref2 / S4(ref2) (per channel, as transplant)"""
+    sigma = 4.0
+    rows, align_rows, flip_rows = [], [], []
+    imgdir = os.path.join(a.out, "img")
+    os.makedirs(imgdir, exist_ok=True)
+    locals_ = [tuple(float(x) for x in item.split(":")) for item in a.local.split(",") if item]
+    locals_ = [(int(b), s) for b, s in locals_]
+    by_fabric = {}  # the presets by fabric (file name FABRIC_MODEL.json, the demo's naming)
+    for preset in a.presets:
+        tag = os.path.splitext(os.path.basename(preset))[0]
+        by_fabric.setdefault(tag.split("_")[0], []).append((tag, preset))
+    for fabric, presets in by_fabric.items():
+        R = fabric_repeats(fabric)
+        for tag, preset in presets:
+            wm = json.load(open(preset)).get("weave_maps")
+            if wm and float(wm["uv_repeats"]) != R:
+                raise SystemExit("%s: weave_maps.uv_repeats %s != the fabric's %s" % (
+                    preset, wm["uv_repeats"], R))
+        p0 = json.load(open(presets[0][1]))
+        for s in p0["fit"]["scenes"]:
+            name = os.path.splitext(os.path.basename(s["scene"]))[0]
+            r2path = os.path.join(a.ref2_dir, "%s_%s_seed2.exr" % (fabric, name))
+            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
+            pu, pv, valid, interior, fp = weave_phase(r2path, R, cov)
+            r1 = read_image(s["reference"], ["R", "G", "B"])
+            r2 = read_image(r2path, ["R", "G", "B"])
+            t1, t2 = texture(r1, cov, sigma), texture(r2, cov, sigma)
+            F = Fold(pu, pv, valid, a.bins)
+            x1, x2 = t1[valid], t2[valid]
+            v1, v2 = float(x1.var()), float(x2.var())
+            tab1, n1 = F.mean(t1)
+            tab2, _ = F.mean(t2)
+            ap_c, ap_shift = anti_phase(tab2)
+            preds = {"g": (F.at(t2, loo=True), F.at(t1, loo=True))}
+            anti = {"g": F.at(None, table=np.roll(tab2, (-ap_shift[0], -ap_shift[1]), axis=(0, 1)))}
+            for nb, sg in locals_:
+                key = "l%d/%g" % (nb, sg)
+                preds[key] = (local_fold(t2, pu, pv, valid, nb, sg),
+                              local_fold(t1, pu, pv, valid, nb, sg))
+            nb0, sg0 = locals_[0]
+            k = nb0 / a.bins
+            anti["l%d/%g" % (nb0, sg0)] = local_fold(
+                t2, pu, pv, valid, nb0, sg0, shift=(int(round(ap_shift[0] * k)), int(round(ap_shift[1] * k))))
+            row = dict(fabric=fabric, scene=name, R=R, bins=a.bins, interior_px=int(interior.sum()),
+                       valid_px=int(valid.sum()), min_bin_px=int(n1.min()),
+                       periods_per_px=[float(q) for q in np.percentile(fp[valid], [5, 50, 95])],
+                       std_t1=float(np.sqrt(v1)), std_t2=float(np.sqrt(v2)),
+                       D=cov_(x1, x2) / v1, D_seed2=cov_(x1, x2) / v2,
+                       corr_fold1_fold2=corr_(tab1, tab2),
+                       anti_phase_shift=list(ap_shift), anti_phase_corr=ap_c, folds={})
+            for key, (p2, p1) in preds.items():
+                row["folds"][key] = dict(P=cov_(x1, p2) / v1, noise=float(p2.var()) / v1 - cov_(x1, p2) / v1,
+                                         R2=1 - float((x1 - p2).var()) / v1,
+                                         P_seed2=cov_(x2, p1) / v2)
+            row["N"] = 1 - row["D"]
+            rows.append(row)
+            print("%s %-6s valid %5d/%5d px (min %d per bin), periods/px %s; std t %.3f (seed 2 "
+                  "%.3f); deterministic %.3f, noise %.3f; corr(fold1, fold2) %.3f; anti-phase "
+                  "shift %s (corr %.2f)" % (
+                      fabric, name, row["valid_px"], row["interior_px"], row["min_bin_px"],
+                      "/".join("%.2f" % q for q in row["periods_per_px"]), row["std_t1"],
+                      row["std_t2"], row["D"], row["N"], row["corr_fold1_fold2"], ap_shift, ap_c))
+            for key, f in row["folds"].items():
+                print("   fold %-7s periodic %.3f (seed 2 %.3f; R2 %.3f; est. noise %.3f) -> "
+                      "non-periodic deterministic %.3f" % (key, f["P"], f["P_seed2"], f["R2"],
+                                                          f["noise"], row["D"] - f["P"]), flush=True)
+            np.save(os.path.join(a.out, "%s_%s_fold_ref1.npy" % (fabric, name)), tab1)
+            np.save(os.path.join(a.out, "%s_%s_fold_ref2.npy" % (fabric, name)), tab2)
+            full = (cov >= 0.999)[:, :, None]
+            sr2 = smooth_inside(r2, cov, sigma)
+            ratio2 = np.where(sr2 > 1e-6, r2 / np.maximum(sr2, 1e-6), 1.0)
+            pattern = {}
+            for key, (p2, _) in preds.items():
+                pattern["fold2 " + key] = F.image(p2)
+                if key in anti:
+                    pattern["fold2 %s anti-phase" % key] = F.image(anti[key])
+            ys = np.nonzero(valid.any(axis=1))[0]
+            edges = np.linspace(ys.min(), ys.max() + 1, a.bands + 1).astype(int)
+            for tag, preset in presets:
+                model = tag.split("_", 1)[1]
+                ps = [x for x in json.load(open(preset))["fit"]["scenes"]
+                      if os.path.splitext(os.path.basename(x["scene"]))[0] == name][0]
+                if os.path.abspath(ps["reference"]) != os.path.abspath(s["reference"]):
+                    raise SystemExit("%s: %s has another reference" % (preset, name))
+                pv_img = read_image(ps["preview"], ["R", "G", "B"])
+                tp = texture(pv_img, cov, sigma)
+                tabp, _ = F.mean(tp)
+                np.save(os.path.join(a.out, "%s_%s_fold_%s.npy" % (fabric, name, model)), tabp)
+                tabr = (tab1 + tab2) / 2
+                ident, best, per = align(tabr, tabp)
+                xp = tp[valid]
+                bands = []
+                for kb in range(a.bands):
+                    band = valid.copy()
+                    band[:edges[kb]] = False
+                    band[edges[kb + 1]:] = False
+                    Fb = Fold(pu, pv, band, a.bins)
+                    tb_r, _ = Fb.mean((t1 + t2) / 2)
+                    tb_p, _ = Fb.mean(tp)
+                    bi, bb, bper = align(tb_r, tb_p)
+                    bands.append(dict(rows=[int(edges[kb]), int(edges[kb + 1])],
+                                      periods_per_px=float(np.median(fp[band])), corr_identity=bi,
+                                      best=[bb[0], bb[1], list(bb[2])],
+                                      per_symmetry={kk: vv[0] for kk, vv in bper.items()}))
+                arow = dict(fabric=fabric, scene=name, model=model,
+                            std_fold_preview=float(tabp.std()), std_fold_ref=float(tabr.std()),
+                            corr_identity=ident, best_corr=best[0], best_symmetry=best[1],
+                            best_shift=list(best[2]),
+                            per_symmetry={kk: [vv[0], list(vv[1])] for kk, vv in per.items()},
+                            corr_pixel_texture=corr_(x1, xp),
+                            std_preview_texture=float(xp.std()),
+                            P_preview=float(F.at(tp).var()) / float(xp.var()), bands=bands)
+                align_rows.append(arow)
+                print("  %-15s fold std %.3f (ref %.3f); corr with the ref fold: identity %.3f, best"
+                      " %.3f (%s, shift %s bins); per symmetry (best shift) %s" % (
+                          model, arow["std_fold_preview"], arow["std_fold_ref"], ident, best[0],
+                          best[1], best[2], ", ".join("%s %.2f" % (kk, vv[0]) for kk, vv in per.items())))
+                for bd in bands:
+                    print("     rows %d-%d (%.2f periods/px): identity %.2f; best %.2f %s %s" % (
+                        bd["rows"][0], bd["rows"][1], bd["periods_per_px"], bd["corr_identity"],
+                        bd["best"][0], bd["best"][1], bd["best"][2]))
+                print("     per-pixel texture corr with the ref %.3f; the preview's own periodic "
+                      "share %.3f" % (arow["corr_pixel_texture"], arow["P_preview"]), flush=True)
+                sp = smooth_inside(pv_img, cov, sigma).astype(np.float64)
+                tests = {"preview": ps["preview"]}
+                imgs = {"smooth": sp}
+                for pname, pat in pattern.items():
+                    imgs["+ " + pname] = sp * np.where(valid, 1.0 + pat, 1.0)[:, :, None]
+                imgs["+ ref2 texture"] = sp * ratio2
+                for what, img in imgs.items():
+                    out = np.where(full, img, pv_img).astype(np.float32)
+                    path = os.path.join(imgdir, "%s_%s_%s.exr" % (tag, name, "".join(
+                        c if c.isalnum() else "_" for c in what)))
+                    write_exr(path, out)
+                    tests[what] = path
+                for what, path in tests.items():
+                    fl = flip_map(a.clothfit, s["reference"], path, s["tone_mapping"],
+                                  s["exposure"], a.out)
+                    frow = pool(fl, regions(cov))
+                    frow.update(fabric=fabric, scene=name, model=model, test=what)
+                    flip_rows.append(frow)
+                    print("     %-26s FLIP %.4f" % (what, frow["all"]), flush=True)
+    json.dump(dict(variance=rows, alignment=align_rows, flip=flip_rows),
+              open(os.path.join(a.out, "fold.json"), "w"), indent=1)
+    print("\nFLIP, mean over scenes (coverage > 0.5):")
+    groups = {}
+    for r in flip_rows:
+        groups.setdefault((r["fabric"], r["model"], r["test"]), []).append(r)
+    for (fab, model, test), rs in groups.items():
+        print("| %s | %s | %s | %s | %.4f |" % (fab, model, test, " / ".join(
+            "%.4f" % r["all"] for r in rs), sum(r["all"] for r in rs) / len(rs)))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast", "period"])
+    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast", "period", "fold"])
     ap.add_argument("presets", nargs="*")
     ap.add_argument("--demo", default="/work/main/out/demo")
     ap.add_argument("--out", required=True)
@@ -502,6 +882,12 @@ def main():
     ap.add_argument("--factors", default="1,2,4")
     ap.add_argument("--shift", default="", help="transplant: also the texture moved by dy,dx px")
     ap.add_argument("--scenes", default="", help="supersample: only these scenes (sphere,drape,swatch)")
+    ap.add_argument("--ref2-dir", default="",
+                    help="fold: FABRIC_SCENE_seed2.exr (render-reference --seed 2 --aov uv)")
+    ap.add_argument("--bins", type=int, default=16, help="fold: phase bins per axis")
+    ap.add_argument("--local", default="16:16,8:16",
+                    help="fold: local folds, BINS:SIGMA_PX,... (the first also gets the anti-phase control)")
+    ap.add_argument("--bands", type=int, default=4, help="fold: row bands for the alignment")
     ap.add_argument("--ppd", type=float, default=None,
                     help="presets: FLIP pixels per degree (default: compare's, 67)")
     a = ap.parse_intermixed_args()
@@ -515,7 +901,8 @@ def main():
     a.clothfit = os.path.abspath(a.clothfit)
     os.makedirs(a.out, exist_ok=True)
     {"floor": cmd_floor, "regions": cmd_regions, "supersample": cmd_supersample,
-     "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables, "contrast": cmd_contrast, "period": cmd_period}[a.command](a)
+     "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables, "contrast": cmd_contrast, "period": cmd_period,
+     "fold": cmd_fold}[a.command](a)
 
 
 if __name__ == "__main__":
