@@ -412,6 +412,39 @@ def cmd_transplant(a):
     json.dump(rows, open(os.path.join(a.out, "transplant.json"), "w"), indent=1)
 
 
+def cmd_texscale(a):
+    """The preview's own texture, scaled (session 14): per preview P (the presets given, their
+    --images previews), FLIP(ref, S_s(P) (1 + k (P / S_s(P) - 1))) for each k in --scales, inside
+    the fully covered fabric (S_s the Gaussian low-pass inside the fabric, --sigmas; every other
+    pixel keeps P). k = 1 is P itself; k = 0 is S_s(P) (the "smooth" preview); k < 1 tones the
+    weave pattern the maps draw down, k > 1 up."""
+    rows = []
+    for preset in a.presets:
+        p = json.load(open(preset))
+        tag = os.path.splitext(os.path.basename(preset))[0]
+        for s in p["fit"]["scenes"]:
+            name = os.path.splitext(os.path.basename(s["scene"]))[0]
+            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
+            masks = regions(cov)
+            pv = read_image(s["preview"], ["R", "G", "B"])
+            full = (cov >= 0.999)[:, :, None]
+            for sigma in a.sigmas:
+                sp = smooth_inside(pv, cov, sigma)
+                ratio = np.where(sp > 1e-6, pv / np.maximum(sp, 1e-6), 1.0)
+                for k in a.scales:
+                    test = np.where(full, sp * (1.0 + k * (ratio - 1.0)), pv).astype(np.float32)
+                    base = os.path.join(a.out, "img", "%s_%s_s%g_k%g.exr" % (tag, name, sigma, k))
+                    os.makedirs(os.path.dirname(base), exist_ok=True)
+                    write_exr(base, test)
+                    fl = flip_map(a.clothfit, s["reference"], base, s["tone_mapping"], s["exposure"], a.out)
+                    row = pool(fl, masks)
+                    row.update(fabric=tag, scene=name, test="texture x%g s%g" % (k, sigma))
+                    rows.append(row)
+                    print("%s %s %-20s fabric %s interior %s" % (tag, name, row["test"],
+                          fmt(row["all"]), fmt(row["interior"])), flush=True)
+    json.dump(rows, open(os.path.join(a.out, "texscale.json"), "w"), indent=1)
+
+
 def cmd_tables(a):
     """Markdown tables (docs/flip.md) from the JSON files the other commands wrote: each
     positional argument is one such file. Per (fabric or preset, test): the three scenes'
@@ -870,7 +903,7 @@ def cmd_fold(a):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast", "period", "fold"])
+    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast", "period", "fold", "texscale"])
     ap.add_argument("presets", nargs="*")
     ap.add_argument("--demo", default="/work/main/out/demo")
     ap.add_argument("--out", required=True)
@@ -888,6 +921,8 @@ def main():
     ap.add_argument("--local", default="16:16,8:16",
                     help="fold: local folds, BINS:SIGMA_PX,... (the first also gets the anti-phase control)")
     ap.add_argument("--bands", type=int, default=4, help="fold: row bands for the alignment")
+    ap.add_argument("--scales", default="0,0.33,0.5,0.75,1,1.5",
+                    help="texscale: factors k on the preview's own texture")
     ap.add_argument("--ppd", type=float, default=None,
                     help="presets: FLIP pixels per degree (default: compare's, 67)")
     a = ap.parse_intermixed_args()
@@ -896,13 +931,14 @@ def main():
     a.sigmas = [float(x) for x in a.sigmas.split(",")]
     a.blocks = [int(x) for x in a.blocks.split(",")]
     a.factors = [int(x) for x in a.factors.split(",")]
+    a.scales = [float(x) for x in a.scales.split(",")]
     a.scenes = [x for x in a.scenes.split(",") if x]
     a.shift = tuple(int(x) for x in a.shift.split(",")) if a.shift else None
     a.clothfit = os.path.abspath(a.clothfit)
     os.makedirs(a.out, exist_ok=True)
     {"floor": cmd_floor, "regions": cmd_regions, "supersample": cmd_supersample,
      "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables, "contrast": cmd_contrast, "period": cmd_period,
-     "fold": cmd_fold}[a.command](a)
+     "fold": cmd_fold, "texscale": cmd_texscale}[a.command](a)
 
 
 if __name__ == "__main__":
