@@ -83,75 +83,116 @@ double FilamentRadius(double u_h_abs, double umax, double ss, double kappa, doub
   return SpineRadius(std::min(u_h_abs, umax_s), umax_s, kappa, width, length);
 }
 
+namespace {
+using Vec3d = Vec3<double>;
+
+// The band indicator's mean over the band coordinate uniform in [-extent, extent]: the overlap
+// of [centre - delta/2, centre + delta/2] with it, over its length.
+double BandMean(double centre, double delta, double extent) {
+  const double lo = std::max(centre - 0.5 * delta, -extent);
+  const double hi = std::min(centre + 0.5 * delta, extent);
+  return std::max(hi - lo, 0.0) / (2.0 * extent);
+}
+
+// What SegmentSpecular computes before it looks at the point: the yarn frame, the half vector
+// and the phase; for a filament yarn (psi = 0) also u_h, the highlight band and the spine
+// radius, which depend on h only. Lobe::GroupSum computes it once per (wo, wi) for all nodes.
+struct PairTerms {
+  bool lit = false;  // false: every point of the yarn gives 0
+  Vec3d wi{0, 0, 0}, wo{0, 0, 0}, h{0, 0, 0};
+  double len = 0.0, fc = 0.0;
+  double u_h = 0.0, delta = 0.0, y_h = 0.0, cos_uh = 1.0, sin_uh = 0.0, R = 0.0, txh_x = 0.0;
+  double fade = 1.0;  // filament smoothing (ss > 0)
+};
+
+PairTerms PreparePair(const Phase& ph, const Yarn& y, double umax, const Vec3d& wo_s,
+                      const Vec3d& wi_s) {
+  PairTerms q;
+  q.wi = ToYarnFrame(wi_s, y.warp);
+  q.wo = ToYarnFrame(wo_s, y.warp);
+  const Vec3d sum = q.wi + q.wo;
+  q.len = Length(sum);
+  if (!(q.len > 1e-12)) return q;
+  q.h = sum * (1.0 / q.len);
+  // Phase function: uniform + von Mises about the forward direction.
+  q.fc = ph.alpha + std::exp(ph.beta * -Dot(q.wi, q.wo)) * ph.von_mises_norm;
+  if (y.psi == 0.0) {
+    // u_h = atan(h_y / h_z) with h_z > 0 (wi, wo above the surface): cos u_h = 1/sqrt(1 + t^2),
+    // sin u_h = t cos u_h, t = h_y / h_z.
+    const double t = q.h.y / q.h.z;
+    q.u_h = std::atan(t);
+    if (!(std::abs(q.u_h) < umax)) return q;
+    const double l = y.length;
+    q.delta = l * ph.h_width;
+    // Band centre clamped so the band stays inside the segment.
+    q.y_h = std::clamp(q.u_h / umax * 0.5 * l, -0.5 * (l - q.delta), 0.5 * (l - q.delta));
+    q.cos_uh = 1.0 / std::sqrt(1.0 + t * t);
+    q.sin_uh = t * q.cos_uh;
+    const Vec3d tangent(0.0, q.cos_uh, -q.sin_uh);
+    q.R = FilamentRadius(std::abs(q.u_h), umax, ph.ss, y.kappa, y.width, l);
+    q.txh_x = tangent.y * q.h.z - tangent.z * q.h.y;
+    if (ph.ss > 0.0) q.fade = 1.0 - SmoothStep01((std::abs(q.u_h) - (1.0 - ph.ss) * umax) / (ph.ss * umax));
+  }
+  q.lit = true;
+  return q;
+}
+
+// A filament yarn's specular at the point with sin v = sv, cos v = cv; `band` = the highlight
+// band's indicator (1) or its mean over the band coordinate. q.lit must hold.
+double FilamentPoint(const Phase& ph, const Yarn& y, const PairTerms& q, double sv, double cv,
+                     double band) {
+  const double a = 0.5 * y.width;
+  const Vec3d n(sv, q.sin_uh * cv, q.cos_uh * cv);
+  const double G = a * (q.R + a * cv) / (q.len * std::abs(q.txh_x));
+  double A = Seeliger(Dot(n, q.wi), Dot(n, q.wo));
+  if (ph.ss > 0.0) A *= q.fade;
+  const double fs = G * q.fc * A * kPi * y.length / q.delta * band;
+  return fs * y.area_factor;
+}
+
+// A staple yarn's specular at p (band_extent as SegmentSpecular's). q.lit must hold.
+double StaplePoint(const Phase& ph, const Yarn& y, const PairTerms& q, const Point& p,
+                   double band_extent) {
+  const Vec3d& h = q.h;
+  const double w = y.width, a = 0.5 * w;
+  const double su = p.sin_u, cu = p.cos_u;
+  const double bterm = h.y * su + h.z * cu;
+  const double r = std::sqrt(h.x * h.x + bterm * bterm);
+  const double D = (h.y * cu - h.z * su) / (r * y.tan_psi);
+  if (!(std::abs(D) < 1.0)) return 0.0;  // also rejects r = 0 (D infinite or NaN)
+  // v_h = atan2(-bterm, h_x) + acos(D), wrapped to (-pi, pi]: its sine and cosine by the
+  // angle-sum formulas (cos of the atan2 = h_x / r, sin = -bterm / r; sin acos D =
+  // sqrt(1 - D^2)), the angle itself by one atan2.
+  const double ca = h.x / r, sa = -bterm / r, sb = std::sqrt(1.0 - D * D);
+  const double cos_vh = ca * D - sa * sb, sin_vh = sa * D + ca * sb;
+  const double v_h = std::atan2(sin_vh, cos_vh);
+  if (!(std::abs(v_h) < 0.5 * kPi)) return 0.0;
+  const double delta = w * ph.h_width;
+  const double x_h = std::clamp(v_h * w / kPi, -0.5 * (w - delta), 0.5 * (w - delta));
+  const bool band_average = band_extent > 0.0;
+  if (!band_average && !(std::abs(p.across - x_h) < 0.5 * delta)) return 0.0;
+  const Vec3d n(sin_vh, su * cos_vh, cu * cos_vh);
+  const double NoH = Dot(n, h);
+  if (!(NoH > 0.0)) return 0.0;
+  const double G = a * (p.spine_radius + a * cos_vh) / (q.len * NoH * std::abs(y.sin_psi));
+  const double A = Seeliger(Dot(n, q.wi), Dot(n, q.wo));
+  const double fs =
+      G * q.fc * A * 2.0 * w * p.umax / delta * (band_average ? BandMean(x_h, delta, band_extent) : 1.0);
+  return fs * y.area_factor;
+}
+}  // namespace
+
 double SegmentSpecular(const Phase& ph, const Yarn& y, const Point& p, const Vec3<double>& wo_s,
                        const Vec3<double>& wi_s, double band_extent) {
-  using Vec3d = Vec3<double>;
-  const bool band_average = band_extent > 0.0;
-  // The band indicator's mean over the band coordinate uniform in [-band_extent, band_extent]:
-  // the overlap of [centre - delta/2, centre + delta/2] with it, over its length.
-  auto band_mean = [band_extent](double centre, double delta) {
-    const double lo = std::max(centre - 0.5 * delta, -band_extent);
-    const double hi = std::min(centre + 0.5 * delta, band_extent);
-    return std::max(hi - lo, 0.0) / (2.0 * band_extent);
-  };
   if (!(wo_s.z > 0.0) || !(wi_s.z > 0.0)) return 0.0;
-  const Vec3d wi = ToYarnFrame(wi_s, y.warp), wo = ToYarnFrame(wo_s, y.warp);
-  const Vec3d sum = wi + wo;
-  const double len = Length(sum);
-  if (!(len > 1e-12)) return 0.0;
-  const Vec3d h = sum * (1.0 / len);
-  const double umax = p.umax, w = y.width, l = y.length, a = 0.5 * w;
-  // Phase function: uniform + von Mises about the forward direction.
-  const double fc = ph.alpha + std::exp(ph.beta * -Dot(wi, wo)) * ph.von_mises_norm;
-  double fs = 0.0;
-  if (y.psi == 0.0) {
-    // u_h = atan(h_y / h_z) with h_z > 0 (wi, wo above the surface): cos u_h = 1/sqrt(1 + q^2),
-    // sin u_h = q cos u_h, q = h_y / h_z.
-    const double q = h.y / h.z;
-    const double u_h = std::atan(q);
-    if (!(std::abs(u_h) < umax)) return 0.0;
-    const double delta = l * ph.h_width;
-    // Band centre clamped so the band stays inside the segment.
-    const double y_h = std::clamp(u_h / umax * 0.5 * l, -0.5 * (l - delta), 0.5 * (l - delta));
-    if (!band_average && !(std::abs(p.along - y_h) < 0.5 * delta)) return 0.0;
-    const double cos_uh = 1.0 / std::sqrt(1.0 + q * q), sin_uh = q * cos_uh;
-    const double v = p.v, sv = std::sin(v), cv = std::cos(v);
-    const Vec3d n(sv, sin_uh * cv, cos_uh * cv);
-    const Vec3d t(0.0, cos_uh, -sin_uh);
-    const double R = FilamentRadius(std::abs(u_h), umax, ph.ss, y.kappa, w, l);
-    const double txh_x = t.y * h.z - t.z * h.y;
-    const double G = a * (R + a * cv) / (len * std::abs(txh_x));
-    double A = Seeliger(Dot(n, wi), Dot(n, wo));
-    if (ph.ss > 0.0) {
-      A *= 1.0 - SmoothStep01((std::abs(u_h) - (1.0 - ph.ss) * umax) / (ph.ss * umax));
-    }
-    // band_average: the band indicator's mean over `along` in place of the indicator
-    fs = G * fc * A * kPi * l / delta * (band_average ? band_mean(y_h, delta) : 1.0);
-  } else {
-    const double su = p.sin_u, cu = p.cos_u;
-    const double bterm = h.y * su + h.z * cu;
-    const double r = std::sqrt(h.x * h.x + bterm * bterm);
-    const double D = (h.y * cu - h.z * su) / (r * y.tan_psi);
-    if (!(std::abs(D) < 1.0)) return 0.0;  // also rejects r = 0 (D infinite or NaN)
-    // v_h = atan2(-bterm, h_x) + acos(D), wrapped to (-pi, pi]: its sine and cosine by the
-    // angle-sum formulas (cos of the atan2 = h_x / r, sin = -bterm / r; sin acos D =
-    // sqrt(1 - D^2)), the angle itself by one atan2.
-    const double ca = h.x / r, sa = -bterm / r, sb = std::sqrt(1.0 - D * D);
-    const double cos_vh = ca * D - sa * sb, sin_vh = sa * D + ca * sb;
-    const double v_h = std::atan2(sin_vh, cos_vh);
-    if (!(std::abs(v_h) < 0.5 * kPi)) return 0.0;
-    const double delta = w * ph.h_width;
-    const double x_h = std::clamp(v_h * w / kPi, -0.5 * (w - delta), 0.5 * (w - delta));
-    if (!band_average && !(std::abs(p.across - x_h) < 0.5 * delta)) return 0.0;
-    const Vec3d n(sin_vh, su * cos_vh, cu * cos_vh);
-    const double NoH = Dot(n, h);
-    if (!(NoH > 0.0)) return 0.0;
-    const double R = p.spine_radius;
-    const double G = a * (R + a * cos_vh) / (len * NoH * std::abs(y.sin_psi));
-    const double A = Seeliger(Dot(n, wi), Dot(n, wo));
-    fs = G * fc * A * 2.0 * w * umax / delta * (band_average ? band_mean(x_h, delta) : 1.0);
-  }
-  return fs * y.area_factor;
+  const PairTerms q = PreparePair(ph, y, p.umax, wo_s, wi_s);
+  if (!q.lit) return 0.0;
+  if (y.psi != 0.0) return StaplePoint(ph, y, q, p, band_extent);
+  const bool band_average = band_extent > 0.0;
+  if (!band_average && !(std::abs(p.along - q.y_h) < 0.5 * q.delta)) return 0.0;
+  // band_average: the band indicator's mean over `along` in place of the indicator
+  return FilamentPoint(ph, y, q, std::sin(p.v), std::cos(p.v),
+                       band_average ? BandMean(q.y_h, q.delta, band_extent) : 1.0);
 }
 
 Yarn MakeYarn(bool warp, double psi_deg, double width, double length, double kappa,
@@ -245,75 +286,21 @@ Lobe::Lobe(const FarField& f) : f_(f) {
   }
 }
 
-// sum_p SegmentSpecular(ph, y, p, wo_s, wi_s, band_extent) over a group's nodes, with the work
-// that does not depend on the node done once: the yarn frame, the half vector and the phase for
-// every yarn; for a filament yarn (psi = 0) also u_h, the highlight band and the spine radius,
-// and each node's sin v, cos v from the constructor (sv, cv). The per-node arithmetic is
-// SegmentSpecular's, operation for operation, so the sum is bit-identical to the loop of calls
-// (test YarnLobe.EvalIsTheSumOfSegmentSpecular). band_extent > 0 (Validate: along, across > 0).
+// sum_p SegmentSpecular(phase_, g.yarn, p, wo_s, wi_s, g.band_extent) over g's nodes, with the
+// point-independent part (PreparePair) computed once, and each filament node's sin v, cos v
+// from the constructor. The same functions as SegmentSpecular's, so the same values (test
+// S12YarnLobe.EvalIsTheSumOfSegmentSpecular). band_extent > 0 (Validate: along, across > 0).
 double Lobe::GroupSum(const G& g, const Vec3<double>& wo_s, const Vec3<double>& wi_s) const {
-  using Vec3d = Vec3<double>;
-  const Phase& ph = phase_;
-  const Yarn& y = g.yarn;
-  const double band_extent = g.band_extent;
-  auto band_mean = [band_extent](double centre, double delta) {
-    const double lo = std::max(centre - 0.5 * delta, -band_extent);
-    const double hi = std::min(centre + 0.5 * delta, band_extent);
-    return std::max(hi - lo, 0.0) / (2.0 * band_extent);
-  };
-  const Vec3d wi = ToYarnFrame(wi_s, y.warp), wo = ToYarnFrame(wo_s, y.warp);
-  const Vec3d sum = wi + wo;
-  const double len = Length(sum);
-  if (!(len > 1e-12) || g.nodes.empty()) return 0.0;
-  const Vec3d h = sum * (1.0 / len);
-  const double umax = g.nodes[0].umax, w = y.width, l = y.length, a = 0.5 * w;
-  const double fc = ph.alpha + std::exp(ph.beta * -Dot(wi, wo)) * ph.von_mises_norm;
+  if (g.nodes.empty()) return 0.0;
+  const PairTerms q = PreparePair(phase_, g.yarn, g.nodes[0].umax, wo_s, wi_s);
+  if (!q.lit) return 0.0;
   double total = 0.0;
-  if (y.psi == 0.0) {
-    const double q = h.y / h.z;
-    const double u_h = std::atan(q);
-    if (!(std::abs(u_h) < umax)) return 0.0;
-    const double delta = l * ph.h_width;
-    const double y_h = std::clamp(u_h / umax * 0.5 * l, -0.5 * (l - delta), 0.5 * (l - delta));
-    const double cos_uh = 1.0 / std::sqrt(1.0 + q * q), sin_uh = q * cos_uh;
-    const Vec3d t(0.0, cos_uh, -sin_uh);
-    const double R = FilamentRadius(std::abs(u_h), umax, ph.ss, y.kappa, w, l);
-    const double txh_x = t.y * h.z - t.z * h.y;
-    const double fade =
-        ph.ss > 0.0 ? 1.0 - SmoothStep01((std::abs(u_h) - (1.0 - ph.ss) * umax) / (ph.ss * umax))
-                    : 1.0;
-    const double bm = band_mean(y_h, delta);
-    for (size_t k = 0; k < g.nodes.size(); ++k) {
-      const double sv = g.sin_v[k], cv = g.cos_v[k];
-      const Vec3d n(sv, sin_uh * cv, cos_uh * cv);
-      const double geom = a * (R + a * cv) / (len * std::abs(txh_x));
-      double A = Seeliger(Dot(n, wi), Dot(n, wo));
-      if (ph.ss > 0.0) A *= fade;
-      const double fs = geom * fc * A * kPi * l / delta * bm;
-      total += fs * y.area_factor;
-    }
-    return total;
-  }
-  for (const Point& p : g.nodes) {
-    const double su = p.sin_u, cu = p.cos_u;
-    const double bterm = h.y * su + h.z * cu;
-    const double r = std::sqrt(h.x * h.x + bterm * bterm);
-    const double D = (h.y * cu - h.z * su) / (r * y.tan_psi);
-    if (!(std::abs(D) < 1.0)) continue;  // also rejects r = 0
-    const double ca = h.x / r, sa = -bterm / r, sb = std::sqrt(1.0 - D * D);
-    const double cos_vh = ca * D - sa * sb, sin_vh = sa * D + ca * sb;
-    const double v_h = std::atan2(sin_vh, cos_vh);
-    if (!(std::abs(v_h) < 0.5 * kPi)) continue;
-    const double delta = w * ph.h_width;
-    const double x_h = std::clamp(v_h * w / kPi, -0.5 * (w - delta), 0.5 * (w - delta));
-    const Vec3d n(sin_vh, su * cos_vh, cu * cos_vh);
-    const double NoH = Dot(n, h);
-    if (!(NoH > 0.0)) continue;
-    const double R = p.spine_radius;
-    const double geom = a * (R + a * cos_vh) / (len * NoH * std::abs(y.sin_psi));
-    const double A = Seeliger(Dot(n, wi), Dot(n, wo));
-    const double fs = geom * fc * A * 2.0 * w * umax / delta * band_mean(x_h, delta);
-    total += fs * y.area_factor;
+  if (g.yarn.psi == 0.0) {
+    const double band = BandMean(q.y_h, q.delta, g.band_extent);
+    for (size_t k = 0; k < g.nodes.size(); ++k)
+      total += FilamentPoint(phase_, g.yarn, q, g.sin_v[k], g.cos_v[k], band);
+  } else {
+    for (const Point& p : g.nodes) total += StaplePoint(phase_, g.yarn, q, p, g.band_extent);
   }
   return total;
 }
