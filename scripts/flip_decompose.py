@@ -359,6 +359,18 @@ def cmd_presets(a):
         "_ppd%g" % a.ppd if a.ppd else "")), "w"), indent=1)
 
 
+def preset_scenes(presets):
+    """Per fitted preset and scene: (preset tag, scene name, the fit's scene record, reference
+    coverage, regions(coverage), the preset's preview image)."""
+    for preset in presets:
+        p = json.load(open(preset))
+        tag = os.path.splitext(os.path.basename(preset))[0]
+        for s in p["fit"]["scenes"]:
+            name = os.path.splitext(os.path.basename(s["scene"]))[0]
+            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
+            yield tag, name, s, cov, regions(cov), read_image(s["preview"], ["R", "G", "B"])
+
+
 def cmd_transplant(a):
     """Shading vs texture, per preview P (the presets given, their --images previews):
       vs smooth ref : FLIP(S_s(ref2), P): P against the second-seed reference low-passed inside
@@ -367,48 +379,41 @@ def cmd_transplant(a):
                       the reference's own texture (seed 2: independent noise): what P's shading
                       would score with a perfect per-pixel pattern (weave, glints) on top."""
     rows = []
-    for preset in a.presets:
-        p = json.load(open(preset))
-        tag = os.path.splitext(os.path.basename(preset))[0]
-        for s in p["fit"]["scenes"]:
-            name = os.path.splitext(os.path.basename(s["scene"]))[0]
-            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
-            masks = regions(cov)
-            r2 = read_image(s["reference2"], ["R", "G", "B"])
-            pv = read_image(s["preview"], ["R", "G", "B"])
-            for sigma in a.sigmas:
-                sr2 = smooth_inside(r2, cov, sigma)
-                sp = smooth_inside(pv, cov, sigma)
-                ratio = np.where(sr2 > 1e-6, r2 / np.maximum(sr2, 1e-6), 1.0)
-                full = (cov >= 0.999)[:, :, None]
-                tex = np.where(full, sp * ratio, pv).astype(np.float32)
-                base = os.path.join(a.out, "img", "%s_%s_s%g" % (tag, name, sigma))
-                os.makedirs(os.path.dirname(base), exist_ok=True)
-                write_exr(base + "_smoothref.exr", sr2)
-                write_exr(base + "_textured.exr", tex)
-                tests = [("vs smooth ref", base + "_smoothref.exr", s["preview"]),
-                         ("+ ref texture", s["reference"], base + "_textured.exr")]
-                if a.shift:
-                    # The same texture moved by (dy, dx) px (circularly): the reference's texture
-                    # statistics without its phase. Its correlation with the unshifted texture
-                    # over the interior is printed.
-                    moved = np.roll(ratio, a.shift, axis=(0, 1))
-                    sh = np.where(full, sp * moved, pv).astype(np.float32)
-                    write_exr(base + "_shifted.exr", sh)
-                    inner = masks["interior"] & full[:, :, 0]
-                    lum = np.array([0.2126, 0.7152, 0.0722])
-                    c = np.corrcoef((ratio @ lum)[inner], (moved @ lum)[inner])[0, 1]
-                    print("%s %s s%g: shift %s, texture correlation %.3f" % (
-                        tag, name, sigma, a.shift, c), flush=True)
-                    tests.append(("+ shifted ref texture", s["reference"], base + "_shifted.exr"))
-                for what, ref, test in tests:
-                    fl = flip_map(a.clothfit, ref, test, s["tone_mapping"], s["exposure"], a.out)
-                    row = pool(fl, masks)
-                    row.update(fabric=tag, scene=name, test="%s s%g" % (what, sigma))
-                    rows.append(row)
-                    print("%s %s %-20s fabric %s interior %s band2 %s" % (
-                        tag, name, row["test"], fmt(row["all"]), fmt(row["interior"]),
-                        fmt(row["band2"])), flush=True)
+    for tag, name, s, cov, masks, pv in preset_scenes(a.presets):
+        r2 = read_image(s["reference2"], ["R", "G", "B"])
+        for sigma in a.sigmas:
+            sr2 = smooth_inside(r2, cov, sigma)
+            sp = smooth_inside(pv, cov, sigma)
+            ratio = np.where(sr2 > 1e-6, r2 / np.maximum(sr2, 1e-6), 1.0)
+            full = (cov >= 0.999)[:, :, None]
+            tex = np.where(full, sp * ratio, pv).astype(np.float32)
+            base = os.path.join(a.out, "img", "%s_%s_s%g" % (tag, name, sigma))
+            os.makedirs(os.path.dirname(base), exist_ok=True)
+            write_exr(base + "_smoothref.exr", sr2)
+            write_exr(base + "_textured.exr", tex)
+            tests = [("vs smooth ref", base + "_smoothref.exr", s["preview"]),
+                     ("+ ref texture", s["reference"], base + "_textured.exr")]
+            if a.shift:
+                # The same texture moved by (dy, dx) px (circularly): the reference's texture
+                # statistics without its phase. Its correlation with the unshifted texture
+                # over the interior is printed.
+                moved = np.roll(ratio, a.shift, axis=(0, 1))
+                sh = np.where(full, sp * moved, pv).astype(np.float32)
+                write_exr(base + "_shifted.exr", sh)
+                inner = masks["interior"] & full[:, :, 0]
+                lum = np.array([0.2126, 0.7152, 0.0722])
+                c = np.corrcoef((ratio @ lum)[inner], (moved @ lum)[inner])[0, 1]
+                print("%s %s s%g: shift %s, texture correlation %.3f" % (
+                    tag, name, sigma, a.shift, c), flush=True)
+                tests.append(("+ shifted ref texture", s["reference"], base + "_shifted.exr"))
+            for what, ref, test in tests:
+                fl = flip_map(a.clothfit, ref, test, s["tone_mapping"], s["exposure"], a.out)
+                row = pool(fl, masks)
+                row.update(fabric=tag, scene=name, test="%s s%g" % (what, sigma))
+                rows.append(row)
+                print("%s %s %-20s fabric %s interior %s band2 %s" % (
+                    tag, name, row["test"], fmt(row["all"]), fmt(row["interior"]),
+                    fmt(row["band2"])), flush=True)
     json.dump(rows, open(os.path.join(a.out, "transplant.json"), "w"), indent=1)
 
 
@@ -419,29 +424,22 @@ def cmd_texscale(a):
     pixel keeps P). k = 1 is P itself; k = 0 is S_s(P) (the "smooth" preview); k < 1 tones the
     weave pattern the maps draw down, k > 1 up."""
     rows = []
-    for preset in a.presets:
-        p = json.load(open(preset))
-        tag = os.path.splitext(os.path.basename(preset))[0]
-        for s in p["fit"]["scenes"]:
-            name = os.path.splitext(os.path.basename(s["scene"]))[0]
-            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
-            masks = regions(cov)
-            pv = read_image(s["preview"], ["R", "G", "B"])
-            full = (cov >= 0.999)[:, :, None]
-            for sigma in a.sigmas:
-                sp = smooth_inside(pv, cov, sigma)
-                ratio = np.where(sp > 1e-6, pv / np.maximum(sp, 1e-6), 1.0)
-                for k in a.scales:
-                    test = np.where(full, sp * (1.0 + k * (ratio - 1.0)), pv).astype(np.float32)
-                    base = os.path.join(a.out, "img", "%s_%s_s%g_k%g.exr" % (tag, name, sigma, k))
-                    os.makedirs(os.path.dirname(base), exist_ok=True)
-                    write_exr(base, test)
-                    fl = flip_map(a.clothfit, s["reference"], base, s["tone_mapping"], s["exposure"], a.out)
-                    row = pool(fl, masks)
-                    row.update(fabric=tag, scene=name, test="texture x%g s%g" % (k, sigma))
-                    rows.append(row)
-                    print("%s %s %-20s fabric %s interior %s" % (tag, name, row["test"],
-                          fmt(row["all"]), fmt(row["interior"])), flush=True)
+    for tag, name, s, cov, masks, pv in preset_scenes(a.presets):
+        full = (cov >= 0.999)[:, :, None]
+        for sigma in a.sigmas:
+            sp = smooth_inside(pv, cov, sigma)
+            ratio = np.where(sp > 1e-6, pv / np.maximum(sp, 1e-6), 1.0)
+            for k in a.scales:
+                test = np.where(full, sp * (1.0 + k * (ratio - 1.0)), pv).astype(np.float32)
+                base = os.path.join(a.out, "img", "%s_%s_s%g_k%g.exr" % (tag, name, sigma, k))
+                os.makedirs(os.path.dirname(base), exist_ok=True)
+                write_exr(base, test)
+                fl = flip_map(a.clothfit, s["reference"], base, s["tone_mapping"], s["exposure"], a.out)
+                row = pool(fl, masks)
+                row.update(fabric=tag, scene=name, test="texture x%g s%g" % (k, sigma))
+                rows.append(row)
+                print("%s %s %-20s fabric %s interior %s" % (tag, name, row["test"],
+                      fmt(row["all"]), fmt(row["interior"])), flush=True)
     json.dump(rows, open(os.path.join(a.out, "texscale.json"), "w"), indent=1)
 
 
