@@ -1183,6 +1183,29 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 #define RE_IndirectSpecular RE_IndirectSpecular_Woven
 `;
 
+// View bands (session 14; injected only with them, after WOVEN_PARS' "varying vec2 vWovenWeaveUv;",
+// so a program without bands is the old source text): WOVEN_VIEW_BANDS bands packed in
+// WOVEN_VIEW_TEXTURES RGBA textures (weaveMapViewBands), blended by NoV in main.
+const WOVEN_VIEW_PARS = /* glsl */ `
+uniform sampler2D wovenViewMaps[ WOVEN_VIEW_TEXTURES ];
+uniform float wovenViewCosines[ WOVEN_VIEW_BANDS ];  // strictly decreasing, as in the preset
+// weaveMapViewWeights / WeaveMaps::ViewWeights: linear in nov between the nodes, clamped to the
+// end bands (band 0 the most frontal).
+void wovenViewWeights( const in float nov, out float w[ WOVEN_VIEW_BANDS ] ) {
+	for ( int k = 0; k < WOVEN_VIEW_BANDS; ++ k ) w[ k ] = 0.0;
+	if ( nov >= wovenViewCosines[ 0 ] ) { w[ 0 ] = 1.0; return; }
+	if ( nov <= wovenViewCosines[ WOVEN_VIEW_BANDS - 1 ] ) { w[ WOVEN_VIEW_BANDS - 1 ] = 1.0; return; }
+	for ( int k = 0; k < WOVEN_VIEW_BANDS - 1; ++ k ) {
+		if ( nov <= wovenViewCosines[ k ] && nov >= wovenViewCosines[ k + 1 ] ) {
+			float t = ( wovenViewCosines[ k ] - nov ) / ( wovenViewCosines[ k ] - wovenViewCosines[ k + 1 ] );
+			w[ k ] = 1.0 - t;
+			w[ k + 1 ] = t;
+			return;
+		}
+	}
+}
+`;
+
 // After three.js's roughness set-up: the IBL radiance three.js fetches is at r_e.
 const WOVEN_ROUGHNESS = /* glsl */ `
 material.roughness = wovenRE;
@@ -1193,6 +1216,24 @@ material.roughness = wovenRE;
 }
 #endif
 `;
+
+// The view bands' blend in main (uniform control flow: every texture is read, so the implicit LOD
+// and the anisotropic footprint are the main maps'): NoV = clamp(dot(N, V), 0, 1) with N the
+// interpolated normal of normal_fragment_begin (faceDirection applied; nonPerturbedNormal, i.e.
+// before any normal map) and V three.js's geometryViewDir (render/preview/preview.cpp hit.NoV
+// before the relief normal); band k's channel c is component (5 k + c) & 3 of texture
+// (5 k + c) >> 2. Generated per K (the program key names K).
+function wovenViewBlendGlsl(K) {
+  const nc = WEAVE_MAP_CHANNELS.length, T = Math.ceil((K * nc) / 4), comp = 'xyzw';
+  const lines = ['{',
+    '\tfloat wovenNoVView = clamp( dot( nonPerturbedNormal, ( isOrthographic ) ? vec3( 0.0, 0.0, 1.0 ) : normalize( vViewPosition ) ), 0.0, 1.0 );',
+    '\tfloat wovenVW[ WOVEN_VIEW_BANDS ];',
+    '\twovenViewWeights( wovenNoVView, wovenVW );'];
+  for (let j = 0; j < T; ++j) lines.push(`\tvec4 wovenVT${j} = texture2D( wovenViewMaps[ ${j} ], vWovenWeaveUv );`);
+  const ch = (c) => Array.from({ length: K }, (_, k) => { const g = nc * k + c; return `wovenVW[ ${k} ] * wovenVT${g >> 2}.${comp[g & 3]}`; }).join(' + ');
+  lines.push(`\twovenWS = WovenWeave( ${ch(0)}, ${ch(1)},`, `\t\tvec3( ${ch(2)},`, `\t\t\t${ch(3)},`, `\t\t\t${ch(4)} ), 1.0 );`, '}');
+  return lines.join('\n');
+}
 
 /**
  * MeshWovenMaterial: brdf/woven.h on three.js's MeshStandardMaterial program. Parameters are the
@@ -1235,6 +1276,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       wovenPhase: { value: wovenPhaseTexture }, clothDG: { value: clothDGTexture },
       wovenWeaveWeights: { value: null }, wovenWeaveKd: { value: null },
       wovenWeaveTransform: { value: new THREE.Matrix3() },
+      wovenViewMaps: { value: [] }, wovenViewCosines: { value: [] },
     };
     this.weaveMaps = null;  // a WeaveMaps (weaveMapsFromExr) or null: the uniform material
     this._setYarnLobe(yarnLobe);
@@ -1259,7 +1301,12 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     u.wovenWeaveWeights.value = wm ? wm.weightsTexture : null;
     u.wovenWeaveKd.value = wm ? wm.kdTexture : null;
     if (wm) u.wovenWeaveTransform.value.copy(wm.uvTransform);
+    u.wovenViewMaps.value = wm?.viewTextures ? wm.viewTextures.slice() : [];
+    u.wovenViewCosines.value = wm?.viewCosines ? wm.viewCosines.slice() : [];
   }
+
+  /** The number of view bands the program blends (0: the main maps alone). */
+  get viewBands() { return this.weaveMaps?.viewCosines?.length ?? 0; }
 
   // The far-field yarn lobe (yarnLobeOptions' result or a preset's raw "yarn_lobe" block, checked
   // here) or null; its uniforms and textures (yarnLobePack) join the material's uniforms.
@@ -1313,6 +1360,8 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     const defs = [];
     if (this.yarnLayer === 'albedo-scaled') defs.push('#define WOVEN_ALBEDO_SCALED');
     if (this.weaveMaps) defs.push('#define WOVEN_WEAVE_MAPS');
+    const K = this.viewBands;
+    if (K > 0) defs.push(`#define WOVEN_VIEW_BANDS ${K}`, `#define WOVEN_VIEW_TEXTURES ${this.weaveMaps.viewTextures.length}`);
     if (this.ibl === 'bent') defs.push('#define WOVEN_BENT');
     if (this.ibl === 'fis') {
       defs.push('#define WOVEN_FIS', `#define WOVEN_FIS_TAPS ${this.fisTaps}`, `#define WOVEN_FIS_DIFFUSE_TAPS ${this.fisDiffuseTaps}`);
@@ -1322,7 +1371,16 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       defs.push('#define WOVEN_YARN_LOBE', `#define WOVEN_YL_GROUPS ${yl.groups}`, `#define WOVEN_YL_NODES ${yl.nodes}`,
         `#define WOVEN_YL_N_THETA ${yl.nTheta}`, `#define WOVEN_YL_N_PHI ${yl.nPhi}`);
     }
-    injectPhysicalChunks(shader, 'MeshWovenMaterial', defs.join('\n') + '\nuniform float wovenRE;\n', WOVEN_PARS, WOVEN_ROUGHNESS);
+    // with view bands: their pars after the weave-map varying, and their blend in place of the
+    // main maps' read (the program without bands is unchanged)
+    let pars = WOVEN_PARS, setup = WOVEN_ROUGHNESS;
+    if (K > 0) {
+      const anchor = 'varying vec2 vWovenWeaveUv;\nWovenWeave wovenWS;', mainRead = /#if defined\( WOVEN_WEAVE_MAPS \)\n\{[^}]*\}\n#endif/;
+      if (pars.split(anchor).length !== 2 || !mainRead.test(setup)) throw new Error('MeshWovenMaterial: view bands: unexpected WOVEN_PARS / WOVEN_ROUGHNESS');
+      pars = pars.replace(anchor, 'varying vec2 vWovenWeaveUv;\n' + WOVEN_VIEW_PARS + 'WovenWeave wovenWS;');
+      setup = setup.replace(mainRead, wovenViewBlendGlsl(K));
+    }
+    injectPhysicalChunks(shader, 'MeshWovenMaterial', defs.join('\n') + '\nuniform float wovenRE;\n', pars, setup);
     routeLightMapToIblDiffuse(shader, 'MeshWovenMaterial');
     const vs = shader.vertexShader;
     if (!vs.includes('void main() {') || !vs.includes('#include <project_vertex>')) throw new Error('MeshWovenMaterial: unexpected three.js vertex shader');
@@ -1334,7 +1392,8 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     const ibl = this.ibl === 'fis' ? `fis${this.fisTaps}/${this.fisDiffuseTaps}` : this.ibl;
     const yl = this._yarnLobePack;
     const lobe = yl ? [`yarn-lobe${yl.groups}x${yl.nodes}/${yl.nTheta}x${yl.nPhi}`] : [];
-    return ['woven', this.yarnLayer, this.weaveMaps ? 'maps' : 'uniform', ibl, ...lobe].join(':');
+    const maps = this.weaveMaps ? (this.viewBands ? `maps-views${this.viewBands}` : 'maps') : 'uniform';
+    return ['woven', this.yarnLayer, maps, ibl, ...lobe].join(':');
   }
 
   copy(source) {
@@ -1476,8 +1535,11 @@ export function weaveMapsFromExr(buffer, { field = {}, name = 'weave maps', half
     }
   });
   const toHalf = (arrs) => (halfFloat ? arrs.map((a) => Uint16Array.from(a, (x) => THREE.DataUtils.toHalfFloat(x))) : arrs);
+  const views = weaveMapViewBands(img, field, name, size, type, anisotropy, toHalf);
   const maps = {
     size, uvRepeats, levels, field,
+    // View bands (session 14; weaveMapViewBands): null unless the preset names view_cosines.
+    viewCosines: views?.cosines ?? null, viewLevels: views?.levels ?? null, viewTextures: views?.textures ?? null,
     anisotropy, requestedAnisotropy: requested,
     weightsTexture: weaveTexture(toHalf(weights), size, 2, THREE.RGFormat, type, anisotropy),
     kdTexture: weaveTexture(toHalf(kd), size, 4, THREE.RGBAFormat, type, anisotropy),
@@ -1493,10 +1555,111 @@ export function weaveMapsFromExr(buffer, { field = {}, name = 'weave maps', half
       }
       return this._aniso;
     },
-    dispose() { this.weightsTexture.dispose(); this.kdTexture.dispose(); this._aniso?.dispose(); },
+    dispose() { this.weightsTexture.dispose(); this.kdTexture.dispose(); this._aniso?.dispose(); this.viewTextures?.forEach((t) => t.dispose()); },
   };
   maps.kdTexture.repeat.set(uvRepeats, uvRepeats);
   return maps;
+}
+
+// ---- view-dependent weave maps (session 14; docs/web.md "View-dependent weave maps") ----------
+// The EXR keeps its 5 all-views channels and may carry K view bands, channels view{k}.warp,
+// view{k}.weft, view{k}.kd.R, view{k}.kd.G, view{k}.kd.B, baked from the pairs of one view cosine
+// each (metadata clothfit:view_cosines "c0 c1 ...", strictly decreasing in (0, 1]). They are
+// drawn only when the preset's weave_maps names the same cosines ("view_cosines": [...], 2 to 8
+// numbers): render/preview/weave_maps.cpp LoadPresetWeaveMaps, which requires the file's list to
+// agree within 1e-9. Extra view channels without the preset's view_cosines are ignored (the
+// preset draws exactly as before). MeshWovenMaterial blends the bands per pixel by NoV
+// (weaveMapViewWeights); physical-aniso draws the 5 main channels only.
+export const WEAVE_MAP_MAX_VIEW_BANDS = 8;
+
+/** The preset's weave_maps.view_cosines checked (2..8 numbers, strictly decreasing, in (0, 1]), or null. */
+export function weaveMapViewCosines(field) {
+  if (field === null || typeof field !== 'object' || field.view_cosines === undefined) return null;
+  const v = field.view_cosines;
+  const fail = (why) => { throw new Error(`loadClothfitPreset: weave_maps.view_cosines: ${why}`); };
+  if (!Array.isArray(v)) fail(`expected an array of 2 to ${WEAVE_MAP_MAX_VIEW_BANDS} numbers, got ${v === null ? 'null' : typeof v}`);
+  if (v.length < 2 || v.length > WEAVE_MAP_MAX_VIEW_BANDS) fail(`${v.length} numbers, expected 2 to ${WEAVE_MAP_MAX_VIEW_BANDS}`);
+  v.forEach((c, k) => {
+    if (typeof c !== 'number' || !Number.isFinite(c)) fail(`[${k}]: expected a finite number, got ${typeof c === 'number' ? String(c) : c === null ? 'null' : typeof c}`);
+    if (!(c > 0) || c > 1) fail(`[${k}]: ${c} is not in (0, 1]`);
+    if (k > 0 && !(c < v[k - 1])) fail(`[${k}]: ${c} is not below [${k - 1}] ${v[k - 1]} (expected strictly decreasing)`);
+  });
+  return v.slice();
+}
+
+/**
+ * The blend weights of the view bands at view cosine nov (render/preview/weave_maps.cpp
+ * WeaveMaps::ViewWeights): cosines strictly decreasing (band 0 the most frontal); piecewise
+ * linear interpolation in nov between the nodes (the hat functions over the ascending cosines),
+ * clamped to the end bands outside [min, max]. Sum 1; exactly one 1 at a node.
+ */
+export function weaveMapViewWeights(cosines, nov) {
+  const K = cosines.length, w = new Array(K).fill(0);
+  const x = Number.isFinite(nov) ? nov : 0;
+  if (x >= cosines[0]) { w[0] = 1; return w; }
+  if (x <= cosines[K - 1]) { w[K - 1] = 1; return w; }
+  for (let k = 0; k + 1 < K; ++k) {
+    if (x <= cosines[k] && x >= cosines[k + 1]) {
+      const t = (cosines[k] - x) / (cosines[k] - cosines[k + 1]);
+      w[k] = 1 - t; w[k + 1] = t;
+      break;
+    }
+  }
+  return w;
+}
+
+// Reads the bands the preset names (null without view_cosines): each band renormalised to a tile
+// mean of 1 and box-mipped exactly as the main maps (WeaveMaps::SetViews -> FromLevel0). Upload:
+// the K x 5 band channels packed in order (channel g = 5 k + c, c = warp, weft, kd.R, kd.G, kd.B)
+// into ceil(5 K / 4) RGBA textures (texture g >> 2, component g & 3; unused components 1), with the
+// main maps' settings (float, REPEAT, trilinear, anisotropy, own box mips): 4 samplers for the
+// bake's 3 bands, 10 for 8, instead of 2 per band. Filtering is per component, so the packing
+// changes no value.
+function weaveMapViewBands(img, field, name, size, type, anisotropy, toHalf) {
+  const cosines = weaveMapViewCosines(field);
+  if (!cosines) return null;
+  const K = cosines.length, nc = WEAVE_MAP_CHANNELS.length, n = size * size;
+  const fail = (msg) => { throw new Error(`${name}: weave maps: ${msg}`); };
+  const attr = img.attributes['clothfit:view_cosines'];
+  if (attr === undefined) fail(`no clothfit:view_cosines metadata (the preset's weave_maps.view_cosines names ${K} view bands)`);
+  const fileCos = String(attr).trim().split(/\s+/).map(Number);
+  if (fileCos.length !== K) fail(`clothfit:view_cosines names ${fileCos.length} view bands, the preset's weave_maps.view_cosines ${K}`);
+  fileCos.forEach((c, k) => { if (!(Math.abs(c - cosines[k]) <= 1e-9)) fail(`clothfit:view_cosines ${String(attr).slice(0, 120)} differs from the preset's weave_maps.view_cosines at [${k}]`); });
+  const bands = [];
+  for (let k = 0; k < K; ++k) {
+    const l0 = new Float32Array(n * nc);
+    WEAVE_MAP_CHANNELS.forEach((c, ci) => {
+      const ch = `view${k}.${c}`, src = img.channels[ch];
+      if (!src) fail(`no channel ${ch} (weave_maps.view_cosines names ${K} view bands: view0..view${K - 1}.{${WEAVE_MAP_CHANNELS.join(',')}})`);
+      let mean = 0;
+      for (let t = 0; t < n; ++t) {
+        const x = src[t];
+        if (!Number.isFinite(x) || x < 0) fail(`channel ${ch} has a negative or non-finite texel`);
+        mean += x;
+      }
+      mean /= n;
+      if (!(mean > 0)) fail(`channel ${ch} has a zero mean`);
+      for (let t = 0; t < n; ++t) l0[t * nc + ci] = src[t] / mean;
+    });
+    const lv = [l0];
+    for (let s = size; s > 1; s >>= 1) lv.push(boxMip(lv[lv.length - 1], s, nc));
+    bands.push(lv);
+  }
+  const T = Math.ceil((K * nc) / 4), textures = [];
+  for (let j = 0; j < T; ++j) {
+    const lvls = bands[0].map((_, l) => {
+      const m = bands[0][l].length / nc, out = new Float32Array(m * 4).fill(1);
+      for (let q = 0; q < 4; ++q) {
+        const g = 4 * j + q;
+        if (g >= K * nc) break;
+        const src = bands[Math.floor(g / nc)][l], c = g % nc;
+        for (let t = 0; t < m; ++t) out[t * 4 + q] = src[t * nc + c];
+      }
+      return out;
+    });
+    textures.push(weaveTexture(toHalf(lvls), size, 4, THREE.RGBAFormat, type, anisotropy));
+  }
+  return { cosines, levels: bands, textures };
 }
 
 // The preset's weave_maps.anisotropy (texture.anisotropy of every map; render/preview/weave_maps.h
@@ -1883,6 +2046,12 @@ export function loadClothfitPreset(json, options = {}) {
   if (preset.weave_maps !== undefined && preset.weave_maps !== null) {
     if (!model.weaveMaps) throw new Error(`loadClothfitPreset: weave_maps: not used by model '${preset.model}' (woven, physical-aniso)`);
     if (options.weaveMaps === undefined) throw new Error(`loadClothfitPreset: weave_maps: the preset names weave maps (${preset.weave_maps?.file}); load it with fetchClothfitPreset(url), or pass {weaveMaps} (fetchWeaveMaps / weaveMapsFromExr; null = the uniform material)`);
+    // view bands (session 14): drawn only when the preset names them, and the maps given must
+    // carry the same ones (weaveMapsFromExr reads them when its field is the preset's weave_maps)
+    const vc = weaveMapViewCosines(preset.weave_maps), mc = options.weaveMaps?.viewCosines ?? null;
+    if (options.weaveMaps && JSON.stringify(vc) !== JSON.stringify(mc)) {
+      throw new Error(`loadClothfitPreset: weave_maps.view_cosines: the preset names ${vc ? vc.length : 'no'} view bands, the weave maps given carry ${mc ? mc.length : 'none'} (build them with weaveMapsFromExr(buffer, {field: preset.weave_maps}))`);
+    }
   }
   const m = model.make(p, preset);
   if (options.weaveMaps && model.weaveMaps) model.weaveMaps(m, options.weaveMaps);

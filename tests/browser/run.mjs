@@ -15,9 +15,9 @@
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //   A light-map case reports "with (without)": the same material timed without its light map too.
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 30 materials (6 + 3 woven + 2 physical-aniso
+// Cases: each canonical scene (datasets/scenes/*.json) x 31 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
-// bent-normal IBL + 5 woven with the far-field yarn lobe) x 2 environments
+// bent-normal IBL + 5 woven with the far-field yarn lobe + 1 with view-dependent weave maps) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
 // 9 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
 // drape and sphere x 3 materials under studio with three.js shadow maps against
@@ -183,6 +183,13 @@ Object.assign(MATERIALS, {
   'woven-lobe-maps-canvas': lobePreset('canvas-maps'),
   'woven-lobe-maps-twill': lobePreset('twill-maps'),
   'woven-lobe-twill-shiny': lobePreset('twill', { specular_color: [0.5, 0.45, 0.3], sheen_color: [0.25, 0.25, 0.3], sheen_roughness: 0.5, warp_share: 0.7 }, { nodes: 8 }),
+});
+// s14-webviews: view-dependent weave maps (docs/web.md "View-dependent weave maps"): the
+// maps-twill lobe preset with its EXR's three view bands (web/test/yarn-lobe-twill-maps-views.*:
+// the same 5 main channels plus view{0,1,2}.* baked at the bake's view cosines 0.887 / 0.5 /
+// 0.113, and "view_cosines" in the preset), blended per pixel by NoV on both sides.
+Object.assign(MATERIALS, {
+  'woven-lobe-maps-twill-views': lobePreset('twill-maps-views'),
 });
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();

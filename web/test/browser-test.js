@@ -50,7 +50,7 @@ async function run() {
     // renderer: texture.anisotropy of the maps clamped to getMaxAnisotropy() (logged when it is).
     const material = await fetchClothfitPreset(fsUrl(c.preset), { renderer, resolveWeaveMapPath: (file) => fsUrl(file) });
     const wmap = material.userData.clothfit?.weave_maps;
-    if (wmap) log(`${c.name}: weave maps ${wmap.file}${wmap.anisotropy ? `, anisotropy ${wmap.anisotropy} (max ${renderer.capabilities.getMaxAnisotropy()})` : ''}`);
+    if (wmap) log(`${c.name}: weave maps ${wmap.file}${wmap.anisotropy ? `, anisotropy ${wmap.anisotropy} (max ${renderer.capabilities.getMaxAnisotropy()})` : ''}${material.viewBands ? `, ${material.viewBands} view bands (${material.weaveMaps.viewCosines.join(' ')}; max texture units ${renderer.capabilities.maxTextures})` : ''}`);
     // s13-lm: the card's light map, baked by the case's own `clothfit render-preview
     // --light-map-out` (c.lightMap, an EXR: irradiance E over the fabric's uv box), on the fabric
     // material only (applyLightMap; the non-fabric meshes get none, as in the preview).
