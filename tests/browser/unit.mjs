@@ -8,7 +8,9 @@
 //     against C++ values (web/test/yarn-lobe-reference.json), bad blocks refused naming the field;
 //   - weave maps: web/exr.js reads tests/browser/maps/canvas.weave.exr as OpenImageIO does
 //     (oiiotool, when installed), tile means 1, box mips, texture settings, uv_repeats, the
-//     anisotropyMap encoding, the preset's "weave_maps" required / refused / fetched.
+//     anisotropyMap encoding, the preset's "weave_maps" required / refused / fetched;
+//   - view-dependent weave maps (session 14): blend weights, weave_maps.view_cosines checks, the
+//     bands' data, packing and program, missing view channels (oiiotool, when installed).
 // Usage: node tests/browser/unit.mjs [--clothfit build/bin/clothfit --work DIR]
 //   with --clothfit, the JSON comes from `clothfit convert --to threejs` itself.
 import assert from 'node:assert/strict';
@@ -334,6 +336,146 @@ if (args.clothfit) {
   checks++;
   checks++;
   fs.rmSync(mapsWork, { recursive: true, force: true });
+}
+// ---- view-dependent weave maps (session 14; docs/web.md "View-dependent weave maps") ----------
+// web/test/yarn-lobe-twill-maps-views.{json,weave.exr}: the twill lobe maps plus 3 view bands
+// (view{k}.*, clothfit:view_cosines). The blend weights, the preset's view_cosines checked as the
+// C++ reader checks them (render/preview/weave_maps.cpp LoadPresetWeaveMaps), the bands' data and
+// packing, the program (a preset without view_cosines compiles the old program), missing channels.
+{
+  const { weaveMapsFromExr, weaveMapViewCosines, weaveMapViewWeights, fetchClothfitPreset } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+  const { parseExr } = await import(pathToFileURL(path.join(repo, 'web', 'exr.js')).href);
+  const GL = [0.8872983346207417, 0.5, 0.1127016653792583];
+  // Blend weights: exact at the nodes, linear between, clamped outside, sum 1; the hat functions
+  // over the ascending nodes (piecewise-linear interpolation: a linear f is reproduced inside).
+  for (const [i, c] of GL.entries()) check(() => assert.deepEqual(weaveMapViewWeights(GL, c), GL.map((_, k) => (k === i ? 1 : 0))), `view weights exact at node ${i}`);
+  for (const [x, want] of [[1, [1, 0, 0]], [0.95, [1, 0, 0]], [0.05, [0, 0, 1]], [0, [0, 0, 1]], [-0.3, [0, 0, 1]], [1.7, [1, 0, 0]], [NaN, [0, 0, 1]]]) {
+    check(() => assert.deepEqual(weaveMapViewWeights(GL, x), want), `view weights clamped at ${x}`);
+  }
+  check(() => assert.deepEqual(weaveMapViewWeights(GL, (GL[0] + GL[1]) / 2).map((w) => +w.toFixed(12)), [0.5, 0.5, 0]), 'view weights: midpoint of bands 0 and 1');
+  check(() => assert.deepEqual(weaveMapViewWeights(GL, 0.3).map((w) => +w.toFixed(12)), [0, +((0.3 - GL[2]) / (GL[1] - GL[2])).toFixed(12), +((GL[1] - 0.3) / (GL[1] - GL[2])).toFixed(12)]), 'view weights: between bands 1 and 2');
+  {
+    let worst = 0, worstLin = 0;
+    const f = (c) => 2 * c - 0.3;  // linear: reproduced exactly between the nodes
+    for (let i = 0; i <= 1000; ++i) {
+      const x = i / 1000, w = weaveMapViewWeights(GL, x);
+      worst = Math.max(worst, Math.abs(w.reduce((a, b) => a + b, 0) - 1));
+      if (w.some((v) => v < 0 || v > 1)) worst = Infinity;
+      if (x >= GL[2] && x <= GL[0]) worstLin = Math.max(worstLin, Math.abs(w.reduce((a, v, k) => a + v * f(GL[k]), 0) - f(x)));
+    }
+    check(() => assert.ok(worst < 1e-15 && worstLin < 1e-14, `sum ${worst}, linear ${worstLin}`), 'view weights: in [0, 1], sum 1, linear interpolation');
+    const eight = [1, 0.9, 0.75, 0.6, 0.4, 0.3, 0.2, 0.1];
+    check(() => assert.deepEqual(weaveMapViewWeights(eight, 0.7).map((v) => +v.toFixed(12)), [0, 0, +(2 / 3).toFixed(12), +(1 / 3).toFixed(12), 0, 0, 0, 0]), 'view weights: 8 bands');
+  }
+  // The preset's view_cosines (2..8 numbers, strictly decreasing, in (0, 1]).
+  check(() => assert.deepEqual(weaveMapViewCosines({ view_cosines: GL }), GL), 'view_cosines accepted');
+  check(() => assert.equal(weaveMapViewCosines({ uri: 'x.exr' }), null), 'no view_cosines: null');
+  check(() => assert.deepEqual(weaveMapViewCosines({ view_cosines: [1, 0.5] }), [1, 0.5]), 'view_cosines 1 is allowed');
+  for (const [bad, why] of [[[0.5, 0.8, 0.1], /\[1\]: 0\.8 is not below \[0\] 0\.5 \(expected strictly decreasing\)/], [[0.5, 0.5], /\[1\]: 0\.5 is not below/],
+    [[0.8, 0.5, 0], /\[2\]: 0 is not in \(0, 1\]/], [[1.2, 0.5], /\[0\]: 1\.2 is not in \(0, 1\]/], [[0.5, -0.1], /\[1\]: -0\.1 is not in/], [[0.5], /1 numbers, expected 2 to 8/],
+    [[0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1], /9 numbers, expected 2 to 8/], [[], /0 numbers/], [[0.8, '0.5'], /\[1\]: expected a finite number, got string/],
+    [[0.8, null], /\[1\]: expected a finite number, got null/], ['0.8 0.5', /expected an array of 2 to 8 numbers, got string/], [null, /got null/], [{ 0: 0.8, 1: 0.5 }, /expected an array/]]) {
+    check(() => assert.throws(() => weaveMapViewCosines({ view_cosines: bad }), (e) => /^loadClothfitPreset: weave_maps\.view_cosines: /.test(e.message) && why.test(e.message)), `bad view_cosines ${JSON.stringify(bad)}`);
+    check(() => assert.throws(() => loadClothfitPreset({ schema: 'clothfit.preset', version: 1, model: 'woven', parameters: {}, weave_maps: { uri: 'm.exr', view_cosines: bad } }, { weaveMaps: null }), /loadClothfitPreset: weave_maps\.view_cosines: /), `bad view_cosines ${JSON.stringify(bad)} (loadClothfitPreset)`);
+  }
+  // The bands: data as the C++ reader makes them (renormalised, box mips), packed 5 K channels
+  // into ceil(5 K / 4) RGBA textures with the main maps' settings.
+  const viewsExr = path.join(repo, 'web', 'test', 'yarn-lobe-twill-maps-views.weave.exr'), plainExr = path.join(repo, 'web', 'test', 'yarn-lobe-twill-maps.weave.exr');
+  const viewsPreset = JSON.parse(fs.readFileSync(path.join(repo, 'web', 'test', 'yarn-lobe-twill-maps-views.json'), 'utf8'));
+  const vbuf = fs.readFileSync(viewsExr), vimg = parseExr(vbuf, viewsExr);
+  check(() => assert.equal(vimg.attributes['clothfit:view_cosines'], GL.join(' ')), 'views EXR: clothfit:view_cosines');
+  check(() => assert.deepEqual(viewsPreset.weave_maps.view_cosines, GL), 'views preset: view_cosines');
+  const vm = weaveMapsFromExr(vbuf, { field: viewsPreset.weave_maps, name: 'views.exr' });
+  check(() => assert.ok(vm.viewCosines.length === 3 && vm.viewLevels.length === 3 && vm.viewTextures.length === 4), 'views: 3 bands, 4 packed textures');
+  {
+    let worstMean = 0, worstPack = 0;
+    for (let k = 0; k < 3; ++k) {
+      const l0 = vm.viewLevels[k][0];
+      for (let c = 0; c < 5; ++c) {
+        let mean = 0;
+        for (let t = 0; t < 4096; ++t) mean += l0[t * 5 + c];
+        worstMean = Math.max(worstMean, Math.abs(mean / 4096 - 1));
+        const src = vimg.channels[`view${k}.${['warp', 'weft', 'kd.R', 'kd.G', 'kd.B'][c]}`];
+        let raw = 0;
+        for (let t = 0; t < 4096; ++t) raw += src[t];
+        raw /= 4096;
+        for (const t of [0, 77, 2048, 4095]) if (l0[t * 5 + c] !== Math.fround(src[t] / raw)) worstPack = Infinity;
+        const g = 5 * k + c, tex = vm.viewTextures[g >> 2];
+        for (let l = 0; l < 7; ++l) {
+          const lv = vm.viewLevels[k][l], data = tex.mipmaps[l].data;
+          for (let t = 0; t < lv.length / 5; t += 7) worstPack = Math.max(worstPack, Math.abs(data[t * 4 + (g & 3)] - lv[t * 5 + c]));
+        }
+      }
+      check(() => assert.equal(vm.viewLevels[k][1][(3 * 32 + 5) * 5 + 1], Math.fround(0.25 * (vm.viewLevels[k][0][(6 * 64 + 10) * 5 + 1] + vm.viewLevels[k][0][(6 * 64 + 11) * 5 + 1] + vm.viewLevels[k][0][(7 * 64 + 10) * 5 + 1] + vm.viewLevels[k][0][(7 * 64 + 11) * 5 + 1]))), `band ${k}: box mip`);
+    }
+    check(() => assert.ok(worstMean < 1e-6 && worstPack === 0, `mean ${worstMean}, packing ${worstPack}`), 'views: bands renormalised to tile mean 1, packed texel for texel');
+    check(() => assert.ok(vm.viewTextures[3].mipmaps[0].data[3] === 1 && vm.viewTextures[3].mipmaps[6].data[3] === 1), 'views: unused packed component is 1');
+    check(() => assert.ok(vm.viewTextures.every((t) => t.mipmaps.length === 7 && t.anisotropy === 16 && t.wrapS === THREE.RepeatWrapping && t.wrapT === THREE.RepeatWrapping
+      && t.minFilter === THREE.LinearMipmapLinearFilter && t.magFilter === THREE.LinearFilter && t.flipY === false && t.generateMipmaps === false
+      && t.format === THREE.RGBAFormat && t.type === THREE.FloatType)), 'views: texture settings = the main maps\'');
+  }
+  // The material: its own program (key, #defines), uniforms; the NoV of the unperturbed normal.
+  const vmat = loadClothfitPreset(viewsPreset, { weaveMaps: vm });
+  check(() => assert.equal(vmat.viewBands, 3), 'material: 3 view bands');
+  check(() => assert.equal(vmat.customProgramCacheKey(), 'woven:additive:maps-views3:split:yarn-lobe4x16/16x32'), 'views: their own program key');
+  {
+    const sh = { uniforms: {}, fragmentShader: THREE.ShaderChunk.meshphysical_frag, vertexShader: THREE.ShaderChunk.meshphysical_vert };
+    vmat.onBeforeCompile(sh);
+    const f = sh.fragmentShader;
+    check(() => assert.ok(f.includes('#define WOVEN_VIEW_BANDS 3\n') && f.includes('#define WOVEN_VIEW_TEXTURES 4\n') && f.includes('uniform sampler2D wovenViewMaps[ WOVEN_VIEW_TEXTURES ];')), 'views: defines and samplers');
+    check(() => assert.ok(!f.includes('texture2D( wovenWeaveWeights') && (f.match(/texture2D\( wovenViewMaps\[ \d \]/g) ?? []).length === 4), 'views: the bands replace the main maps\' read');
+    check(() => assert.ok(f.includes('dot( nonPerturbedNormal, ( isOrthographic ) ? vec3( 0.0, 0.0, 1.0 ) : normalize( vViewPosition ) )')
+      && f.indexOf('vec3 nonPerturbedNormal') < f.indexOf('wovenNoVView') && f.indexOf('#include <normal_fragment_maps>') < f.indexOf('wovenNoVView')), 'views: NoV from the normal before the normal map');
+    check(() => assert.ok(sh.uniforms.wovenViewMaps.value.length === 4 && sh.uniforms.wovenViewMaps.value[2] === vm.viewTextures[2] && sh.uniforms.wovenViewCosines.value.join(' ') === GL.join(' ')), 'views: uniforms');
+    // band 1's kd.G is packed channel 5 + 3 = 8: texture 2, x
+    check(() => assert.ok(/wovenVW\[ 1 \] \* wovenVT2\.x/.test(f.split('vec3(').pop())), 'views: band 1 kd.G = texture 2 .x');
+    const clone = vmat.clone();
+    check(() => assert.ok(clone.viewBands === 3 && clone.customProgramCacheKey() === vmat.customProgramCacheKey() && clone._wovenUniforms.wovenViewMaps.value.length === 4), 'views survive clone');
+  }
+  // Extra view channels without view_cosines: ignored, the old maps and the old program.
+  const { view_cosines: _vc, ...plainField } = viewsPreset.weave_maps;
+  const pm = weaveMapsFromExr(vbuf, { field: plainField }), om = weaveMapsFromExr(fs.readFileSync(plainExr), { field: plainField });
+  check(() => assert.ok(pm.viewCosines === null && pm.viewTextures === null), 'view channels without view_cosines: ignored');
+  check(() => assert.ok(pm.levels.every((lv, l) => lv.every((x, i) => x === om.levels[l][i]))), 'view channels without view_cosines: the main maps as the 5-channel file\'s');
+  {
+    const plainPreset = { ...viewsPreset, weave_maps: plainField };
+    const a = loadClothfitPreset(plainPreset, { weaveMaps: pm }), b = loadClothfitPreset(plainPreset, { weaveMaps: om });
+    const comp = (mat) => { const sh = { uniforms: {}, fragmentShader: THREE.ShaderChunk.meshphysical_frag, vertexShader: THREE.ShaderChunk.meshphysical_vert }; mat.onBeforeCompile(sh); return sh; };
+    const sa = comp(a), sb = comp(b);
+    check(() => assert.ok(a.customProgramCacheKey() === 'woven:additive:maps:split:yarn-lobe4x16/16x32' && sa.fragmentShader === sb.fragmentShader && !sa.fragmentShader.includes('WOVEN_VIEW')), 'without view_cosines: the old program');
+  }
+  // The maps given must carry the bands the preset names (and only then).
+  check(() => assert.throws(() => loadClothfitPreset(viewsPreset, { weaveMaps: pm }), /weave_maps\.view_cosines: the preset names 3 view bands, the weave maps given carry none/), 'preset bands, maps without');
+  check(() => assert.throws(() => loadClothfitPreset({ ...viewsPreset, weave_maps: plainField }, { weaveMaps: vm }), /the preset names no view bands, the weave maps given carry 3/), 'maps with bands, preset without');
+  // The file must carry the cosines and every channel the preset's cosines imply.
+  check(() => assert.throws(() => weaveMapsFromExr(fs.readFileSync(plainExr), { field: viewsPreset.weave_maps, name: 'plain.exr' }), /plain\.exr: weave maps: no clothfit:view_cosines metadata/), 'no view bands in the file');
+  check(() => assert.throws(() => weaveMapsFromExr(vbuf, { field: { ...viewsPreset.weave_maps, view_cosines: [0.8872983346207417, 0.5] }, name: 'v.exr' }), /v\.exr: weave maps: clothfit:view_cosines names 3 view bands, the preset's weave_maps\.view_cosines 2/), 'band count differs');
+  check(() => assert.throws(() => weaveMapsFromExr(vbuf, { field: { ...viewsPreset.weave_maps, view_cosines: [0.887, 0.5, 0.1127016653792583] }, name: 'v.exr' }), /differs from the preset's weave_maps\.view_cosines at \[0\]/), 'cosines differ');
+  check(() => assert.throws(() => weaveMapsFromExr(vbuf, { field: { ...viewsPreset.weave_maps, view_cosines: [0.5, 0.9] }, name: 'v.exr' }), /loadClothfitPreset: weave_maps\.view_cosines: \[1\]/), 'bad cosines refused by weaveMapsFromExr');
+  const oiio = spawnSync('oiiotool', ['--help'], { encoding: 'utf8' });
+  if (!oiio.error) {
+    const work = fs.mkdtempSync('/tmp/clothfit-unit-views-');
+    const all = Object.keys(vimg.channels);
+    for (const drop of ['view1.kd.G', 'view0.warp', 'view2.kd.B']) {
+      const out = path.join(work, `no-${drop}.weave.exr`);
+      const r = spawnSync('oiiotool', [viewsExr, '--ch', ['warp', 'weft', 'kd.R', 'kd.G', 'kd.B', ...[0, 1, 2].flatMap((k) => ['warp', 'weft', 'kd.R', 'kd.G', 'kd.B'].map((c) => `view${k}.${c}`))].filter((c) => c !== drop).join(','), '-d', 'float', '-o', out], { encoding: 'utf8' });
+      check(() => assert.equal(r.status, 0, r.stderr), `oiiotool drops ${drop}`);
+      const dimg = parseExr(fs.readFileSync(out), out);
+      check(() => assert.ok(!dimg.channels[drop] && Object.keys(dimg.channels).length === all.length - 1 && dimg.attributes['clothfit:view_cosines'] === GL.join(' ')), `${drop} dropped, metadata kept`);
+      const re = new RegExp(`no-${drop.replace(/\./g, '\\.')}\\.weave\\.exr: weave maps: no channel ${drop.replace(/\./g, '\\.')} \\(weave_maps\\.view_cosines names 3 view bands`);
+      check(() => assert.throws(() => weaveMapsFromExr(fs.readFileSync(out), { field: viewsPreset.weave_maps, name: out }), re), `missing channel ${drop} refused`);
+      // fetched: the error names the preset's URL and the channel
+      fs.writeFileSync(path.join(work, 'p.json'), JSON.stringify({ ...viewsPreset, weave_maps: { ...viewsPreset.weave_maps, uri: path.basename(out) } }));
+      await assert.rejects(fetchClothfitPreset(pathToFileURL(path.join(work, 'p.json')).href), new RegExp(`p\\.json: .*no channel ${drop.replace(/\./g, '\\.')}`));
+      checks++;
+    }
+    fs.rmSync(work, { recursive: true, force: true });
+  } else {
+    console.log('unit: oiiotool not found, missing-view-channel checks skipped');
+  }
+  // fetched as a whole (uri next to the preset): the bands are read
+  const fv = await fetchClothfitPreset(pathToFileURL(path.join(repo, 'web', 'test', 'yarn-lobe-twill-maps-views.json')).href);
+  check(() => assert.ok(fv.viewBands === 3 && fv.weaveMaps.viewTextures.length === 4), 'fetchClothfitPreset reads the view bands');
 }
 // ---- shadows (session 13): shadowOptions validation, fitted shadow cameras ------------------
 {
