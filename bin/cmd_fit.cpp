@@ -167,6 +167,8 @@ struct FitArgs {
   // "Anisotropic filtering of the maps": per-pixel FLIP canvas 0.93x -> 0.83x, twill 0.97x ->
   // 0.90x of the best baseline; block RMSE canvas -0.6 %, twill +1.0 %).
   int map_anisotropy = -1;  // -1: not given (16 where there are maps); given without maps: an error
+  int weave_map_view_band = -1;  // measurement: bake the maps from one view cosine's pairs
+  bool no_weave_map_views = false;  // --weave-maps auto without the view bands (session 13's maps)
   std::string target_error;  // reference adaptive sampling (TargetErrorFor)
   double loss_scale = 1.0, min_coverage = 0.5;
   bool subsurface = false, no_floor = false, second_seed = false;
@@ -239,6 +241,16 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "filtering (EXT_texture_filter_anisotropic); written to the preset's "
                   "weave_maps.anisotropy and used by the fit's previews (default 16)")
       ->check(CLI::Range(1, 16));
+  cmd->add_option("--weave-map-view-band", a.weave_map_view_band,
+                  "measurement (docs/flip.md, session 14): bake the weave maps from the pairs of "
+                  "one view cosine only (0, 1, 2: the Gauss-Legendre nodes 0.887, 0.5, 0.113 in "
+                  "the bake's order); the preset's weave_maps.source records it")
+      ->check(CLI::Range(0, 2));
+  cmd->add_flag("--no-weave-map-views", a.no_weave_map_views,
+                "woven, --weave-maps auto: bake only the all-views maps (session 13's), not the "
+                "view bands (by default the maps are also baked once per view cosine, 0.887, "
+                "0.5, 0.113, and drawn blended by NoV; the preset's weave_maps.view_cosines; "
+                "docs/preview.md \"View-dependent weave maps\")");
   cmd->add_option("--images", a.images, "directory for fitted previews and residual images");
   cmd->add_option("--threads", a.threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
   cmd->add_option("--references2", a.references2,
@@ -887,6 +899,9 @@ int RunFit(const FitArgs& a, const Globals& g) {
     bake.indicator = a.weave_maps == "indicator";
     bake.relief = a.weave_maps == "relief";
     bake.glint = a.weave_maps == "glint";
+    bake.view_band = a.weave_map_view_band;
+    // View bands (session 14) with the default maps, unless turned off or one band is measured.
+    bake.view_bands = a.weave_maps == "auto" && !a.no_weave_map_views && a.weave_map_view_band < 0;
     const std::string line = fit::AttachWeaveMaps(a.fabric, maps, &o, bake);
     if (!line.empty()) std::printf("fit: %s\n", line.c_str());
   }

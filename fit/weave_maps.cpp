@@ -2,6 +2,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -54,6 +55,7 @@ std::vector<Pair> BuildPairs(const render::MaterialPreset& preset, const WeaveBa
   std::vector<Pair> out;
   double total = 0.0;
   for (int a = 0; a < o.mu_nodes; ++a) {
+    if (o.view_band >= 0 && a != o.view_band) continue;
     const double mv = 0.5 * (gl.x[size_t(a)] + 1.0), wv = 0.5 * gl.w[size_t(a)];
     const double sv = std::sqrt(1.0 - mv * mv);
     for (int b = 0; b < o.mu_nodes; ++b) {
@@ -135,6 +137,12 @@ double SquaredError(const std::vector<Pair>& pairs, const std::vector<Rgb<double
 
 }  // namespace
 
+double WeaveViewBandCosine(int k, int mu_nodes) {
+  const lut::GaussLegendre gl(mu_nodes);
+  if (k < 0 || k >= mu_nodes) throw std::invalid_argument("weave maps: no view band " + std::to_string(k));
+  return 0.5 * (gl.x[size_t(k)] + 1.0);
+}
+
 WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
                               const render::MaterialPreset& preset, const WeaveBakeOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -142,8 +150,10 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
     throw std::invalid_argument("BakeWeaveMaps: the preset is not a woven preset");
   if (source.repeat_u() != source.repeat_v())
     throw std::invalid_argument("BakeWeaveMaps: the fabric's repeat_u and repeat_v differ");
-  if (o.size < 1 || (o.size & (o.size - 1)) != 0 || o.mu_nodes < 1 || o.phi_v < 1 || o.phi_l < 1)
-    throw std::invalid_argument("BakeWeaveMaps: bad options (size a power of two, counts >= 1)");
+  if (o.size < 1 || (o.size & (o.size - 1)) != 0 || o.mu_nodes < 1 || o.phi_v < 1 || o.phi_l < 1 ||
+      o.view_band < -1 || o.view_band >= o.mu_nodes)
+    throw std::invalid_argument("BakeWeaveMaps: bad options (size a power of two, counts >= 1, "
+                                "view_band -1 or a view node)");
   // The reference without its fineness glints (a global, non-periodic hash; E[I] = 1).
   render::WeavePattern pattern = source.pattern();
   pattern.fineness = 0.0;
@@ -309,6 +319,30 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       }
     });
     res.maps.SetGlint(G, std::move(g));
+  }
+  if (o.view_bands) {
+    if (o.indicator || o.relief || o.glint || o.view_band >= 0)
+      throw std::invalid_argument("BakeWeaveMaps: view bands only with the plain fitted maps");
+    std::vector<double> cosines;
+    std::vector<std::vector<float>> bands;
+    for (int k = 0; k < o.mu_nodes; ++k) {
+      WeaveBakeOptions ok = o;
+      ok.view_bands = false;
+      ok.view_band = k;
+      cosines.push_back(WeaveViewBandCosine(k, o.mu_nodes));
+      bands.push_back(BakeWeaveMaps(source, preset, ok).maps.levels.at(0));
+    }
+    // Gauss-Legendre nodes come in increasing x; the bands are stored by decreasing cosine.
+    std::vector<size_t> idx(cosines.size());
+    for (size_t k = 0; k < idx.size(); ++k) idx[k] = k;
+    std::sort(idx.begin(), idx.end(), [&](size_t a, size_t b) { return cosines[a] > cosines[b]; });
+    std::vector<double> cs;
+    std::vector<std::vector<float>> bs;
+    for (size_t k : idx) {
+      cs.push_back(cosines[k]);
+      bs.push_back(std::move(bands[k]));
+    }
+    res.maps.SetViews(std::move(cs), std::move(bs));
   }
   res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;

@@ -54,7 +54,18 @@ struct WeaveBakeOptions {
   // square at the smallest power of two >= the fineness cells per uv unit (<= 2048), 2 x 2
   // sub-positions per texel (box prefilter). Not normalised (the reference's E[I] is 1).
   bool glint = false;
+  // Measurement (session 14, docs/flip.md "View-dependent weave maps"): >= 0 fits the texels on
+  // the pairs whose view cosine is the view_band-th Gauss-Legendre node only (0 .. mu_nodes-1,
+  // in the order of lut::GaussLegendre); -1 (default) on every pair.
+  int view_band = -1;
+  // true (session 14, `clothfit fit --weave-map-views`): also bake one map per view cosine
+  // (view_band = 0 .. mu_nodes - 1) into the result's view bands (render/preview/weave_maps.h
+  // SetViews; cosines = the Gauss-Legendre nodes, decreasing). Not with indicator, relief,
+  // glint or view_band >= 0.
+  bool view_bands = false;
 };
+// The view cosine of view band k (the k-th Gauss-Legendre node of [0, 1] with `mu_nodes` nodes).
+double WeaveViewBandCosine(int k, int mu_nodes);
 
 struct WeaveBakeResult {
   render::WeaveMaps maps;

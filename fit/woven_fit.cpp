@@ -39,9 +39,15 @@ std::string AttachWeaveMaps(const std::string& fabric_path, const std::string& m
                                  {"bake_error_mapped", r.error_mapped},
                                  {"mode", std::string(bake.indicator ? "indicator" : "fitted") +
                                               (bake.relief ? " + relief normals" : "") +
-                                              (bake.glint ? " + glint" : "")},
+                                              (bake.glint ? " + glint" : "") +
+                                              (bake.view_bands ? " + view bands" : "")},
                                  {"lobes_from", "the start preset (woven defaults)"}};
-  options->start.extra["weave_maps"] = render::WeaveMapsPresetField(maps_path, r.maps, source);
+  nlohmann::json src = source;
+  if (bake.view_band >= 0) {  // measurement: one view cosine's pairs only
+    src["view_band"] = bake.view_band;
+    src["view_band_cosine"] = WeaveViewBandCosine(bake.view_band, bake.mu_nodes);
+  }
+  options->start.extra["weave_maps"] = render::WeaveMapsPresetField(maps_path, r.maps, src);
   if (r.maps.has_glint()) {
     std::string glint = maps_path;
     const size_t dot = glint.rfind(".weave.exr");

@@ -443,6 +443,65 @@ def cmd_texscale(a):
     json.dump(rows, open(os.path.join(a.out, "texscale.json"), "w"), indent=1)
 
 
+def cmd_viewbands(a):
+    """View-dependent weave maps, estimated (session 14): per woven preset P (the presets given)
+    and scene, the previews drawn with the maps baked from one view cosine's pairs only
+    (`clothfit fit --weave-map-view-band K` writes them; --band-dirs DIR0,DIR1,DIR2 hold
+    copies of P pointing at band K's maps, rendered as DIRk/<fabric>_<scene>.exr by
+    `render-preview --ibl-engine threejs`), blended per pixel by NoV: linear in the view cosine
+    between the bands' nodes (--band-cosines), clamped outside. Every map channel enters the
+    preview linearly, so blending the images is blending the maps (same global parameters).
+    NoV from a reference render's N and P AOVs (--aov-dir: aov_<scene>.exr) and the scene's
+    glTF camera translation. FLIP against P's reference, pooled as `presets`."""
+    dirs = a.band_dirs.split(",")
+    mus = [float(x) for x in a.band_cosines.split(",")]
+    order = np.argsort(mus)
+    rows = []
+    for preset in a.presets:
+        p = json.load(open(preset))
+        fabric = os.path.basename(preset).split("_")[0]
+        for s in p["fit"]["scenes"]:
+            name = os.path.splitext(os.path.basename(s["scene"]))[0]
+            cov = read_image(s["reference"], ["fabric"])[:, :, 0]
+            masks = regions(cov)
+            aov = read_image(os.path.join(a.aov_dir, "aov_%s.exr" % name),
+                             ["N.X", "N.Y", "N.Z", "P.X", "P.Y", "P.Z"])
+            gltf = json.load(open(os.path.join(os.path.dirname(s["scene"]),
+                                               json.load(open(s["scene"]))["gltf"])))
+            cam = [n for n in gltf["nodes"] if "camera" in n][0]
+            c = np.array(cam.get("translation", [0.0, 0.0, 0.0]))
+            n = aov[:, :, 0:3]
+            n = n / np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-12)
+            v = c[None, None, :] - aov[:, :, 3:6]
+            v = v / np.maximum(np.linalg.norm(v, axis=2, keepdims=True), 1e-12)
+            nov = np.clip(np.abs((n * v).sum(axis=2)), 0.0, 1.0)
+            imgs = [read_image(os.path.join(d, "%s_%s.exr" % (fabric, name)), ["R", "G", "B"])
+                    for d in dirs]
+            ms = [mus[i] for i in order]
+            ims = [imgs[i] for i in order]
+            # hat functions over the ascending nodes: linear interpolation, clamped at the ends
+            w = np.stack([np.interp(nov, ms, np.eye(len(ms))[k]) for k in range(len(ms))], axis=2)
+            blend = sum(w[:, :, k:k + 1] * ims[k] for k in range(len(ms)))
+            fab = (cov > 0.0)[:, :, None]
+            out = np.where(fab, blend, read_image(s["preview"], ["R", "G", "B"]))
+            base = os.path.join(a.out, "img", "%s_%s_viewbands.exr" % (fabric, name))
+            os.makedirs(os.path.dirname(base), exist_ok=True)
+            write_exr(base, out.astype(np.float32))
+            tests = [("preview", s["preview"]), ("view bands", base)]
+            tests += [("band %d only (mu %.3f)" % (i, mus[i]),
+                       os.path.join(dirs[i], "%s_%s.exr" % (fabric, name))) for i in range(len(dirs))]
+            for what, test in tests:
+                fl = flip_map(a.clothfit, s["reference"], test, s["tone_mapping"], s["exposure"], a.out)
+                row = pool(fl, masks)
+                row.update(fabric=fabric, scene=name, test=what,
+                           nov_median=float(np.median(nov[masks["fabric"]])))
+                rows.append(row)
+                print("%s %s %-26s fabric %s interior %s  (median NoV %.2f)" % (
+                    fabric, name, what, fmt(row["all"]), fmt(row["interior"]), row["nov_median"]),
+                    flush=True)
+    json.dump(rows, open(os.path.join(a.out, "viewbands.json"), "w"), indent=1)
+
+
 def cmd_tables(a):
     """Markdown tables (docs/flip.md) from the JSON files the other commands wrote: each
     positional argument is one such file. Per (fabric or preset, test): the three scenes'
@@ -901,7 +960,7 @@ def cmd_fold(a):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast", "period", "fold", "texscale"])
+    ap.add_argument("command", choices=["floor", "regions", "supersample", "presets", "transplant", "tables", "contrast", "period", "fold", "texscale", "viewbands"])
     ap.add_argument("presets", nargs="*")
     ap.add_argument("--demo", default="/work/main/out/demo")
     ap.add_argument("--out", required=True)
@@ -921,6 +980,10 @@ def main():
     ap.add_argument("--bands", type=int, default=4, help="fold: row bands for the alignment")
     ap.add_argument("--scales", default="0,0.33,0.5,0.75,1,1.5",
                     help="texscale: factors k on the preview's own texture")
+    ap.add_argument("--band-dirs", default="", help="viewbands: DIR0,DIR1,DIR2 (band previews)")
+    ap.add_argument("--band-cosines", default="0.8872983346207417,0.5,0.1127016653792583",
+                    help="viewbands: the bands' view cosines, in --band-dirs order")
+    ap.add_argument("--aov-dir", default="", help="viewbands: aov_<scene>.exr (N and P AOVs)")
     ap.add_argument("--ppd", type=float, default=None,
                     help="presets: FLIP pixels per degree (default: compare's, 67)")
     a = ap.parse_intermixed_args()
@@ -936,7 +999,8 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     {"floor": cmd_floor, "regions": cmd_regions, "supersample": cmd_supersample,
      "presets": cmd_presets, "transplant": cmd_transplant, "tables": cmd_tables, "contrast": cmd_contrast, "period": cmd_period,
-     "fold": cmd_fold, "texscale": cmd_texscale}[a.command](a)
+     "fold": cmd_fold, "texscale": cmd_texscale,
+     "viewbands": cmd_viewbands}[a.command](a)
 
 
 if __name__ == "__main__":

@@ -553,7 +553,11 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       // GPU footprint (isotropic LOD, or anisotropic probes with wm.anisotropy > 1;
       // render/preview/weave_maps.h), the same for the weave, normal and anisotropy maps.
       const WeaveMaps::Footprint lod = wm.FootprintAt(duv, x.opt.weave_footprint_scale);
-      const auto s = wm.Sample(uv[0], uv[1], lod);
+      // woven: the view bands (if the preset names them) blended by NoV before the relief
+      // normal (weave_maps.h SampleView); physical-aniso draws the main maps only.
+      const auto s = x.opt.model == ModelKind::kWoven
+                         ? wm.SampleView(uv[0], uv[1], lod, std::clamp(hit.NoV, 0.0, 1.0))
+                         : wm.Sample(uv[0], uv[1], lod);
       for (int k = 0; k < WeaveMaps::kChannels; ++k) weave[size_t(k)] = float(s[size_t(k)]);
       if (wm.has_glint()) {  // the glint multiplies both yarn lobes: fold it into their weights
         const double g = wm.SampleGlint(uv[0], uv[1], duv, x.opt.weave_footprint_scale);

@@ -17,6 +17,11 @@ namespace {
 
 constexpr std::array<const char*, WeaveMaps::kChannels> kChannelNames{"warp", "weft", "kd.R",
                                                                        "kd.G", "kd.B"};
+// A view band's channel: "view<k>.<channel>".
+std::string ViewChannelName(size_t k, const char* channel) {
+  return "view" + std::to_string(k) + "." + channel;
+}
+
 constexpr const char* kConvention =
     "texel (i, j) covers TEXCOORD_0 [i, i+1) / (size uv_repeats) x [j, j+1) / (size uv_repeats), "
     "i = column from the left, j = row from the top; texel centres at +0.5; REPEAT on both axes";
@@ -246,6 +251,65 @@ std::array<double, WeaveMaps::kChannels> WeaveMaps::Sample(double u, double v,
   return TrilinearAniso<kChannels>(levels, size, uv_repeats, u, v, fp);
 }
 
+std::vector<double> WeaveMaps::ViewWeights(double nov) const {
+  const size_t K = view_cosines.size();
+  std::vector<double> w(K, 0.0);
+  if (K == 0) return w;
+  // Cosines are strictly decreasing: band K-1 is the most grazing, band 0 the most frontal.
+  const double x = std::isfinite(nov) ? nov : 0.0;
+  if (x >= view_cosines[0]) {
+    w[0] = 1.0;
+    return w;
+  }
+  if (x <= view_cosines[K - 1]) {
+    w[K - 1] = 1.0;
+    return w;
+  }
+  for (size_t k = 0; k + 1 < K; ++k)
+    if (x <= view_cosines[k] && x >= view_cosines[k + 1]) {
+      const double t = (view_cosines[k] - x) / (view_cosines[k] - view_cosines[k + 1]);
+      w[k] = 1.0 - t;
+      w[k + 1] = t;
+      break;
+    }
+  return w;
+}
+
+void WeaveMaps::SetViews(std::vector<double> cosines, std::vector<std::vector<float>> level0s) {
+  if (cosines.size() < 2 || cosines.size() > 8 || level0s.size() != cosines.size())
+    throw std::invalid_argument("weave maps: view bands: expected 2 to 8 cosines with one map each");
+  for (size_t k = 0; k < cosines.size(); ++k) {
+    if (!std::isfinite(cosines[k]) || !(cosines[k] > 0.0) || cosines[k] > 1.0)
+      throw std::invalid_argument("weave maps: view bands: cosine " + std::to_string(k) +
+                                  " not in (0, 1]");
+    if (k > 0 && !(cosines[k] < cosines[k - 1]))
+      throw std::invalid_argument("weave maps: view bands: cosines not strictly decreasing");
+  }
+  std::vector<std::vector<std::vector<float>>> levels_out;
+  for (std::vector<float>& l0 : level0s)
+    levels_out.push_back(FromLevel0(size, uv_repeats, std::move(l0)).levels);
+  view_cosines = std::move(cosines);
+  view_levels = std::move(levels_out);
+}
+
+std::array<double, WeaveMaps::kChannels> WeaveMaps::SampleView(double u, double v,
+                                                               const Footprint& fp,
+                                                               double nov) const {
+  if (!has_views()) return Sample(u, v, fp);
+  const std::vector<double> w = ViewWeights(nov);
+  std::array<double, kChannels> out{};
+  for (size_t k = 0; k < w.size(); ++k) {
+    if (w[k] == 0.0) continue;
+    // the main maps' rules exactly (Sample(u, v, fp)): trilinear, or the anisotropic probes
+    const std::array<double, kChannels> s =
+        fp.n <= 1 ? Trilinear<kChannels>(view_levels[k], size, uv_repeats, u, v,
+                                         ClampLod(fp.lambda, double(view_levels[k].size() - 1)))
+                  : TrilinearAniso<kChannels>(view_levels[k], size, uv_repeats, u, v, fp);
+    for (int c = 0; c < kChannels; ++c) out[size_t(c)] += w[k] * s[size_t(c)];
+  }
+  return out;
+}
+
 std::array<double, 2> WeaveMaps::SampleAnisotropy(double u, double v, const Footprint& fp) const {
   if (fp.n <= 1 || aniso_levels.empty()) return SampleAnisotropy(u, v, fp.lambda);
   // The texture is filtered (its encoded RG / B), then decoded, as the GPU and three.js do.
@@ -364,16 +428,22 @@ void WriteWeaveMaps(const std::string& path, const WeaveMaps& maps,
   img.width = maps.size;
   img.height = maps.size;
   img.channel_names.assign(kChannelNames.begin(), kChannelNames.end());
-  img.pixels = maps.levels.at(0);
-  if (maps.has_normals()) {  // interleave N.X, N.Y, N.Z after the five ratio channels
-    const size_t n = size_t(maps.size) * size_t(maps.size);
-    std::vector<float> px(n * 8);
-    for (size_t t = 0; t < n; ++t) {
-      for (size_t c = 0; c < 5; ++c) px[t * 8 + c] = maps.levels[0][t * 5 + c];
-      for (size_t c = 0; c < 3; ++c) px[t * 8 + 5 + c] = maps.normal_levels[0][t * 3 + c];
-    }
-    img.pixels = std::move(px);
+  // Per texel: the five ratio channels, then N.X N.Y N.Z (relief normals), then each view
+  // band's five channels (view{k}.warp ... view{k}.kd.B).
+  const size_t n = size_t(maps.size) * size_t(maps.size);
+  if (maps.has_normals())
     for (const char* c : {"N.X", "N.Y", "N.Z"}) img.channel_names.push_back(c);
+  for (size_t k = 0; k < maps.view_levels.size(); ++k)
+    for (const char* c : kChannelNames) img.channel_names.push_back(ViewChannelName(k, c));
+  const size_t nc = img.channel_names.size();
+  img.pixels.assign(n * nc, 0.f);
+  for (size_t t = 0; t < n; ++t) {
+    size_t o = t * nc;
+    for (size_t c = 0; c < 5; ++c) img.pixels[o++] = maps.levels[0][t * 5 + c];
+    if (maps.has_normals())
+      for (size_t c = 0; c < 3; ++c) img.pixels[o++] = maps.normal_levels[0][t * 3 + c];
+    for (const auto& band : maps.view_levels)
+      for (size_t c = 0; c < 5; ++c) img.pixels[o++] = band[0][t * 5 + c];
   }
   img.metadata = metadata;
   img.metadata["clothfit:weave_maps"] = "1";
@@ -382,6 +452,14 @@ void WriteWeaveMaps(const std::string& path, const WeaveMaps& maps,
   img.metadata["clothfit:uv_repeats"] = buf;
   img.metadata["clothfit:convention"] = kConvention;
   img.metadata["clothfit:colour_space"] = kColourSpace;
+  if (maps.has_views()) {
+    std::string cos;
+    for (double c : maps.view_cosines) {
+      std::snprintf(buf, sizeof buf, "%s%.17g", cos.empty() ? "" : " ", c);
+      cos += buf;
+    }
+    img.metadata["clothfit:view_cosines"] = cos;
+  }
   io::WriteExr(path, img);
 }
 
@@ -428,6 +506,46 @@ WeaveMaps ReadWeaveMaps(const std::string& path) {
         for (size_t k = 0; k < 3; ++k) nv[t * 3 + k] = img.pixels[t * nc + size_t(nc3[k])];
       m.SetNormals(std::move(nv));
     }
+    const auto vc = img.metadata.find("clothfit:view_cosines");
+    if (vc != img.metadata.end()) {  // view bands (session 14): K cosines, K x 5 channels
+      std::vector<double> cosines;
+      const std::string& text = vc->second;
+      size_t pos = 0;
+      while (pos < text.size() && cosines.size() <= 8) {
+        while (pos < text.size() && text[pos] == ' ') ++pos;
+        if (pos >= text.size()) break;
+        size_t used = 0;
+        double x = 0.0;
+        try {
+          x = std::stod(text.substr(pos, 32), &used);
+        } catch (const std::exception&) {
+          throw bad("clothfit:view_cosines is not a list of numbers");
+        }
+        if (used == 0) throw bad("clothfit:view_cosines is not a list of numbers");
+        pos += used;
+        if (pos < text.size() && text[pos] != ' ')
+          throw bad("clothfit:view_cosines is not a list of numbers");
+        cosines.push_back(x);
+      }
+      if (cosines.size() < 2 || cosines.size() > 8)
+        throw bad("clothfit:view_cosines: expected 2 to 8 numbers");
+      std::vector<std::vector<float>> bands;
+      for (size_t k = 0; k < cosines.size(); ++k) {
+        std::array<int, WeaveMaps::kChannels> vcol{};
+        for (int ch = 0; ch < WeaveMaps::kChannels; ++ch) {
+          const std::string name = ViewChannelName(k, kChannelNames[size_t(ch)]);
+          const auto it = std::find(img.channel_names.begin(), img.channel_names.end(), name);
+          if (it == img.channel_names.end()) throw bad("no channel " + name + " (clothfit:view_cosines names " + std::to_string(cosines.size()) + " bands)");
+          vcol[size_t(ch)] = int(it - img.channel_names.begin());
+        }
+        std::vector<float> l(n * WeaveMaps::kChannels);
+        for (size_t t = 0; t < n; ++t)
+          for (int ch = 0; ch < WeaveMaps::kChannels; ++ch)
+            l[t * WeaveMaps::kChannels + size_t(ch)] = img.pixels[t * nc + size_t(vcol[size_t(ch)])];
+        bands.push_back(std::move(l));
+      }
+      m.SetViews(std::move(cosines), std::move(bands));
+    }
     return m;
   } catch (const std::invalid_argument& e) {
     throw bad(e.what());
@@ -436,13 +554,15 @@ WeaveMaps ReadWeaveMaps(const std::string& path) {
 
 nlohmann::json WeaveMapsPresetField(const std::string& file, const WeaveMaps& maps,
                                     const nlohmann::json& source) {
-  return {{"file", std::filesystem::absolute(file).lexically_normal().string()},
-          {"size", maps.size},
-          {"uv_repeats", maps.uv_repeats},
-          {"channels", kChannelNames},
-          {"colour_space", kColourSpace},
-          {"convention", kConvention},
-          {"source", source}};
+  nlohmann::json f = {{"file", std::filesystem::absolute(file).lexically_normal().string()},
+                      {"size", maps.size},
+                      {"uv_repeats", maps.uv_repeats},
+                      {"channels", kChannelNames},
+                      {"colour_space", kColourSpace},
+                      {"convention", kConvention},
+                      {"source", source}};
+  if (maps.has_views()) f["view_cosines"] = maps.view_cosines;
+  return f;
 }
 
 namespace {
@@ -541,6 +661,30 @@ std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& prese
     if (!(*it)["glint_file"].is_string())
       throw MaterialError("preset field weave_maps.glint_file: expected a string");
     ReadGlintMap((*it)["glint_file"].get<std::string>(), maps.get());
+  }
+  // View bands are drawn only when the preset names them, and then the file must carry the
+  // same cosines (web/ reads the preset's list and the file's channels).
+  if (it->contains("view_cosines")) {
+    const auto& vc = (*it)["view_cosines"];
+    if (!vc.is_array() || vc.size() < 2 || vc.size() > 8)
+      throw MaterialError("preset field weave_maps.view_cosines: expected 2 to 8 numbers");
+    for (size_t k = 0; k < vc.size(); ++k) {
+      if (!vc[k].is_number() || !std::isfinite(vc[k].get<double>()) || !(vc[k].get<double>() > 0.0) ||
+          vc[k].get<double>() > 1.0 || (k > 0 && !(vc[k].get<double>() < vc[k - 1].get<double>())))
+        throw MaterialError("preset field weave_maps.view_cosines: expected numbers in (0, 1], "
+                            "strictly decreasing");
+    }
+    if (maps->view_cosines.size() != vc.size())
+      throw MaterialError("preset field weave_maps.view_cosines: the map file has " +
+                          std::to_string(maps->view_cosines.size()) + " view bands, the preset names " +
+                          std::to_string(vc.size()));
+    for (size_t k = 0; k < vc.size(); ++k)
+      if (!(std::abs(maps->view_cosines[k] - vc[k].get<double>()) <= 1e-9))
+        throw MaterialError("preset field weave_maps.view_cosines: differs from the map file's "
+                            "clothfit:view_cosines");
+  } else {
+    maps->view_cosines.clear();
+    maps->view_levels.clear();
   }
   return maps;
 }

@@ -110,6 +110,26 @@ struct WeaveMaps {
   // weft), B = |warp - weft| / (warp + weft); 3 channels, box mips. It is filtered as a GPU
   // filters that texture (the encoded values, not warp/weft), see SampleAnisotropy.
   std::vector<std::vector<float>> aniso_levels;
+  // Optional view bands (session 14, docs/preview.md "View-dependent weave maps"): the 5
+  // channels baked again from the pairs of one view cosine each (fit/weave_maps.h view_bands),
+  // view_cosines strictly decreasing in (0, 1] (the bake's Gauss-Legendre nodes: 0.887, 0.5,
+  // 0.113), each band a ratio map with tile mean 1 of this object's size and uv_repeats, box
+  // mips. SampleView blends them by the view cosine: piecewise linear in NoV between the
+  // cosines (hat weights over the ascending nodes), clamped to the end bands outside them.
+  // The five main channels stay the all-views maps (what physical-aniso and a reader without
+  // bands draw). File: channels view{k}.warp ... view{k}.kd.B and metadata
+  // clothfit:view_cosines; preset: weave_maps.view_cosines (the bands are drawn only when the
+  // preset names them, and the two must agree).
+  std::vector<double> view_cosines;
+  std::vector<std::vector<std::vector<float>>> view_levels;  // per band: its mip chain
+
+  bool has_views() const { return !view_levels.empty(); }
+  // The hat weights of the bands at view cosine nov (sum 1; index = band).
+  std::vector<double> ViewWeights(double nov) const;
+  // Sets the bands from their level 0 (size^2 x 5 each; renormalised to tile mean 1, as
+  // FromLevel0). Throws std::invalid_argument on 2..8 bands not given, cosines not strictly
+  // decreasing in (0, 1], or a bad level.
+  void SetViews(std::vector<double> cosines, std::vector<std::vector<float>> level0s);
 
   // The filter footprint of one sample (see "Anisotropic filtering" above): the LOD, the
   // number of probes and the uv step between them (the first probe at uv - (n - 1)/2 step).
@@ -129,6 +149,9 @@ struct WeaveMaps {
   Footprint FootprintAt(const std::array<double, 4>& duv, double footprint_scale = 1.0) const;
   // The samples below at a footprint: the mean of fp.n trilinear probes at fp.lambda.
   std::array<double, kChannels> Sample(double u, double v, const Footprint& fp) const;
+  // Sample at a footprint with the view bands blended by nov in [0, 1] (above); Sample(u, v,
+  // fp) without bands.
+  std::array<double, kChannels> SampleView(double u, double v, const Footprint& fp, double nov) const;
   std::array<double, 2> SampleAnisotropy(double u, double v, const Footprint& fp) const;
   std::array<double, 3> SampleNormal(double u, double v, const Footprint& fp) const;
 

@@ -12,7 +12,7 @@ BIN_DIR=$(realpath "$2")
 WHICH=$3
 SECONDS_PER=${4:-60}
 HERE=$(cd "$(dirname "$0")" && pwd)
-HARNESSES=(scene_card gltf glb weave fabric preset merl image_exr image_png image_hdr
+HARNESSES=(scene_card gltf glb weave fabric preset weave_maps merl image_exr image_png image_hdr
            convert_json convert_gltf convert_glb)
 FLAGS=(-rss_limit_mb=1024 -malloc_limit_mb=1024 -timeout=5)
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=0:abort_on_error=1:allocator_may_return_null=1}
