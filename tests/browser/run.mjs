@@ -15,9 +15,9 @@
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //   A light-map case reports "with (without)": the same material timed without its light map too.
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 31 materials (6 + 3 woven + 2 physical-aniso
+// Cases: each canonical scene (datasets/scenes/*.json) x 32 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
-// bent-normal IBL + 5 woven with the far-field yarn lobe + 1 with view-dependent weave maps) x 2 environments
+// bent-normal IBL + 5 woven with the far-field yarn lobe + 2 with view-dependent weave maps) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
 // 9 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
 // drape and sphere x 3 materials under studio with three.js shadow maps against
@@ -188,9 +188,12 @@ Object.assign(MATERIALS, {
 // maps-twill lobe preset with its EXR's three view bands (web/test/yarn-lobe-twill-maps-views.*:
 // the same 5 main channels plus view{0,1,2}.* baked at the bake's view cosines 0.887 / 0.5 /
 // 0.113, and "view_cosines" in the preset), blended per pixel by NoV on both sides.
+// The same with weave_maps.anisotropy 1: the blend without the anisotropic filter's residual
+// (the swatch's aniso-16 cases carry it: tests/browser/bounds.json).
 Object.assign(MATERIALS, {
   'woven-lobe-maps-twill-views': lobePreset('twill-maps-views'),
 });
+MATERIALS['woven-lobe-maps-twill-views-aniso1'] = withAniso('woven-lobe-maps-twill-views', 1);
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
 // s10-sun: the sun split is on by default in both renderers ("environment": {"sun": "auto"}
