@@ -4,7 +4,7 @@
 # A woven fit of an Irawan fabric with the default maps writes the view bands (the preset's
 # weave_maps.view_cosines, the EXR's view{k}.* channels); --no-weave-map-views and the other
 # --weave-maps modes do not; --weave-map-view-band outside 0..2 fails naming the option.
-# The unit tests are tests/test_s14_view_bands.cpp (S14ViewBands.*).
+# The unit tests are S14ViewBands.* in tests/test_weave_maps.cpp.
 . "$(dirname "$0")/cli_common.sh"
 FABRIC="$SRC/datasets/fabrics/canvas.json"
 "$BIN" --quiet render-reference --scene "$SCENE" --fabric "$FABRIC" --spp 2 \

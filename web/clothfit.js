@@ -1481,6 +1481,28 @@ function weaveTexture(levels, size, nc, format, type, anisotropy = 1) {
   return t;
 }
 
+// Level 0 of a ratio map: the named channels of an EXR image, each divided by its mean over the
+// n texels (interleaved, channel k at t * names.length + k). Calls fail(message) on a negative
+// or non-finite texel or a zero mean. Float32Array rounds as float(double / double), as the
+// C++ reader (render/preview/weave_maps.cpp FromLevel0).
+function ratioLevel0(img, names, n, fail) {
+  const nc = names.length;
+  const l0 = new Float32Array(n * nc);
+  names.forEach((c, k) => {
+    const src = img.channels[c];
+    let mean = 0;
+    for (let t = 0; t < n; ++t) {
+      const x = src[t];
+      if (!Number.isFinite(x) || x < 0) fail(`channel ${c} has a negative or non-finite texel`);
+      mean += x;
+    }
+    mean /= n;
+    if (!(mean > 0)) fail(`channel ${c} has a zero mean`);
+    for (let t = 0; t < n; ++t) l0[t * nc + k] = src[t] / mean;
+  });
+  return l0;
+}
+
 /**
  * Weave maps from an EXR (ArrayBuffer) as clothfit writes them. `field` is the preset's
  * "weave_maps" object (its uv_repeats wins), `name` names the file in errors. Returns
@@ -1506,19 +1528,7 @@ export function weaveMapsFromExr(buffer, { field = {}, name = 'weave maps', half
   }
   if (!(uvRepeats > 0) || !Number.isFinite(uvRepeats)) fail('no clothfit:uv_repeats metadata (and none in the preset)');
   const n = size * size, nc = WEAVE_MAP_CHANNELS.length;
-  const l0 = new Float32Array(n * nc);
-  WEAVE_MAP_CHANNELS.forEach((c, k) => {
-    const src = img.channels[c];
-    let mean = 0;
-    for (let t = 0; t < n; ++t) {
-      const x = src[t];
-      if (!Number.isFinite(x) || x < 0) fail(`channel ${c} has a negative or non-finite texel`);
-      mean += x;
-    }
-    mean /= n;
-    if (!(mean > 0)) fail(`channel ${c} has a zero mean`);
-    for (let t = 0; t < n; ++t) l0[t * nc + k] = src[t] / mean;  // Float32Array rounds as float(double / double)
-  });
+  const l0 = ratioLevel0(img, WEAVE_MAP_CHANNELS, n, fail);
   const levels = [l0];
   for (let s = size; s > 1; s >>= 1) levels.push(boxMip(levels[levels.length - 1], s, nc));
   const type = halfFloat ? THREE.HalfFloatType : THREE.FloatType;
@@ -1624,23 +1634,13 @@ function weaveMapViewBands(img, field, name, size, type, anisotropy, toHalf) {
   if (attr === undefined) fail(`no clothfit:view_cosines metadata (the preset's weave_maps.view_cosines names ${K} view bands)`);
   const fileCos = String(attr).trim().split(/\s+/).map(Number);
   if (fileCos.length !== K) fail(`clothfit:view_cosines names ${fileCos.length} view bands, the preset's weave_maps.view_cosines ${K}`);
-  fileCos.forEach((c, k) => { if (!(Math.abs(c - cosines[k]) <= 1e-9)) fail(`clothfit:view_cosines ${String(attr).slice(0, 120)} differs from the preset's weave_maps.view_cosines at [${k}]`); });
+  fileCos.forEach((c, k) => { if (!(Math.abs(c - cosines[k]) <= 1e-9)) fail(`clothfit:view_cosines differs from the preset's weave_maps.view_cosines at [${k}]`); });
   const bands = [];
   for (let k = 0; k < K; ++k) {
-    const l0 = new Float32Array(n * nc);
-    WEAVE_MAP_CHANNELS.forEach((c, ci) => {
-      const ch = `view${k}.${c}`, src = img.channels[ch];
-      if (!src) fail(`no channel ${ch} (weave_maps.view_cosines names ${K} view bands: view0..view${K - 1}.{${WEAVE_MAP_CHANNELS.join(',')}})`);
-      let mean = 0;
-      for (let t = 0; t < n; ++t) {
-        const x = src[t];
-        if (!Number.isFinite(x) || x < 0) fail(`channel ${ch} has a negative or non-finite texel`);
-        mean += x;
-      }
-      mean /= n;
-      if (!(mean > 0)) fail(`channel ${ch} has a zero mean`);
-      for (let t = 0; t < n; ++t) l0[t * nc + ci] = src[t] / mean;
-    });
+    const names = WEAVE_MAP_CHANNELS.map((c) => `view${k}.${c}`);
+    for (const ch of names)
+      if (!img.channels[ch]) fail(`no channel ${ch} (weave_maps.view_cosines names ${K} view bands: view0..view${K - 1}.{${WEAVE_MAP_CHANNELS.join(',')}})`);
+    const l0 = ratioLevel0(img, names, n, fail);
     const lv = [l0];
     for (let s = size; s > 1; s >>= 1) lv.push(boxMip(lv[lv.length - 1], s, nc));
     bands.push(lv);
