@@ -2,7 +2,6 @@
 
 #include <tbb/parallel_for.h>
 
-#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -323,24 +322,16 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
   if (o.view_bands) {
     if (o.indicator || o.relief || o.glint || o.view_band >= 0)
       throw std::invalid_argument("BakeWeaveMaps: view bands only with the plain fitted maps");
-    std::vector<double> cosines;
-    std::vector<std::vector<float>> bands;
+    // lut::GaussLegendre lists its nodes by decreasing x, the order the bands are stored in
+    // (SetViews refuses any other).
+    std::vector<double> cs;
+    std::vector<std::vector<float>> bs;
     for (int k = 0; k < o.mu_nodes; ++k) {
       WeaveBakeOptions ok = o;
       ok.view_bands = false;
       ok.view_band = k;
-      cosines.push_back(WeaveViewBandCosine(k, o.mu_nodes));
-      bands.push_back(BakeWeaveMaps(source, preset, ok).maps.levels.at(0));
-    }
-    // Gauss-Legendre nodes come in increasing x; the bands are stored by decreasing cosine.
-    std::vector<size_t> idx(cosines.size());
-    for (size_t k = 0; k < idx.size(); ++k) idx[k] = k;
-    std::sort(idx.begin(), idx.end(), [&](size_t a, size_t b) { return cosines[a] > cosines[b]; });
-    std::vector<double> cs;
-    std::vector<std::vector<float>> bs;
-    for (size_t k : idx) {
-      cs.push_back(cosines[k]);
-      bs.push_back(std::move(bands[k]));
+      cs.push_back(WeaveViewBandCosine(k, o.mu_nodes));
+      bs.push_back(BakeWeaveMaps(source, preset, ok).maps.levels.at(0));
     }
     res.maps.SetViews(std::move(cs), std::move(bs));
   }
