@@ -453,6 +453,15 @@ TEST(S14ViewBands, FileAndPresetRoundTripAndErrorsNameTheField) {
   expect_field_error("not decreasing");
   p.extra["weave_maps"]["view_cosines"] = "0.9 0.5 0.1";
   expect_field_error("not an array");
+  // Read from a preset file, the error names that file as well.
+  p.extra["weave_maps"]["view_cosines"] = {0.9, 1.5, 0.1};
+  try {
+    LoadPresetWeaveMaps(p, (dir / "named.json").string());
+    ADD_FAILURE() << "no error for a cosine above 1";
+  } catch (const MaterialError& e) {
+    EXPECT_NE(std::string(e.what()).find("named.json: field weave_maps.view_cosines"), std::string::npos)
+        << e.what();
+  }
   p.extra["weave_maps"].erase("view_cosines");
   EXPECT_FALSE(LoadPresetWeaveMaps(p)->has_views());  // not named: not drawn
 

@@ -637,7 +637,15 @@ std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& prese
   if (!HasWeaveMapsField(preset)) return nullptr;
   MaterialPreset resolved = preset;
   ResolvePresetWeaveMapPaths(&resolved, preset_path);
-  return LoadPresetWeaveMaps(resolved);
+  try {
+    return LoadPresetWeaveMaps(resolved);
+  } catch (const MaterialError& e) {  // "preset field weave_maps...": name the preset file too
+    const std::string what = e.what();
+    const std::string generic = "preset field ";
+    if (what.compare(0, generic.size(), generic) != 0) throw;
+    throw MaterialError(limits::EscapeForMessage(preset_path, 400) + ": field " +
+                        what.substr(generic.size()));
+  }
 }
 
 std::shared_ptr<const WeaveMaps> LoadPresetWeaveMaps(const MaterialPreset& preset) {
