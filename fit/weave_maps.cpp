@@ -134,6 +134,70 @@ double SquaredError(const std::vector<Pair>& pairs, const std::vector<Rgb<double
   return e;
 }
 
+
+// One texel's unknowns: weighted least squares on the cube-root residuals linearised at the
+// target (weight (y + eps)^(-4/3) / 9), a ridge towards 1 relative to the diagonal's scale, and
+// negative unknowns dropped and the rest re-solved. `target[k]` is the reference BSDF times
+// cos for ps[k].
+std::array<double, kN> FitTexel(const Pair* ps, const Rgb<double>* target, size_t n, double ridge) {
+  std::array<std::array<double, kN>, kN> A{};
+  std::array<double, kN> r{};
+  for (size_t k = 0; k < n; ++k) {
+    const Pair& q = ps[k];
+    for (int c = 0; c < 3; ++c) {
+      const double y = std::max(target[k][c], 0.0) + kEps;
+      const double w = q.weight * std::pow(y, -4.0 / 3.0) / 9.0;
+      const double res = target[k][c] - q.b0[c];
+      for (int a = 0; a < kN; ++a) {
+        const double da = Design(q, c, a);
+        if (da == 0.0) continue;
+        r[size_t(a)] += w * da * res;
+        for (int b = 0; b < kN; ++b) A[size_t(a)][size_t(b)] += w * da * Design(q, c, b);
+      }
+    }
+  }
+  double diag = 0.0;
+  for (int a = 0; a < kN; ++a) diag = std::max(diag, A[size_t(a)][size_t(a)]);
+  for (int a = 0; a < kN; ++a) {
+    A[size_t(a)][size_t(a)] += ridge * diag;
+    r[size_t(a)] += ridge * diag * 1.0;
+  }
+  std::array<bool, kN> active;
+  active.fill(true);
+  std::array<double, kN> x{};
+  for (int it = 0; it <= kN; ++it) {
+    if (!Solve(A, r, active, &x)) {
+      x.fill(1.0);
+      break;
+    }
+    bool neg = false;
+    for (int a = 0; a < kN; ++a)
+      if (active[size_t(a)] && x[size_t(a)] < 0.0) {
+        active[size_t(a)] = false;
+        neg = true;
+      }
+    if (!neg) break;
+  }
+  for (double& v : x) v = std::max(v, 0.0);
+  return x;
+}
+
+// The tile means of the texels' solutions, and level 0 of the ratio maps (a channel with a zero
+// tile mean, e.g. no weft lobe anywhere, stays uniform).
+std::vector<float> Level0(const std::vector<std::array<double, kN>>& xs,
+                          std::array<double, kN>* mean_out) {
+  const size_t texels = xs.size();
+  std::array<double, kN> mean{};
+  for (const auto& x : xs)
+    for (int a = 0; a < kN; ++a) mean[size_t(a)] += x[size_t(a)] / double(texels);
+  std::vector<float> level0(texels * kN);
+  for (size_t t = 0; t < texels; ++t)
+    for (int a = 0; a < kN; ++a)
+      level0[t * kN + size_t(a)] = mean[size_t(a)] > 1e-9 ? float(xs[t][size_t(a)]) : 1.f;
+  if (mean_out) *mean_out = mean;
+  return level0;
+}
+
 }  // namespace
 
 double WeaveViewBandCosine(int k, int mu_nodes) {
@@ -153,6 +217,8 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       o.view_band < -1 || o.view_band >= o.mu_nodes)
     throw std::invalid_argument("BakeWeaveMaps: bad options (size a power of two, counts >= 1, "
                                 "view_band -1 or a view node)");
+  if (o.view_bands && (o.indicator || o.relief || o.glint || o.view_band >= 0))
+    throw std::invalid_argument("BakeWeaveMaps: view bands only with the plain fitted maps");
   // The reference without its fineness glints (a global, non-periodic hash; E[I] = 1).
   render::WeavePattern pattern = source.pattern();
   pattern.fineness = 0.0;
@@ -193,6 +259,21 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       }
   }
   std::vector<std::vector<Rgb<double>>> targets(texels);
+  // The view bands (o.view_bands): band k is what a bake with view_band = k would fit, solved
+  // here from the main bake's targets (band k's pairs are the main pairs [k M, (k + 1) M), the
+  // view cosine being BuildPairs' outer loop), so the reference BSDF is evaluated once.
+  std::vector<std::vector<Pair>> band_pairs;
+  if (o.view_bands)
+    for (int k = 0; k < o.mu_nodes; ++k) {
+      WeaveBakeOptions ok = o;
+      ok.view_bands = false;
+      ok.view_band = k;
+      band_pairs.push_back(BuildPairs(preset, ok));
+      if (band_pairs.back().size() * size_t(o.mu_nodes) != pairs.size())
+        throw std::logic_error("BakeWeaveMaps: view band pairs do not partition the pairs");
+    }
+  std::vector<std::vector<std::array<double, kN>>> band_xs(band_pairs.size(),
+                                                           std::vector<std::array<double, kN>>(texels));
 
   tbb::parallel_for(0, S, [&](int j) {
     for (int i = 0; i < S; ++i) {
@@ -219,48 +300,13 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       const std::vector<Pair>& pairs_t = o.relief ? local : pairs;
       std::vector<Rgb<double>>& target = targets[t];
       target.resize(pairs.size());
-      std::array<std::array<double, kN>, kN> A{};
-      std::array<double, kN> r{};
-      for (size_t k = 0; k < pairs_t.size(); ++k) {
-        const Pair& q = pairs_t[k];
-        target[k] = bsdf.Eval(q.v, q.l, sp) * q.l.z;
-        for (int c = 0; c < 3; ++c) {
-          const double y = std::max(target[k][c], 0.0) + kEps;
-          const double w = q.weight * std::pow(y, -4.0 / 3.0) / 9.0;
-          const double res = target[k][c] - q.b0[c];
-          for (int a = 0; a < kN; ++a) {
-            const double da = Design(q, c, a);
-            if (da == 0.0) continue;
-            r[size_t(a)] += w * da * res;
-            for (int b = 0; b < kN; ++b) A[size_t(a)][size_t(b)] += w * da * Design(q, c, b);
-          }
-        }
-      }
-      // Ridge towards 1, relative to the diagonal's scale.
-      double diag = 0.0;
-      for (int a = 0; a < kN; ++a) diag = std::max(diag, A[size_t(a)][size_t(a)]);
-      for (int a = 0; a < kN; ++a) {
-        A[size_t(a)][size_t(a)] += o.ridge * diag;
-        r[size_t(a)] += o.ridge * diag * 1.0;
-      }
-      std::array<bool, kN> active;
-      active.fill(true);
-      std::array<double, kN> x{};
-      for (int it = 0; it <= kN; ++it) {
-        if (!Solve(A, r, active, &x)) {
-          x.fill(1.0);
-          break;
-        }
-        bool neg = false;
-        for (int a = 0; a < kN; ++a)
-          if (active[size_t(a)] && x[size_t(a)] < 0.0) {
-            active[size_t(a)] = false;
-            neg = true;
-          }
-        if (!neg) break;
-      }
-      for (double& v : x) v = std::max(v, 0.0);
-      xs[t] = x;
+      for (size_t k = 0; k < pairs_t.size(); ++k) target[k] = bsdf.Eval(pairs_t[k].v, pairs_t[k].l, sp) * pairs_t[k].l.z;
+      xs[t] = FitTexel(pairs_t.data(), target.data(), pairs_t.size(), o.ridge);
+      // The view bands from the same targets: band k's pairs are the main pairs [k M, (k + 1) M)
+      // with their weights renormalised over the band (BuildPairs, view_band = k).
+      for (size_t k = 0; k < band_pairs.size(); ++k)
+        band_xs[k][t] = FitTexel(band_pairs[k].data(), target.data() + k * band_pairs[k].size(),
+                                 band_pairs[k].size(), o.ridge);
     }
   });
 
@@ -268,8 +314,7 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
   WeaveBakeResult res;
   res.pairs = int(pairs.size());
   std::array<double, kN> mean{};
-  for (const auto& x : xs)
-    for (int a = 0; a < kN; ++a) mean[size_t(a)] += x[size_t(a)] / double(texels);
+  std::vector<float> level0 = Level0(xs, &mean);
   double eu = 0.0, em = 0.0;
   for (size_t t = 0; t < texels; ++t) {
     if (targets[t].empty()) {  // indicator maps: the targets were not evaluated
@@ -295,11 +340,6 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
   res.mean_warp = mean[0];
   res.mean_weft = mean[1];
   res.mean_kd = {mean[2], mean[3], mean[4]};
-  // A channel with a zero tile mean (e.g. no weft lobe anywhere) stays uniform.
-  std::vector<float> level0(texels * kN);
-  for (size_t t = 0; t < texels; ++t)
-    for (int a = 0; a < kN; ++a)
-      level0[t * kN + size_t(a)] = mean[size_t(a)] > 1e-9 ? float(xs[t][size_t(a)]) : 1.f;
   res.maps = render::WeaveMaps::FromLevel0(S, R, std::move(level0));
   if (o.relief) res.maps.SetNormals(std::move(normals));
   if (o.glint && source.pattern().fineness > 0.0) {
@@ -320,18 +360,14 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
     res.maps.SetGlint(G, std::move(g));
   }
   if (o.view_bands) {
-    if (o.indicator || o.relief || o.glint || o.view_band >= 0)
-      throw std::invalid_argument("BakeWeaveMaps: view bands only with the plain fitted maps");
     // lut::GaussLegendre lists its nodes by decreasing x, the order the bands are stored in
-    // (SetViews refuses any other).
+    // (SetViews refuses any other). Each band's level 0 is what its own bake returns
+    // (FromLevel0's ratio maps), bit for bit (test S15ViewBands.OnePassEqualsSeparateBakes).
     std::vector<double> cs;
     std::vector<std::vector<float>> bs;
-    for (int k = 0; k < o.mu_nodes; ++k) {
-      WeaveBakeOptions ok = o;
-      ok.view_bands = false;
-      ok.view_band = k;
-      cs.push_back(WeaveViewBandCosine(k, o.mu_nodes));
-      bs.push_back(BakeWeaveMaps(source, preset, ok).maps.levels.at(0));
+    for (size_t k = 0; k < band_xs.size(); ++k) {
+      cs.push_back(WeaveViewBandCosine(int(k), o.mu_nodes));
+      bs.push_back(render::WeaveMaps::FromLevel0(S, R, Level0(band_xs[k], nullptr)).levels.at(0));
     }
     res.maps.SetViews(std::move(cs), std::move(bs));
   }

@@ -536,5 +536,35 @@ TEST(S14ViewBands, BakedBandsAreRatioMapsWhoseYarnContrastGrowsTowardsGrazing) {
   EXPECT_THROW(fit::BakeWeaveMaps(*irawan, DefaultPreset(ModelKind::kWoven), o), std::invalid_argument);
 }
 
+// Session 15: the view bands are solved in the main bake's texel loop from its targets (the
+// reference BSDF is evaluated once per texel and pair). Each band must equal what a separate
+// bake of that band alone (--weave-map-view-band k, the measurement flag) returns, bit for bit,
+// with 3 and 4 view nodes (solving band k from band k+1's targets fails it; checked).
+TEST(S15ViewBands, OnePassEqualsSeparateBakes) {
+  const Fabric f = CanvasFabric();
+  const auto* irawan = dynamic_cast<const IrawanBsdf*>(f.bsdf.get());
+  ASSERT_NE(irawan, nullptr);
+  for (const int mu : {3, 4}) {
+    fit::WeaveBakeOptions o;
+    o.size = 16;
+    o.mu_nodes = mu;
+    o.view_bands = true;
+    const MaterialPreset preset = DefaultPreset(ModelKind::kWoven);
+    const fit::WeaveBakeResult r = fit::BakeWeaveMaps(*irawan, preset, o);
+    ASSERT_EQ(r.maps.view_levels.size(), size_t(mu));
+    for (int k = 0; k < mu; ++k) {
+      fit::WeaveBakeOptions ok = o;
+      ok.view_bands = false;
+      ok.view_band = k;
+      const fit::WeaveBakeResult b = fit::BakeWeaveMaps(*irawan, preset, ok);
+      // SetViews re-normalises each band's level 0 (a mean of 1 up to rounding) and rebuilds
+      // its mips (FromLevel0); do the same to the separate bake.
+      const auto ref = WeaveMaps::FromLevel0(b.maps.size, b.maps.uv_repeats, b.maps.levels.at(0)).levels;
+      EXPECT_EQ(r.maps.view_levels[size_t(k)], ref) << "mu " << mu << " band " << k;
+      EXPECT_NE(r.maps.view_levels[size_t(k)][0], r.maps.levels[0]) << "band " << k << " is the main maps";
+    }
+  }
+}
+
 }  // namespace
 }  // namespace clothfit::render
