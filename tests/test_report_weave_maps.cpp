@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -72,6 +73,47 @@ TEST(ReportWeaveMaps, ThumbnailsTileThePeriodWithTheDocumentedNormalisation) {
   EXPECT_NE(p.note.find("weft"), std::string::npos);
 }
 
+// Session 15: a file with view bands (view{k}.warp/weft/kd.R/G/B, session 14) gets three
+// pictures per band, each normalised on its own, tagged with its band; a band with a missing
+// channel is a note naming it.
+io::Image MapsWithViews(int n, int bands) {
+  const io::Image main = Maps(n);
+  io::Image img;
+  img.width = img.height = n;
+  img.channel_names = main.channel_names;
+  for (int k = 0; k < bands; ++k)
+    for (const char* c : {"warp", "weft", "kd.R", "kd.G", "kd.B"})
+      img.channel_names.push_back("view" + std::to_string(k) + "." + c);
+  const size_t nc = img.channel_names.size();
+  img.pixels.resize(size_t(n) * n * nc);
+  for (size_t t = 0; t < size_t(n) * n; ++t)
+    for (size_t c = 0; c < nc; ++c)  // band k: the main maps times (k + 2) (warp max 3 (k + 2))
+      img.pixels[t * nc + c] = main.pixels[t * 5 + c % 5] * (c < 5 ? 1.0f : float((c - 5) / 5 + 2));
+  return img;
+}
+
+TEST(ReportWeaveMaps, ViewBandsGetTheirOwnPictures) {
+  const int n = 4;
+  const WeaveMapPictures w = WeaveMapThumbnails(MapsWithViews(n, 3), "maps.exr", 2);
+  EXPECT_TRUE(w.note.empty()) << w.note;
+  EXPECT_EQ(w.view_bands, 3);
+  ASSERT_EQ(w.pictures.size(), 12u);
+  for (size_t i = 0; i < w.pictures.size(); ++i) {
+    EXPECT_EQ(w.pictures[i].band, int(i / 3) - 1) << i;
+    EXPECT_EQ(w.pictures[i].title, w.pictures[i % 3].title) << i;
+  }
+  for (int k = 0; k < 3; ++k) EXPECT_DOUBLE_EQ(w.pictures[size_t(3 + 3 * k)].max, 3.0 * (k + 2));
+  // Normalised on its own: band 0's warp (the main warp x 2, white = its max) is the same
+  // picture as the main warp.
+  EXPECT_EQ(w.pictures[3].png, w.pictures[0].png);
+  io::Image broken = MapsWithViews(n, 2);
+  broken.channel_names[5 + 5 + 1] = "view1.other";  // band 1 without its weft
+  const WeaveMapPictures b = WeaveMapThumbnails(broken, "maps.exr", 2);
+  EXPECT_EQ(b.view_bands, 2);
+  EXPECT_EQ(b.pictures.size(), 8u);
+  EXPECT_NE(b.note.find("view1.weft"), std::string::npos) << b.note;
+}
+
 class ReportWeaveMapPage : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -93,6 +135,7 @@ TEST_F(ReportWeaveMapPage, PageShowsTheMapsAndTheModelWithEscapedStrings) {
   io::WriteExr(ref, img);
   io::WriteExr(prev, img);
   io::WriteExr((dir_ / "m.weave.exr").string(), Maps(8));
+  io::WriteExr((dir_ / "v.weave.exr").string(), MapsWithViews(8, 3));
   auto preset = [&](const std::string& model, const nlohmann::json& maps) {
     nlohmann::json j = {
         {"schema", "clothfit.preset"}, {"version", 1}, {"model", model},
@@ -109,16 +152,25 @@ TEST_F(ReportWeaveMapPage, PageShowsTheMapsAndTheModelWithEscapedStrings) {
       preset("standard", nullptr),
       preset("woven", {{"file", "m.weave.exr"}, {"colour_space", "<script>x</script>"},
                        {"uv_repeats", 60.0}}),
-      preset("physical-aniso", {{"file", "missing<b>.exr"}})};
+      preset("physical-aniso", {{"file", "missing<b>.exr"}}),
+      preset("cloth", {{"file", "v.weave.exr"}, {"view_cosines", {0.887, 0.5, 0.113}}}),
+      preset("physical-sheen", {{"file", "v.weave.exr"}})};
   const auto fabrics = FabricsFromPresets(presets);
   const FabricReport rep = BuildFabricReport(fabrics.at(0));
-  ASSERT_EQ(rep.weave_maps.size(), 3u);
-  EXPECT_FALSE(rep.weave_maps[0].has_value());  // standard: no maps, no section entry
-  ASSERT_TRUE(rep.weave_maps[1].has_value());
-  EXPECT_EQ(rep.weave_maps[1]->pictures.size(), 3u);
-  ASSERT_TRUE(rep.weave_maps[2].has_value());
-  EXPECT_TRUE(rep.weave_maps[2]->pictures.empty());
-  EXPECT_NE(rep.weave_maps[2]->note.find("missing<b>.exr"), std::string::npos);
+  ASSERT_EQ(rep.weave_maps.size(), 5u);
+  // The report orders the models its own way: look them up by name.
+  auto maps_of = [&](const std::string& model) -> const std::optional<WeaveMapPictures>& {
+    for (size_t i = 0; i < rep.spec.models.size(); ++i)
+      if (rep.spec.models[i].model == model) return rep.weave_maps.at(i);
+    ADD_FAILURE() << "no model " << model;
+    return rep.weave_maps.at(0);
+  };
+  EXPECT_FALSE(maps_of("standard").has_value());  // standard: no maps, no section entry
+  ASSERT_TRUE(maps_of("woven").has_value());
+  EXPECT_EQ(maps_of("woven")->pictures.size(), 3u);
+  ASSERT_TRUE(maps_of("physical-aniso").has_value());
+  EXPECT_TRUE(maps_of("physical-aniso")->pictures.empty());
+  EXPECT_NE(maps_of("physical-aniso")->note.find("missing<b>.exr"), std::string::npos);
   const std::string html = FabricHtml(rep);
   EXPECT_NE(html.find("<h2>Weave maps</h2>"), std::string::npos);
   EXPECT_NE(html.find("(model <code>woven</code>)"), std::string::npos);
@@ -128,6 +180,17 @@ TEST_F(ReportWeaveMapPage, PageShowsTheMapsAndTheModelWithEscapedStrings) {
   EXPECT_EQ(html.find("<script>x"), std::string::npos);
   EXPECT_NE(html.find("&lt;script&gt;x"), std::string::npos);
   EXPECT_EQ(html.find("missing<b>"), std::string::npos);
+  // View bands: pictures per band, their cosines from the preset; without view_cosines the
+  // page says they are not drawn.
+  ASSERT_TRUE(maps_of("cloth").has_value());
+  EXPECT_EQ(maps_of("cloth")->pictures.size(), 12u);
+  EXPECT_EQ(maps_of("cloth")->view_cosines.size(), 3u);
+  ASSERT_TRUE(maps_of("physical-sheen").has_value());
+  EXPECT_TRUE(maps_of("physical-sheen")->view_cosines.empty());
+  EXPECT_NE(html.find("alt=\"cloth view band 2 warp weight\""), std::string::npos);
+  EXPECT_NE(html.find("view band 1 at NoV = 0.5"), std::string::npos);
+  EXPECT_NE(html.find("alt=\"physical-sheen view band 0 weft weight\""), std::string::npos);
+  EXPECT_NE(html.find("does not draw them"), std::string::npos);
 }
 
 // The report reads a preset's maps as every reader does: "uri" first (relative to the preset

@@ -692,8 +692,9 @@ WeaveMapPictures WeaveMapThumbnails(const io::Image& img, const std::string& fil
   // One picture from 1 (grey) or 3 (colour) channels. Grey (a lobe weight): value / max, so
   // black = 0 and white = the period's maximum. Colour (kd ratio): 0.5 + 0.5 (value - 1) / s,
   // s = max |value - 1| over the period and channels, so mid-grey = the tile mean.
-  auto picture = [&](const std::string& title, const std::vector<int>& chans) {
+  auto picture = [&](const std::string& title, const std::vector<int>& chans, int band) {
     WeaveMapPictures::Picture p;
+    p.band = band;
     p.title = title;
     p.min = std::numeric_limits<double>::infinity();
     p.max = -p.min;
@@ -725,14 +726,27 @@ WeaveMapPictures WeaveMapThumbnails(const io::Image& img, const std::string& fil
     out.pictures.push_back(std::move(p));
   };
   std::vector<std::string> missing;
-  for (const char* name : {"warp", "weft"}) {
-    const int c = channel(name);
-    if (c < 0) missing.push_back(name);
-    else picture(std::string(name) + " weight", {c});
+  // One set of maps: the main ones (prefix "", band -1) or view band k ("view{k}.", band k).
+  auto maps = [&](const std::string& prefix, int band) {
+    for (const char* name : {"warp", "weft"}) {
+      const int c = channel(prefix + name);
+      if (c < 0) missing.push_back(prefix + name);
+      else picture(std::string(name) + " weight", {c}, band);
+    }
+    const int kr = channel(prefix + "kd.R"), kg = channel(prefix + "kd.G"),
+              kb = channel(prefix + "kd.B");
+    if (kr < 0 || kg < 0 || kb < 0) missing.push_back(prefix + "kd.R/G/B");
+    else picture("diffuse (kd) ratio, colour", {kr, kg, kb}, band);
+  };
+  maps("", -1);
+  for (int k = 0; k < 8; ++k) {
+    const std::string prefix = "view" + std::to_string(k) + ".";
+    bool any = false;
+    for (const std::string& c : img.channel_names) any = any || c.rfind(prefix, 0) == 0;
+    if (!any) break;
+    maps(prefix, k);
+    out.view_bands = k + 1;
   }
-  const int kr = channel("kd.R"), kg = channel("kd.G"), kb = channel("kd.B");
-  if (kr < 0 || kg < 0 || kb < 0) missing.push_back("kd.R/G/B");
-  else picture("diffuse (kd) ratio, colour", {kr, kg, kb});
   if (!missing.empty()) {
     out.note = "no channel";
     for (const std::string& c : missing) out.note += " " + c;
@@ -874,6 +888,10 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
         w->colour_space = wm.at("colour_space").get<std::string>();
       if (wm.contains("uv_repeats") && wm.at("uv_repeats").is_number())
         w->uv_repeats = wm.at("uv_repeats").get<double>();
+      if (wm.contains("view_cosines") && wm.at("view_cosines").is_array() &&
+          wm.at("view_cosines").size() <= 8)
+        for (const nlohmann::json& c : wm.at("view_cosines"))
+          if (c.is_number() && std::isfinite(c.get<double>())) w->view_cosines.push_back(c.get<double>());
     }
     rep.weave_maps.push_back(std::move(w));
   }
@@ -1202,17 +1220,40 @@ void FabricPageWeaveMaps(std::ostream& h, const FabricReport& rep) {
     h << "</p>\n";
     if (!w.note.empty()) h << "<p class=\"meta na\">n/a (" << EscapeHtml(w.note) << ")</p>\n";
     if (w.pictures.empty()) continue;
-    h << "<div class=\"grid\" style=\"--cols:" << w.pictures.size() << "\">\n";
-    for (const WeaveMapPictures::Picture& p : w.pictures)
-      h << "<figure><img style=\"image-rendering:pixelated;width:192px\" alt=\""
-        << EscapeHtml(model + " " + p.title) << "\" src=\"data:image/png;base64," << p.png
-        << "\"><figcaption>" << EscapeHtml(p.title) << "<br>range [" << FormatNumber(p.min, 2)
-        << ", " << FormatNumber(p.max, 2) << "] &times; tile mean"
-        << (p.title.find("colour") != std::string::npos
-                ? "<br>mid-grey = 1, s = " + FormatNumber(p.scale, 3)
-                : "<br>white = " + FormatNumber(p.scale, 2))
-        << "</figcaption></figure>\n";
-    h << "</div>\n";
+    // One grid per set: the main maps, then each view band under its own line.
+    const bool drawn = int(w.view_cosines.size()) == w.view_bands;
+    for (int band = -1; band < w.view_bands; ++band) {
+      size_t count = 0;
+      for (const WeaveMapPictures::Picture& p : w.pictures) count += p.band == band;
+      if (count == 0) continue;
+      if (band == 0)
+        h << "<p class=\"meta\"><b>View bands</b> (docs/preview.md \"View-dependent weave "
+             "maps\"): the same maps fitted at one view cosine each. "
+          << (drawn ? "woven's preview blends them per pixel in place of the main maps above, "
+                      "linearly in NoV between the bands' cosines and clamped to the end bands "
+                      "outside them (physical-aniso draws the main maps only)."
+                    : "The preset names no matching weave_maps.view_cosines, so the preview "
+                      "does not draw them.")
+          << "</p>\n";
+      if (band >= 0)
+        h << "<p class=\"meta\">view band " << band
+          << (drawn ? " at NoV = " + FormatNumber(w.view_cosines[size_t(band)], 3) : std::string())
+          << "</p>\n";
+      h << "<div class=\"grid\" style=\"--cols:" << count << "\">\n";
+      for (const WeaveMapPictures::Picture& p : w.pictures) {
+        if (p.band != band) continue;
+        const std::string name = band < 0 ? p.title : "view band " + std::to_string(band) + " " + p.title;
+        h << "<figure><img style=\"image-rendering:pixelated;width:192px\" alt=\""
+          << EscapeHtml(model + " " + name) << "\" src=\"data:image/png;base64," << p.png
+          << "\"><figcaption>" << EscapeHtml(p.title) << "<br>range [" << FormatNumber(p.min, 2)
+          << ", " << FormatNumber(p.max, 2) << "] &times; tile mean"
+          << (p.title.find("colour") != std::string::npos
+                  ? "<br>mid-grey = 1, s = " + FormatNumber(p.scale, 3)
+                  : "<br>white = " + FormatNumber(p.scale, 2))
+          << "</figcaption></figure>\n";
+      }
+      h << "</div>\n";
+    }
   }
 }
 

@@ -113,12 +113,17 @@ struct WeaveMapPictures {
   int size = 0;              // texels per period (the EXR's width)
   double uv_repeats = 0.0;
   struct Picture {
+    int band = -1;      // -1: the main (all-views) maps; k >= 0: view band k (view{k}.*)
     std::string title;  // e.g. "warp weight"
     std::string png;    // base64, 2 x 2 periods
     double min = 0.0, max = 0.0;  // of the channel(s) over one period
     double scale = 0.0;           // display normalisation (see WeaveMapThumbnails)
   };
-  std::vector<Picture> pictures;
+  std::vector<Picture> pictures;  // the main maps' first, then each view band's in order
+  int view_bands = 0;              // view bands found in the file (view0.* .. view{K-1}.*)
+  // The preset's weave_maps.view_cosines (finite numbers only; empty without them): the view
+  // cosine of each band the preview draws. Without it the preview ignores the file's bands.
+  std::vector<double> view_cosines;
 };
 
 // Tiles `periods` x `periods` copies of one period of the maps in `image` (channels warp, weft,
@@ -126,7 +131,10 @@ struct WeaveMapPictures {
 // encoding: a weight (warp, weft) as value / max over the period (Picture::scale = max); the kd
 // ratio as 0.5 + 0.5 (value - 1) / s per channel, s = max |value - 1| over the period and
 // channels (Picture::scale = s; mid-grey = the tile mean). A period larger than 128 texels is
-// subsampled (nearest) to 128. Missing channels give fewer pictures and a note.
+// subsampled (nearest) to 128. Missing channels give fewer pictures and a note. View bands
+// (session 14; channels view{k}.warp, view{k}.weft, view{k}.kd.R/G/B for k = 0, 1, ... up to
+// the first k with none of them, at most 8) get the same three pictures each, normalised on
+// their own, with Picture::band = k.
 WeaveMapPictures WeaveMapThumbnails(const io::Image& image, const std::string& file, int periods = 2);
 
 // SceneResult::noise_floor_source values.
