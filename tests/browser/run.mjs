@@ -190,10 +190,15 @@ Object.assign(MATERIALS, {
 // 0.113, and "view_cosines" in the preset), blended per pixel by NoV on both sides.
 // The same with weave_maps.anisotropy 1: the blend without the anisotropic filter's residual
 // (the swatch's aniso-16 cases carry it: tests/browser/bounds.json).
+// s15: the canvas counterpart (web/test/yarn-lobe-canvas-maps-views.*: the woven-lobe-maps-canvas
+// preset with view_cosines; its EXR is the demo's canvas_woven maps, whose 5 main channels equal
+// yarn-lobe-canvas-maps.weave.exr (oiiotool --diff PASS), with the bands the default fit bakes).
 Object.assign(MATERIALS, {
   'woven-lobe-maps-twill-views': lobePreset('twill-maps-views'),
+  'woven-lobe-maps-canvas-views': lobePreset('canvas-maps-views'),
 });
 MATERIALS['woven-lobe-maps-twill-views-aniso1'] = withAniso('woven-lobe-maps-twill-views', 1);
+MATERIALS['woven-lobe-maps-canvas-views-aniso1'] = withAniso('woven-lobe-maps-canvas-views', 1);
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
 // s10-sun: the sun split is on by default in both renderers ("environment": {"sun": "auto"}
