@@ -1091,6 +1091,19 @@ FitResult FitWithLightMapAlbedo(
   const bool reweighted = own && ReweightLightMaps(own.get(), o2.visibility.fabric_albedo);
   FitResult second = fit(o2, reweighted ? own.get() : nullptr);
   if (!second.usable) return first;
+  // The record keeps both passes' paths (fit.woven_paths): the first pass's under
+  // "first pass: ", the second's under "albedo pass: " (session 15; before, the first pass's
+  // cloth-basin paths vanished from the preset).
+  std::vector<FitResult::Candidate> both;
+  for (FitResult::Candidate c : first.candidates) {
+    c.name = "first pass: " + c.name;
+    both.push_back(std::move(c));
+  }
+  for (FitResult::Candidate c : second.candidates) {
+    c.name = "albedo pass: " + c.name;
+    both.push_back(std::move(c));
+  }
+  second.candidates = std::move(both);
   second.starts += first.starts;
   second.iterations += first.iterations;
   second.setup_seconds += first.setup_seconds;

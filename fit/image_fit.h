@@ -190,7 +190,9 @@ struct FitResult {
   double rmse = 0.0;          // over all blocks of all scenes, fit space, unweighted
   std::string solver_report;  // Ceres BriefReport of the winning start
   // woven (fit/woven_fit.h FitWovenImages): each path's RMSE, iterations and fit seconds (setup
-  // excluded), in the order run: "two-stage", "cloth-basin", "cloth-basin+two-stage".
+  // excluded), in the order run: "two-stage", "cloth-basin", "cloth-basin+two-stage". With a
+  // card's light map (FitWithLightMapAlbedo's two passes) the first pass's paths are prefixed
+  // "first pass: " and the second's "albedo pass: " (session 15).
   struct Candidate {
     std::string name;
     double rmse = 0.0, seconds = 0.0;

@@ -55,6 +55,24 @@ fi
 check -- --light-map-out render-preview --scene "$SCENE" --material "$TMP/std.json" --out "$TMP/x.png"   --light-map-out "$TMP/x.exr"
 check -- --light-map-out render-preview --scene "$TMP/lm.json" --material "$TMP/std.json" --out "$TMP/x.png"   --light-map-out "$TMP/x.exr" --no-card-visibility
 [ ! -e "$TMP/x.exr" ] && [ ! -e "$TMP/x.png" ] || fail "output written despite a --light-map-out error"
+# Session 15: a woven fit on a card with a light map runs two passes (the light map re-baked with
+# the first pass's albedo); fit.woven_paths keeps both passes' paths, the first pass's (with the
+# cloth-basin start) under "first pass: ", the second's under "albedo pass: ".
+"$BIN" --quiet render-reference --scene "$TMP/lm.json" --fabric "$SRC/datasets/fabrics/canvas.json" \
+  --spp 2 --out "$TMP/lmref.exr" > /dev/null 2>&1 || fail "render-reference of the light-map card failed"
+"$BIN" --quiet fit --references "$TMP/lmref.exr" --scenes "$TMP/lm.json" --model woven \
+  --max-iterations 2 --level 2 --out "$TMP/lmfit.json" > "$TMP/lmfit.log" 2>&1
+rc=$?
+[ $rc -eq 0 ] || [ $rc -eq 3 ] || fail "woven fit on the light-map card exited $rc: $(cat "$TMP/lmfit.log")"
+python3 - "$TMP/lmfit.json" <<'PY' || fail "fit.woven_paths does not keep both passes"
+import json, sys
+f = json.load(open(sys.argv[1]))["fit"]
+assert f.get("light_map_albedo_pass") is True, f.get("light_map_albedo_pass")
+names = [p["path"] for p in f["woven_paths"]]
+assert names[0] == "first pass: two-stage" and "first pass: cloth-basin" in names, names
+assert names[-1] == "albedo pass: two-stage", names
+assert all(n.startswith(("first pass: ", "albedo pass: ")) for n in names), names
+PY
 # a bad block is named with the card
 python3 -c "
 import json,sys; c=json.load(open('$TMP/lm.json')); c['visibility']={'light_map':{'size':0}}; json.dump(c,open('$TMP/bad.json','w'))"
