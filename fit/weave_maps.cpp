@@ -134,7 +134,6 @@ double SquaredError(const std::vector<Pair>& pairs, const std::vector<Rgb<double
   return e;
 }
 
-
 // One texel's unknowns: weighted least squares on the cube-root residuals linearised at the
 // target (weight (y + eps)^(-4/3) / 9), a ridge towards 1 relative to the diagonal's scale, and
 // negative unknowns dropped and the rest re-solved. `target[k]` is the reference BSDF times
@@ -272,8 +271,8 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       if (band_pairs.back().size() * size_t(o.mu_nodes) != pairs.size())
         throw std::logic_error("BakeWeaveMaps: view band pairs do not partition the pairs");
     }
-  std::vector<std::vector<std::array<double, kN>>> band_xs(band_pairs.size(),
-                                                           std::vector<std::array<double, kN>>(texels));
+  std::vector<std::vector<std::array<double, kN>>> band_xs(
+      band_pairs.size(), std::vector<std::array<double, kN>>(texels));
 
   tbb::parallel_for(0, S, [&](int j) {
     for (int i = 0; i < S; ++i) {
@@ -300,7 +299,8 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       const std::vector<Pair>& pairs_t = o.relief ? local : pairs;
       std::vector<Rgb<double>>& target = targets[t];
       target.resize(pairs.size());
-      for (size_t k = 0; k < pairs_t.size(); ++k) target[k] = bsdf.Eval(pairs_t[k].v, pairs_t[k].l, sp) * pairs_t[k].l.z;
+      for (size_t k = 0; k < pairs_t.size(); ++k)
+        target[k] = bsdf.Eval(pairs_t[k].v, pairs_t[k].l, sp) * pairs_t[k].l.z;
       xs[t] = FitTexel(pairs_t.data(), target.data(), pairs_t.size(), o.ridge);
       // The view bands from the same targets: band k's pairs are the main pairs [k M, (k + 1) M)
       // with their weights renormalised over the band (BuildPairs, view_band = k).

@@ -730,13 +730,17 @@ WeaveMapPictures WeaveMapThumbnails(const io::Image& img, const std::string& fil
   auto maps = [&](const std::string& prefix, int band) {
     for (const char* name : {"warp", "weft"}) {
       const int c = channel(prefix + name);
-      if (c < 0) missing.push_back(prefix + name);
-      else picture(std::string(name) + " weight", {c}, band);
+      if (c < 0)
+        missing.push_back(prefix + name);
+      else
+        picture(std::string(name) + " weight", {c}, band);
     }
     const int kr = channel(prefix + "kd.R"), kg = channel(prefix + "kd.G"),
               kb = channel(prefix + "kd.B");
-    if (kr < 0 || kg < 0 || kb < 0) missing.push_back(prefix + "kd.R/G/B");
-    else picture("diffuse (kd) ratio, colour", {kr, kg, kb}, band);
+    if (kr < 0 || kg < 0 || kb < 0)
+      missing.push_back(prefix + "kd.R/G/B");
+    else
+      picture("diffuse (kd) ratio, colour", {kr, kg, kb}, band);
   };
   maps("", -1);
   for (int k = 0; k < 8; ++k) {
@@ -891,7 +895,8 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
       if (wm.contains("view_cosines") && wm.at("view_cosines").is_array() &&
           wm.at("view_cosines").size() <= 8)
         for (const nlohmann::json& c : wm.at("view_cosines"))
-          if (c.is_number() && std::isfinite(c.get<double>())) w->view_cosines.push_back(c.get<double>());
+          if (c.is_number() && std::isfinite(c.get<double>()))
+            w->view_cosines.push_back(c.get<double>());
     }
     rep.weave_maps.push_back(std::move(w));
   }
@@ -1242,7 +1247,8 @@ void FabricPageWeaveMaps(std::ostream& h, const FabricReport& rep) {
       h << "<div class=\"grid\" style=\"--cols:" << count << "\">\n";
       for (const WeaveMapPictures::Picture& p : w.pictures) {
         if (p.band != band) continue;
-        const std::string name = band < 0 ? p.title : "view band " + std::to_string(band) + " " + p.title;
+        const std::string name =
+            band < 0 ? p.title : "view band " + std::to_string(band) + " " + p.title;
         h << "<figure><img style=\"image-rendering:pixelated;width:192px\" alt=\""
           << EscapeHtml(model + " " + name) << "\" src=\"data:image/png;base64," << p.png
           << "\"><figcaption>" << EscapeHtml(p.title) << "<br>range [" << FormatNumber(p.min, 2)
