@@ -150,11 +150,11 @@ TEST_F(ReportWeaveMapPage, PageShowsTheMapsAndTheModelWithEscapedStrings) {
   };
   const std::vector<std::string> presets = {
       preset("standard", nullptr),
-      preset("woven", {{"file", "m.weave.exr"}, {"colour_space", "<script>x</script>"},
-                       {"uv_repeats", 60.0}}),
+      preset("woven", {{"file", "v.weave.exr"}, {"colour_space", "<script>x</script>"},
+                       {"uv_repeats", 60.0}, {"view_cosines", {0.887, 0.5, 0.113}}}),
       preset("physical-aniso", {{"file", "missing<b>.exr"}}),
       preset("cloth", {{"file", "v.weave.exr"}, {"view_cosines", {0.887, 0.5, 0.113}}}),
-      preset("physical-sheen", {{"file", "v.weave.exr"}})};
+      preset("physical-sheen", {{"file", "m.weave.exr"}, {"view_cosines", {0.887, 0.5, 0.113}}})};
   const auto fabrics = FabricsFromPresets(presets);
   const FabricReport rep = BuildFabricReport(fabrics.at(0));
   ASSERT_EQ(rep.weave_maps.size(), 5u);
@@ -167,7 +167,7 @@ TEST_F(ReportWeaveMapPage, PageShowsTheMapsAndTheModelWithEscapedStrings) {
   };
   EXPECT_FALSE(maps_of("standard").has_value());  // standard: no maps, no section entry
   ASSERT_TRUE(maps_of("woven").has_value());
-  EXPECT_EQ(maps_of("woven")->pictures.size(), 3u);
+  EXPECT_EQ(maps_of("woven")->pictures.size(), 12u);
   ASSERT_TRUE(maps_of("physical-aniso").has_value());
   EXPECT_TRUE(maps_of("physical-aniso")->pictures.empty());
   EXPECT_NE(maps_of("physical-aniso")->note.find("missing<b>.exr"), std::string::npos);
@@ -180,17 +180,35 @@ TEST_F(ReportWeaveMapPage, PageShowsTheMapsAndTheModelWithEscapedStrings) {
   EXPECT_EQ(html.find("<script>x"), std::string::npos);
   EXPECT_NE(html.find("&lt;script&gt;x"), std::string::npos);
   EXPECT_EQ(html.find("missing<b>"), std::string::npos);
-  // View bands: pictures per band, their cosines from the preset; without view_cosines the
-  // page says they are not drawn.
+  // View bands: pictures per band; woven's cosines from its preset. Another model's bands are
+  // shown as not drawn even when its preset names cosines (only woven draws them); a file
+  // without bands shows none.
+  EXPECT_EQ(maps_of("woven")->view_cosines.size(), 3u);
+  EXPECT_NE(html.find("alt=\"woven view band 2 warp weight\""), std::string::npos);
+  EXPECT_NE(html.find("view band 1 at NoV = 0.5"), std::string::npos);
   ASSERT_TRUE(maps_of("cloth").has_value());
   EXPECT_EQ(maps_of("cloth")->pictures.size(), 12u);
-  EXPECT_EQ(maps_of("cloth")->view_cosines.size(), 3u);
+  EXPECT_TRUE(maps_of("cloth")->view_cosines.empty());
+  EXPECT_NE(html.find("alt=\"cloth view band 0 weft weight\""), std::string::npos);
+  EXPECT_NE(html.find("Only woven draws view bands"), std::string::npos);
+  size_t at_nov = 0;
+  for (size_t pos = html.find(" at NoV = "); pos != std::string::npos;
+       pos = html.find(" at NoV = ", pos + 1))
+    ++at_nov;
+  EXPECT_EQ(at_nov, 3u);  // woven's three bands only
   ASSERT_TRUE(maps_of("physical-sheen").has_value());
-  EXPECT_TRUE(maps_of("physical-sheen")->view_cosines.empty());
-  EXPECT_NE(html.find("alt=\"cloth view band 2 warp weight\""), std::string::npos);
-  EXPECT_NE(html.find("view band 1 at NoV = 0.5"), std::string::npos);
-  EXPECT_NE(html.find("alt=\"physical-sheen view band 0 weft weight\""), std::string::npos);
-  EXPECT_NE(html.find("does not draw them"), std::string::npos);
+  EXPECT_EQ(maps_of("physical-sheen")->pictures.size(), 3u);
+  EXPECT_EQ(maps_of("physical-sheen")->view_bands, 0);
+  // Out-of-range cosines (2 is not a view cosine; the preview's loader refuses them) are not
+  // claimed as drawn: the bands show, unlabelled, as not drawn.
+  const std::string bad = preset("woven", {{"file", "v.weave.exr"}, {"view_cosines", {2.0, 0.5, 0.113}}});
+  const FabricReport one = BuildFabricReport(FabricsFromPresets({bad}).at(0));
+  ASSERT_TRUE(one.weave_maps.at(0).has_value());
+  EXPECT_EQ(one.weave_maps[0]->view_bands, 3);
+  EXPECT_TRUE(one.weave_maps[0]->view_cosines.empty());
+  const std::string bad_html = FabricHtml(one);
+  EXPECT_NE(bad_html.find("names no matching weave_maps.view_cosines"), std::string::npos);
+  EXPECT_EQ(bad_html.find(" at NoV = "), std::string::npos);
 }
 
 // The report reads a preset's maps as every reader does: "uri" first (relative to the preset

@@ -892,11 +892,16 @@ FabricReport BuildFabricReport(const FabricSpec& spec, const ReportOptions& opti
         w->colour_space = wm.at("colour_space").get<std::string>();
       if (wm.contains("uv_repeats") && wm.at("uv_repeats").is_number())
         w->uv_repeats = wm.at("uv_repeats").get<double>();
-      if (wm.contains("view_cosines") && wm.at("view_cosines").is_array() &&
-          wm.at("view_cosines").size() <= 8)
+      // The bands are drawn by woven only, and only when the preset names their cosines
+      // (render/preview/weave_maps.h LoadPresetWeaveMaps, which also checks them against the
+      // file; the report does not link the preview). Kept only when all are in (0, 1].
+      if (m.model == "woven" && wm.contains("view_cosines") && wm.at("view_cosines").is_array() &&
+          wm.at("view_cosines").size() <= 8) {
         for (const nlohmann::json& c : wm.at("view_cosines"))
-          if (c.is_number() && std::isfinite(c.get<double>()))
+          if (c.is_number() && c.get<double>() > 0.0 && c.get<double>() <= 1.0)
             w->view_cosines.push_back(c.get<double>());
+        if (w->view_cosines.size() != wm.at("view_cosines").size()) w->view_cosines.clear();
+      }
     }
     rep.weave_maps.push_back(std::move(w));
   }
@@ -1237,8 +1242,10 @@ void FabricPageWeaveMaps(std::ostream& h, const FabricReport& rep) {
           << (drawn ? "woven's preview blends them per pixel in place of the main maps above, "
                       "linearly in NoV between the bands' cosines and clamped to the end bands "
                       "outside them (physical-aniso draws the main maps only)."
-                    : "The preset names no matching weave_maps.view_cosines, so the preview "
-                      "does not draw them.")
+                    : model != "woven"
+                          ? "Only woven draws view bands, so the preview does not draw them."
+                          : "The preset names no matching weave_maps.view_cosines, so the "
+                            "preview does not draw them.")
           << "</p>\n";
       if (band >= 0)
         h << "<p class=\"meta\">view band " << band

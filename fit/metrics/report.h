@@ -121,8 +121,9 @@ struct WeaveMapPictures {
   };
   std::vector<Picture> pictures;  // the main maps' first, then each view band's in order
   int view_bands = 0;              // view bands found in the file (view0.* .. view{K-1}.*)
-  // The preset's weave_maps.view_cosines (finite numbers only; empty without them): the view
-  // cosine of each band the preview draws. Without it the preview ignores the file's bands.
+  // A woven preset's weave_maps.view_cosines (empty for other models, without the field, or
+  // when any entry is not a number in (0, 1]): the view cosine of each band the preview draws.
+  // Without it the preview ignores the file's bands.
   std::vector<double> view_cosines;
 };
 
