@@ -398,7 +398,7 @@ void FillBentYarnTables(const PixelContext& x, const PrimaryHit& hit, PixelData*
 // B of the anisotropy frame comes from the weave-map direction rotated by
 // PreviewOptions::anisotropy_rotation (render-preview: the preset's; the fit locks the rotation
 // and leaves it at 0).
-constexpr int kAnisoBentNodes = 5;
+constexpr int kAnisoBentNodes = 17;
 // Which way the anisotropy direction (where three.js raises the roughness to alpha_t) points
 // relative to the dominant yarn: false = along it (warp -> t, weft -> b, the mapping),
 // true = across it (warp -> b, weft -> t: a cylinder's normals spread across its axis).
@@ -578,6 +578,14 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
         hit.b = Cross(hit.n, hit.t) * a.tangent_sign;
       }
     }
+    // physical-aniso is three.js's own MeshPhysicalMaterial, whose anisotropy frame on a back face
+    // of a DoubleSide mesh is tbn[0] *= faceDirection, tbn[1] *= faceDirection
+    // (normal_fragment_begin). Here n is already flipped and b = (-n) x t = -b as three.js's,
+    // but t is not: flip it too, or a rotated anisotropy direction (b cos - t sin) is mirrored on
+    // back faces. woven keeps its own frame (web/clothfit.js vWovenTangent: t is not flipped).
+    if (UsesThreejsIbl(x.opt) && back_face && x.opt.model == ModelKind::kPhysicalAniso &&
+        hit.mesh->is_fabric)
+      hit.t = hit.t * -1.0;
     std::vector<float> lt;
     // Sheen tilt (sheen_tilt.h): the tilted cosines come from the tangent cosines, so a cloth
     // fabric pixel gathers them too.
