@@ -921,10 +921,11 @@ float wovenCharlie( const in float alpha, const in float NoH ) {
 }
 
 // The far-field yarn lobe (WOVEN_YARN_LOBE, a preset's "woven": {"yarn_lobe": {...}}; the CPU
-// side and the constants' layout: yarnLobePack). wovenYarnLobe(wo, wi) = (T_warp, T_weft) at local
-// unit directions (x = t, y = b, z = n), fit/yarn_farfield.cpp EvalQuadrature term by term, in
-// float; wovenYarnLobeIbl reads the lobes' IBL summary (brdf/yarn_table.h Table::Ibl) and the
-// PMREM once per lobe.
+// side: yarnLobePack). wovenYarnLobe(wo, wi) = (T_warp, T_weft) at local unit directions (x = t,
+// y = b, z = n), fit/yarn_farfield.cpp EvalQuadrature's terms in float, is generated per lobe
+// (yarnLobeGlsl: its constants as literals, one helper call per node) and replaces the marker
+// line below; wovenYarnLobeIbl reads the lobes' IBL summary (brdf/yarn_table.h Table::Ibl) and
+// the PMREM once per lobe.
 #if defined( WOVEN_YARN_LOBE )
 uniform sampler2D wovenYlIbl;
 
