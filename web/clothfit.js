@@ -423,7 +423,8 @@ export function wovenLobes(p) {
 // environment one PMREM read per lobe at the lobe's tabulated IBL summary (brdf/yarn_table.h
 // Table::Ibl). Local frame: x = t (+u, warp), y = b (+v, weft), z = n.
 // yarnLobeOptions checks the block (errors name the field), yarnLobeEval is a double-precision
-// port of the lobe for node-side tests, yarnLobePack makes the shader's uniforms and textures.
+// port of the lobe for node-side tests, yarnLobePack makes the shader's source (yarnLobeGlsl) and
+// the IBL texture.
 
 export const YARN_LOBE_MAX_GROUPS = 16, YARN_LOBE_MAX_NODES = 64;
 const YL_DEG = Math.PI / 180;
@@ -648,55 +649,130 @@ export function yarnLobeIbl(lobe, woIn) {
   });
 }
 
-// The shader's per-group constants (vec4 x 4 per group), per-node constants (an RGBA32F texture,
-// nodes x groups: staple (sin u_j, cos u_j, SpineRadius(|u_j|), 0), filament (sin v_j, cos v_j,
-// 0, 0)) and the IBL summary (an RGBA32F texture, 2 n_phi x 2 n_theta: texel (2 p, k n_theta + t)
-// = entries 0..3 of (lobe k, theta bin t, phi bin p), texel (2 p + 1, ...) = (entry 4, 0, 0, 0)),
-// all read with texelFetch (no filtering, no float-linear extension). Group vec4s:
-//   g0 = (weft ? 1 : 0, staple ? 1 : 0, umax (rad), weight): weight = share area_factor scale /
-//        nodes x (staple: 2 w umax / delta, filament: pi l / delta), the term's constant factor;
-//   g1 = staple (tan psi, |sin psi|, w, delta = w h_width); filament (umax_s, l, delta = l
-//        h_width, ss), umax_s = (1 - ss) umax when ss > 0 (FilamentRadius);
-//   g2 = (band extent e (staple: across, filament: along), a = w / 2, (extent - delta) / 2, 0);
-//   g3 = the filament's SpineRadius at umax_s as a function of tan u: (branch, p0, p1, rhat):
-//        0 circle R = p0; 1 ellipse (b, c); 2 parabola p0 = hx / tan umax_s; 3 hyperbola (b, c).
-export function yarnLobePack(lobe) {
-  const G = lobe.groups.length, N = lobe.nodes;
-  const g0 = [], g1 = [], g2 = [], g3 = [];
-  const nodes = new Float32Array(N * G * 4);
-  lobe.groups.forEach((g, k) => {
-    const staple = g.psi !== 0, umax = g.umax * YL_DEG, w = g.width, l = g.length;
-    const delta = (staple ? w : l) * lobe.h_width;
-    const gain = staple ? 2 * w * umax / delta : Math.PI * l / delta;
-    g0.push(new THREE.Vector4(g.type === 'weft' ? 1 : 0, staple ? 1 : 0, umax, g.share * g.area_factor * lobe.scale / N * gain));
-    const psi = g.psi * YL_DEG;
-    const umaxS = lobe.ss > 0 ? (1 - lobe.ss) * umax : umax;
-    g1.push(staple ? new THREE.Vector4(Math.tan(psi), Math.abs(Math.sin(psi)), w, delta) : new THREE.Vector4(umaxS, l, delta, lobe.ss));
-    g2.push(new THREE.Vector4(staple ? g.across : g.along, 0.5 * w, 0.5 * ((staple ? w : l) - delta), 0));
-    // SpineRadius(., umax_s, kappa, w, l)'s branch and constants (yarnSpineRadius, same guards)
-    const hx = 0.5 * l - 0.5 * w * Math.sin(umaxS);
-    const rhat = g.kappa === 0 ? 1 : 1 + g.kappa * (1 + 1 / Math.tan(umaxS));
-    if (Math.abs(rhat - 1) < 1e-12) g3.push(new THREE.Vector4(0, hx / Math.sin(umaxS), 0, rhat));
-    else if (rhat > 1e-9) {
-      const b = hx / Math.sin(Math.atan(rhat * Math.tan(umaxS)));
-      g3.push(new THREE.Vector4(1, b, b / rhat, rhat));
-    } else if (rhat > -1e-9) g3.push(new THREE.Vector4(2, hx / Math.tan(umaxS), 0, rhat));
-    else {
-      const b = hx / Math.sinh(Math.atanh(Math.min(-rhat * Math.tan(umaxS), 1 - 1e-9)));
-      g3.push(new THREE.Vector4(3, b, b / -rhat, rhat));
-    }
-    for (let j = 0; j < N; ++j) {
-      const s = -1 + (2 * j + 1) / N, o = (k * N + j) * 4;
+// A float constant for generated GLSL: the double rounded to float once (Math.fround), printed
+// as the shortest decimal that reads back as that float (so the shader's constant is exactly
+// the float a Float32Array would have held), with a '.0' when it would read as an int.
+const ylFloat = (x) => { const s = String(Math.fround(x)); return /[.e]/.test(s) ? s : `${s}.0`; };
+
+// A 64-bit FNV-1a-style digest of a string (two 32-bit lanes, hex): the program key of a
+// generated lobe, so a preset with other constants compiles its own program.
+function ylDigest(s) {
+  let a = 0x811c9dc5, b = 0x9e3779b9;
+  for (let k = 0; k < s.length; ++k) {
+    const c = s.charCodeAt(k);
+    a = Math.imul(a ^ c, 0x01000193);
+    b = Math.imul(b ^ c, 0x5bd1e995);
+    b ^= b >>> 13;
+  }
+  return (a >>> 0).toString(16).padStart(8, '0') + (b >>> 0).toString(16).padStart(8, '0');
+}
+
+// wovenYarnLobe(wo, wi) of one lobe as GLSL, every per-lobe number a compile-time constant
+// (session 16: the per-light quadrature was 7-10x cloth's frame cost in SwiftShader). The same
+// value as yarnLobeEval (the terms of fit/yarn_farfield.cpp EvalQuadrature) in float, with the
+// algebra rearranged where it is the same in exact arithmetic:
+//   - per yarn type (all warp groups share the yarn frame) H = wi_s + wo_s, NOT normalised:
+//     every staple term is homogeneous in H (with h = H / |H|, |H| = len): bt = |H| (h.y su +
+//     h.z cu), r2 = |H|^2 r^2, p = |H| r D, q = sqrt(r2 - p^2) = |H| r sqrt(1 - D^2) = len NoH
+//     (NoH = n . h = r sqrt(1 - D^2) identically), cos v_h = (H.x p + bt q) / r2, sin v_h =
+//     (H.x q - bt p) / r2; so G = a (R + a cos v_h) / (q |sin psi|), no atan, one sqrt;
+//   - |v_h| < pi / 2 is cos v_h > 0, |D| < 1 and NoH > 0 are r2 - p^2 > 0 (and r > 0);
+//   - the band mean: |x_h| <= (w - delta) / 2, so when the extent e >= w / 2 the band
+//     [x_h - delta/2, x_h + delta/2] lies inside [-e, e] and its mean is delta / (2 e) for every
+//     x_h: a constant, and v_h (its atan) is not needed (every fitted canvas / twill group:
+//     across = w / 2); otherwise v_h = atan(sin, cos) and the band as before;
+//   - the node-independent factors (the weight, a / |sin psi|, 1 / 4pi, the phase fc, a
+//     constant band; the filament's 1 / (len |t . h|), smoothing and band) multiply the sum of
+//     the nodes once per group; each node is a helper call with its sin, cos and SpineRadius
+//     as literals (inlined and folded by the compiler: no texture, no loop).
+// Conditions select (no early continue), so the quad's lanes stay converged.
+export function yarnLobeGlsl(lobe) {
+  const F = ylFloat, N = lobe.nodes, inv4pi = 1 / (4 * Math.PI);
+  const vmNorm = 1 / (2 * Math.PI * besselI0(Math.abs(lobe.beta)));
+  const L = [
+    `// generated by yarnLobeGlsl: ${lobe.groups.length} groups x ${N} nodes`,
+    'vec2 wovenYarnLobe( const in vec3 wo, const in vec3 wi ) {',
+    '\tvec2 T = vec2( 0.0 );',
+    '\tif ( !( wo.z > 0.0 ) || !( wi.z > 0.0 ) ) return T;',
+    `\tfloat fc = ${F(lobe.alpha)} + exp( ${F(lobe.beta)} * -dot( wi, wo ) ) * ${F(vmNorm)};`,
+  ];
+  for (const weft of [false, true]) {
+    const groups = lobe.groups.map((g, k) => ({ g, k })).filter(({ g }) => (g.type === 'weft') === weft);
+    if (!groups.length) continue;
+    L.push(`\t{  // ${weft ? 'weft' : 'warp'}: the yarn frame ${weft ? '(-x, -y, z)' : '(-y, x, z)'}`,
+      weft ? '\t\tvec3 o = vec3( -wo.x, -wo.y, wo.z ), i = vec3( -wi.x, -wi.y, wi.z );'
+        : '\t\tvec3 o = vec3( -wo.y, wo.x, wo.z ), i = vec3( -wi.y, wi.x, wi.z );',
+      '\t\tvec3 H = i + o;  // |H| h',
+      '\t\tfloat t = 0.0;',
+      '\t\tif ( dot( H, H ) > 1e-24 ) {');
+    for (const { g, k } of groups) {
+      const staple = g.psi !== 0, umax = g.umax * YL_DEG, w = g.width, l = g.length, a = 0.5 * w;
+      const delta = (staple ? w : l) * lobe.h_width, e = staple ? g.across : g.along;
+      const gain = staple ? 2 * w * umax / delta : Math.PI * l / delta;
+      const weight = g.share * g.area_factor * lobe.scale / N * gain * inv4pi * a;  // x the sum
+      const xmax = 0.5 * ((staple ? w : l) - delta);
+      const band = (c) => `wovenYlBand( ${c}, ${F(delta)}, ${F(e)} )`;
+      L.push(`\t\t\t{  // group ${k}: ${staple ? 'staple' : 'filament'}, psi ${g.psi}, umax ${g.umax}, w ${w}, l ${l}`);
       if (staple) {
-        const u = Math.min(Math.max(s * g.along / (0.5 * l) * umax, -umax), umax);
-        nodes[o] = Math.sin(u); nodes[o + 1] = Math.cos(u);
-        nodes[o + 2] = yarnSpineRadius(Math.abs(u), umax, g.kappa, w, l);
+        const psi = g.psi * YL_DEG, constBand = 0.5 * w <= e;
+        const args = (j) => {
+          const u = Math.min(Math.max((-1 + (2 * j + 1) / N) * g.along / (0.5 * l) * umax, -umax), umax);
+          const R = yarnSpineRadius(Math.abs(u), umax, g.kappa, w, l);
+          return `H, i, o, ${F(Math.sin(u))}, ${F(Math.cos(u))}, ${F(R)}, ${F(a)}, ${F(1 / Math.tan(psi))}`
+            + (constBand ? '' : `, ${F(w / Math.PI)}, ${F(xmax)}, ${F(delta)}, ${F(e)}`);
+        };
+        L.push('\t\t\t\tfloat s = 0.0;');
+        for (let j = 0; j < N; ++j) L.push(`\t\t\t\ts += ${constBand ? 'wovenYlStaple' : 'wovenYlStapleBand'}( ${args(j)} );`);
+        const K = weight / Math.abs(Math.sin(psi)) * (constBand ? delta / (2 * e) : 1);
+        L.push(`\t\t\t\tt += ${F(K)} * s;`);
       } else {
-        const v = Math.min(Math.max(s * g.across * Math.PI / w, -0.5 * Math.PI), 0.5 * Math.PI);
-        nodes[o] = Math.sin(v); nodes[o + 1] = Math.cos(v);
+        const umaxS = lobe.ss > 0 ? (1 - lobe.ss) * umax : umax;
+        const pk = yarnLobeRadiusConic(g.kappa, umaxS, w, l);
+        L.push('\t\t\t\tfloat qy = H.y / H.z, uh = atan( qy );',
+          `\t\t\t\tif ( abs( uh ) < ${F(umax)} ) {`,
+          '\t\t\t\t\tfloat cuh = inversesqrt( 1.0 + qy * qy ), suh = qy * cuh;',
+          `\t\t\t\t\tfloat R = wovenYlRadius( vec4( ${pk.map(F).join(', ')} ), ${F(umaxS)}, abs( uh ) );`,
+          '\t\t\t\t\tfloat bi = suh * i.y + cuh * i.z, bo = suh * o.y + cuh * o.z, s = 0.0;');
+        for (let j = 0; j < N; ++j) {
+          const v = Math.min(Math.max((-1 + (2 * j + 1) / N) * g.across * Math.PI / w, -0.5 * Math.PI), 0.5 * Math.PI);
+          L.push(`\t\t\t\t\ts += wovenYlFilament( i.x, bi, o.x, bo, ${F(Math.sin(v))}, ${F(Math.cos(v))}, R, ${F(a)} );`);
+        }
+        const smooth = lobe.ss > 0
+          ? ` * ( 1.0 - smoothstep( 0.0, 1.0, ( abs( uh ) - ${F((1 - lobe.ss) * umax)} ) * ${F(1 / (lobe.ss * umax))} ) )` : '';
+        // len |t . h| = |cuh H.z + suh H.y|
+        L.push(`\t\t\t\t\tt += ${F(weight)} * s${smooth} * ${band(`clamp( uh * ${F(0.5 * l / umax)}, ${F(-xmax)}, ${F(xmax)} )`)} / abs( cuh * H.z + suh * H.y );`,
+          '\t\t\t\t}');
       }
+      L.push('\t\t\t}');
     }
-  });
+    L.push('\t\t}', `\t\tT.${weft ? 'y' : 'x'} = fc * t;`, '\t}');
+  }
+  L.push('\treturn T;', '}', '');
+  return L.join('\n');
+}
+
+// The filament's SpineRadius(., umax_s, kappa, w, l) as (branch, p0, p1, rhat) for
+// wovenYlRadius (yarnSpineRadius, same guards): 0 circle R = p0; 1 ellipse (b, c); 2 parabola
+// p0 = hx / tan umax_s; 3 hyperbola (b, c).
+function yarnLobeRadiusConic(kappa, umaxS, w, l) {
+  const hx = 0.5 * l - 0.5 * w * Math.sin(umaxS);
+  const rhat = kappa === 0 ? 1 : 1 + kappa * (1 + 1 / Math.tan(umaxS));
+  if (Math.abs(rhat - 1) < 1e-12) return [0, hx / Math.sin(umaxS), 0, rhat];
+  if (rhat > 1e-9) {
+    const b = hx / Math.sin(Math.atan(rhat * Math.tan(umaxS)));
+    return [1, b, b / rhat, rhat];
+  }
+  if (rhat > -1e-9) return [2, hx / Math.tan(umaxS), 0, rhat];
+  const b = hx / Math.sinh(Math.atanh(Math.min(-rhat * Math.tan(umaxS), 1 - 1e-9)));
+  return [3, b, b / -rhat, rhat];
+}
+
+// The shader side of a lobe: wovenYarnLobe's source (yarnLobeGlsl) and its digest for the
+// program key, and the IBL summary as an RGBA32F texture, 2 n_phi x 2 n_theta: texel (2 p,
+// k n_theta + t) = entries 0..3 of (lobe k, theta bin t, phi bin p), texel (2 p + 1, ...) =
+// (entry 4, 0, 0, 0), read with texelFetch (no filtering, no float-linear extension).
+export function yarnLobePack(lobe) {
+  const glsl = yarnLobeGlsl(lobe);
   const { n_theta: nt, n_phi: np, summary } = lobe.ibl;
   const ibl = new Float32Array(2 * np * 2 * nt * 4);
   for (let k = 0; k < 2; ++k) {
@@ -708,22 +784,15 @@ export function yarnLobePack(lobe) {
       }
     }
   }
-  const tex = (data, w, h) => {
-    const t = new THREE.DataTexture(data, w, h, THREE.RGBAFormat, THREE.FloatType);
-    t.minFilter = THREE.NearestFilter; t.magFilter = THREE.NearestFilter;
-    t.generateMipmaps = false; t.flipY = false; t.colorSpace = THREE.NoColorSpace;
-    t.needsUpdate = true;
-    return t;
-  };
+  const t = new THREE.DataTexture(ibl, 2 * np, 2 * nt, THREE.RGBAFormat, THREE.FloatType);
+  t.minFilter = THREE.NearestFilter; t.magFilter = THREE.NearestFilter;
+  t.generateMipmaps = false; t.flipY = false; t.colorSpace = THREE.NoColorSpace;
+  t.needsUpdate = true;
   return {
-    groups: G, nodes: N, nTheta: nt, nPhi: np,
-    uniforms: {
-      wovenYlG0: g0, wovenYlG1: g1, wovenYlG2: g2, wovenYlG3: g3,
-      wovenYlPhase: new THREE.Vector3(lobe.alpha, lobe.beta, 1 / (2 * Math.PI * besselI0(Math.abs(lobe.beta)))),
-    },
-    nodesTexture: tex(nodes, N, G),
-    iblTexture: tex(ibl, 2 * np, 2 * nt),
-    dispose() { this.nodesTexture.dispose(); this.iblTexture.dispose(); },
+    groups: lobe.groups.length, nodes: lobe.nodes, nTheta: nt, nPhi: np,
+    glsl, digest: ylDigest(glsl),
+    iblTexture: t,
+    dispose() { this.iblTexture.dispose(); },
   };
 }
 
@@ -852,30 +921,19 @@ float wovenCharlie( const in float alpha, const in float NoH ) {
 }
 
 // The far-field yarn lobe (WOVEN_YARN_LOBE, a preset's "woven": {"yarn_lobe": {...}}; the CPU
-// side and the constants' layout: yarnLobePack). wovenYarnLobe(wo, wi) = (T_warp, T_weft) at local
-// unit directions (x = t, y = b, z = n), fit/yarn_farfield.cpp EvalQuadrature term by term, in
-// float; wovenYarnLobeIbl reads the lobes' IBL summary (brdf/yarn_table.h Table::Ibl) and the
-// PMREM once per lobe.
+// side: yarnLobePack). wovenYarnLobe(wo, wi) = (T_warp, T_weft) at local unit directions (x = t,
+// y = b, z = n), fit/yarn_farfield.cpp EvalQuadrature's terms in float, is generated per lobe
+// (yarnLobeGlsl: its constants as literals, one helper call per node) and replaces the marker
+// line below; wovenYarnLobeIbl reads the lobes' IBL summary (brdf/yarn_table.h Table::Ibl) and
+// the PMREM once per lobe.
 #if defined( WOVEN_YARN_LOBE )
-uniform vec4 wovenYlG0[ WOVEN_YL_GROUPS ];
-uniform vec4 wovenYlG1[ WOVEN_YL_GROUPS ];
-uniform vec4 wovenYlG2[ WOVEN_YL_GROUPS ];
-uniform vec4 wovenYlG3[ WOVEN_YL_GROUPS ];
-uniform vec3 wovenYlPhase;  // alpha, beta, 1 / (2 pi I0(|beta|))
-uniform sampler2D wovenYlNodes;
 uniform sampler2D wovenYlIbl;
 
-// Seeliger's law, (1/4pi) c1 c2 / (c1 + c2), 0 unless both cosines are > 0.
-float wovenYlSeeliger( float c1, float c2 ) {
-	c1 = max( c1, 0.0 );
-	c2 = max( c2, 0.0 );
-	return ( c1 <= 0.0 || c2 <= 0.0 ) ? 0.0 : ( 0.25 * RECIPROCAL_PI ) * c1 * c2 / ( c1 + c2 );
-}
 // The highlight band's mean over its coordinate uniform in [-e, e].
 float wovenYlBand( const in float c, const in float delta, const in float e ) {
 	return max( min( c + 0.5 * delta, e ) - max( c - 0.5 * delta, -e ), 0.0 ) / ( 2.0 * e );
 }
-// FilamentRadius(|u|): SpineRadius at umax_s (g1.x) by branch k.x with tau = rhat tan u
+// FilamentRadius(|u|): SpineRadius at umax_s by branch k.x with tau = rhat tan u
 // (ellipse: cos^2 t = 1 / (1 + tau^2); hyperbola: cosh^2 s = 1 / (1 - tau^2), tau <= 1 - 1e-9 as
 // the C++ clamp, its 1 - tau^2 floored at 2e-9 since float rounds 1 - 1e-9 to 1).
 float wovenYlRadius( const in vec4 k, const in float umaxS, const in float uAbs ) {
@@ -894,64 +952,45 @@ float wovenYlRadius( const in vec4 k, const in float umaxS, const in float uAbs 
 	}
 	return q * sqrt( q ) / ( k.y * k.z );
 }
-vec2 wovenYarnLobe( const in vec3 wo, const in vec3 wi ) {
-	vec2 T = vec2( 0.0 );
-	if ( !( wo.z > 0.0 ) || !( wi.z > 0.0 ) ) return T;
-	// the phase function (uniform + von Mises about the forward direction); dot is frame-free
-	float fc = wovenYlPhase.x + exp( wovenYlPhase.y * -dot( wi, wo ) ) * wovenYlPhase.z;
-	for ( int g = 0; g < WOVEN_YL_GROUPS; ++g ) {
-		vec4 g0 = wovenYlG0[ g ], g1 = wovenYlG1[ g ], g2 = wovenYlG2[ g ];
-		bool weft = g0.x > 0.5;
-		vec3 o = weft ? vec3( -wo.x, -wo.y, wo.z ) : vec3( -wo.y, wo.x, wo.z );
-		vec3 i = weft ? vec3( -wi.x, -wi.y, wi.z ) : vec3( -wi.y, wi.x, wi.z );
-		vec3 sum = i + o;
-		float len = length( sum );
-		if ( !( len > 1e-12 ) ) continue;
-		vec3 h = sum / len;
-		float umax = g0.z, a = g2.y, s = 0.0;
-		if ( g0.y > 0.5 ) {  // staple: u_j along the cells, the band across them
-			for ( int j = 0; j < WOVEN_YL_NODES; ++j ) {
-				vec4 nd = texelFetch( wovenYlNodes, ivec2( j, g ), 0 );
-				float su = nd.x, cu = nd.y;
-				float bterm = h.y * su + h.z * cu;
-				float r = sqrt( h.x * h.x + bterm * bterm );
-				if ( !( r > 0.0 ) ) continue;
-				float D = ( h.y * cu - h.z * su ) / ( r * g1.x );
-				if ( !( abs( D ) < 1.0 ) ) continue;
-				float ca = h.x / r, sa = -bterm / r, sb = sqrt( 1.0 - D * D );
-				float cosVh = ca * D - sa * sb, sinVh = sa * D + ca * sb;
-				float vh = atan( sinVh, cosVh );
-				if ( !( abs( vh ) < 0.5 * PI ) ) continue;
-				float xh = clamp( vh * g1.z * RECIPROCAL_PI, -g2.z, g2.z );
-				vec3 n = vec3( sinVh, su * cosVh, cu * cosVh );
-				float NoH = dot( n, h );
-				if ( !( NoH > 0.0 ) ) continue;
-				float G = a * ( nd.z + a * cosVh ) / ( len * NoH * g1.y );
-				s += G * fc * wovenYlSeeliger( dot( n, i ), dot( n, o ) ) * wovenYlBand( xh, g1.w, g2.x );
-			}
-		} else {  // filament: v_j across the cells, the band along them
-			float q = h.y / h.z;
-			float uh = atan( q );
-			if ( !( abs( uh ) < umax ) ) continue;
-			float yh = clamp( uh / umax * 0.5 * g1.y, -g2.z, g2.z );
-			float cuh = 1.0 / sqrt( 1.0 + q * q ), suh = q * cuh;
-			float R = wovenYlRadius( wovenYlG3[ g ], g1.x, abs( uh ) );
-			float txh = cuh * h.z + suh * h.y;
-			float smoothA = 1.0;
-			if ( g1.w > 0.0 ) smoothA = 1.0 - smoothstep( 0.0, 1.0, ( abs( uh ) - ( 1.0 - g1.w ) * umax ) / ( g1.w * umax ) );
-			for ( int j = 0; j < WOVEN_YL_NODES; ++j ) {
-				vec4 nd = texelFetch( wovenYlNodes, ivec2( j, g ), 0 );
-				vec3 n = vec3( nd.x, suh * nd.y, cuh * nd.y );
-				float G = a * ( R + a * nd.y ) / ( len * abs( txh ) );
-				s += G * fc * wovenYlSeeliger( dot( n, i ), dot( n, o ) );
-			}
-			s *= smoothA * wovenYlBand( yh, g1.z, g2.x );
-		}
-		if ( weft ) T.y += g0.w * s;
-		else T.x += g0.w * s;
-	}
-	return T;
+// One staple node u_j (su = sin u_j, cu = cos u_j, R = SpineRadius(|u_j|), a = w / 2, it =
+// 1 / tan psi) at H = |H| h in the yarn frame: (R + a cos v_h) Seeliger'(n . wi, n . wo) /
+// (|H| NoH), Seeliger' = c1 c2 / (c1 + c2) (the 1 / 4pi, a, 1 / |sin psi| and the weight are
+// the caller's); 0 unless |D| < 1, |v_h| < pi / 2, c1, c2 > 0 (yarnLobeGlsl has the algebra).
+float wovenYlStaple( const in vec3 H, const in vec3 i, const in vec3 o, const in float su, const in float cu, const in float R, const in float a, const in float it ) {
+	float bt = H.y * su + H.z * cu;
+	float r2 = H.x * H.x + bt * bt;            // |H|^2 r^2
+	float p = ( H.y * cu - H.z * su ) * it;    // |H| r D
+	float q2 = r2 - p * p;                     // |H|^2 r^2 (1 - D^2): > 0 iff |D| < 1 and r > 0
+	float q = sqrt( max( q2, 0.0 ) );          // |H| NoH
+	float ir2 = 1.0 / r2;
+	float cv = ( H.x * p + bt * q ) * ir2, sv = ( H.x * q - bt * p ) * ir2;  // cos v_h, sin v_h
+	float c1 = sv * i.x + cv * ( su * i.y + cu * i.z ), c2 = sv * o.x + cv * ( su * o.y + cu * o.z );
+	float t = ( R + a * cv ) * c1 * c2 / ( q * ( c1 + c2 ) );
+	return ( q2 > 0.0 && cv > 0.0 && c1 > 0.0 && c2 > 0.0 ) ? t : 0.0;
 }
+// The same with the band mean across at x_h = clamp(v_h w / pi, -xmax, xmax) (wpi = w / pi),
+// for a group whose extent e < w / 2.
+float wovenYlStapleBand( const in vec3 H, const in vec3 i, const in vec3 o, const in float su, const in float cu, const in float R, const in float a, const in float it,
+		const in float wpi, const in float xmax, const in float delta, const in float e ) {
+	float bt = H.y * su + H.z * cu;
+	float r2 = H.x * H.x + bt * bt;
+	float p = ( H.y * cu - H.z * su ) * it;
+	float q2 = r2 - p * p;
+	float q = sqrt( max( q2, 0.0 ) );
+	float ir2 = 1.0 / r2;
+	float cv = ( H.x * p + bt * q ) * ir2, sv = ( H.x * q - bt * p ) * ir2;
+	float c1 = sv * i.x + cv * ( su * i.y + cu * i.z ), c2 = sv * o.x + cv * ( su * o.y + cu * o.z );
+	float t = ( R + a * cv ) * c1 * c2 / ( q * ( c1 + c2 ) ) * wovenYlBand( clamp( atan( sv, cv ) * wpi, -xmax, xmax ), delta, e );
+	return ( q2 > 0.0 && cv > 0.0 && c1 > 0.0 && c2 > 0.0 ) ? t : 0.0;
+}
+// One filament node v_j (sv, cv = sin v_j, cos v_j) with n = (sv, suh cv, cuh cv): ix, bi = i's
+// x and (suh i.y + cuh i.z), the same for o: (R + a cos v_j) Seeliger'(n . wi, n . wo).
+float wovenYlFilament( const in float ix, const in float bi, const in float ox, const in float bo, const in float sv, const in float cv, const in float R, const in float a ) {
+	float c1 = sv * ix + cv * bi, c2 = sv * ox + cv * bo;
+	float t = ( R + a * cv ) * c1 * c2 / ( c1 + c2 );
+	return ( c1 > 0.0 && c2 > 0.0 ) ? t : 0.0;
+}
+// @wovenYarnLobe (yarnLobeGlsl's source replaces this line)
 // Table::Ibl's entry of lobe k at wo: (A, dir) and r (bilinear in theta, phi; phi periodic).
 vec4 wovenYlIblEntry( const in int k, const in vec3 woIn, out float r ) {
 	const int NT = WOVEN_YL_N_THETA, NP = WOVEN_YL_N_PHI;
@@ -1314,19 +1353,14 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     this._yarnLobePack?.dispose();
     this.yarnLobe = block ? yarnLobeOptions(block) : null;
     this._yarnLobePack = this.yarnLobe ? yarnLobePack(this.yarnLobe) : null;
-    // The uniform objects are created once and only their values change: a compiled program
-    // whose key is unchanged (same group count, nodes and table size) is reused by three.js
-    // without onBeforeCompile, and keeps reading the objects it was given then.
+    // The lobe's constants are in the program's source (yarnLobeGlsl; the key names their
+    // digest). The IBL texture's uniform object is created once and only its value changes: a
+    // compiled program whose key is unchanged is reused by three.js without onBeforeCompile, and
+    // keeps reading the object it was given then.
     const u = this._wovenUniforms;
-    const set = (k, v) => { if (u[k]) u[k].value = v; else u[k] = { value: v }; };
     const pk = this._yarnLobePack;
-    for (const k of ['wovenYlG0', 'wovenYlG1', 'wovenYlG2', 'wovenYlG3', 'wovenYlPhase', 'wovenYlNodes', 'wovenYlIbl'])
-      set(k, null);
-    if (pk) {
-      for (const [k, v] of Object.entries(pk.uniforms)) set(k, v);
-      set('wovenYlNodes', pk.nodesTexture);
-      set('wovenYlIbl', pk.iblTexture);
-    }
+    if (u.wovenYlIbl) u.wovenYlIbl.value = pk ? pk.iblTexture : null;
+    else u.wovenYlIbl = { value: pk ? pk.iblTexture : null };
   }
 
   /** Sets (a "yarn_lobe" block) or removes (null) the far-field yarn lobe; recompiles the program. */
@@ -1368,12 +1402,16 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     }
     const yl = this._yarnLobePack;
     if (yl) {
-      defs.push('#define WOVEN_YARN_LOBE', `#define WOVEN_YL_GROUPS ${yl.groups}`, `#define WOVEN_YL_NODES ${yl.nodes}`,
-        `#define WOVEN_YL_N_THETA ${yl.nTheta}`, `#define WOVEN_YL_N_PHI ${yl.nPhi}`);
+      defs.push('#define WOVEN_YARN_LOBE', `#define WOVEN_YL_N_THETA ${yl.nTheta}`, `#define WOVEN_YL_N_PHI ${yl.nPhi}`);
     }
     // with view bands: their pars after the weave-map varying, and their blend in place of the
     // main maps' read (the program without bands is unchanged)
     let pars = WOVEN_PARS, setup = WOVEN_ROUGHNESS;
+    if (yl) {
+      const anchor = '// @wovenYarnLobe (yarnLobeGlsl\'s source replaces this line)\n';
+      if (pars.split(anchor).length !== 2) throw new Error('MeshWovenMaterial: yarn lobe: unexpected WOVEN_PARS');
+      pars = pars.replace(anchor, () => yl.glsl);
+    }
     if (K > 0) {
       const anchor = 'varying vec2 vWovenWeaveUv;\nWovenWeave wovenWS;', mainRead = /#if defined\( WOVEN_WEAVE_MAPS \)\n\{[^}]*\}\n#endif/;
       if (pars.split(anchor).length !== 2 || !mainRead.test(setup)) throw new Error('MeshWovenMaterial: view bands: unexpected WOVEN_PARS / WOVEN_ROUGHNESS');
@@ -1391,7 +1429,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
   customProgramCacheKey() {
     const ibl = this.ibl === 'fis' ? `fis${this.fisTaps}/${this.fisDiffuseTaps}` : this.ibl;
     const yl = this._yarnLobePack;
-    const lobe = yl ? [`yarn-lobe${yl.groups}x${yl.nodes}/${yl.nTheta}x${yl.nPhi}`] : [];
+    const lobe = yl ? [`yarn-lobe${yl.groups}x${yl.nodes}/${yl.nTheta}x${yl.nPhi}/${yl.digest}`] : [];
     const maps = this.weaveMaps ? (this.viewBands ? `maps-views${this.viewBands}` : 'maps') : 'uniform';
     return ['woven', this.yarnLayer, maps, ibl, ...lobe].join(':');
   }
