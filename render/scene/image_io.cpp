@@ -102,6 +102,12 @@ std::string EncodePng8AsString(int width, int height, const std::vector<float>& 
 // gigabytes before failing (found by fuzz_image_exr). So each such attribute must hold exactly
 // what its type reads, and the data window must fit the image limits. Sizes: OpenEXR file
 // layout, "Header attributes" (openexr.com/en/latest/OpenEXRFileLayout.html).
+// Pixels in one EXR tile at most (real files use 32x32 to 256x256): 1024 x 1024 x kMaxChannels
+// float samples are 256 MiB, within kMaxImageBytes. A forged tile of 67108868 x 4 made OpenEXR
+// allocate 1.6 GB for one tile's buffers (found by fuzz_image_exr in session 16; OpenImageIO
+// took 3.3 GB and 17 s on the same file).
+constexpr uint64_t kMaxTilePixels = uint64_t(1) << 20;
+
 template <class Fail>
 void CheckExrAttribute(std::string_view v, const std::string& name, const std::string& type,
                        const std::string& shown, const Fail& fail) {
@@ -148,6 +154,14 @@ void CheckExrAttribute(std::string_view v, const std::string& name, const std::s
       fail("EXR preview '" + shown + "' claims " + std::to_string(w) + "x" + std::to_string(h) +
            " pixels in " + std::to_string(v.size()) + " bytes");
     need(size_t(8 + 4 * w * h));
+  }
+  if (type == "tiledesc") {  // uint32 xSize, ySize, u8 mode: OpenEXR sizes its tile buffers by them
+    const uint64_t tx = uint32_t(i32(0)), ty = uint32_t(i32(4));
+    if (tx < 1 || ty < 1 || tx > uint64_t(kMaxDimension) || ty > uint64_t(kMaxDimension) ||
+        tx * ty > kMaxTilePixels)
+      fail("EXR tile size " + std::to_string(tx) + "x" + std::to_string(ty) + " is outside 1-" +
+           std::to_string(kMaxDimension) + " per side and " + std::to_string(kMaxTilePixels) +
+           " pixels per tile");
   }
   if (name == "dataWindow" && type == "box2i") {
     const int64_t w = int64_t(i32(8)) - i32(0) + 1, h = int64_t(i32(12)) - i32(4) + 1;
