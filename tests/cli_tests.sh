@@ -250,7 +250,7 @@ PY
     (cd "$TMP/one" && ls) > "$TMP/ls1"; (cd "$TMP/two" && ls) > "$TMP/ls2"
     [ "$(wc -l < "$TMP/ls1")" -eq 12 ] || fail "cache holds $(wc -l < "$TMP/ls1") files, not 12"
     diff "$TMP/ls1" "$TMP/ls2" > /dev/null || fail "the shards' cache entries differ from one run's"
-    # Same pixels (the files differ only in OpenImageIO's DateTime).
+    # Same pixels (the files differ only in the capDate attribute, the time of writing).
     for f in $(cat "$TMP/ls1"); do
       oiiotool --fail 0 --diff "$TMP/one/$f" "$TMP/two/$f" | grep -q '^PASS' || fail "$f differs between runs"
     done

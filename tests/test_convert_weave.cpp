@@ -3,7 +3,7 @@
 // woven model refused for the engine targets, the `preset-maps` target.
 //
 // The textures are decoded here independently of the writer: the PNG bytes through
-// OpenImageIO (io::ReadImage), the sRGB curve from IEC 61966-2-1, the anisotropy texel as
+// libpng (io::ReadImage), the sRGB curve from IEC 61966-2-1, the anisotropy texel as
 // three.js r187 / KHR_materials_anisotropy decode it (normalize(2 rg - 1), rotated by
 // anisotropyRotation, strength x b), the frame through brdf/physical_aniso.h MakeFrame; the
 // expected values come from the preview's own sampling of the maps (WeaveMaps::SampleLevel at
@@ -24,7 +24,7 @@
 #include "brdf/physical_aniso.h"
 #include "fit/convert/convert.h"
 #include "fit/convert/convert_io.h"
-#include "fit/convert/png.h"
+#include "render/scene/png.h"
 #include "fit/convert/weave_textures.h"
 #include "render/preview/weave_maps.h"
 #include "render/scene/image_io.h"
@@ -118,7 +118,7 @@ fs::path GltfTexture(const json& g, const json& info, const fs::path& dir, doubl
   return dir / g.at("images").at(tex.at("source").get<size_t>()).at("uri").get<std::string>();
 }
 
-// The 8-bit codes of a PNG as OpenImageIO decodes it (values v = code / 255, no transfer).
+// The 8-bit codes of a PNG as io::ReadImage decodes it (values v = code / 255, no transfer).
 std::vector<int> Codes(const fs::path& png, int size) {
   const io::Image img = io::ReadImage(png.string());
   EXPECT_EQ(img.width, size);
@@ -355,7 +355,7 @@ TEST(ConvertWeave, BaseColourAboveOneClipsAndIsCounted) {
   EXPECT_LT(w.base_factor[1], 1.0);       // the other channels keep their exact encoding
 }
 
-TEST(ConvertWeave, PngEncoderRoundTripsEveryCodeThroughOpenImageIO) {
+TEST(ConvertWeave, PngEncoderRoundTripsEveryCodeThroughTheReader) {
   const fs::path d = TempDir("png");
   std::vector<unsigned char> px(16 * 16 * 3);
   for (size_t k = 0; k < px.size(); ++k) px[k] = static_cast<unsigned char>((k * 7) % 256);
@@ -363,8 +363,8 @@ TEST(ConvertWeave, PngEncoderRoundTripsEveryCodeThroughOpenImageIO) {
   WritePngFile((d / "x.png").string(), 16, 16, 3, px, false);
   const std::vector<int> q = Codes(d / "x.png", 16);
   for (size_t k = 0; k < px.size(); ++k) ASSERT_EQ(q[k], int(px[k])) << k;
-  EXPECT_THROW(EncodePng(16, 16, 2, px, false), std::invalid_argument);
-  EXPECT_THROW(EncodePng(16, 15, 3, px, false), std::invalid_argument);
+  EXPECT_THROW(io::EncodePng(16, 16, 2, px, false), std::invalid_argument);
+  EXPECT_THROW(io::EncodePng(16, 15, 3, px, false), std::invalid_argument);
   fs::remove_all(d);
 }
 

@@ -1,11 +1,16 @@
-// EXR input/output: round trip with metadata, atomic writes, clear errors naming the file.
+// Image input/output: round trip with metadata, atomic writes, clear errors naming the file;
+// what the readers return (render/scene/image_readers.h): OpenImageIO's EXR channel order, PNG
+// codes with premultiplied alpha, Radiance HDR flat and run-length encoded scanlines.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
 #include "brdf/lut.h"
 #include "render/scene/image_io.h"
+#include "render/scene/png.h"
 
 namespace clothfit {
 namespace {
@@ -88,6 +93,94 @@ TEST(ImageIo, InconsistentImageIsRefused) {
   img.channel_names = {"R"};
   img.pixels.resize(3);
   EXPECT_THROW(io::WriteExr((fs::temp_directory_path() / "x.exr").string(), img), io::IoError);
+}
+
+TEST(ImageIo, ExrChannelsComeInOpenImageIoOrder) {
+  // The file stores channels sorted by name; the reader lists them by layer, reserved names
+  // first (R G B A ... Z), X Y Z kept in a layer that has them.
+  const fs::path dir = TempDir();
+  io::Image img;
+  img.width = 3;
+  img.height = 2;
+  img.channel_names = {"uv.U", "half.R", "B", "A", "fabric", "R", "G", "N.Z", "N.X", "N.Y", "Z"};
+  const size_t nc = img.channel_names.size();
+  img.pixels.resize(6 * nc);
+  for (size_t p = 0; p < 6; ++p)
+    for (size_t c = 0; c < nc; ++c) img.pixels[p * nc + c] = float(100 * c + p);
+  const std::string path = (dir / "order.exr").string();
+  io::WriteExr(path, img);
+  const io::Image back = io::ReadImage(path);
+  const std::vector<std::string> want = {"R", "G", "B", "A", "Z", "fabric", "N.X", "N.Y", "N.Z",
+                                         "half.R", "uv.U"};
+  ASSERT_EQ(back.channel_names, want);
+  for (size_t k = 0; k < nc; ++k) {
+    const size_t c = size_t(std::find(img.channel_names.begin(), img.channel_names.end(), want[k]) -
+                            img.channel_names.begin());
+    for (size_t p = 0; p < 6; ++p) EXPECT_EQ(back.pixels[p * nc + k], float(100 * c + p)) << want[k];
+  }
+  EXPECT_TRUE(back.float_source);
+  EXPECT_EQ(back.source_format, "float");
+  EXPECT_EQ(back.file_format, "openexr");
+  fs::remove_all(dir);
+}
+
+TEST(ImageIo, PngCodesAreReadWithAlphaPremultiplied) {
+  const fs::path dir = TempDir();
+  const std::string path = (dir / "rgba.png").string();
+  // Two pixels: (200, 100, 50, a = 128), (255, 7, 0, a = 255); top row first.
+  const std::string png = io::EncodePng(1, 2, 4, {200, 100, 50, 128, 255, 7, 0, 255}, false);
+  std::ofstream(path, std::ios::binary) << png;
+  const io::Image img = io::ReadImage(path);
+  ASSERT_EQ(img.channel_names, (std::vector<std::string>{"R", "G", "B", "A"}));
+  EXPECT_FALSE(img.float_source);
+  EXPECT_EQ(img.source_format, "uint8");
+  EXPECT_EQ(img.file_format, "png");
+  // floor(c a / 255) in the codes, then code * (1 / 255) in float.
+  const int want[8] = {100, 50, 25, 128, 255, 7, 0, 255};
+  for (size_t k = 0; k < 8; ++k) EXPECT_EQ(img.pixels[k], float(want[k]) * (1.0f / 255.0f)) << k;
+  const std::string grey = (dir / "grey.png").string();
+  std::ofstream(grey, std::ios::binary) << io::EncodePng(2, 1, 1, {0, 255}, false);
+  const io::Image g = io::ReadImage(grey);
+  ASSERT_EQ(g.channel_names, (std::vector<std::string>{"Y"}));
+  EXPECT_EQ(g.pixels, (std::vector<float>{0.0f, 255.0f * (1.0f / 255.0f)}));
+  fs::remove_all(dir);
+}
+
+TEST(ImageIo, RadianceHdrFlatAndRunLengthScanlines) {
+  const fs::path dir = TempDir();
+  const std::string path = (dir / "sky.hdr").string();
+  // 8 x 2: row 0 run-length encoded (R: a run of 8 x 64; G: 8 literals; B: run of 8 x 0;
+  // E: run of 8 x 129, i.e. value m * 2^(129 - 136) = m / 128), row 1 flat (8 x (1 2 3 136)).
+  std::string f = "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\nEXPOSURE=1\n\n-Y 2 +X 8\n";
+  f += std::string("\x02\x02\x00\x08", 4);
+  f += std::string("\x88\x40", 2);
+  f += std::string("\x08", 1) + std::string("\x00\x01\x02\x03\x04\x05\x06\x07", 8);
+  f += std::string("\x88\x00", 2);
+  f += std::string("\x88\x81", 2);
+  for (int x = 0; x < 8; ++x) f += std::string("\x01\x02\x03\x88", 4);
+  std::ofstream(path, std::ios::binary) << f;
+  const io::Image img = io::ReadImage(path);
+  ASSERT_EQ(img.width, 8);
+  ASSERT_EQ(img.height, 2);
+  ASSERT_EQ(img.channel_names, (std::vector<std::string>{"R", "G", "B"}));
+  EXPECT_TRUE(img.float_source);
+  EXPECT_EQ(img.file_format, "hdr");
+  for (int x = 0; x < 8; ++x) {
+    EXPECT_EQ(img.pixels[size_t(3 * x)], 0.5f);
+    EXPECT_EQ(img.pixels[size_t(3 * x + 1)], float(x) / 128.0f);
+    EXPECT_EQ(img.pixels[size_t(3 * x + 2)], 0.0f);
+    EXPECT_EQ(img.pixels[size_t(24 + 3 * x)], 1.0f);
+    EXPECT_EQ(img.pixels[size_t(24 + 3 * x + 2)], 3.0f);
+  }
+  // The same file without its last scanline: refused before allocating, naming the file.
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << f.substr(0, f.size() - 32);
+  try {
+    io::ReadImage(path);
+    FAIL() << "a truncated HDR was read";
+  } catch (const io::IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("sky.hdr"), std::string::npos) << e.what();
+  }
+  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -10,7 +10,7 @@
 #include <sstream>
 
 #include "fit/metrics/metrics.h"
-#include "fit/convert/png.h"
+#include "render/scene/png.h"
 #include "render/scene/gltf_tinygltf.h"
 #include "render/scene/image_io.h"
 #include "render/scene/tonemap.h"
@@ -1007,7 +1007,7 @@ void WritePngFile(const std::string& path, int width, int height, int channels,
                   const std::vector<unsigned char>& pixels, bool srgb) {
   std::string png;
   try {
-    png = EncodePng(width, height, channels, pixels, srgb);
+    png = io::EncodePng(width, height, channels, pixels, srgb);
   } catch (const std::exception& e) {
     throw ConvertError(path + ": " + e.what());
   }

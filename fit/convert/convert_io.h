@@ -119,7 +119,7 @@ void WriteGltf(const std::string& path, const Converted& c);
 // Filament material source (.mat) for shadingModel: cloth.
 void WriteFilamentMat(const std::string& path, const Converted& c);
 
-// Writes an 8-bit PNG atomically (fit/convert/png.h); `srgb`: with an sRGB chunk.
+// Writes an 8-bit PNG atomically (render/scene/png.h); `srgb`: with an sRGB chunk.
 void WritePngFile(const std::string& path, int width, int height, int channels,
                   const std::vector<unsigned char>& pixels, bool srgb);
 // The `preset-maps` target: the source preset itself, its weave maps (and glint map) copied

@@ -1,7 +1,7 @@
 // fit/metrics/plot.h: a small raster plotter for benchmark figures (error against time).
 //
 // Linear RGB in [0, 1] on a white canvas, written as an 8-bit PNG through render/scene/image_io.h.
-// Text is rasterised by OpenImageIO (ImageBufAlgo::render_text) with a TrueType font found at
+// Text is rasterised by FreeType (as OpenImageIO's render_text did) with a TrueType font found at
 // $CLOTHFIT_FONT or the Debian fonts-dejavu-core path; when no font is found, Text() returns
 // false and the plot carries marks without text (the CSV next to it has every number).
 #pragma once

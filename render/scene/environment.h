@@ -29,7 +29,7 @@ struct EnvironmentStats {
 
 class Environment {
  public:
-  // Loads an EXR/HDR (anything OpenImageIO reads). Throws io::IoError naming the file.
+  // Loads an EXR or Radiance HDR (io::ReadImage). Throws io::IoError naming the file.
   static Environment Load(const std::string& path, double intensity, double rotation_y,
                           const std::function<void(const std::string&)>& warn = {});
   // A procedural sky (fallback when no map is installed): a smooth blue-to-white gradient

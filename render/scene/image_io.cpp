@@ -1,8 +1,13 @@
 #include "render/scene/image_io.h"
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/imageio.h>
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfIntAttribute.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfThreading.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -10,13 +15,20 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <random>
+#include <string_view>
+#include <thread>
+#include <tuple>
 
+#include "render/scene/image_readers.h"
 #include "render/scene/input_limits.h"
+#include "render/scene/png.h"
 
 namespace clothfit::io {
 namespace fs = std::filesystem;
@@ -28,7 +40,7 @@ std::string TempPathFor(const std::string& path) {
   const fs::path p(path);
   const std::string name = "." + p.filename().string() + ".tmp." + std::to_string(::getpid()) +
                            "." + std::to_string(counter++);
-  // Keep the extension last so OIIO picks the right writer.
+  // Keep the extension last (tools and readers that go by the name see the right format).
   return (p.parent_path() / (name + p.extension().string())).string();
 }
 
@@ -41,18 +53,44 @@ void RenameInto(const std::string& tmp, const std::string& path) {
   }
 }
 
-// Writes `pixels` to the temporary file `tmp` with OpenImageIO; removes it on failure.
-void WriteWithOiio(const std::string& path, const std::string& tmp, const OIIO::ImageSpec& spec,
-                   OIIO::TypeDesc type, const void* pixels) {
-  auto out = OIIO::ImageOutput::create(tmp);
-  if (!out) throw IoError(path + ": cannot create an image writer: " + OIIO::geterror());
-  if (!out->open(tmp, spec)) throw IoError(path + ": cannot open for writing: " + out->geterror());
-  const bool ok = out->write_image(type, pixels);
-  const bool closed = out->close();
-  if (!ok || !closed) {
+// OpenEXR uses a pool of worker threads for (de)compressing blocks of scanlines, one per
+// hardware thread as OpenImageIO set it up before session 16; created on the first EXR access.
+void UseExrThreads() {
+  static std::once_flag once;
+  std::call_once(once, [] { Imf::setGlobalThreadCount(int(std::max(1u, std::thread::hardware_concurrency()))); });
+}
+
+// Writes `bytes` to the temporary file `tmp`; removes it on failure.
+void WriteBytes(const std::string& path, const std::string& tmp, const std::string& bytes) {
+  std::ofstream f(tmp, std::ios::binary);
+  if (!f) throw IoError(path + ": cannot open for writing");
+  f.write(bytes.data(), std::streamsize(bytes.size()));
+  f.flush();
+  if (!f) {
+    f.close();
     std::error_code ec;
     fs::remove(tmp, ec);
-    throw IoError(path + ": write failed: " + out->geterror());
+    throw IoError(path + ": write failed");
+  }
+}
+
+// Display-referred RGB in [0, 1] (non-finite -> 0) as 8-bit codes, rounded to nearest.
+std::vector<unsigned char> ToBytes(const std::vector<float>& rgb) {
+  std::vector<unsigned char> bytes(rgb.size());
+  for (size_t i = 0; i < rgb.size(); ++i) {
+    const float v = std::isfinite(rgb[i]) ? std::min(std::max(rgb[i], 0.0f), 1.0f) : 0.0f;
+    bytes[i] = static_cast<unsigned char>(std::lround(v * 255.0f));
+  }
+  return bytes;
+}
+
+// An sRGB-tagged 8-bit RGB PNG (render/scene/png.h). Throws IoError naming `what`.
+std::string EncodePng8AsString(int width, int height, const std::vector<float>& rgb,
+                               const std::string& what) {
+  try {
+    return EncodePng(width, height, 3, ToBytes(rgb), /*srgb_chunk=*/true);
+  } catch (const std::exception& e) {
+    throw IoError(what + ": PNG encoding failed: " + e.what());
   }
 }
 
@@ -64,6 +102,12 @@ void WriteWithOiio(const std::string& path, const std::string& tmp, const OIIO::
 // gigabytes before failing (found by fuzz_image_exr). So each such attribute must hold exactly
 // what its type reads, and the data window must fit the image limits. Sizes: OpenEXR file
 // layout, "Header attributes" (openexr.com/en/latest/OpenEXRFileLayout.html).
+// Pixels in one EXR tile at most (real files use 32x32 to 256x256): 1024 x 1024 x kMaxChannels
+// float samples are 256 MiB, within kMaxImageBytes. A forged tile of 67108868 x 4 made OpenEXR
+// allocate 1.6 GB for one tile's buffers (found by fuzz_image_exr in session 16; OpenImageIO
+// took 3.3 GB and 17 s on the same file).
+constexpr uint64_t kMaxTilePixels = uint64_t(1) << 20;
+
 template <class Fail>
 void CheckExrAttribute(std::string_view v, const std::string& name, const std::string& type,
                        const std::string& shown, const Fail& fail) {
@@ -111,6 +155,14 @@ void CheckExrAttribute(std::string_view v, const std::string& name, const std::s
            " pixels in " + std::to_string(v.size()) + " bytes");
     need(size_t(8 + 4 * w * h));
   }
+  if (type == "tiledesc") {  // uint32 xSize, ySize, u8 mode: OpenEXR sizes its tile buffers by them
+    const uint64_t tx = uint32_t(i32(0)), ty = uint32_t(i32(4));
+    if (tx < 1 || ty < 1 || tx > uint64_t(kMaxDimension) || ty > uint64_t(kMaxDimension) ||
+        tx * ty > kMaxTilePixels)
+      fail("EXR tile size " + std::to_string(tx) + "x" + std::to_string(ty) + " is outside 1-" +
+           std::to_string(kMaxDimension) + " per side and " + std::to_string(kMaxTilePixels) +
+           " pixels per tile");
+  }
   if (name == "dataWindow" && type == "box2i") {
     const int64_t w = int64_t(i32(8)) - i32(0) + 1, h = int64_t(i32(12)) - i32(4) + 1;
     if (w < 1 || h < 1 || w > kMaxDimension || h > kMaxDimension)
@@ -122,9 +174,9 @@ void CheckExrAttribute(std::string_view v, const std::string& name, const std::s
 // Validate before the decoder allocates (docs/reliability.md): libpng and OpenEXR allocate a
 // chunk's or header attribute's *declared* length (up to 2 GiB) before reading it, so a few
 // hundred forged bytes requested 1.7 GB (found by fuzz_image_png / fuzz_image_exr). Every
-// declared length must fit in what remains of the real file. Returns the OIIO plugin for the
-// file's magic bytes; anything but EXR, PNG and Radiance HDR (the formats clothfit reads) is
-// refused, so OIIO never tries its other plugins on an unknown file.
+// declared length must fit in what remains of the real file. Returns the format of the file's
+// magic bytes ("openexr", "png", "hdr"); anything but EXR, PNG and Radiance HDR (the formats
+// clothfit reads) is refused.
 std::string CheckContainer(const std::string& path, const std::string& shown, size_t file_bytes) {
   std::ifstream f(path, std::ios::binary);
   unsigned char head[8] = {};
@@ -199,6 +251,198 @@ std::string CheckContainer(const std::string& path, const std::string& shown, si
 
 }  // namespace
 
+// ---- EXR input (OpenEXR) --------------------------------------------------------------------
+//
+// As OpenImageIO 2.4 presented EXRs (the reader clothfit used before session 16):
+//  - the first part of a multi-part file; its data window is the image (top row = min y);
+//  - channels HALF and FLOAT as float (exact), UINT as code * (1/4294967295) in float
+//    arithmetic (float_source = false);
+//  - channels in OpenImageIO's canonical order, not the file's alphabetical one: grouped by
+//    layer (the name up to and including its last '.', "" first, byte order), within a layer
+//    the reserved names first in the order R Red G Green B Blue Y real imag A Alpha AR RA AG GA
+//    AB BA Z Depth Zback (case-insensitive), or, when the layer has an X and a Y or Z,
+//    R Red G Green B Blue X Y Z real imag A Alpha AR RA AG GA AB BA Depth Zback; then the
+//    others by name. E.g. A B G R fabric half.B half.G half.R -> R G B A fabric half.R half.G
+//    half.B, and N.X N.Y N.Z stays X Y Z;
+//  - source_format: "half" or "float" or "uint" when all channels agree, else "float";
+//  - metadata: every attribute of type string or int (as decimal text), under its name in the
+//    file (clothfit:*) or OpenImageIO's for it (kRenamed: capDate is DateTime). Attributes of
+//    other types are not copied: no consumer reads them (clothfit writes strings only).
+// Subsampled channels are refused, as OpenImageIO refused them.
+namespace internal {
+namespace {
+
+struct ExrChannel {
+  std::string name, layer, suffix;
+  Imf::PixelType type = Imf::FLOAT;
+  int rank = 10000;  // position among the reserved names of its layer (10000: not reserved)
+};
+
+bool EqualIgnoringCase(const std::string& a, std::string_view b) {
+  return a.size() == b.size() &&
+         std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
+           return std::tolower(static_cast<unsigned char>(x)) ==
+                  std::tolower(static_cast<unsigned char>(y));
+         });
+}
+
+int ReservedRank(const std::string& suffix, bool xyz_layer) {
+  static constexpr std::string_view kUsual[] = {
+      "R", "Red", "G", "Green", "B", "Blue", "Y", "real", "imag", "A", "Alpha", "AR", "RA", "AG",
+      "GA", "AB", "BA", "Z", "Depth", "Zback"};
+  static constexpr std::string_view kXyz[] = {
+      "R", "Red", "G", "Green", "B", "Blue", "X", "Y", "Z", "real", "imag", "A", "Alpha", "AR",
+      "RA", "AG", "GA", "AB", "BA", "Depth", "Zback"};
+  const auto* begin = xyz_layer ? std::begin(kXyz) : std::begin(kUsual);
+  const auto* end = xyz_layer ? std::end(kXyz) : std::end(kUsual);
+  for (const auto* r = begin; r != end; ++r)
+    if (EqualIgnoringCase(suffix, *r)) return int(r - begin);
+  return 10000;
+}
+
+// EXR attribute names OpenImageIO gave other names to ("" = not metadata: the part's type).
+// WriteExr maps the first three back, as OpenImageIO's writer did.
+constexpr std::pair<std::string_view, std::string_view> kRenamed[] = {
+    {"capDate", "DateTime"},
+    {"comments", "ImageDescription"},
+    {"owner", "Copyright"},
+    {"name", "oiio:subimagename"},
+    {"chunkCount", "openexr:chunkCount"},
+    {"maxSamplesPerPixel", "openexr:maxSamplesPerPixel"},
+    {"type", ""}};
+
+std::string MetadataName(const std::string& exr_name) {
+  for (const auto& [exr, ours] : kRenamed)
+    if (exr_name == exr) return std::string(ours);
+  return exr_name;
+}
+
+std::string ExrAttributeName(const std::string& metadata_name) {
+  for (size_t k = 0; k < 3; ++k)
+    if (metadata_name == kRenamed[k].second) return std::string(kRenamed[k].first);
+  return metadata_name;
+}
+
+std::vector<ExrChannel> CanonicalOrder(const Imf::ChannelList& list) {
+  std::vector<ExrChannel> ch;
+  for (auto it = list.begin(); it != list.end(); ++it) {
+    ExrChannel c;
+    c.name = it.name();
+    const size_t dot = c.name.find_last_of('.');
+    c.layer = dot == std::string::npos ? std::string() : c.name.substr(0, dot + 1);
+    c.suffix = dot == std::string::npos ? c.name : c.name.substr(dot + 1);
+    c.type = it.channel().type;
+    ch.push_back(std::move(c));
+  }
+  auto has = [&](const std::string& layer, std::string_view suffix) {
+    for (const ExrChannel& c : ch)
+      if (c.layer == layer && EqualIgnoringCase(c.suffix, suffix)) return true;
+    return false;
+  };
+  for (ExrChannel& c : ch) {
+    const bool xyz = has(c.layer, "X") && (has(c.layer, "Y") || has(c.layer, "Z"));
+    c.rank = ReservedRank(c.suffix, xyz);
+  }
+  std::sort(ch.begin(), ch.end(), [](const ExrChannel& a, const ExrChannel& b) {
+    return std::tie(a.layer, a.rank, a.suffix) < std::tie(b.layer, b.rank, b.suffix);
+  });
+  return ch;
+}
+
+class ExrReader : public ImageReader {
+ public:
+  ExrReader(const std::string& path, const std::string& shown) : shown_(shown) {
+    UseExrThreads();
+    try {
+      file_ = std::make_unique<Imf::InputFile>(path.c_str());
+    } catch (const std::exception& e) {
+      throw IoError(shown_ + ": cannot read image: " + limits::EscapeForMessage(e.what(), 400));
+    }
+    const Imf::Header& header = file_->header();
+    window_ = header.dataWindow();
+    width = int(std::min<int64_t>(int64_t(window_.max.x) - window_.min.x + 1, std::numeric_limits<int>::max()));
+    height = int(std::min<int64_t>(int64_t(window_.max.y) - window_.min.y + 1, std::numeric_limits<int>::max()));
+    channels_ = CanonicalOrder(header.channels());
+    if (channels_.empty()) throw IoError(shown_ + ": cannot read image: no channels");
+    bool all_half = true, all_uint = true;
+    for (auto it = header.channels().begin(); it != header.channels().end(); ++it)
+      if (it.channel().xSampling != 1 || it.channel().ySampling != 1)
+        throw IoError(shown_ + ": cannot read image: channel '" +
+                      limits::EscapeForMessage(it.name(), 64) + "' is subsampled (" +
+                      std::to_string(it.channel().xSampling) + "x" +
+                      std::to_string(it.channel().ySampling) + "), which clothfit does not read");
+    for (const ExrChannel& c : channels_) {
+      channel_names.push_back(c.name);
+      sample_bytes.push_back(c.type == Imf::HALF ? 2 : 4);
+      all_half = all_half && c.type == Imf::HALF;
+      all_uint = all_uint && c.type == Imf::UINT;
+      if (c.type == Imf::UINT) float_source = false;
+    }
+    source_format = all_half ? "half" : all_uint ? "uint" : "float";
+    file_format = "openexr";
+    for (auto it = header.begin(); it != header.end(); ++it) {
+      const std::string name = MetadataName(it.name());
+      if (name.empty()) continue;
+      if (const auto* a = dynamic_cast<const Imf::StringAttribute*>(&it.attribute()))
+        metadata[name] = a->value();
+      else if (const auto* i = dynamic_cast<const Imf::IntAttribute*>(&it.attribute()))
+        metadata[name] = std::to_string(i->value());
+    }
+  }
+
+  void Read(float* out) override {
+    const size_t w = size_t(width), h = size_t(height), nc = channels_.size();
+    std::vector<uint32_t> codes;  // UINT channels, converted below
+    size_t uint_channels = 0;
+    for (const ExrChannel& c : channels_) uint_channels += c.type == Imf::UINT;
+    try {
+      codes.resize(w * h * uint_channels);
+      Imf::FrameBuffer fb;
+      size_t u = 0;
+      for (size_t k = 0; k < nc; ++k) {
+        if (channels_[k].type == Imf::UINT)
+          fb.insert(channels_[k].name, Imf::Slice::Make(Imf::UINT, codes.data() + u++, window_,
+                                                        sizeof(uint32_t) * uint_channels,
+                                                        sizeof(uint32_t) * uint_channels * w));
+        else
+          fb.insert(channels_[k].name, Imf::Slice::Make(Imf::FLOAT, out + k, window_,
+                                                        sizeof(float) * nc, sizeof(float) * nc * w));
+      }
+      file_->setFrameBuffer(fb);
+      file_->readPixels(window_.min.y, window_.max.y);
+    } catch (const std::bad_alloc&) {
+      throw;
+    } catch (const std::exception& e) {
+      throw IoError(shown_ + ": corrupt or truncated image: " + limits::EscapeForMessage(e.what(), 400));
+    }
+    if (uint_channels == 0) return;
+    // OpenImageIO's integer-to-float rule: the full range maps to [0, 1].
+    const float scale = 1.0f / float(std::numeric_limits<uint32_t>::max());
+    for (size_t k = 0, u = 0; k < nc; ++k) {
+      if (channels_[k].type != Imf::UINT) continue;
+      for (size_t p = 0; p < w * h; ++p)
+        out[p * nc + k] = float(codes[p * uint_channels + u]) * scale;
+      ++u;
+    }
+  }
+
+ private:
+  std::string shown_;
+  std::unique_ptr<Imf::InputFile> file_;
+  Imath::Box2i window_;
+  std::vector<ExrChannel> channels_;
+};
+
+}  // namespace
+
+std::unique_ptr<ImageReader> OpenExr(const std::string& path, const std::string& shown) {
+  return std::make_unique<ExrReader>(path, shown);
+}
+
+}  // namespace internal
+
+// ---- public ---------------------------------------------------------------------------------
+
 void WriteExr(const std::string& path, const Image& image) {
   if (image.width <= 0 || image.height <= 0 || image.channels() <= 0 ||
       image.pixels.size() != size_t(image.width) * image.height * image.channels()) {
@@ -208,43 +452,77 @@ void WriteExr(const std::string& path, const Image& image) {
   if (!parent.empty() && !fs::is_directory(parent)) {
     throw IoError(path + ": output directory " + parent.string() + " does not exist");
   }
+  UseExrThreads();
   const std::string tmp = TempPathFor(path);
-  OIIO::ImageSpec spec(image.width, image.height, image.channels(), OIIO::TypeDesc::FLOAT);
-  spec.channelnames = image.channel_names;
-  spec.attribute("compression", "zip");
-  for (const auto& [k, v] : image.metadata) spec.attribute(k, v);
-  WriteWithOiio(path, tmp, spec, OIIO::TypeDesc::FLOAT, image.pixels.data());
+  // The header OpenImageIO wrote before session 16: FLOAT channels, ZIP (16 scanlines, zlib
+  // level 4), increasing Y, the default windows and aspect, capDate (local time, "YYYY:MM:DD
+  // HH:MM:SS"), and the metadata as string attributes.
+  try {
+    Imf::Header header(image.width, image.height);
+    header.compression() = Imf::ZIP_COMPRESSION;
+    header.zipCompressionLevel() = 4;
+    header.lineOrder() = Imf::INCREASING_Y;
+    const size_t nc = size_t(image.channels());
+    for (const std::string& name : image.channel_names)
+      header.channels().insert(name, Imf::Channel(Imf::FLOAT));
+    size_t distinct = 0;
+    for (auto it = header.channels().begin(); it != header.channels().end(); ++it) ++distinct;
+    if (distinct != nc)
+      throw IoError(path + ": refusing to write an EXR with repeated channel names");
+    std::time_t now = std::time(nullptr);
+    std::tm local{};
+    localtime_r(&now, &local);
+    char date[64];
+    std::snprintf(date, sizeof date, "%4d:%02d:%02d %02d:%02d:%02d", local.tm_year + 1900,
+                  local.tm_mon + 1, local.tm_mday, local.tm_hour, local.tm_min, local.tm_sec);
+    header.insert("capDate", Imf::StringAttribute(date));  // replaced by a DateTime entry
+    for (const auto& [k, v] : image.metadata)
+      header.insert(internal::ExrAttributeName(k), Imf::StringAttribute(v));
+    Imf::FrameBuffer fb;
+    const size_t w = size_t(image.width);
+    for (size_t k = 0; k < nc; ++k)
+      fb.insert(image.channel_names[k],
+                Imf::Slice(Imf::FLOAT, const_cast<char*>(reinterpret_cast<const char*>(image.pixels.data() + k)),
+                           sizeof(float) * nc, sizeof(float) * nc * w));
+    Imf::OutputFile out(tmp.c_str(), header);
+    out.setFrameBuffer(fb);
+    out.writePixels(image.height);
+  } catch (const std::exception& e) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    if (dynamic_cast<const IoError*>(&e)) throw;
+    throw IoError(path + ": write failed: " + e.what());
+  }
   RenameInto(tmp, path);
 }
 
 Image ReadImage(const std::string& path) {
   const std::string shown = limits::EscapeForMessage(path, 400);
   // The real file first: a regular, non-empty file within the byte budget (this also refuses
-  // /proc files, FIFOs and devices, which OIIO would read without end).
+  // /proc files, FIFOs and devices, which a decoder would read without end).
   size_t file_bytes = 0;
   try {
     file_bytes = limits::CheckedFileSize(path, limits::kMaxImageFileBytes, "image file");
   } catch (const limits::InputError& e) {
     throw IoError(e.what());
   }
-  // The plugin for the file's magic bytes only (no fallback to OIIO's other readers), after the
-  // container's declared lengths were checked against the file.
-  auto in = OIIO::ImageInput::create(CheckContainer(path, shown, file_bytes));
-  OIIO::ImageSpec opened;
-  if (!in || !in->open(path, opened))
-    throw IoError(shown + ": cannot read image: " +
-                  limits::EscapeForMessage(in ? in->geterror() : OIIO::geterror(), 400));
-  const OIIO::ImageSpec& spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxDimension ||
-      spec.height > kMaxDimension || spec.nchannels <= 0 || spec.nchannels > kMaxChannels ||
-      spec.depth != 1) {
-    throw IoError(shown + ": unsupported image size " + std::to_string(spec.width) + "x" +
-                  std::to_string(spec.height) + "x" + std::to_string(spec.nchannels) + " (limits " +
+  // The decoder for the file's magic bytes only, after the container's declared lengths were
+  // checked against the file; it reads the header, nothing is allocated for pixels yet.
+  const std::string format = CheckContainer(path, shown, file_bytes);
+  const std::unique_ptr<internal::ImageReader> in =
+      format == "openexr" ? internal::OpenExr(path, shown)
+      : format == "png"   ? internal::OpenPng(path, shown)
+                          : internal::OpenRgbe(path, shown, file_bytes);
+  const int nchannels = int(in->channel_names.size());
+  if (in->width <= 0 || in->height <= 0 || in->width > kMaxDimension ||
+      in->height > kMaxDimension || nchannels <= 0 || nchannels > kMaxChannels) {
+    throw IoError(shown + ": unsupported image size " + std::to_string(in->width) + "x" +
+                  std::to_string(in->height) + "x" + std::to_string(nchannels) + " (limits " +
                   std::to_string(kMaxDimension) + " per side, " + std::to_string(kMaxChannels) +
                   " channels)");
   }
   // Validate before allocating: the decoded float image must fit the per-image budget...
-  const size_t w = size_t(spec.width), h = size_t(spec.height), c = size_t(spec.nchannels);
+  const size_t w = size_t(in->width), h = size_t(in->height), c = size_t(nchannels);
   const auto bytes = limits::CheckedProduct({w, h, c, sizeof(float)});
   if (!bytes || *bytes > limits::kMaxImageBytes) {
     throw IoError(shown + ": image " + std::to_string(w) + "x" + std::to_string(h) + "x" +
@@ -256,9 +534,9 @@ Image ReadImage(const std::string& path) {
   }
   // ...and a PNG cannot hold more than deflate's maximum expansion of its file: a forged header
   // on a few bytes of data is refused here instead of costing a zero-filled giant buffer.
-  if (std::string(in->format_name()) == "png") {
+  if (in->file_format == "png") {
     size_t sample_bytes = 0;
-    for (int k = 0; k < spec.nchannels; ++k) sample_bytes += spec.channelformat(k).size();
+    for (size_t b : in->sample_bytes) sample_bytes += b;
     const auto raw = limits::CheckedMul(h, 1 + w * sample_bytes);  // filter byte per row
     const size_t can_hold = limits::kMaxPngExpansion * file_bytes + (size_t(64) << 10);
     if (!raw || *raw > can_hold)
@@ -270,26 +548,21 @@ Image ReadImage(const std::string& path) {
                     limits::LimitRef("kMaxPngExpansion"));
   }
   Image img;
-  img.width = spec.width;
-  img.height = spec.height;
-  img.channel_names = spec.channelnames;
-  img.float_source = true;
-  for (int k = 0; k < spec.nchannels; ++k)
-    if (!spec.channelformat(k).is_floating_point()) img.float_source = false;
-  img.source_format = spec.format.c_str();
-  img.file_format = in->format_name();
-  for (const auto& p : spec.extra_attribs) img.metadata[p.name().string()] = p.get_string();
+  img.width = in->width;
+  img.height = in->height;
+  img.channel_names = in->channel_names;
+  img.float_source = in->float_source;
+  img.source_format = in->source_format;
+  img.file_format = in->file_format;
+  img.metadata = in->metadata;
   try {
     img.pixels.resize(w * h * c);
-    if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))
-      throw IoError(shown + ": corrupt or truncated image: " +
-                    limits::EscapeForMessage(in->geterror(), 400));
+    in->Read(img.pixels.data());
   } catch (const std::bad_alloc&) {
     throw IoError(shown + ": out of memory decoding a " + std::to_string(w) + "x" +
                   std::to_string(h) + "x" + std::to_string(c) + " image " +
                   limits::LimitRef("kMaxImageBytes"));
   }
-  in->close();
   return img;
 }
 
@@ -324,15 +597,9 @@ void WritePng8(const std::string& path, int width, int height, const std::vector
   const fs::path parent = fs::path(path).parent_path();
   if (!parent.empty() && !fs::is_directory(parent))
     throw IoError(path + ": output directory " + parent.string() + " does not exist");
-  std::vector<unsigned char> bytes(rgb.size());
-  for (size_t i = 0; i < rgb.size(); ++i) {
-    const float v = std::isfinite(rgb[i]) ? std::min(std::max(rgb[i], 0.0f), 1.0f) : 0.0f;
-    bytes[i] = static_cast<unsigned char>(std::lround(v * 255.0f));
-  }
+  const std::string png = EncodePng8AsString(width, height, rgb, path);
   const std::string tmp = TempPathFor(path);
-  OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::UINT8);
-  spec.attribute("oiio:ColorSpace", "sRGB");
-  WriteWithOiio(path, tmp, spec, OIIO::TypeDesc::UINT8, bytes.data());
+  WriteBytes(path, tmp, png);
   RenameInto(tmp, path);
 }
 
@@ -340,22 +607,8 @@ std::vector<unsigned char> EncodePng8(int width, int height, const std::vector<f
                                       const std::string& what) {
   if (width <= 0 || height <= 0 || rgb.size() != size_t(width) * size_t(height) * 3)
     throw IoError(what + ": refusing to encode a PNG with inconsistent size");
-  std::vector<unsigned char> bytes(rgb.size());
-  for (size_t i = 0; i < rgb.size(); ++i) {
-    const float v = std::isfinite(rgb[i]) ? std::min(std::max(rgb[i], 0.0f), 1.0f) : 0.0f;
-    bytes[i] = static_cast<unsigned char>(std::lround(v * 255.0f));
-  }
-  std::vector<unsigned char> png;
-  OIIO::Filesystem::IOVecOutput proxy(png);
-  auto out = OIIO::ImageOutput::create("memory.png");
-  if (!out) throw IoError(what + ": cannot create a PNG writer: " + OIIO::geterror());
-  OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::UINT8);
-  spec.attribute("oiio:ColorSpace", "sRGB");
-  if (!out->set_ioproxy(&proxy) || !out->open("memory.png", spec) ||
-      !out->write_image(OIIO::TypeDesc::UINT8, bytes.data()) || !out->close())
-    throw IoError(what + ": PNG encoding failed: " + out->geterror());
-  if (png.empty()) throw IoError(what + ": PNG encoding produced no data");
-  return png;
+  const std::string png = EncodePng8AsString(width, height, rgb, what);
+  return std::vector<unsigned char>(png.begin(), png.end());
 }
 
 void WriteTextAtomic(const std::string& path, const std::string& text) {

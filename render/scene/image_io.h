@@ -1,4 +1,6 @@
-// render/scene/image_io.h: EXR/PNG input and output through OpenImageIO.
+// render/scene/image_io.h: image input (EXR through OpenEXR, PNG through libpng, Radiance HDR)
+// and output (float EXR, 8-bit sRGB PNG). render/scene/image_readers.h describes what a read
+// returns: the same as OpenImageIO 2.4, which clothfit used until session 16.
 //
 // Writes are atomic: the file is written next to its destination under a temporary name
 // and renamed into place, so an interrupted run never leaves a truncated output. Reads check
@@ -29,8 +31,10 @@ struct Image {
   // Set by ReadImage: false when any channel was stored as an integer type (8/16-bit PNG):
   // such values are display-encoded (sRGB), not linear radiance.
   bool float_source = true;
-  std::string source_format;  // OIIO type name of the stored data ("half", "uint8")
-  std::string file_format;    // OIIO format name ("openexr", "png", "hdr")
+  // The stored data type ("half", "float", "uint", "uint8", "uint16"; "float" for mixed EXR
+  // channels) and the format ("openexr", "png", "hdr"): OpenImageIO's names.
+  std::string source_format;
+  std::string file_format;
 
   int channels() const { return int(channel_names.size()); }
 };
@@ -39,10 +43,14 @@ struct Image {
 inline constexpr int kMaxDimension = 16384;
 inline constexpr int kMaxChannels = 64;
 
-// Writes a 32-bit float EXR (ZIP compression) with the given string metadata, atomically.
+// Writes a 32-bit float EXR (ZIP compression) with the given metadata as string attributes,
+// atomically.
 void WriteExr(const std::string& path, const Image& image);
 
-// Reads any OIIO-readable image as float. Throws IoError naming the file on failure.
+// Reads an EXR, PNG or Radiance HDR image as float. Throws IoError naming the file on failure.
+// EXR: the first part's data window, channels in OpenImageIO's canonical order (R G B A first;
+// image_readers.h), string attributes as metadata. PNG: 8/16-bit codes / (2^n - 1), not
+// linearised, alpha premultiplied. HDR: RGB as stored.
 // Before allocating, it checks the file (regular, <= kMaxImageFileBytes), the decoded size
 // (W*H*C*4 <= kMaxImageBytes) and, for PNG, that the file can hold the claimed pixels
 // (docs/reliability.md).
@@ -54,7 +62,7 @@ Image TableToImage(const Table2D& table, const std::vector<std::string>& channel
 Table2D ImageToTable(const Image& image);
 
 // Writes display-referred RGB (values in [0, 1], already tone mapped and sRGB encoded) as an
-// 8-bit PNG, atomically. Values are clamped and rounded to nearest.
+// 8-bit PNG with an sRGB chunk, atomically. Values are clamped and rounded to nearest.
 void WritePng8(const std::string& path, int width, int height, const std::vector<float>& rgb);
 
 // Encodes display-referred RGB (values in [0, 1], clamped, non-finite -> 0) as an 8-bit PNG

@@ -1,4 +1,4 @@
-// Image layer (OpenImageIO through io::ReadImage), then the conversions every caller does
+// Image layer (io::ReadImage: OpenEXR, libpng, the RGBE reader), then the conversions every caller does
 // (metrics::ToRgb / ToMask, and the half-sample channels: metrics::ExtractHalves). Built three times: FUZZ_EXT ".exr", ".png", ".hdr".
 #include "fit/metrics/metrics.h"
 #include "fit/metrics/reference_halves.h"
