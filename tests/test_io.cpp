@@ -76,6 +76,74 @@ TEST(ImageIo, CorruptAndTruncatedFilesGiveErrorsNotCrashes) {
   fs::remove_all(dir);
 }
 
+// Forged EXR headers (session 16 review): each is refused by CheckContainer, by name, before
+// OpenEXR or the channel ordering sees it. Built here byte by byte (OpenEXR file layout,
+// "Header attributes": name \0 type \0 int32 size value, an empty name ends the header).
+std::string ExrAttr(const std::string& name, const std::string& type, const std::string& v) {
+  std::string a = name + '\0' + type + '\0';
+  const uint32_t n = uint32_t(v.size());
+  for (int i = 0; i < 4; ++i) a += char((n >> (8 * i)) & 0xff);
+  return a + v;
+}
+std::string Le32(uint32_t x) {
+  std::string s;
+  for (int i = 0; i < 4; ++i) s += char((x >> (8 * i)) & 0xff);
+  return s;
+}
+std::string ForgedExr(int channels, int width, uint32_t tile_x, uint32_t tile_y, size_t pad) {
+  std::string f = Le32(20000630) + Le32(tile_x ? 2 | 0x200 : 2);
+  if (pad) f += ExrAttr("comments", "string", std::string(pad, 'x'));
+  std::string ch;
+  for (int i = 0; i < channels; ++i)
+    ch += "c" + std::to_string(i) + '\0' + Le32(2) + std::string(4, '\0') + Le32(1) + Le32(1);
+  f += ExrAttr("channels", "chlist", ch + '\0');
+  f += ExrAttr("compression", "compression", std::string(1, '\0'));
+  const std::string box = Le32(0) + Le32(0) + Le32(uint32_t(width - 1)) + Le32(0);
+  f += ExrAttr("dataWindow", "box2i", box) + ExrAttr("displayWindow", "box2i", box);
+  f += ExrAttr("lineOrder", "lineOrder", std::string(1, '\0'));
+  if (tile_x) f += ExrAttr("tiles", "tiledesc", Le32(tile_x) + Le32(tile_y) + std::string(1, '\0'));
+  return f + '\0' + std::string(64, '\0');
+}
+
+TEST(ImageIo, ForgedExrHeadersAreRefusedBeforeOpenExr) {
+  const fs::path dir = TempDir();
+  auto refused = [&](const std::string& file, const std::string& bytes, const std::string& why) {
+    const std::string path = (dir / file).string();
+    std::ofstream(path, std::ios::binary) << bytes;
+    try {
+      io::ReadImage(path);
+      ADD_FAILURE() << file << ": expected an error";
+    } catch (const io::IoError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(file), std::string::npos) << m;
+      EXPECT_NE(m.find(why), std::string::npos) << m;
+    }
+  };
+  // 65 channels: over kMaxChannels, refused in the channel list itself.
+  refused("channels.exr", ForgedExr(io::kMaxChannels + 1, 4, 0, 0, 0), "more than 64 channels");
+  // A 17 MiB comment hides a forged tile size past the 16 MiB the check reads.
+  refused("padded.exr", ForgedExr(3, 4, 67108868, 4, size_t(17) << 20), "does not end within");
+  // Legal tile sides, but width x tile height x channels would be 64 GiB of OpenEXR's cache.
+  refused("wide_tile.exr", ForgedExr(64, 16384, 64, 16384, 0), "tile budget");
+  // The same shapes within the limits pass the header check (and fail later only because the
+  // forged files carry no pixel data), so the limits are not what refuses the files above.
+  for (const auto& [file, bytes] :
+       {std::pair<std::string, std::string>{"ok64.exr", ForgedExr(io::kMaxChannels, 4, 0, 0, 0)},
+        {"ok_tile.exr", ForgedExr(4, 64, 64, 64, 0)}}) {
+    const std::string path = (dir / file).string();
+    std::ofstream(path, std::ios::binary) << bytes;
+    try {
+      io::ReadImage(path);
+    } catch (const io::IoError& e) {
+      const std::string m = e.what();
+      EXPECT_EQ(m.find("more than"), std::string::npos) << m;
+      EXPECT_EQ(m.find("does not end"), std::string::npos) << m;
+      EXPECT_EQ(m.find("tile budget"), std::string::npos) << m;
+    }
+  }
+  fs::remove_all(dir);
+}
+
 TEST(ImageIo, WriteIntoMissingDirectoryFailsAndNamesIt) {
   io::Image img = io::TableToImage(lut::ComputeDfg({4}), {"R", "G", "B"});
   try {
@@ -179,6 +247,16 @@ TEST(ImageIo, RadianceHdrFlatAndRunLengthScanlines) {
     FAIL() << "a truncated HDR was read";
   } catch (const io::IoError& e) {
     EXPECT_NE(std::string(e.what()).find("sky.hdr"), std::string::npos) << e.what();
+  }
+  // Another orientation (bottom-up rows): refused by name rather than read upside down.
+  std::string up = f;
+  up.replace(up.find("-Y 2 +X 8"), 9, "+Y 2 +X 8");
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << up;
+  try {
+    io::ReadImage(path);
+    FAIL() << "a bottom-up HDR was read";
+  } catch (const io::IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("orientation '+Y H +X W'"), std::string::npos) << e.what();
   }
   fs::remove_all(dir);
 }

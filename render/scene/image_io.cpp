@@ -108,9 +108,14 @@ std::string EncodePng8AsString(int width, int height, const std::vector<float>& 
 // took 3.3 GB and 17 s on the same file).
 constexpr uint64_t kMaxTilePixels = uint64_t(1) << 20;
 
+// What CheckContainer gathers from the header for the checks that combine attributes.
+struct ExrHeaderSizes {
+  uint64_t channels = 0, tile_x = 0, tile_y = 0, width = 0;
+};
+
 template <class Fail>
 void CheckExrAttribute(std::string_view v, const std::string& name, const std::string& type,
-                       const std::string& shown, const Fail& fail) {
+                       const std::string& shown, const Fail& fail, ExrHeaderSizes* sizes) {
   auto i32 = [&](size_t at) {
     return int32_t(uint32_t(uint8_t(v[at])) | uint32_t(uint8_t(v[at + 1])) << 8 |
                    uint32_t(uint8_t(v[at + 2])) << 16 | uint32_t(uint8_t(v[at + 3])) << 24);
@@ -131,6 +136,7 @@ void CheckExrAttribute(std::string_view v, const std::string& name, const std::s
     if (type == t) need(bytes);
   if (type == "chlist") {  // (name \0, int32 type, u8 pLinear, 3 reserved, int32 xs, int32 ys)* \0
     size_t p = 0;
+    uint64_t count = 0;
     for (;;) {
       const size_t end = v.find('\0', p);
       if (end == std::string_view::npos) fail("EXR channel list '" + shown + "' has no end");
@@ -144,6 +150,12 @@ void CheckExrAttribute(std::string_view v, const std::string& name, const std::s
              std::to_string(pixel_type) + " and sampling " + std::to_string(xs) + "x" +
              std::to_string(ys) + " (types 0-2, sampling 1-" + std::to_string(kMaxDimension) + ")");
       p += 16;
+      // Refused here, before OpenEXR (whose channel lookups and per-pixel buffers grow with the
+      // count) or our own channel ordering see the list.
+      sizes->channels = std::max(sizes->channels, ++count);
+      if (count > uint64_t(kMaxChannels))
+        fail("EXR channel list '" + shown + "' has more than " + std::to_string(kMaxChannels) +
+             " channels (kMaxChannels)");
     }
     need(p);
   }
@@ -162,12 +174,15 @@ void CheckExrAttribute(std::string_view v, const std::string& name, const std::s
       fail("EXR tile size " + std::to_string(tx) + "x" + std::to_string(ty) + " is outside 1-" +
            std::to_string(kMaxDimension) + " per side and " + std::to_string(kMaxTilePixels) +
            " pixels per tile");
+    sizes->tile_x = tx;
+    sizes->tile_y = ty;
   }
   if (name == "dataWindow" && type == "box2i") {
     const int64_t w = int64_t(i32(8)) - i32(0) + 1, h = int64_t(i32(12)) - i32(4) + 1;
     if (w < 1 || h < 1 || w > kMaxDimension || h > kMaxDimension)
       fail("EXR " + name + " is " + std::to_string(w) + "x" + std::to_string(h) +
            " (limit 1-" + std::to_string(kMaxDimension) + " per side)");
+    sizes->width = uint64_t(w);
   }
 }
 
@@ -224,10 +239,19 @@ std::string CheckContainer(const std::string& path, const std::string& shown, si
       pos = end + 1;
       return true;
     };
+    // The whole header must lie in the window: an attribute or string that runs past it would
+    // let a padded header (a 16 MiB comment, then a forged tile size or channel list) skip the
+    // checks below.
+    const std::string past = "EXR header does not end within the first " +
+                             std::to_string(window) + " bytes of the file";
+    ExrHeaderSizes sizes;
     for (bool first = true;; first = false) {
       size_t attributes = 0;
       std::string name, type;
-      while (cstr(&name) && !name.empty() && cstr(&type) && pos + 4 <= buf.size()) {
+      for (;;) {
+        if (!cstr(&name)) fail(past);
+        if (name.empty()) break;
+        if (!cstr(&type) || pos + 4 > buf.size()) fail(past);
         const uint32_t u = uint32_t(uint8_t(buf[pos])) | uint32_t(uint8_t(buf[pos + 1])) << 8 |
                            uint32_t(uint8_t(buf[pos + 2])) << 16 | uint32_t(uint8_t(buf[pos + 3])) << 24;
         pos += 4;
@@ -236,13 +260,25 @@ std::string CheckContainer(const std::string& path, const std::string& shown, si
           fail("EXR header attribute '" + shown_name + "' claims " +
                std::to_string(int32_t(u)) + " bytes but only " + std::to_string(file_bytes - pos) +
                " remain");
-        if (pos + u <= buf.size())
-          CheckExrAttribute(std::string_view(buf).substr(pos, u), name, type, shown_name, fail);
+        if (u > buf.size() - pos) fail(past);
+        CheckExrAttribute(std::string_view(buf).substr(pos, u), name, type, shown_name, fail,
+                          &sizes);
         pos += u;
         ++attributes;
       }
-      if (!multipart || (attributes == 0 && !first) || pos >= buf.size() || !name.empty()) break;
+      if (!multipart || (attributes == 0 && !first)) break;
     }
+    // OpenEXR's tiled reader keeps two tile buffers per thread and, for a scanline frame buffer,
+    // a cache of width x tile height samples per channel: bound both in samples (4 bytes each).
+    // Real files: 64 x 64 tiles x 4 channels = 2^14 samples per tile.
+    constexpr uint64_t kMaxTileSamples = uint64_t(1) << 22;  // 16 MiB of floats per tile
+    const uint64_t ch = std::max<uint64_t>(sizes.channels, 1);
+    if (sizes.tile_x > 0 && (sizes.tile_x * sizes.tile_y * ch > kMaxTileSamples ||
+                             sizes.width * sizes.tile_y * ch > uint64_t(limits::kMaxImageBytes) / 4))
+      fail("EXR tiles of " + std::to_string(sizes.tile_x) + "x" + std::to_string(sizes.tile_y) +
+           " with " + std::to_string(ch) + " channels and width " + std::to_string(sizes.width) +
+           " exceed the tile budget (" + std::to_string(kMaxTileSamples) +
+           " samples per tile, width x tile height x channels <= kMaxImageBytes / 4)");
     return "openexr";
   }
   if (file_bytes >= 2 && head[0] == '#' && head[1] == '?') return "hdr";
@@ -646,7 +682,8 @@ ReferenceHalves ReferenceHalvesFromImage(const Image& image, const std::string& 
       used = 0;
     }
     if (used == 0 || used != it->second.size())
-      throw IoError(what + ": metadata '" + key + "' = '" + it->second + "' is not an integer");
+      throw IoError(what + ": metadata '" + key + "' = '" + limits::EscapeForMessage(it->second, 64) +
+                    "' is not an integer");
     return v;
   };
   ReferenceHalves h;

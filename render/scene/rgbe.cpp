@@ -70,13 +70,18 @@ class RgbeReader : public ImageReader {
     static const char* const kForms[8][2] = {{"-Y", "+X"}, {"-Y", "-X"}, {"+Y", "-X"},
                                              {"+Y", "+X"}, {"+X", "-Y"}, {"+X", "+Y"},
                                              {"-X", "+Y"}, {"-X", "-Y"}};
-    bool size_found = false;
-    for (const auto& form : kForms)
-      if (ParseResolution(res, form[0], form[1], &h, &w)) {
-        size_found = true;
+    int form_found = -1;
+    for (int k = 0; k < 8; ++k)
+      if (ParseResolution(res, kForms[k][0], kForms[k][1], &h, &w)) {
+        form_found = k;
         break;
       }
-    if (!size_found) fail("missing image size line in the Radiance HDR header");
+    if (form_found < 0) fail("missing image size line in the Radiance HDR header");
+    // Only the standard top-down, left-to-right form: OpenImageIO (before session 16) returned
+    // the other seven in stored order, so a "+Y" environment loaded upside down without a word.
+    if (form_found != 0)
+      fail(std::string("Radiance HDR orientation '") + kForms[form_found][0] + " H " +
+           kForms[form_found][1] + " W' is not supported (only '-Y H +X W', top-down rows)");
     width = w;
     height = h;
     data_begin_ = pos;
