@@ -9,10 +9,11 @@
 //
 // Accepted as OpenImageIO 2.4 accepted them (the reader clothfit used before session 16): the
 // header must contain the line FORMAT=32-bit_rle_rgbe (XYZE is refused), lines are read 128
-// bytes at most at a time, at most 100 header lines; the resolution line is any of the eight
-// "[-+]Y H [-+]X W" / "[-+]X H [-+]Y W" forms, the first number giving the height; pixels are
-// returned in stored order (the first stored scanline is the top row; no reorientation),
-// channels R G B, linear (float_source), values as OpenImageIO computed them (ToFloat).
+// bytes at most at a time, at most 100 header lines; the resolution line must be the standard
+// "-Y H +X W" (top-down rows, left to right). The seven other forms are refused by name since
+// the session-16 review: OpenImageIO returned them in stored order, i.e. upside down or
+// transposed, without a word. Channels R G B, linear (float_source), values as OpenImageIO
+// computed them (ToFloat).
 #include <algorithm>
 #include <array>
 #include <cmath>
