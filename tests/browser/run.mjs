@@ -40,6 +40,7 @@ import path from 'node:path';
 import zlib from 'node:zlib';
 import { fileURLToPath } from 'node:url';
 import { startServer } from '../../web/serve.mjs';
+import { killChromiumOnExit, stopChromium } from '../../web/tools/chromium.mjs';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const repo = path.resolve(here, '..', '..');
@@ -381,21 +382,22 @@ const browser = spawn(chromium, [
   '--disable-gpu-sandbox', '--no-first-run', '--no-default-browser-check', '--disable-extensions',
   '--disable-background-networking', '--mute-audio', '--log-level=3', `--user-data-dir=${profile}`,
   '--window-size=512,512', pageUrl,
-], { stdio: ['ignore', 'ignore', 'pipe'] });
+], { stdio: ['ignore', 'ignore', 'pipe'], detached: true });  // own group: web/tools/chromium.mjs
+killChromiumOnExit(browser);
 let browserErr = '';
 browser.stderr.on('data', (d) => { browserErr += d; });
 const timer = setTimeout(() => finish('timeout'), timeoutS * 1000);
 const outcome = await finished;
 clearTimeout(timer);
 const browserS = (Date.now() - browserT0) / 1000;
-browser.kill('SIGTERM');
 server.close();
+const browserStopped = stopChromium(browser, profile);
 say(`browser: ${outcome}, ${results.size}/${cases.length} frames in ${browserS.toFixed(1)} s`);
 if (outcome !== 'ok') {
   console.error(browserErr.split('\n').slice(-20).join('\n'));
 }
 await (cppPromise ?? cppAll());
-try { fs.rmSync(profile, { recursive: true, force: true }); } catch { /* best effort */ }
+{ const w = await browserStopped; if (w) say(`warning: ${w}`); }
 
 // ---- PNG decode (8-bit RGB/RGBA, non-interlaced; PNG spec 1.2 filters 0-4) -------------------
 function decodePng(file) {

@@ -7,6 +7,7 @@ import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
 import { startServer } from '../serve.mjs';
+import { killChromiumOnExit, stopChromium } from './chromium.mjs';
 
 const arg = (k, d) => { const i = process.argv.indexOf(`--${k}`); return i > 0 ? process.argv[i + 1] : d; };
 const out = path.resolve(arg('out', 'viewer.png'));
@@ -19,13 +20,14 @@ const url = `http://127.0.0.1:${server.address().port}/web/viewer.html?shot=1&${
 const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'clothfit-shot-'));
 const browser = spawn(arg('chromium', '/usr/bin/chromium'), ['--headless=new', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
   '--no-sandbox', '--no-first-run', '--disable-extensions', '--log-level=3', `--user-data-dir=${profile}`, '--window-size=560,640', url],
-{ stdio: 'ignore' });
+{ stdio: 'ignore', detached: true });  // its own process group: the renderer and GPU children go with it
+killChromiumOnExit(browser);
 const timer = setTimeout(() => done(null), timeoutS * 1000);
 const png = await shot;
 clearTimeout(timer);
-browser.kill('SIGTERM');
+if (png) fs.writeFileSync(out, png);
 server.close();
-fs.rmSync(profile, { recursive: true, force: true });
+const warning = await stopChromium(browser, profile);
+if (warning) console.error(`warning: ${warning}`);
 if (!png) { console.error('no frame before the timeout'); process.exit(1); }
-fs.writeFileSync(out, png);
 console.log(`wrote ${out} (${png.length} bytes) from ${url}`);
