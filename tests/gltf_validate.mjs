@@ -48,7 +48,8 @@ execFileSync(args.clothfit, ['--quiet', 'convert', catalogue, path.join(repo, 't
 
 const list = (dir, re) => fs.readdirSync(dir, { recursive: true })
   .map((f) => path.join(dir, f)).filter((f) => re.test(f) && fs.statSync(f).isFile()).sort();
-const files = [...list(out, /\.(gltf|glb)$/), ...list(path.join(repo, 'datasets', 'scenes'), /\.gltf$/)];
+const scenes = list(path.join(repo, 'datasets', 'scenes'), /\.gltf$/);
+const files = [...list(out, /\.(gltf|glb)$/), ...scenes];
 
 // The validator's own check that it is awake: one converted file with a value out of the
 // extension's schema range must come back with an error.
@@ -85,13 +86,31 @@ let failures = 0;
     }
   }
 }
+{
+  // An extension the validator does not know must fail (UNSUPPORTED_EXTENSION raised above).
+  const any = files.find((f) => f.startsWith(out) && f.endsWith('.gltf'));
+  const g = JSON.parse(fs.readFileSync(any, 'utf8'));
+  g.extensionsUsed = [...(g.extensionsUsed ?? []), 'CLOTHFIT_self_check_unknown'];
+  const bad = path.join(path.dirname(any), 'self-check-unknown-extension.gltf.json');
+  fs.writeFileSync(bad, JSON.stringify(g));
+  const r = await validate(bad);
+  fs.rmSync(bad);
+  if (!r.issues.messages.some((m) => m.severity === 0 && m.code === 'UNSUPPORTED_EXTENSION')) {
+    console.error('FAIL: the validator did not flag an unknown extension as an error (UNSUPPORTED_EXTENSION)');
+    failures++;
+  }
+}
 let infos = 0;
+let images = 0;
 const extensions = new Set();
 const counts = {};
 for (const file of files) {
   const report = await validate(file);
   const is = report.issues;
   for (const e of report.info?.extensionsUsed ?? []) extensions.add(e);
+  // Textures read and decoded: an external image resource with a recognised format.
+  images += (report.info?.resources ?? []).filter((r) => r.pointer?.startsWith('/images/') &&
+    r.storage === 'external' && r.image?.format).length;
   infos += is.numInfos + is.numHints;
   for (const m of is.messages) counts[m.code] = (counts[m.code] ?? 0) + 1;
   if (is.numErrors > 0 || is.numWarnings > 0) {
@@ -105,12 +124,17 @@ for (const file of files) {
 }
 const converted = files.filter((f) => f.startsWith(out)).length;
 console.log(`gltf-validator ${validator.version()}: ${files.length} files (${converted} from convert, ` +
-  `${files.length - converted} scenes), ${failures} with errors or warnings; infos/hints ${infos} ` +
+  `${files.length - converted} scenes, ${images} texture images decoded), ${failures} failure(s); infos/hints ${infos} ` +
   `(${Object.entries(counts).map(([k, v]) => `${k} ${v}`).join(', ') || 'none'}); ` +
   `extensions seen: ${[...extensions].sort().join(', ') || 'none'}`);
 // The check must have seen what it is for: material extensions and textures from convert.
-for (const e of ['KHR_materials_sheen', 'KHR_materials_anisotropy', 'KHR_materials_specular']) {
+for (const e of ['KHR_materials_sheen', 'KHR_materials_anisotropy', 'KHR_materials_specular',
+  'KHR_texture_transform']) {
   if (!extensions.has(e)) { console.error(`FAIL: no converted file uses ${e}`); failures++; }
 }
 if (converted < 10) { console.error(`FAIL: only ${converted} glTF files from convert`); failures++; }
+for (const s of ['drape.gltf', 'sphere.gltf', 'swatch.gltf']) {
+  if (!scenes.some((f) => path.basename(f) === s)) { console.error(`FAIL: no datasets/scenes/${s}`); failures++; }
+}
+if (images < 2) { console.error(`FAIL: only ${images} texture images read and decoded`); failures++; }
 process.exit(failures ? 1 : 0);

@@ -383,7 +383,7 @@ const browser = spawn(chromium, [
   '--disable-background-networking', '--mute-audio', '--log-level=3', `--user-data-dir=${profile}`,
   '--window-size=512,512', pageUrl,
 ], { stdio: ['ignore', 'ignore', 'pipe'], detached: true });  // own group: web/tools/chromium.mjs
-killChromiumOnExit(browser);
+killChromiumOnExit(browser, profile);
 let browserErr = '';
 browser.stderr.on('data', (d) => { browserErr += d; });
 const timer = setTimeout(() => finish('timeout'), timeoutS * 1000);

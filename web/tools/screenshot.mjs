@@ -21,7 +21,7 @@ const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'clothfit-shot-'));
 const browser = spawn(arg('chromium', '/usr/bin/chromium'), ['--headless=new', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
   '--no-sandbox', '--no-first-run', '--disable-extensions', '--log-level=3', `--user-data-dir=${profile}`, '--window-size=560,640', url],
 { stdio: 'ignore', detached: true });  // its own process group: the renderer and GPU children go with it
-killChromiumOnExit(browser);
+killChromiumOnExit(browser, profile);
 const timer = setTimeout(() => done(null), timeoutS * 1000);
 const png = await shot;
 clearTimeout(timer);
