@@ -12,7 +12,7 @@ case "$CASE" in
     "$BIN" --quiet lut --size 128 --out "$TMP/dfg.exr" --sheen-out "$TMP/sheen.exr" || fail "lut exited $?"
     [ -s "$TMP/dfg.exr" ] || fail "no dfg.exr"
     [ -s "$TMP/sheen.exr" ] || fail "no sheen.exr"
-    oiiotool --info -v "$TMP/dfg.exr" | grep -q "clothfit:v_axis" || fail "axis metadata missing"
+    grep -q "clothfit:v_axis" <<< "$(oiiotool --info -v "$TMP/dfg.exr")" || fail "axis metadata missing"
     oiiotool "$TMP/dfg.exr" --ch B -o "$TMP/b.exr" || fail "oiiotool --ch B"
     oiiotool --dumpdata "$TMP/b.exr" > "$TMP/b.txt" || fail "oiiotool --dumpdata"
     # Bilinear lookup of channel B at the stored-table points of cloth-models.md (+-0.01).
@@ -55,90 +55,90 @@ PY
   badargs)
     "$BIN" lut --size 1 --out "$TMP/x.exr" 2>/dev/null && fail "--size 1 accepted"
     err=$("$BIN" --quiet lut --size 8 --out /nonexistent/dir/x.exr 2>&1) && fail "bad --out accepted"
-    echo "$err" | grep -q "/nonexistent/dir" || fail "error does not name the path: $err"
+    grep -q "/nonexistent/dir" <<< "$err" || fail "error does not name the path: $err"
     "$BIN" no-such-command 2>/dev/null && fail "unknown subcommand accepted"
     err=$("$BIN" --quiet bench reference --fabric /nonexistent/f.json 2>&1) && fail "bench reference: missing fabric accepted"
-    echo "$err" | grep -q "/nonexistent/f.json" || fail "bench reference error does not name the file: $err"
+    grep -q "/nonexistent/f.json" <<< "$err" || fail "bench reference error does not name the file: $err"
     "$BIN" stress --evals abc 2>/dev/null && fail "non-numeric --evals accepted"
     "$BIN" lut --out "$TMP/y.exr" --frobnicate 2>/dev/null && fail "unknown flag accepted"
     [ ! -e "$TMP/x.exr" ] || fail "output written despite error"
     err=$("$BIN" --quiet bench fit --widths 64,abc --csv "$TMP/b.csv" 2>&1) && fail "bad --widths accepted"
-    echo "$err" | grep -q -- "--widths: 'abc'" || fail "error does not name --widths: $err"
+    grep -q -- "--widths: 'abc'" <<< "$err" || fail "error does not name --widths: $err"
     err=$("$BIN" --quiet bench fit --starts 4 --csv "$TMP/b.csv" 2>&1) && fail "--starts 4 accepted"
-    echo "$err" | grep -q -- "--starts" || fail "error does not name --starts: $err"
+    grep -q -- "--starts" <<< "$err" || fail "error does not name --starts: $err"
     err=$("$BIN" --quiet fit --fabric x.json --level 3x --out "$TMP/f.json" 2>&1) && fail "--level 3x accepted"
-    echo "$err" | grep -q -- "--level: '3x'" || fail "error does not name --level: $err"
+    grep -q -- "--level: '3x'" <<< "$err" || fail "error does not name --level: $err"
     [ ! -e "$TMP/b.csv" ] || fail "bench wrote a CSV despite bad arguments"
     ;;
   bench)
     out=$("$BIN" bench brdf --benchmark_filter='cloth/filament/' --benchmark_min_time=0.01 2>&1) \
       || fail "bench exited non-zero: $out"
-    echo "$out" | grep -q "brdf/cloth/filament/double" || fail "no double benchmark in: $out"
-    echo "$out" | grep -q "brdf/cloth/filament/jet10" || fail "no jet benchmark in: $out"
+    grep -q "brdf/cloth/filament/double" <<< "$out" || fail "no double benchmark in: $out"
+    grep -q "brdf/cloth/filament/jet10" <<< "$out" || fail "no jet benchmark in: $out"
     ;;
   compare)
     "$BIN" --quiet lut --size 16 --out "$TMP/a.exr" >/dev/null || fail "lut a"
     "$BIN" --quiet lut --size 16 --out "$TMP/b.exr" >/dev/null || fail "lut b"
     "$BIN" --quiet lut --size 8 --out "$TMP/c.exr" >/dev/null || fail "lut c"
     out=$("$BIN" compare "$TMP/a.exr" "$TMP/b.exr" --json --hdr-range -4,2) || fail "compare exited $?"
-    echo "$out" | grep -q '"inf"' || fail "identical images: PSNR not reported as inf: $out"
+    grep -q '"inf"' <<< "$out" || fail "identical images: PSNR not reported as inf: $out"
     err=$("$BIN" compare "$TMP/a.exr" "$TMP/c.exr" 2>&1) && fail "size mismatch accepted"
-    echo "$err" | grep -q "c.exr" || fail "size mismatch error does not name the file: $err"
+    grep -q "c.exr" <<< "$err" || fail "size mismatch error does not name the file: $err"
     "$BIN" compare "$TMP/a.exr" "$TMP/missing.exr" 2>/dev/null && fail "missing file accepted"
     ;;
   fitbad)
     printf '{"schema":"clothfit.preset","version":1,"model":"cloth","parameters":{"roughness":2}}' > "$TMP/m.json"
     err=$("$BIN" render-preview --scene "$(dirname "$0")/../datasets/scenes/sphere.json" --material "$TMP/m.json" --out "$TMP/p.png" 2>&1) \
       && fail "out-of-range roughness accepted"
-    echo "$err" | grep -q "parameters.roughness" || fail "error does not name the field: $err"
+    grep -q "parameters.roughness" <<< "$err" || fail "error does not name the field: $err"
     printf '{"schema":"clothfit.preset","version":1,"model":"cloth","parameters":{}}' > "$TMP/ok.json"
     err=$("$BIN" render-preview --scene "$(dirname "$0")/../datasets/scenes/sphere.json" --material "$TMP/ok.json" --model standard --out "$TMP/p.png" 2>&1) \
       && fail "model mismatch accepted"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$(dirname "$0")/../datasets/scenes/sphere.json" --out "$TMP/f.json" 2>&1) \
       && fail "missing reference accepted"
-    echo "$err" | grep -q "none.exr" || fail "fit error does not name the file: $err"
+    grep -q "none.exr" <<< "$err" || fail "fit error does not name the file: $err"
     [ ! -e "$TMP/f.json" ] || fail "preset written despite error"
     # A glTF passed as --scenes is named as a glTF, not reported as an unknown card field.
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$(dirname "$0")/../datasets/scenes/sphere.gltf" --out "$TMP/f.json" 2>&1) \
       && fail "glTF accepted as a scene card"
-    echo "$err" | grep -q "sphere.gltf: this is a glTF file, not a clothfit scene card" || fail "glTF as --scenes: $err"
+    grep -q "sphere.gltf: this is a glTF file, not a clothfit scene card" <<< "$err" || fail "glTF as --scenes: $err"
     # fit --batch (s6-demo): a missing list is named; other options are refused; a failing job
     # makes the batch fail with its status, after the "batch job N: exit S" line.
     err=$("$BIN" --quiet fit --batch "$TMP/nolist.txt" 2>&1) && fail "missing batch list accepted"
-    echo "$err" | grep -q "nolist.txt" || fail "batch error does not name the list: $err"
+    grep -q "nolist.txt" <<< "$err" || fail "batch error does not name the list: $err"
     printf -- '--model standard\n' > "$TMP/list.txt"
     err=$("$BIN" --quiet fit --batch "$TMP/list.txt" --model cloth 2>&1) && fail "--batch with other options accepted"
     printf -- '# comment\n--references %s --scenes %s --out %s\n' "$TMP/none.exr" \
       "$(dirname "$0")/../datasets/scenes/sphere.json" "$TMP/b.json" > "$TMP/list.txt"
     out=$("$BIN" --quiet fit --batch "$TMP/list.txt" 2>&1) && fail "failing batch job accepted"
-    echo "$out" | grep -q "fit: batch job 1: exit 1" || fail "batch status line missing: $out"
-    echo "$out" | grep -q "none.exr" || fail "batch job error does not name the file: $out"
+    grep -q "fit: batch job 1: exit 1" <<< "$out" || fail "batch status line missing: $out"
+    grep -q "none.exr" <<< "$out" || fail "batch job error does not name the file: $out"
     err=$("$BIN" --quiet fit --model standard 2>&1) && fail "fit without --out accepted"
-    echo "$err" | grep -q -- "--out is required" || fail "missing --out not named: $err"
+    grep -q -- "--out is required" <<< "$err" || fail "missing --out not named: $err"
     # --yarn-lobe farfield (session 11 measurement): woven only, with --exact-ibl and an irawan
     # --fabric; refused before any reference is read, nothing written.
     D="$(dirname "$0")/../datasets"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
       --yarn-lobe farfield --weave-maps none --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe without --exact-ibl accepted"
-    echo "$err" | grep -q -- "--yarn-lobe farfield: needs --exact-ibl" || fail "--yarn-lobe without --exact-ibl: $err"
+    grep -q -- "--yarn-lobe farfield: needs --exact-ibl" <<< "$err" || fail "--yarn-lobe without --exact-ibl: $err"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model standard \
       --yarn-lobe farfield --exact-ibl 16 --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe on standard accepted"
-    echo "$err" | grep -q -- "--yarn-lobe: only for --model woven" || fail "--yarn-lobe on standard: $err"
+    grep -q -- "--yarn-lobe: only for --model woven" <<< "$err" || fail "--yarn-lobe on standard: $err"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
       --yarn-lobe farfield --exact-ibl 16 --weave-maps none --fabric "$D/fabrics/velvet.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe on velvet accepted"
-    echo "$err" | grep -q "velvet.json: model 'sadeghi' has no yarns" || fail "--yarn-lobe on velvet: $err"
+    grep -q "velvet.json: model 'sadeghi' has no yarns" <<< "$err" || fail "--yarn-lobe on velvet: $err"
     [ ! -e "$TMP/y.json" ] || fail "preset written despite a --yarn-lobe error"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
       --yarn-lobe quadrature --ao --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe with --ao accepted"
-    echo "$err" | grep -q -- "not with --sheen-tilt, --ao or --indirect" || fail "--yarn-lobe with --ao: $err"
+    grep -q -- "not with --sheen-tilt, --ao or --indirect" <<< "$err" || fail "--yarn-lobe with --ao: $err"
     # --yarn-lobe preset (session 12; the default "auto" for irawan fabrics): refused on a fabric
     # without yarns and with what the lobe has no path for, nothing written.
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
       --yarn-lobe preset --fabric "$D/fabrics/velvet.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe preset on velvet accepted"
-    echo "$err" | grep -q "velvet.json: model 'sadeghi' has no yarns" || fail "--yarn-lobe preset on velvet: $err"
+    grep -q "velvet.json: model 'sadeghi' has no yarns" <<< "$err" || fail "--yarn-lobe preset on velvet: $err"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
       --yarn-lobe preset --woven-ibl fis --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe preset with FIS accepted"
-    echo "$err" | grep -q -- "--yarn-lobe preset: not with" || fail "--yarn-lobe preset with FIS: $err"
+    grep -q -- "--yarn-lobe preset: not with" <<< "$err" || fail "--yarn-lobe preset with FIS: $err"
     [ ! -e "$TMP/y.json" ] || fail "preset written despite a --yarn-lobe preset error"
     # --yarn-lobe auto (the default) chooses none where the lobe has no path (--sheen-tilt,
     # --woven-ibl fis, a fabric without yarns; since session 13 the visibility flags keep the
@@ -149,13 +149,13 @@ PY
       # shellcheck disable=SC2086
       err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
         $x --fabric "$fab" --out "$TMP/y.json" 2>&1) && fail "fit without references accepted ($extra)"
-      echo "$err" | grep -q -- "yarn-lobe" && fail "--yarn-lobe auto refused with $extra: $err"
-      echo "$err" | grep -q "none.exr" || fail "auto with $extra did not reach the references: $err"
+      grep -q -- "yarn-lobe" <<< "$err" && fail "--yarn-lobe auto refused with $extra: $err"
+      grep -q "none.exr" <<< "$err" || fail "auto with $extra did not reach the references: $err"
     done
     # a preset fitted with --yarn-lobe is not evaluated as an ordinary woven preset
     printf '{"schema":"clothfit.preset","version":1,"model":"woven","parameters":{},"fit":{"yarn_lobe":"x","scenes":[]}}' > "$TMP/yl.json"
     err=$("$BIN" --quiet evaluate --preset "$TMP/yl.json" 2>&1) && fail "evaluate of a --yarn-lobe preset accepted"
-    echo "$err" | grep -q "fit.yarn_lobe" || fail "evaluate of a --yarn-lobe preset: $err"
+    grep -q "fit.yarn_lobe" <<< "$err" || fail "evaluate of a --yarn-lobe preset: $err"
     ;;
   report)
     # Small EXRs from the lut command stand in for references and previews (16x16, RGB).
@@ -172,9 +172,9 @@ PY
     preset "$TMP/c.json" cloth prev.exr
     preset "$TMP/s.json" standard prev_std.exr
     out=$("$BIN" --quiet report "$TMP/c.json" "$TMP/s.json" --out "$TMP/rep") || fail "report exited $?: $out"
-    echo "$out" | grep -q "^report: /.*/rep/index.html$" || fail "no report path in: $out"
-    echo "$out" | grep -q "^demo .*noise floor" || fail "no noise-floor row in: $out"
-    echo "$out" | grep -q "^demo .*standard" || fail "no standard row in: $out"
+    grep -q "^report: /.*/rep/index.html$" <<< "$out" || fail "no report path in: $out"
+    grep -q "^demo .*noise floor" <<< "$out" || fail "no noise-floor row in: $out"
+    grep -q "^demo .*standard" <<< "$out" || fail "no standard row in: $out"
     for f in index.html demo.html report.json report.csv; do [ -s "$TMP/rep/$f" ] || fail "no $f"; done
     [ "$(grep -o 'data:image/png;base64,' "$TMP/rep/demo.html" | wc -l)" -eq 6 ] || fail "expected 6 images"
     python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert j['fabrics'][0]['scenes'][0]['models']['standard']['psnr_display']=='inf'" \
@@ -182,16 +182,16 @@ PY
     # Bad inputs: missing preview, size mismatch, corrupt EXR, missing preset -> exit 1 naming the file.
     preset "$TMP/bad.json" cloth missing.exr
     err=$("$BIN" --quiet report "$TMP/bad.json" --out "$TMP/rep2" 2>&1) && fail "missing preview accepted"
-    echo "$err" | grep -q "missing.exr" || fail "error does not name the missing file: $err"
+    grep -q "missing.exr" <<< "$err" || fail "error does not name the missing file: $err"
     preset "$TMP/bad.json" cloth small.exr
     err=$("$BIN" --quiet report "$TMP/bad.json" --out "$TMP/rep2" 2>&1) && fail "size mismatch accepted"
-    echo "$err" | grep -q "small.exr" || fail "size mismatch error does not name the file: $err"
+    grep -q "small.exr" <<< "$err" || fail "size mismatch error does not name the file: $err"
     printf 'v/1\001 this is not an EXR' > "$TMP/corrupt.exr"
     preset "$TMP/bad.json" cloth corrupt.exr
     err=$("$BIN" --quiet report "$TMP/bad.json" --out "$TMP/rep2" 2>&1) && fail "corrupt EXR accepted"
-    echo "$err" | grep -q "corrupt.exr" || fail "corrupt EXR error does not name the file: $err"
+    grep -q "corrupt.exr" <<< "$err" || fail "corrupt EXR error does not name the file: $err"
     err=$("$BIN" --quiet report "$TMP/nope.json" --out "$TMP/rep2" 2>&1) && fail "missing preset accepted"
-    echo "$err" | grep -q "nope.json" || fail "missing preset error does not name the file: $err"
+    grep -q "nope.json" <<< "$err" || fail "missing preset error does not name the file: $err"
     [ ! -e "$TMP/rep2" ] || fail "report written despite errors"
     # Convergence badge (issue 15): a converged fit has none; a capped one (no status field:
     # termination NO_CONVERGENCE) and one flagged at a bound (status "at bound") each have one.
@@ -210,27 +210,27 @@ PY
     out=$("$BIN" --quiet convert "$TMP/cat" --to preset,threejs,gltf,filament --out "$TMP/out" -j 2 2>&1)
     rc=$?
     [ $rc -eq 2 ] || fail "convert with broken entries exited $rc (want 2): $out"
-    echo "$out" | grep -q "merl_truncated.binary" || fail "summary does not name the broken file: $out"
+    grep -q "merl_truncated.binary" <<< "$out" || fail "summary does not name the broken file: $out"
     [ -s "$TMP/out/convert-log.json" ] || fail "no JSON log"
     ls "$TMP/out"/*.mat >/dev/null 2>&1 || fail "no Filament .mat written"
     rm -rf "$TMP/cat/broken"
     out=$("$BIN" --quiet convert "$TMP/cat" --to preset,threejs,gltf,filament --out "$TMP/out" 2>&1) \
       || fail "clean re-run exited $?: $out"
-    echo "$out" | grep -q "| converted | 0 |" || fail "resume converted again: $out"
+    grep -q "| converted | 0 |" <<< "$out" || fail "resume converted again: $out"
     printf '%s\n' "presets/preset_0000.json" "# a comment" "gltf" > "$TMP/cat/manifest.txt"
     "$BIN" --quiet convert "$TMP/cat/manifest.txt" --out "$TMP/m" --shard 1/2 >/dev/null || fail "manifest + shard"
     "$BIN" convert "$TMP/cat" --out "$TMP/x" --to obj 2>/dev/null && fail "unknown target accepted"
     "$BIN" convert "$TMP/cat" --out "$TMP/x" --shard 2/2 2>/dev/null && fail "bad shard accepted"
     "$BIN" convert "$TMP/nothing" --out "$TMP/x" 2>/dev/null && fail "missing input accepted"
     out=$("$BIN" --quiet bench convert --catalogue "$TMP/cat" -j 1 2>&1) || fail "bench convert: $out"
-    echo "$out" | grep -q "materials/s" || fail "bench convert prints no rate: $out"
+    grep -q "materials/s" <<< "$out" || fail "bench convert prints no rate: $out"
     # A woven preset has no glTF form: refused (exit 2) naming the model; preset-maps carries it.
     mkdir -p "$TMP/wv"
     printf '{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {}}\n' \
       > "$TMP/wv/w.json"
     out=$("$BIN" --quiet convert "$TMP/wv" --to gltf --out "$TMP/wvo" 2>&1)
     [ $? -eq 2 ] || fail "woven preset to glTF was not refused: $out"
-    echo "$out" | grep -q "w.json: model: 'woven'" || fail "woven refusal does not name the model: $out"
+    grep -q "w.json: model: 'woven'" <<< "$out" || fail "woven refusal does not name the model: $out"
     "$BIN" --quiet convert "$TMP/wv" --to preset-maps --out "$TMP/wvo" >/dev/null \
       || fail "preset-maps on a woven preset failed"
     grep -q '"model": "woven"' "$TMP/wvo/w.maps.preset.json" || fail "preset-maps did not write the woven preset"
@@ -252,7 +252,7 @@ PY
     diff "$TMP/ls1" "$TMP/ls2" > /dev/null || fail "the shards' cache entries differ from one run's"
     # Same pixels (the files differ only in the capDate attribute, the time of writing).
     for f in $(cat "$TMP/ls1"); do
-      oiiotool --fail 0 --diff "$TMP/one/$f" "$TMP/two/$f" | grep -q '^PASS' || fail "$f differs between runs"
+      grep -q '^PASS' <<< "$(oiiotool --fail 0 --diff "$TMP/one/$f" "$TMP/two/$f")" || fail "$f differs between runs"
     done
     # A different target is a different cache entry; a missing scene target is an error.
     refs "$TMP/one" "0.02" 1 0/1 > "$TMP/c.txt" || fail "target 0.02 exited $?"

@@ -29,10 +29,10 @@ FAB=$SRC/datasets/fabrics/canvas.json
 # Errors first.
 err=$("$BIN" --quiet fit --fabric "$FAB" --references "$TMP/ref.exr" --model woven --out "$TMP/x.json" 2>&1) \
   && fail "--fabric --references without --scenes accepted"
-echo "$err" | grep -q -- "--fabric --references needs --scenes" || fail "unclear error: $err"
+grep -q -- "--fabric --references needs --scenes" <<< "$err" || fail "unclear error: $err"
 err=$("$BIN" --quiet fit --fabric "$FAB" --scenes "$TMP/card.json" --references2 "$TMP/ref.exr" --out "$TMP/x.json" 2>&1) \
   && fail "--references2 without --references accepted"
-echo "$err" | grep -q -- "--references2 needs --references" || fail "unclear error: $err"
+grep -q -- "--references2 needs --references" <<< "$err" || fail "unclear error: $err"
 
 # The woven refit on the given card and reference, maps from the fabric.
 mkdir -p "$TMP/a"
@@ -64,7 +64,7 @@ json.dump(p, open(sys.argv[1], "w"))
 PY
 "$BIN" --quiet render-preview --scene "$TMP/card.json" --material "$TMP/else/where/b/w.json" \
   --out "$TMP/after.exr" > /dev/null || fail "preview after the move exited $?"
-oiiotool --fail 0 --diff "$TMP/before.exr" "$TMP/after.exr" | grep -q '^PASS' \
+grep -q '^PASS' <<< "$(oiiotool --fail 0 --diff "$TMP/before.exr" "$TMP/after.exr")" \
   || fail "the moved preset previews other pixels"
 "$BIN" --quiet evaluate --json --preset "$TMP/else/where/b/w.json" > "$TMP/ev.json" \
   || fail "evaluate of the moved preset exited $?"
@@ -84,6 +84,6 @@ json.dump(p, open(sys.argv[2], "w"))
 PY
 err=$("$BIN" --quiet render-preview --scene "$TMP/card.json" --material "$TMP/else/where/b/bad.json" \
   --out "$TMP/bad.exr" 2>&1) && fail "escaping uri accepted"
-echo "$err" | grep -q "bad.json: field weave_maps.uri: .* escapes the preset's directory" \
+grep -q "bad.json: field weave_maps.uri: .* escapes the preset's directory" <<< "$err" \
   || fail "unclear error: $err"
 echo "PASS: s7_fit_fabric_scenes"

@@ -8,7 +8,7 @@
 for n in 0 17 2.5 x; do
   err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --model woven \
         --map-anisotropy "$n" --out "$TMP/f.json" 2>&1) && fail "fit --map-anisotropy $n accepted"
-  echo "$err" | grep -q -- "--map-anisotropy" || fail "fit error does not name --map-anisotropy: $err"
+  grep -q -- "--map-anisotropy" <<< "$err" || fail "fit error does not name --map-anisotropy: $err"
   [ ! -e "$TMP/f.json" ] || fail "preset written despite --map-anisotropy $n"
 done
 
@@ -19,19 +19,19 @@ for v in 0 17 2.5 16.0 '"x"'; do
 JSON
   err=$("$BIN" --quiet render-preview --scene "$SCENE" --material "$TMP/bad.json" \
         --out "$TMP/p.png" 2>&1) && fail "render-preview accepted weave_maps.anisotropy $v"
-  echo "$err" | grep -q "bad.json" || fail "render-preview error does not name the file ($v): $err"
-  echo "$err" | grep -q "weave_maps.anisotropy" || fail "render-preview error does not name the field ($v): $err"
+  grep -q "bad.json" <<< "$err" || fail "render-preview error does not name the file ($v): $err"
+  grep -q "weave_maps.anisotropy" <<< "$err" || fail "render-preview error does not name the field ($v): $err"
   err=$("$BIN" --quiet evaluate --scenes "$SCENE" --preset "$TMP/bad.json" \
         --references "$TMP/none.exr" 2>&1) && fail "evaluate accepted weave_maps.anisotropy $v"
-  echo "$err" | grep -q "weave_maps.anisotropy" || fail "evaluate error does not name the field ($v): $err"
+  grep -q "weave_maps.anisotropy" <<< "$err" || fail "evaluate error does not name the field ($v): $err"
 done
 
 err=$("$BIN" --quiet render-preview --scene "$SCENE" --material "$TMP/bad.json" --out "$TMP/p.png" \
       --map-aniso-rule nvidia 2>&1) && fail "render-preview --map-aniso-rule nvidia accepted"
-echo "$err" | grep -q -- "--map-aniso-rule" || fail "error does not name --map-aniso-rule: $err"
+grep -q -- "--map-aniso-rule" <<< "$err" || fail "error does not name --map-aniso-rule: $err"
 # --map-anisotropy on a fit without weave maps would be ignored: an error naming it.
 err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --model standard \
       --map-anisotropy 4 --out "$TMP/f.json" 2>&1) && fail "fit --model standard --map-anisotropy 4 accepted"
-echo "$err" | grep -q -- "--map-anisotropy" || fail "error does not name --map-anisotropy: $err"
+grep -q -- "--map-anisotropy" <<< "$err" || fail "error does not name --map-anisotropy: $err"
 [ ! -e "$TMP/f.json" ] || fail "preset written despite --map-anisotropy without maps"
 echo "s9_aniso_cli: ok"

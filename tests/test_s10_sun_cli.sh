@@ -9,7 +9,7 @@
 check() {  # check <text the error must contain> <args...>
   local name=$1; shift
   err=$("$BIN" --quiet "$@" 2>&1) && fail "$* accepted"
-  echo "$err" | grep -q -- "$name" || fail "error of '$*' does not name $name: $err"
+  grep -q -- "$name" <<< "$err" || fail "error of '$*' does not name $name: $err"
 }
 cat > "$TMP/std.json" <<'J'
 {"schema": "clothfit.preset", "version": 1, "model": "standard", "parameters": {"base_color": [0.5, 0.5, 0.5], "roughness": 0.6, "metalness": 0}}

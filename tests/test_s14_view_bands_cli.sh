@@ -21,8 +21,8 @@ has_views() {  # has_views <preset> -> prints the cosines' count (0 without)
 }
 fit default
 [ "$(has_views "$TMP/default.json")" = 3 ] || fail "the default fit wrote no view bands"
-oiiotool --info -v "$TMP/default.weave.exr" | grep -q "view2.kd.B" || fail "the EXR has no view2.kd.B channel"
-oiiotool --info -v "$TMP/default.weave.exr" | grep -q "clothfit:view_cosines" || fail "the EXR has no clothfit:view_cosines"
+grep -q "view2.kd.B" <<< "$(oiiotool --info -v "$TMP/default.weave.exr")" || fail "the EXR has no view2.kd.B channel"
+grep -q "clothfit:view_cosines" <<< "$(oiiotool --info -v "$TMP/default.weave.exr")" || fail "the EXR has no clothfit:view_cosines"
 fit off --no-weave-map-views
 [ "$(has_views "$TMP/off.json")" = 0 ] || fail "--no-weave-map-views wrote view bands"
 fit relief --weave-maps relief
@@ -33,6 +33,6 @@ python3 -c 'import json,sys; s=json.load(open(sys.argv[1]))["weave_maps"]["sourc
   "$TMP/band.json" || fail "--weave-map-view-band 2 is not recorded as the grazing band"
 err=$("$BIN" --quiet fit --fabric "$FABRIC" --references "$TMP/ref.exr" --scenes "$SCENE" \
   --model woven --weave-map-view-band 3 --out "$TMP/bad.json" 2>&1) && fail "--weave-map-view-band 3 accepted"
-echo "$err" | grep -q -- "--weave-map-view-band" || fail "the error does not name --weave-map-view-band: $err"
+grep -q -- "--weave-map-view-band" <<< "$err" || fail "the error does not name --weave-map-view-band: $err"
 [ ! -e "$TMP/bad.json" ] || fail "a preset was written for a bad option"
 echo "ok"

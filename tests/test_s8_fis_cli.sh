@@ -6,23 +6,23 @@
 
 err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --ibl-engine vulkan \
       --out "$TMP/f.json" 2>&1) && fail "fit --ibl-engine vulkan accepted"
-echo "$err" | grep -q -- "--ibl-engine" || fail "fit error does not name --ibl-engine: $err"
+grep -q -- "--ibl-engine" <<< "$err" || fail "fit error does not name --ibl-engine: $err"
 [ ! -e "$TMP/f.json" ] || fail "preset written despite a bad --ibl-engine"
 
 err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --model woven \
       --woven-ibl exact --out "$TMP/f.json" 2>&1) && fail "fit --woven-ibl exact accepted"
-echo "$err" | grep -q -- "--woven-ibl" || fail "fit error does not name --woven-ibl: $err"
+grep -q -- "--woven-ibl" <<< "$err" || fail "fit error does not name --woven-ibl: $err"
 
 err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --model woven \
       --fis-taps 0 --out "$TMP/f.json" 2>&1) && fail "fit --fis-taps 0 accepted"
-echo "$err" | grep -q -- "--fis-taps" || fail "fit error does not name --fis-taps: $err"
+grep -q -- "--fis-taps" <<< "$err" || fail "fit error does not name --fis-taps: $err"
 
 # FIS exists on the three.js engine only: asking for it on Filament's is an error (before any
 # reference is read).
 err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" --model woven \
       --ibl-engine filament --woven-ibl fis --out "$TMP/f.json" 2>&1) \
   && fail "fit --woven-ibl fis --ibl-engine filament accepted"
-echo "$err" | grep -q "three.js IBL engine" || fail "fis on filament: $err"
+grep -q "three.js IBL engine" <<< "$err" || fail "fis on filament: $err"
 [ ! -e "$TMP/f.json" ] || fail "preset written despite an error"
 
 # Options that would be ignored are errors (session 9): FIS options on another model or
@@ -32,23 +32,23 @@ for args in "--model standard --woven-ibl fis" "--model standard --fis-taps 8" \
   # shellcheck disable=SC2086
   err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$SCENE" $args \
         --out "$TMP/f.json" 2>&1) && fail "fit $args accepted"
-  echo "$err" | grep -q -- "only" || fail "fit $args: $err"
+  grep -q -- "only" <<< "$err" || fail "fit $args: $err"
   [ ! -e "$TMP/f.json" ] || fail "preset written despite fit $args"
 done
 
 err=$("$BIN" --quiet evaluate --preset "$TMP/none.json" --ibl-engine metal 2>&1) \
   && fail "evaluate --ibl-engine metal accepted"
-echo "$err" | grep -q -- "--ibl-engine" || fail "evaluate error does not name --ibl-engine: $err"
+grep -q -- "--ibl-engine" <<< "$err" || fail "evaluate error does not name --ibl-engine: $err"
 
 printf '{"schema":"clothfit.preset","version":1,"model":"woven","parameters":{},"woven":{"ibl":"fis","fis_taps":100}}' > "$TMP/w.json"
 err=$("$BIN" render-preview --scene "$SCENE" --material "$TMP/w.json" --out "$TMP/p.png" 2>&1) \
   && fail "fis_taps 100 accepted"
-echo "$err" | grep -q "woven.fis_taps" || fail "error does not name woven.fis_taps: $err"
-echo "$err" | grep -q "w.json" || fail "error does not name the file: $err"
+grep -q "woven.fis_taps" <<< "$err" || fail "error does not name woven.fis_taps: $err"
+grep -q "w.json" <<< "$err" || fail "error does not name the file: $err"
 printf '{"schema":"clothfit.preset","version":1,"model":"woven","parameters":{},"woven":{"ibl":"fast"}}' > "$TMP/w.json"
 err=$("$BIN" render-preview --scene "$SCENE" --material "$TMP/w.json" --out "$TMP/p.png" 2>&1) \
   && fail "ibl fast accepted"
-echo "$err" | grep -q "woven.ibl" || fail "error does not name woven.ibl: $err"
+grep -q "woven.ibl" <<< "$err" || fail "error does not name woven.ibl: $err"
 # The fit's sampled caches carry the FIS table (review s8: fit/image_fit.cpp Subset copies
 # yarn_radiance and geometryRoughness; a dropped table would silently fall back to the split
 # sum): `evaluate` of a FIS preset against render-preview's FIS frame of the same preset is
@@ -73,5 +73,5 @@ python3 -c 'import json,sys; j=json.loads(sys.argv[1]); assert j["woven_ibl"]=="
 # On Filament's engine the FIS preset is evaluated with the split sum, and evaluate says so.
 err=$("$BIN" evaluate --preset "$TMP/fis.json" --references "$TMP/fis.exr" --scenes "$TMP/small.json" \
       --ibl-engine filament --stride 1 --level 0 --json 2>&1 >/dev/null) || fail "evaluate on filament: $err"
-echo "$err" | grep -q "split sum" || fail "evaluate on filament does not say FIS is off: $err"
+grep -q "split sum" <<< "$err" || fail "evaluate on filament does not say FIS is off: $err"
 echo "PASS"

@@ -8,7 +8,7 @@
 check() {  # check <option named in the error> <args...>
   local name=$1; shift
   err=$("$BIN" --quiet "$@" 2>&1) && fail "$* accepted"
-  echo "$err" | grep -q -- "$name" || fail "error of '$*' does not name $name: $err"
+  grep -q -- "$name" <<< "$err" || fail "error of '$*' does not name $name: $err"
 }
 for cmd in fit evaluate; do
   if [ $cmd = fit ]; then base=(fit --references "$TMP/none.exr" --scenes "$SCENE" --out "$TMP/f.json")
@@ -49,8 +49,8 @@ printf '{"schema":"clothfit.preset","version":1,"model":"standard","parameters":
 "$BIN" --quiet render-preview --scene "$TMP/lm.json" --material "$TMP/std.json" --out "$TMP/lm.png"   --light-map-out "$TMP/lm.exr" > /dev/null 2>&1 || fail "render-preview --light-map-out failed"
 [ -s "$TMP/lm.exr" ] || fail "no light map written"
 if command -v oiiotool > /dev/null; then
-  oiiotool --info -v "$TMP/lm.exr" | grep -q "clothfit:uv_box" || fail "light map without its uv box"
-  oiiotool --info "$TMP/lm.exr" | grep -Eq "16 x +16," || fail "light map is not 16 x 16"
+  grep -q "clothfit:uv_box" <<< "$(oiiotool --info -v "$TMP/lm.exr")" || fail "light map without its uv box"
+  grep -Eq "16 x +16," <<< "$(oiiotool --info "$TMP/lm.exr")" || fail "light map is not 16 x 16"
 fi
 check -- --light-map-out render-preview --scene "$SCENE" --material "$TMP/std.json" --out "$TMP/x.png"   --light-map-out "$TMP/x.exr"
 check -- --light-map-out render-preview --scene "$TMP/lm.json" --material "$TMP/std.json" --out "$TMP/x.png"   --light-map-out "$TMP/x.exr" --no-card-visibility
