@@ -51,8 +51,7 @@ const list = (dir, re) => fs.readdirSync(dir, { recursive: true })
 const scenes = list(path.join(repo, 'datasets', 'scenes'), /\.gltf$/);
 const files = [...list(out, /\.(gltf|glb)$/), ...scenes];
 
-// The validator's own check that it is awake: one converted file with a value out of the
-// extension's schema range must come back with an error.
+// One file through the validator, its external resources (buffers, images) read from disk.
 async function validate(file) {
   const dir = path.dirname(file);
   return validator.validateBytes(new Uint8Array(fs.readFileSync(file)), {
@@ -68,38 +67,28 @@ async function validate(file) {
 }
 
 let failures = 0;
-{
-  const sheen = files.find((f) => f.startsWith(out) && /KHR_materials_sheen/.test(fs.readFileSync(f, 'utf8')));
-  if (!sheen) {
-    console.error('FAIL: no converted glTF with KHR_materials_sheen for the self-check');
-    failures++;
-  } else {
-    const g = JSON.parse(fs.readFileSync(sheen, 'utf8'));
-    g.materials[0].extensions.KHR_materials_sheen.sheenRoughnessFactor = 2.0;  // schema: [0, 1]
-    const bad = path.join(path.dirname(sheen), 'self-check-out-of-range.gltf.json');
-    fs.writeFileSync(bad, JSON.stringify(g));
-    const r = await validate(bad);
-    fs.rmSync(bad);
-    if (!r.issues.messages.some((m) => m.severity === 0 && m.code === 'VALUE_NOT_IN_RANGE')) {
-      console.error('FAIL: the validator did not flag sheenRoughnessFactor 2.0 (VALUE_NOT_IN_RANGE)');
-      failures++;
-    }
-  }
-}
-{
-  // An extension the validator does not know must fail (UNSUPPORTED_EXTENSION raised above).
-  const any = files.find((f) => f.startsWith(out) && f.endsWith('.gltf'));
-  const g = JSON.parse(fs.readFileSync(any, 'utf8'));
-  g.extensionsUsed = [...(g.extensionsUsed ?? []), 'CLOTHFIT_self_check_unknown'];
-  const bad = path.join(path.dirname(any), 'self-check-unknown-extension.gltf.json');
+// The validator's own checks that it is awake: a converted file, mutated, must come back with
+// an error of the given code.
+async function selfCheck(file, mutate, code, what) {
+  if (!file) { console.error(`FAIL: no converted glTF for the self-check (${what})`); failures++; return; }
+  const g = JSON.parse(fs.readFileSync(file, 'utf8'));
+  mutate(g);
+  const bad = path.join(path.dirname(file), 'self-check.gltf.json');
   fs.writeFileSync(bad, JSON.stringify(g));
   const r = await validate(bad);
   fs.rmSync(bad);
-  if (!r.issues.messages.some((m) => m.severity === 0 && m.code === 'UNSUPPORTED_EXTENSION')) {
-    console.error('FAIL: the validator did not flag an unknown extension as an error (UNSUPPORTED_EXTENSION)');
+  if (!r.issues.messages.some((m) => m.severity === 0 && m.code === code)) {
+    console.error(`FAIL: the validator did not flag ${what} as an error (${code})`);
     failures++;
   }
 }
+const converted = files.filter((f) => f.startsWith(out));
+await selfCheck(converted.find((f) => /KHR_materials_sheen/.test(fs.readFileSync(f, 'utf8'))),
+  (g) => { g.materials[0].extensions.KHR_materials_sheen.sheenRoughnessFactor = 2.0; },  // schema: [0, 1]
+  'VALUE_NOT_IN_RANGE', 'sheenRoughnessFactor 2.0');
+await selfCheck(converted.find((f) => f.endsWith('.gltf')),  // UNSUPPORTED_EXTENSION raised above
+  (g) => { g.extensionsUsed = [...(g.extensionsUsed ?? []), 'CLOTHFIT_self_check_unknown']; },
+  'UNSUPPORTED_EXTENSION', 'an unknown extension');
 let infos = 0;
 let images = 0;
 const extensions = new Set();
@@ -122,9 +111,8 @@ for (const file of files) {
     }
   }
 }
-const converted = files.filter((f) => f.startsWith(out)).length;
-console.log(`gltf-validator ${validator.version()}: ${files.length} files (${converted} from convert, ` +
-  `${files.length - converted} scenes, ${images} texture images decoded), ${failures} failure(s); infos/hints ${infos} ` +
+console.log(`gltf-validator ${validator.version()}: ${files.length} files (${converted.length} from convert, ` +
+  `${files.length - converted.length} scenes, ${images} texture images decoded), ${failures} failure(s); infos/hints ${infos} ` +
   `(${Object.entries(counts).map(([k, v]) => `${k} ${v}`).join(', ') || 'none'}); ` +
   `extensions seen: ${[...extensions].sort().join(', ') || 'none'}`);
 // The check must have seen what it is for: material extensions and textures from convert.
@@ -132,7 +120,7 @@ for (const e of ['KHR_materials_sheen', 'KHR_materials_anisotropy', 'KHR_materia
   'KHR_texture_transform']) {
   if (!extensions.has(e)) { console.error(`FAIL: no converted file uses ${e}`); failures++; }
 }
-if (converted < 10) { console.error(`FAIL: only ${converted} glTF files from convert`); failures++; }
+if (converted.length < 10) { console.error(`FAIL: only ${converted.length} glTF files from convert`); failures++; }
 for (const s of ['drape.gltf', 'sphere.gltf', 'swatch.gltf']) {
   if (!scenes.some((f) => path.basename(f) === s)) { console.error(`FAIL: no datasets/scenes/${s}`); failures++; }
 }
