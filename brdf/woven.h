@@ -1,7 +1,8 @@
 // brdf/woven.h: the real-time woven-cloth material (issue 12). Yarn specular as two
 // anisotropic GGX lobes aligned with the warp and weft yarns, under a "phase Fresnel" that
 // carries the yarns' forward scattering; the cloth sheen lobe (Charlie + Neubelt) for fuzz;
-// Lambert diffuse; sheen layered over everything by albedo scaling (KHR_materials_sheen).
+// a rough diffuse (Fujii's improved Oren-Nayar; Lambert at diffuse_roughness 0, the default);
+// sheen layered over everything by albedo scaling (KHR_materials_sheen).
 // Not an exact MeshPhysicalMaterial (Fp and the second lobe): three.js draws it as a web/
 // material. Design and the BRDF-space measurements: docs/fitting.md, "woven".
 //
@@ -26,7 +27,14 @@
 //          ks = `specular_color`, m = `warp_share` x WeaveSample.warp (the weft weight is
 //          (1 - warp_share) x WeaveSample.weft), tints from Options (1 = uniform)
 //   f_s  = sheen (x) D_Charlie(r_s^2, NoH) V_Neubelt(NoV, NoL)             (= cloth::SheenDV)
-//   f_d  = base (x) kd_ratio / pi                                          (Lambert)
+//   f_d  = base (x) kd_ratio / pi x On(v, l)                  (Fujii 2012 "FON", session 19)
+//   On   = A (1 + sigma s / t),  A = 1 / (1 + (1/2 - 2/(3 pi)) sigma),  sigma = `diffuse_roughness`
+//          s = l.v - (n.l)(n.v),  t = max(n.l, n.v) if s > 0, else 1   (l.v = 2 LoH^2 - 1)
+//          sigma = 0: On = 1 exactly (Lambert; every preset before session 19). s > 0 towards
+//          the light (retro-reflection) brightens, s < 0 (light behind, forward) darkens: the
+//          yarns' self-shadowing a flat Lambert surface lacks. The single-scattering lobe of
+//          OpenPBR's EON diffuse (Portsmouth, Kutz, Hill 2025), without its multiple-
+//          scattering compensation.
 //   S(mu) = sat(1 - max3(sheen) Es(mu)),  Es = DFG.z(mu, r_s)              (KHR_materials_sheen
 //          albedo scaling, with the albedo of our own Charlie + Neubelt lobe)
 //   Y(mu) = 1 (kAdditive, default: Irawan's BSDF is ks spec + kd/pi, additive)
@@ -39,7 +47,9 @@
 //   yarn = S(NoV) ks (x) glint [f0 PT_0(NoV, r_e) + (1 - f0) PT_beta(NoV, r_e)]
 //   warp = yarn m tint_w, weft = yarn (1 - m) tint_f       x GGX-prefiltered radiance at r_e
 //   sheen = sheen Es(NoV)                                  x prefiltered radiance at r_s
-//   diffuse = S(NoV) Y(NoV) base (x) kd_ratio              x Lambert irradiance E_d
+//   diffuse = S(NoV) Y(NoV) base (x) kd_ratio Eo(NoV)      x Lambert irradiance E_d
+//   Eo(mu) = A (1 + sigma G(mu)), the directional albedo of On (per unit base), G in closed
+//   form (OnAlbedoG below; tests/test_woven_model.cpp integrates it numerically)
 //   PT = lut::DefaultWovenPhase() (our own integrator; beta interpolated linearly between the
 //   nodes lut::kWovenPhaseBetas), read at the effective isotropic roughness
 //   r_e = (alpha_a alpha_c)^(1/4) (geometric-mean alpha). The renderer looks both yarn lobes up
@@ -59,10 +69,14 @@
 //   forward_scattering  1    2           [0, 8]       yes   beta of Fp
 //   sheen_color         3    0,0,0       [0, 1]       yes   linear sRGB Charlie sheen (0 = off)
 //   sheen_roughness     1    0.6         [0.045, 1]   yes   perceptual r_s, alpha = r_s^2
+//   diffuse_roughness   1    0           [0, 1]       yes   sigma of On (0 = Lambert; session 19,
+//                                                           appended: older flat vectors keep
+//                                                           their offsets)
 //
 // References: Irawan & Marschner 2012 ("Specular Reflection from Woven Cloth", ToG 31(1)); Burley
 // 2012 (anisotropic GGX); Heitz 2014 (anisotropic Smith); Estevez & Kulla 2017 (Charlie);
-// Neubelt & Pettineo 2013; KHR_materials_anisotropy and KHR_materials_sheen (albedo scaling);
+// Neubelt & Pettineo 2013; Fujii 2012 ("A tiny improvement of Oren-Nayar reflectance model");
+// Portsmouth, Kutz & Hill 2025 (EON, JCGT 14(1)); KHR_materials_anisotropy and KHR_materials_sheen (albedo scaling);
 // Karis 2013 (split sum).
 #pragma once
 
@@ -151,11 +165,12 @@ struct Params {
   T forward_scattering = Const<T>(2.0);
   Rgb<T> sheen_color{Const<T>(0.0), Const<T>(0.0), Const<T>(0.0)};
   T sheen_roughness = Const<T>(0.6);
+  T diffuse_roughness = Const<T>(0.0);
 };
 
-inline constexpr int kParameterCount = 16;
+inline constexpr int kParameterCount = 17;
 
-inline constexpr std::array<ParamInfo, 10> kParameterTable{{
+inline constexpr std::array<ParamInfo, 11> kParameterTable{{
     {"base_color", 3, {0.5, 0.5, 0.5}, 0.0, 1.0, true, "linear sRGB diffuse albedo (Lambert)"},
     {"specular_color", 3, {0.5, 0.5, 0.5}, 0.0, 1.0, true,
      "linear sRGB yarn specular scale; Fp(LoH = 0) = 1 (F90-like)"},
@@ -174,13 +189,56 @@ inline constexpr std::array<ParamInfo, 10> kParameterTable{{
     {"sheen_color", 3, {0.0, 0.0, 0.0}, 0.0, 1.0, true, "linear sRGB Charlie sheen (0 = off)"},
     {"sheen_roughness", 1, {0.6, 0.0, 0.0}, kMinRoughness, 1.0, true,
      "perceptual r_s, clamped to [0.045, 1]; alpha = r_s^2"},
+    {"diffuse_roughness", 1, {0.0, 0.0, 0.0}, 0.0, 1.0, true,
+     "Fujii improved Oren-Nayar sigma: f_d = base/pi A (1 + sigma s/t); 0 = Lambert"},
 }};
 
 // Flat vector (kParameterTable order) -> Params.
 template <typename T>
 inline Params<T> FromFlat(const T* x) {
   auto rgb = [&](int k) { return Rgb<T>(x[k], x[k + 1], x[k + 2]); };
-  return {rgb(0), rgb(3), x[6], x[7], x[8], x[9], x[10], x[11], rgb(12), x[15]};
+  return {rgb(0), rgb(3), x[6], x[7], x[8], x[9], x[10], x[11], rgb(12), x[15], x[16]};
+}
+
+// --- Rough diffuse On (Fujii 2012; see the header comment) ---
+inline constexpr double kOnAlbedoSlope = 0.5 - 2.0 / (3.0 * kPi);  // A = 1 / (1 + k sigma)
+
+// s / t of On from the cosines (geometry only: never differentiated). NoV, NoL in [0, 1].
+template <typename G>
+inline G OnSOverT(const G& NoV, const G& NoL, const G& LoH) {
+  // s = sin th_v sin th_l cos(phi) in [-1, 1] for consistent cosines; the floor keeps On >= 0
+  // for inconsistent ones (the stress test's adversarial inputs)
+  const G s = std::max((G(2.0) * LoH * LoH - G(1.0)) - NoL * NoV, G(-1.0));
+  if (!(s > G(0.0))) return s;  // t = 1
+  const G t = std::max(std::max(NoL, NoV), G(1e-6));
+  return s / t;
+}
+
+// G(mu) of the albedo Eo(mu) = A (1 + sigma G(mu)): (1/pi) times the cosine-weighted
+// hemispherical integral of s / t for a view at cos theta = mu,
+//   G = [sin th (th - sin th cos th) + (2/3) sin th cos th (1 + sin th + sin^2 th) / (1 + sin th)
+//        - (2/3) sin th] / pi
+// (the second term is (2/3) tan th (1 - sin^3 th) written without the division by cos th).
+// G(1) = 0, G(0) = (pi/2 - 2/3) / pi.
+inline double OnAlbedoG(double mu) {
+  const double c = std::clamp(mu, 0.0, 1.0);
+  const double th = std::acos(c);
+  const double sn = std::sqrt(std::max(0.0, 1.0 - c * c));
+  return (sn * (th - sn * c) + (2.0 / 3.0) * sn * c * (1.0 + sn + sn * sn) / (1.0 + sn) -
+          (2.0 / 3.0) * sn) /
+         kPi;
+}
+
+// A(sigma) and A sigma, sigma saturated.
+template <typename T>
+struct OnTerms {
+  T a, b;  // On = a + b s/t, Eo = a + b G
+};
+template <typename T>
+inline OnTerms<T> PrepareOn(const T& diffuse_roughness) {
+  const T sg = Saturate(diffuse_roughness);
+  const T a = Const<T>(1.0) / (Const<T>(1.0) + Const<T>(kOnAlbedoSlope) * sg);
+  return {a, a * sg};
 }
 
 template <typename T>
@@ -297,7 +355,9 @@ inline Rgb<T> EvalDirect(const Params<T>& p, const Options& o, const Lobes<T>& l
   const T LoH = Saturate(c.LoH);
   const Rgb<T> yarn = p.specular_color * YarnLobes(lb, o, ws, NoV, NoL, NoH, tc) *
                       (F_Phase(lb.f0, lb.beta, LoH) * ws.glint);
-  const Rgb<T> diffuse = p.base_color * ws.kd * Fd_Lambert<T>();
+  const OnTerms<T> on = PrepareOn(p.diffuse_roughness);
+  const T on_f = on.a + on.b * Const<T>(OnSOverT(ScalarPart(NoV), ScalarPart(NoL), ScalarPart(LoH)));
+  const Rgb<T> diffuse = p.base_color * ws.kd * Fd_Lambert<T>() * on_f;
   const T y = Min(YarnScaling(p, o, lb, phase, NoV), YarnScaling(p, o, lb, phase, NoL));
   const T s = Min(SheenScaling(p, lb, dfg, NoV), SheenScaling(p, lb, dfg, NoL));
   const T dv = D_Charlie(lb.r_s * lb.r_s, NoH) * V_Neubelt(NoV, NoL);
@@ -329,7 +389,9 @@ inline WovenIblWeights<T> EvalIbl(const Params<T>& p, const Options& o, const Lo
   w.warp = yarn * CastRgb<T>(o.tint_warp) * (lb.m * ws.warp);
   w.weft = yarn * CastRgb<T>(o.tint_weft) * ((Const<T>(1.0) - lb.m) * ws.weft);
   w.sheen = p.sheen_color * dfg.Sample(NoV, lb.r_s, 2);
-  w.diffuse = p.base_color * ws.kd * (s * YarnScaling(p, o, lb, phase, NoV));
+  const OnTerms<T> on = PrepareOn(p.diffuse_roughness);
+  const T eo = on.a + on.b * Const<T>(OnAlbedoG(ScalarPart(NoV)));
+  w.diffuse = p.base_color * ws.kd * (s * YarnScaling(p, o, lb, phase, NoV)) * eo;
   return w;
 }
 
@@ -452,6 +514,8 @@ struct FrameTerms {
   T spec_max;        // Max3(specular_color) (YarnScaling)
   T charlie_scale;   // 2 + 1 / alpha_s (D_Charlie), alpha_s = Max(r_s^2, kMinAlpha)
   T charlie_exp;     // (1 / alpha_s) 0.5
+  OnTerms<T> on;     // rough diffuse A, A sigma
+  bool lambert;      // diffuse_roughness exactly 0, derivatives included: On = 1, skipped
 };
 
 template <typename T>
@@ -489,6 +553,8 @@ inline FrameTerms<T> PrepareFrame(const Params<T>& p, const Options& o, const Ta
   const T inv_alpha = Const<T>(1.0) / alpha_s;
   f.charlie_scale = Const<T>(2.0) + inv_alpha;
   f.charlie_exp = inv_alpha * Const<T>(0.5);
+  f.on = PrepareOn(p.diffuse_roughness);
+  f.lambert = ExactlyZero(p.diffuse_roughness);
   return f;
 }
 
@@ -520,6 +586,7 @@ struct ViewTerms {
   T mw, mf;           // m ws.warp, (1 - m) ws.weft
   Rgb<T> base_kd;     // base (x) ws.kd
   Rgb<T> diffuse;     // base (x) ws.kd / pi
+  T eo;               // Eo(NoV) = A (1 + sigma G(NoV)) (1, unused, with f.lambert)
 };
 
 template <typename T>
@@ -547,6 +614,7 @@ inline ViewTerms<T> PrepareView(const Params<T>& p, const FrameTerms<T>& f,
   w.mf = f.one_minus_m * ws.weft;
   w.base_kd = p.base_color * ws.kd;
   w.diffuse = w.base_kd * Fd_Lambert<T>();
+  w.eo = f.lambert ? Const<T>(1.0) : f.on.a + f.on.b * G(OnAlbedoG(double(w.NoV)));
   return w;
 }
 
@@ -585,11 +653,16 @@ inline Rgb<T> EvalDirectLight(const Params<T>& p, const FrameTerms<T>& f,
   const T Fp = lb.f0 + f.one_minus_f0 * exp(f.minus_2_beta * Sq(LoH));
   const Rgb<T> yarn = p.specular_color * lobes * (Fp * ws.glint);
   Rgb<T> inner = yarn;
+  // On in double from the cosines, as EvalDirect (the same bits for float as well)
+  const Rgb<T> diffuse =
+      f.lambert ? w.diffuse
+                : w.diffuse * (f.on.a + f.on.b * G(OnSOverT(double(w.NoV), double(NoL),
+                                                            double(LoH))));
   if (!f.additive) {
     const T y = Min(w.y_v, YarnScalingAt(f, phase, NoL));
-    inner = yarn + w.diffuse * y;
+    inner = yarn + diffuse * y;
   } else {
-    inner = yarn + w.diffuse;  // y = Min(1, 1) = 1 exactly
+    inner = yarn + diffuse;  // y = Min(1, 1) = 1 exactly
   }
   if (f.sheen_off) return ScaleRgb(inner, NoL);
   using std::pow;
@@ -614,6 +687,7 @@ inline WovenIblWeights<T> EvalIblView(const Params<T>& p, const FrameTerms<T>& f
   r.weft = yarn * f.tint_f * w.mf;
   if (!f.sheen_off) r.sheen = p.sheen_color * w.es_v;
   r.diffuse = w.base_kd * (w.s_v * w.y_v);
+  if (!f.lambert) r.diffuse = r.diffuse * w.eo;
   return r;
 }
 

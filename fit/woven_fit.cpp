@@ -77,7 +77,8 @@ bool Has(const std::vector<std::string>& v, const char* name) {
 FitResult FitTwoStages(const std::vector<SceneInput>& inputs, const FitOptions& options,
                        const PreparedScenes* prepared) {
   FitOptions yarn = options;
-  yarn.locked = Union(options.locked, {"anisotropy", "twist", "sheen_color", "sheen_roughness"});
+  yarn.locked = Union(options.locked, {"anisotropy", "twist", "sheen_color", "sheen_roughness",
+                                       "diffuse_roughness"});
   FitResult r1 = FitImages(inputs, yarn, prepared);
   if (!r1.usable) return r1;
 
@@ -89,7 +90,8 @@ FitResult FitTwoStages(const std::vector<SceneInput>& inputs, const FitOptions& 
   for (int c = 0; c < 3; ++c)
     sheen.start.values[size_t(off + c)] = std::max(sheen.start.values[size_t(off + c)], 0.02);
   sheen.locked = Union(options.locked, {"roughness", "anisotropy", "twist", "warp_share",
-                                        "specular_f0", "forward_scattering"});
+                                        "specular_f0", "forward_scattering",
+                                        "diffuse_roughness"});
   FitResult r2 = FitImages(inputs, sheen, prepared);
   const double seconds = r1.seconds + r2.seconds, setup = r1.setup_seconds + r2.setup_seconds;
   const int iterations = r1.iterations + r2.iterations, starts = r1.starts + r2.starts;
@@ -135,7 +137,8 @@ FitOptions ClothBasinOptions(const FitOptions& options) {
   const int off = c.start.Offset("specular_color");
   for (int k = 0; k < 3; ++k) c.start.values[size_t(off + k)] = 0.0;  // yarn lobes off
   c.locked = Union(options.locked, {"specular_color", "roughness", "anisotropy", "twist",
-                                    "warp_share", "specular_f0", "forward_scattering"});
+                                    "warp_share", "specular_f0", "forward_scattering",
+                                    "diffuse_roughness"});
   c.init_from_reference = true;  // base from the reference, sheen colour 0.5: cloth's start
   c.start_roughness = {kClothBasinSheenRoughness};  // the sheen roughness (roughness is locked)
   return c;
@@ -150,6 +153,18 @@ FitOptions FromClothBasin(const FitOptions& options, const render::MaterialPrese
   from.init_from_reference = false;
   from.start_roughness = {0.0};  // unused without init_from_reference: one start
   return from;
+}
+
+FitOptions DiffuseStageOptions(const FitOptions& options, const render::MaterialPreset& from) {
+  FitOptions d = options;
+  d.start = from;
+  const int off = d.start.Offset("diffuse_roughness");
+  if (!(d.start.values[size_t(off)] > 0.0)) d.start.values[size_t(off)] = kDiffuseStageStart;
+  d.init_from_reference = false;
+  d.start_roughness = {0.0};  // unused without init_from_reference: one start
+  d.locked = Union(options.locked, {"specular_color", "roughness", "anisotropy", "twist",
+                                    "warp_share", "specular_f0", "forward_scattering"});
+  return d;
 }
 
 FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options,
@@ -172,6 +187,13 @@ FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions
       TakeBetter(std::move(nested), basin);
     }
     TakeBetter(std::move(basin), best);
+  }
+  if (best.usable && !Has(options.locked, "diffuse_roughness")) {
+    // The rough-diffuse stage (session 19): from the best result, the diffuse roughness free
+    // with the colours it trades against (docs/fitting.md "A rough diffuse for woven").
+    FitResult rough = FitImages(inputs, DiffuseStageOptions(options, best.preset), prepared);
+    rough.candidates = {CandidateOf("rough-diffuse", rough)};
+    TakeBetter(std::move(rough), best);
   }
   if (own) {  // a caller's preparation is the caller's to count
     best.setup_seconds += PreparedSeconds(*own);

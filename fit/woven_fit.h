@@ -66,6 +66,16 @@ FitOptions ClothBasinOptions(const FitOptions& options);
 // The options of step (b): `options` started from (a)'s fitted preset `basin`.
 FitOptions FromClothBasin(const FitOptions& options, const render::MaterialPreset& basin);
 
+// The rough-diffuse stage (session 19; docs/fitting.md "A rough diffuse for woven"). The
+// stages above hold diffuse_roughness (sigma of brdf/woven.h's On; each stage already frees the
+// ten scalars the Jacobian carries). After them FitWovenImages fits once more from the best
+// result with sigma free together with base_color, sheen_color and sheen_roughness (8 free;
+// the yarn parameters held), sigma started at kDiffuseStageStart unless the start already has
+// one, and keeps it when its RMSE is lower. Skipped when diffuse_roughness is locked
+// (`--lock diffuse_roughness`: the Lambert model of sessions 7-18).
+inline constexpr double kDiffuseStageStart = 0.5;
+FitOptions DiffuseStageOptions(const FitOptions& options, const render::MaterialPreset& from);
+
 // The per-model defaults every image fit shares (clothfit fit, bench fit): metalness /
 // metallic locked for the three.js and glTF baselines (fabrics are dielectric); physical-aniso
 // (docs/fitting.md, "The honest baseline"): metalness, anisotropy_rotation (the maps carry the

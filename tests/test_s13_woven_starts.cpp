@@ -120,10 +120,12 @@ TEST(S13WovenStarts, SyntheticSheenDominatedReferenceIsRecovered) {
   ASSERT_GE(r.candidates.size(), 2u);
   EXPECT_EQ(r.candidates[0].name, "two-stage");
   EXPECT_EQ(r.candidates[1].name, "cloth-basin");
+  EXPECT_EQ(r.candidates.back().name, "rough-diffuse");  // session 19's last stage
   for (const auto& c : r.candidates) EXPECT_LE(r.rmse, c.rmse) << c.name;
   EXPECT_LT(r.rmse, 2e-3);
 
-  o.cloth_basin_start = false;  // the session-5 stages alone
+  o.cloth_basin_start = false;  // the session-5 stages alone (Lambert diffuse)
+  o.locked.push_back("diffuse_roughness");
   const FitResult old = FitWovenImages(in, o);
   ASSERT_TRUE(old.usable);
   ASSERT_EQ(old.candidates.size(), 1u);

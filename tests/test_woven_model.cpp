@@ -34,6 +34,7 @@ woven::Params<double> SomeParams() {
   p.forward_scattering = 1.7;
   p.sheen_color = {0.0, 0.0, 0.0};
   p.sheen_roughness = 0.6;
+  p.diffuse_roughness = 0.4;  // the rough diffuse On in every test that does not reset it
   return p;
 }
 
@@ -82,6 +83,7 @@ TEST(WovenModel, YarnLobesMatchALiteralAnisotropicGgxTranscription) {
 
 TEST(WovenModel, ZeroSpecularIsLambertPlusScaledSheen) {
   woven::Params<double> p = SomeParams();
+  p.diffuse_roughness = 0.0;  // Lambert (the default)
   p.specular_color = {0, 0, 0};
   p.sheen_color = {0.3, 0.2, 0.1};
   const V3 v = Dir(0.7, 0), l = Dir(0.4, 2.0);
@@ -96,6 +98,59 @@ TEST(WovenModel, ZeroSpecularIsLambertPlusScaledSheen) {
   // and without sheen it is exactly Lambert
   p.sheen_color = {0, 0, 0};
   EXPECT_NEAR(Direct(p, v, l).g, p.base_color.g / kPi * c.NoL, 1e-15);
+}
+
+// On (Fujii's improved Oren-Nayar, session 19), literally: f_d = base/pi A (1 + sigma s/t).
+TEST(WovenModel, RoughDiffuseIsFujiiOrenNayar) {
+  woven::Params<double> p = SomeParams();
+  p.specular_color = {0, 0, 0};
+  p.diffuse_roughness = 0.8;
+  const double A = 1.0 / (1.0 + (0.5 - 2.0 / (3.0 * kPi)) * 0.8);
+  for (double tv : {0.2, 0.9, 1.4})
+    for (double tl : {0.1, 0.7, 1.3})
+      for (double phi : {0.0, 1.0, 2.0, kPi}) {
+        const V3 v = Dir(tv, 0.0), l = Dir(tl, phi);
+        const double s = Dot(l, v) - l.z * v.z;
+        const double t = s > 0 ? std::max(l.z, v.z) : 1.0;
+        const double want = p.base_color.g / kPi * A * (1.0 + 0.8 * s / t) * l.z;
+        EXPECT_NEAR(Direct(p, v, l).g, want, 1e-12 * want + 1e-15) << tv << " " << tl << " " << phi;
+      }
+  // forward (light behind, grazing) darker than Lambert, retro-reflection brighter
+  const V3 v = Dir(1.2, 0.0);
+  const double lambert = p.base_color.g / kPi * v.z;
+  EXPECT_LT(Direct(p, v, Dir(1.2, kPi)).g, 0.5 * lambert);
+  EXPECT_GT(Direct(p, v, v).g, 1.5 * lambert);
+  // sigma = 0 is Lambert to the bit
+  p.diffuse_roughness = 0.0;
+  EXPECT_EQ(Direct(p, v, Dir(1.2, kPi)).g, p.base_color.g * Fd_Lambert<double>() * v.z);
+}
+
+// The IBL diffuse weight Eo(NoV) (closed-form G) equals the hemispherical integral of the
+// direct diffuse (midpoint rule in (cos theta, phi)), for several sigma and views.
+TEST(WovenModel, RoughDiffuseIblAlbedoMatchesBruteForceIntegral) {
+  woven::Params<double> p = SomeParams();
+  p.specular_color = {0, 0, 0};
+  p.sheen_color = {0, 0, 0};
+  p.base_color = {1, 1, 1};
+  for (double sigma : {0.0, 0.3, 1.0})
+    for (double nov : {0.05, 0.3, 0.7, 0.99}) {
+      p.diffuse_roughness = sigma;
+      const V3 v(std::sqrt(1 - nov * nov), 0, nov);
+      const int nt = 400, np = 400;
+      double sum = 0;
+      for (int i = 0; i < nt; ++i)
+        for (int j = 0; j < np; ++j) {
+          const double mu = (i + 0.5) / nt, phi = 2 * kPi * (j + 0.5) / np;
+          const double st = std::sqrt(1 - mu * mu);
+          sum += Direct(p, v, V3(st * std::cos(phi), st * std::sin(phi), mu)).r;
+        }
+      sum *= 2 * kPi / (double(nt) * np);
+      const woven::WovenIblWeights<double> w = woven::EvalIbl(
+          p, {}, nov, woven::WeaveSample<double>{}, lut::DefaultDfg(), lut::DefaultWovenPhase());
+      EXPECT_NEAR(w.diffuse.r, sum, 2e-4) << "sigma " << sigma << " NoV " << nov;
+    }
+  EXPECT_EQ(woven::OnAlbedoG(1.0), 0.0);
+  EXPECT_NEAR(woven::OnAlbedoG(0.0), (kPi / 2 - 2.0 / 3.0) / kPi, 1e-15);
 }
 
 TEST(WovenModel, IsReciprocal) {
@@ -190,7 +245,8 @@ TEST(WovenModel, EdgeCosinesGiveFiniteJets) {
   using J = ceres::Jet<double, woven::kParameterCount>;
   std::array<J, woven::kParameterCount> x;
   const std::array<double, woven::kParameterCount> v{0.5, 0.4, 0.3, 0.6, 0.5, 0.4, 0.045, 1.0,
-                                                     90.0, 1.0, 0.0, 8.0, 0.3, 0.2, 0.1, 1.0};
+                                                     90.0, 1.0, 0.0, 8.0, 0.3, 0.2, 0.1, 1.0,
+                                                     1.0};
   for (int k = 0; k < woven::kParameterCount; ++k) x[size_t(k)] = J(v[size_t(k)], k);
   for (double a : {0.0, 1e-8, 1.0, -0.3})
     for (double t : {0.0, 1.0, -1.0}) {
@@ -247,10 +303,10 @@ TEST(WovenModel, JetDerivativesMatchFiniteDifferences) {
   // Roughnesses between texel centres; beta between nodes; distinct colour channels.
   const std::array<double, woven::kParameterCount> interior{
       0.45, 0.40, 0.30, 0.55, 0.50, 0.45, 0.5546875, 0.7, -9.0, 0.55, 0.07, 1.7,
-      0.20, 0.15, 0.10, 0.6171875};
+      0.20, 0.15, 0.10, 0.6171875, 0.35};
   const std::array<double, woven::kParameterCount> near_bounds{
       0.99, 0.02, 0.5, 0.98, 0.01, 0.3, 0.0461, 0.999, 89.0, 0.999, 0.995, 7.9,
-      0.01, 0.02, 0.03, 0.0461};
+      0.01, 0.02, 0.03, 0.0461, 0.99};
   for (const auto& x : {interior, near_bounds}) {
     CheckDerivatives(x, Dir(0.3, 0.2), Dir(0.8, 2.6));
     CheckDerivatives(x, Dir(1.3, 0.0), Dir(1.2, 3.0));  // backlit, near-mirror forward

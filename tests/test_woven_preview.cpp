@@ -18,7 +18,9 @@ namespace clothfit::render {
 namespace {
 
 std::vector<double> WovenParams() {
-  return {0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75, -9.0, 0.54, 0.07, 1.6, 0.1, 0.05, 0.02, 0.6};
+  // the 17th value: diffuse_roughness 0 (Lambert); the tests below set it where they need it
+  return {0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75, -9.0, 0.54, 0.07, 1.6, 0.1, 0.05, 0.02, 0.6,
+          0.0};
 }
 
 TEST(WovenPreview, DirectLightUsesTheReferenceTangentFrame) {
@@ -98,6 +100,7 @@ void CheckSplitEvaluation(int free_from, int free_count, const std::array<double
     xs[10] = 0.3 * U(rng);         // f0
     xs[11] = 6 * U(rng);           // beta
     for (int k = 0; k < 3; ++k) xs[size_t(12 + k)] = sheen[size_t(k)] * U(rng);
+    xs[16] = trial % 4 == 0 ? 0.0 : U(rng);  // diffuse roughness: Lambert (exact skip) or On
     std::vector<T> x(xs.size());
     for (size_t k = 0; k < xs.size(); ++k) {
       if constexpr (std::is_arithmetic_v<T>) {
@@ -165,12 +168,16 @@ TEST(WovenPreview, SplitEvaluationEqualsEvalDirectAndEvalIbl) {
     CheckSplitEvaluation<Jet>(0, 10, on, layer);
     CheckSplitEvaluation<Jet>(6, 10, off, layer);   // sheen colour free at 0: full path
     CheckSplitEvaluation<Jet>(6, 10, on, layer);
+    CheckSplitEvaluation<Jet>(7, 10, on, layer);    // the rough-diffuse stage: sigma free
   }
   // The exact skip is taken only when it is exact.
   woven::Params<Jet> p;
   EXPECT_TRUE(woven::PrepareFrame(p, {}, lut::DefaultDfg(), lut::DefaultWovenPhase()).sheen_off);
   p.sheen_color.g = Jet(0.0, 3);
   EXPECT_FALSE(woven::PrepareFrame(p, {}, lut::DefaultDfg(), lut::DefaultWovenPhase()).sheen_off);
+  EXPECT_TRUE(woven::PrepareFrame(p, {}, lut::DefaultDfg(), lut::DefaultWovenPhase()).lambert);
+  p.diffuse_roughness = Jet(0.0, 9);
+  EXPECT_FALSE(woven::PrepareFrame(p, {}, lut::DefaultDfg(), lut::DefaultWovenPhase()).lambert);
 }
 
 // The preview's fast woven kernel gives the generic per-light kernel's frame (woven::EvalDirect
@@ -206,16 +213,18 @@ TEST(WovenPreview, FastKernelEqualsTheReferenceKernel) {
     for (int sheen = 0; sheen < 3; ++sheen) {
       auto xs = WovenParams();
       if (sheen == 0) xs[12] = xs[13] = xs[14] = 0.0;
+      if (sheen >= 1) xs[16] = 0.6;  // the rough diffuse On (session 19)
       std::vector<Rgb<double>> a, b;
       EvaluatePreview(*fast, xs.data(), a);
       EvaluatePreview(ref, xs.data(), b);
       ASSERT_EQ(a.size(), b.size());
       for (size_t i = 0; i < a.size(); ++i)
         for (int ch = 0; ch < 3; ++ch) ASSERT_EQ(a[i][ch], b[i][ch]) << "pixel " << i;
-      // Jets: sheen == 2 frees the sheen colour (slots 6..8 = parameters 12..14).
+      // Jets: sheen == 2 frees the sheen colour and the diffuse roughness (slots 5..7 and 9 =
+      // parameters 12..14 and 16).
       std::vector<Jet> xj(xs.size());
       for (size_t k = 0; k < xs.size(); ++k) {
-        const int slot = sheen == 2 ? (k >= 6 ? int(k) - 6 : -1) : int(k);
+        const int slot = sheen == 2 ? (k >= 7 ? int(k) - 7 : -1) : int(k);
         xj[k] = slot >= 0 && slot < 10 ? Jet(xs[k], slot) : Jet(xs[k]);
       }
       std::vector<Rgb<Jet>> aj, bj;
