@@ -34,7 +34,7 @@ void AddModelsCommand(CLI::App& app, const Globals&, int& exit_code) {
     PrintTable("physical-sheen (three.js r187 MeshPhysicalMaterial sheen)",
                physical_sheen::kParameterTable);
     PrintTable("gltf-sheen (glTF 2.0 + KHR_materials_sheen)", gltf_sheen::kParameterTable);
-    PrintTable("woven (warp/weft anisotropic GGX x phase Fresnel + Charlie sheen + Lambert; "
+    PrintTable("woven (warp/weft anisotropic GGX x phase Fresnel + Charlie sheen + rough diffuse; "
                "see brdf/woven.h)",
                woven::kParameterTable);
     PrintTable("physical-aniso (three.js r187 MeshPhysicalMaterial sheen + anisotropy + specular; "

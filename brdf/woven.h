@@ -171,7 +171,8 @@ struct Params {
 inline constexpr int kParameterCount = 17;
 
 inline constexpr std::array<ParamInfo, 11> kParameterTable{{
-    {"base_color", 3, {0.5, 0.5, 0.5}, 0.0, 1.0, true, "linear sRGB diffuse albedo (Lambert)"},
+    {"base_color", 3, {0.5, 0.5, 0.5}, 0.0, 1.0, true,
+     "linear sRGB diffuse colour (Lambert albedo at diffuse_roughness 0)"},
     {"specular_color", 3, {0.5, 0.5, 0.5}, 0.0, 1.0, true,
      "linear sRGB yarn specular scale; Fp(LoH = 0) = 1 (F90-like)"},
     {"roughness", 1, {0.6, 0.0, 0.0}, kMinRoughness, 1.0, true,

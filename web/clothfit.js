@@ -347,11 +347,14 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
 //     weft a_f = c_w, c_f = -a_w; alpha_a = r^2, alpha_c = r^2 + (1 - r^2) s^2;
 //     D_GGX_Anisotropic(alpha_c along c, alpha_a along a) x V_SmithGGXCorrelated_Anisotropic;
 //   phase Fresnel Fp = f0 + (1 - f0) exp(-2 beta LoH^2); sheen Charlie + Neubelt (no clamp);
-//     Lambert diffuse; sheen layered by albedo scaling S(mu) = sat(1 - max3(sheen) Es(mu)),
+//     diffuse base kd / pi x On (Fujii's improved Oren-Nayar, On = A (1 + sigma s / t), sigma =
+//     diffuse_roughness; Lambert, On = 1 and the old program, at sigma 0: WOVEN_ROUGH_DIFFUSE);
+//     sheen layered by albedo scaling S(mu) = sat(1 - max3(sheen) Es(mu)),
 //     Es = the cloth DG table (channel 2 of clothfit's DFG LUT) at (mu, r_s);
 //   IBL (split sum): yarn = S ks glint [f0 PT_0 + (1 - f0) PT_beta](NoV, r_e) x radiance at r_e,
 //     r_e = (alpha_a alpha_c)^(1/4); sheen = sheen Es(NoV) x radiance at r_s; diffuse =
-//     S Y base x E_d (E_d = three.js's iblIrradiance / pi). PT = web/lut/woven_phase_32.f32, the
+//     S Y base Eo(NoV) x E_d (E_d = three.js's iblIrradiance / pi; Eo = A (1 + sigma G(NoV)), the
+//     directional albedo of On, 1 at sigma 0). PT = web/lut/woven_phase_32.f32, the
 //     same table as the C++ lut::DefaultWovenPhase() (web/tools/export-woven-phase.mjs), beta
 //     linear between the nodes kWovenPhaseBetas (the node and weight are computed here on the CPU,
 //     as woven::PhaseAlbedo does).
@@ -393,6 +396,24 @@ export function wovenPhaseTable() {
 
 const clamp01 = (x) => Math.min(Math.max(x, 0), 1);
 
+// diffuse_roughness checked as the C++ preset reader checks a parameter (render/scene/material.cpp
+// ParseParameter: a finite number in the table's range [0, 1]); `fail(msg)` throws.
+export function checkWovenDiffuseRoughness(v, fail) {
+  if (typeof v !== 'number') fail(`expected a number, got ${v === null ? 'null' : Array.isArray(v) ? 'array' : typeof v}`);
+  if (!Number.isFinite(v)) fail('not finite');
+  if (v < 0 || v > 1) fail(`value ${v} outside [0, 1]`);
+}
+
+// The rough diffuse's A and A sigma (woven::PrepareOn; sigma = saturate(diffuse_roughness), a
+// missing one is 0): On = onA + onB s/t, Eo = onA + onB G. rough: sigma > 0, i.e. not Lambert
+// (woven::FrameTerms::lambert; the program then has WOVEN_ROUGH_DIFFUSE).
+const WOVEN_ON_ALBEDO_SLOPE = 0.5 - 2 / (3 * Math.PI);  // brdf/woven.h kOnAlbedoSlope
+export function wovenOnTerms(diffuseRoughness) {
+  const sg = clamp01(diffuseRoughness ?? 0);
+  const a = 1 / (1 + WOVEN_ON_ALBEDO_SLOPE * sg);
+  return { rough: sg > 0, onA: a, onB: a * sg };
+}
+
 // woven::PrepareLobes + the phase node of woven::PhaseAlbedo, on the CPU (per material).
 export function wovenLobes(p) {
   const r = Math.min(Math.max(p.roughness, WOVEN_MIN_ROUGHNESS), 1);
@@ -409,7 +430,7 @@ export function wovenLobes(p) {
     alphaA, alphaC, rE: Math.sqrt(Math.sqrt(alphaA * alphaC)),
     rS: Math.min(Math.max(p.sheen_roughness, WOVEN_MIN_ROUGHNESS), 1),
     cr: Math.cos(rho), sr: Math.sin(rho), f0: clamp01(p.specular_f0), beta, m: clamp01(p.warp_share), s,
-    phaseK: k, phaseT: t,
+    phaseK: k, phaseT: t, ...wovenOnTerms(p.diffuse_roughness),
   };
 }
 
@@ -920,6 +941,30 @@ float wovenCharlie( const in float alpha, const in float NoH ) {
 	return ( 2.0 + invAlpha ) * pow( sin2h, invAlpha * 0.5 ) * ( 0.5 * RECIPROCAL_PI );
 }
 
+// The rough diffuse (WOVEN_ROUGH_DIFFUSE: diffuse_roughness sigma > 0; without it the diffuse
+// is Lambert and none of this is compiled): Fujii's improved Oren-Nayar (brdf/woven.h On,
+// OnSOverT, OnAlbedoG, PrepareOn). On = A + A sigma s / t multiplies the lights' diffuse,
+// Eo(NoV) = A + A sigma G(NoV) (On's directional albedo) every irradiance under the diffuse
+// weight; wovenOnA = A = 1 / (1 + (1/2 - 2/(3 pi)) sigma), wovenOnB = A sigma (wovenOnTerms).
+#if defined( WOVEN_ROUGH_DIFFUSE )
+uniform float wovenOnA;
+uniform float wovenOnB;
+// s / t: s = l.v - NoL NoV (l.v = 2 LoH^2 - 1) floored at -1, t = max(NoL, NoV, 1e-6) if s > 0
+float wovenOnSOverT( const in float NoV, const in float NoL, const in float LoH ) {
+	float s = max( ( 2.0 * LoH * LoH - 1.0 ) - NoL * NoV, - 1.0 );
+	if ( ! ( s > 0.0 ) ) return s;
+	return s / max( max( NoL, NoV ), 1e-6 );
+}
+// G(mu) = [sin th (th - sin th cos th) + (2/3) sin th cos th (1 + sin th + sin^2 th) /
+// (1 + sin th) - (2/3) sin th] / pi, th = acos(mu)
+float wovenOnAlbedoG( const in float mu ) {
+	float c = clamp( mu, 0.0, 1.0 );
+	float th = acos( c );
+	float sn = sqrt( max( 0.0, 1.0 - c * c ) );
+	return ( sn * ( th - sn * c ) + ( 2.0 / 3.0 ) * sn * c * ( 1.0 + sn + sn * sn ) / ( 1.0 + sn ) - ( 2.0 / 3.0 ) * sn ) * RECIPROCAL_PI;
+}
+#endif
+
 // The far-field yarn lobe (WOVEN_YARN_LOBE, a preset's "woven": {"yarn_lobe": {...}}; the CPU
 // side: yarnLobePack). wovenYarnLobe(wo, wi) = (T_warp, T_weft) at local unit directions (x = t,
 // y = b, z = n), fit/yarn_farfield.cpp EvalQuadrature's terms in float, is generated per lobe
@@ -1058,6 +1103,9 @@ void RE_Direct_Woven( const in IncidentLight directLight, const in vec3 geometry
 		vec3 yarn = wovenSpecularColor * lobes * ( Fp * ws.glint );
 	#endif
 	vec3 diffuse = material.diffuseColor * ws.kd * RECIPROCAL_PI;
+	#if defined( WOVEN_ROUGH_DIFFUSE )
+		diffuse *= wovenOnA + wovenOnB * wovenOnSOverT( NoV, NoL, LoH );
+	#endif
 	float rE = material.roughness;
 	float y = min( wovenYarnScaling( NoV, rE ), wovenYarnScaling( NoL, rE ) );
 	float s = min( wovenSheenScaling( NoV ), wovenSheenScaling( NoL ) );
@@ -1210,6 +1258,10 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 		// The card's light map (applyLightMap): E_d + E_ind / pi under the IBL diffuse weight.
 		wovenEd += clothfitLightMapIrradiance * RECIPROCAL_PI;
 	#endif
+	#if defined( WOVEN_ROUGH_DIFFUSE )
+		// every irradiance under the diffuse weight (IBL, FIS taps, light map) x Eo(NoV)
+		wovenEd *= wovenOnA + wovenOnB * wovenOnAlbedoG( NoV );
+	#endif
 	reflectedLight.indirectDiffuse += material.diffuseColor * ws.kd * ( s * wovenYarnScaling( NoV, rE ) ) * wovenEd;
 }
 
@@ -1277,7 +1329,9 @@ function wovenViewBlendGlsl(K) {
 /**
  * MeshWovenMaterial: brdf/woven.h on three.js's MeshStandardMaterial program. Parameters are the
  * preset's (snake_case, linear colours): base_color, specular_color, roughness, anisotropy,
- * twist (degrees), warp_share, specular_f0, forward_scattering, sheen_color, sheen_roughness;
+ * twist (degrees), warp_share, specular_f0, forward_scattering, sheen_color, sheen_roughness,
+ * diffuse_roughness (sigma of the rough diffuse On, [0, 1], default 0 = Lambert; > 0 compiles
+ * WOVEN_ROUGH_DIFFUSE, and crossing 0 recompiles);
  * options: yarnLayer 'additive' (default) | 'albedo-scaled', tintWarp / tintWeft (THREE.Color);
  * ibl 'split' (default: the split sum, one PMREM read at r_e) | 'fis' (filtered importance
  * sampling of the yarn lobe, fisTaps taps, 1..64, default 16; fisDiffuseTaps 0..64 cosine taps
@@ -1292,6 +1346,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     yarnLobe = null, ...standard
   } = {}) {
     const p = { ...WOVEN_DEFAULTS, ...parameters };
+    checkWovenDiffuseRoughness(p.diffuse_roughness, (msg) => { throw new Error(`MeshWovenMaterial: diffuse_roughness: ${msg}`); });
     super({ metalness: 0, roughness: 1, color: linear(p.base_color), ...standard });
     this.isMeshWovenMaterial = true;
     this.woven = p;
@@ -1312,6 +1367,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       wovenAlphaA: { value: 0 }, wovenAlphaC: { value: 0 }, wovenRE: { value: 0 }, wovenRS: { value: 0 },
       wovenCr: { value: 1 }, wovenSr: { value: 0 }, wovenF0: { value: 0 }, wovenBeta: { value: 0 },
       wovenM: { value: 0 }, wovenAniso: { value: 0 }, wovenPhaseK: { value: 0 }, wovenPhaseT: { value: 0 },
+      wovenOnA: { value: 1 }, wovenOnB: { value: 0 },
       wovenPhase: { value: wovenPhaseTexture }, clothDG: { value: clothDGTexture },
       wovenWeaveWeights: { value: null }, wovenWeaveKd: { value: null },
       wovenWeaveTransform: { value: new THREE.Matrix3() },
@@ -1335,6 +1391,10 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     u.wovenCr.value = lb.cr; u.wovenSr.value = lb.sr;
     u.wovenF0.value = lb.f0; u.wovenBeta.value = lb.beta; u.wovenM.value = lb.m; u.wovenAniso.value = lb.s;
     u.wovenPhaseK.value = lb.phaseK; u.wovenPhaseT.value = lb.phaseT;
+    u.wovenOnA.value = lb.onA; u.wovenOnB.value = lb.onB;
+    // sigma crossing 0 switches WOVEN_ROUGH_DIFFUSE (the program key names it): recompile
+    if (this._roughDiffuse !== undefined && this._roughDiffuse !== lb.rough) this.needsUpdate = true;
+    this._roughDiffuse = lb.rough;
     u.wovenPhase.value = wovenPhaseTexture; u.clothDG.value = clothDGTexture;
     const wm = this.weaveMaps;
     u.wovenWeaveWeights.value = wm ? wm.weightsTexture : null;
@@ -1343,6 +1403,9 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     u.wovenViewMaps.value = wm?.viewTextures ? wm.viewTextures.slice() : [];
     u.wovenViewCosines.value = wm?.viewCosines ? wm.viewCosines.slice() : [];
   }
+
+  /** Whether the diffuse is the rough On (diffuse_roughness > 0; false: Lambert). */
+  get roughDiffuse() { return wovenOnTerms(this.woven.diffuse_roughness).rough; }
 
   /** The number of view bands the program blends (0: the main maps alone). */
   get viewBands() { return this.weaveMaps?.viewCosines?.length ?? 0; }
@@ -1393,6 +1456,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     Object.assign(shader.uniforms, this._wovenUniforms);
     const defs = [];
     if (this.yarnLayer === 'albedo-scaled') defs.push('#define WOVEN_ALBEDO_SCALED');
+    if (this.roughDiffuse) defs.push('#define WOVEN_ROUGH_DIFFUSE');
     if (this.weaveMaps) defs.push('#define WOVEN_WEAVE_MAPS');
     const K = this.viewBands;
     if (K > 0) defs.push(`#define WOVEN_VIEW_BANDS ${K}`, `#define WOVEN_VIEW_TEXTURES ${this.weaveMaps.viewTextures.length}`);
@@ -1431,7 +1495,8 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     const yl = this._yarnLobePack;
     const lobe = yl ? [`yarn-lobe${yl.groups}x${yl.nodes}/${yl.nTheta}x${yl.nPhi}/${yl.digest}`] : [];
     const maps = this.weaveMaps ? (this.viewBands ? `maps-views${this.viewBands}` : 'maps') : 'uniform';
-    return ['woven', this.yarnLayer, maps, ibl, ...lobe].join(':');
+    const rough = this.roughDiffuse ? ['rough-diffuse'] : [];
+    return ['woven', this.yarnLayer, maps, ibl, ...lobe, ...rough].join(':');
   }
 
   copy(source) {
@@ -1458,7 +1523,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
 const WOVEN_DEFAULTS = Object.freeze({
   base_color: [0.5, 0.5, 0.5], specular_color: [0.5, 0.5, 0.5], roughness: 0.6, anisotropy: 0.7,
   twist: 0, warp_share: 0.5, specular_f0: 0.05, forward_scattering: 2, sheen_color: [0, 0, 0],
-  sheen_roughness: 0.6,
+  sheen_roughness: 0.6, diffuse_roughness: 0,
 });
 
 // ---------------------------------------------------------------------------------------------
@@ -1992,6 +2057,12 @@ registerClothfitModel('cloth', {
 registerClothfitModel('woven', {
   engine: 'clothfit MeshWovenMaterial (brdf/woven.h; weave maps as GPU textures)',
   defaults: WOVEN_DEFAULTS,
+  // the preset's own parameters, before any default (loadClothfitPreset)
+  checkParameters: (given) => {
+    if ('diffuse_roughness' in given) {
+      checkWovenDiffuseRoughness(given.diffuse_roughness, (msg) => { throw new Error(`loadClothfitPreset: parameters.diffuse_roughness: ${msg}`); });
+    }
+  },
   make: (p, preset) => {
     const w = wovenOptions(preset.woven);
     return new MeshWovenMaterial(p, {
@@ -2080,6 +2151,7 @@ export function loadClothfitPreset(json, options = {}) {
     if (!(k in model.defaults)) throw new Error(`loadClothfitPreset: parameters.${k}: unknown for model '${preset.model}' (valid: ${Object.keys(model.defaults).join(', ')})`);
   }
   if (preset.woven !== undefined && preset.model !== 'woven') throw new Error('loadClothfitPreset: woven: only allowed with model "woven"');
+  model.checkParameters?.(given);
   const p = { ...model.defaults, ...given };
   if (preset.weave_maps !== undefined && preset.weave_maps !== null) {
     if (!model.weaveMaps) throw new Error(`loadClothfitPreset: weave_maps: not used by model '${preset.model}' (woven, physical-aniso)`);

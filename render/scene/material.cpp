@@ -451,6 +451,10 @@ json PresetToJson(const MaterialPreset& p) {
   }
   j["conventions"] = {{"colour_space", "linear sRGB (Rec.709 primaries), not gamma-encoded"},
                       {"roughness", "perceptual r in [0, 1]; the models use alpha = r^2"}};
+  if (p.model == ModelKind::kWoven)
+    j["conventions"]["diffuse_roughness"] =
+        "sigma of Fujii's improved Oren-Nayar diffuse, used as is (not squared); 0 = Lambert "
+        "(brdf/woven.h)";
   json params = json::object();
   int off = 0;
   for (const ParamInfo& info : ParameterTable(p.model)) {

@@ -15,13 +15,14 @@
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //   A light-map case reports "with (without)": the same material timed without its light map too.
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 32 materials (6 + 3 woven + 2 physical-aniso
+// Cases: each canonical scene (datasets/scenes/*.json) x 38 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
-// bent-normal IBL + 5 woven with the far-field yarn lobe + 2 with view-dependent weave maps) x 2 environments
+// bent-normal IBL + 5 woven with the far-field yarn lobe + 4 with view-dependent weave maps + 4 woven
+// with the rough diffuse, s19) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
-// 9 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
+// 11 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
 // drape and sphere x 3 materials under studio with three.js shadow maps against
-// `render-preview --shadows` (the */studio-shadows/* cases), plus (s13-lm) 11 cases on the drape
+// `render-preview --shadows` (the */studio-shadows/* cases), plus (s13-lm) 13 cases on the drape
 // with the card's baked light map (env "studio-lightmap*", below), plus (s13) the drape card as it
 // is, with its visibility block (shadows and light map: env "studio-card"). The other cases
 // drop the card's visibility block, so they compare the shading alone. The page posts
@@ -200,6 +201,19 @@ Object.assign(MATERIALS, {
 });
 MATERIALS['woven-lobe-maps-twill-views-aniso1'] = withAniso('woven-lobe-maps-twill-views', 1);
 MATERIALS['woven-lobe-maps-canvas-views-aniso1'] = withAniso('woven-lobe-maps-canvas-views', 1);
+// s19: the rough diffuse (parameters.diffuse_roughness sigma > 0: Fujii's improved Oren-Nayar,
+// brdf/woven.h On for the lights, its albedo Eo(NoV) under every irradiance; web/clothfit.js
+// WOVEN_ROUGH_DIFFUSE): the 'woven' preset (yarn lobes and sheen) at sigma 0.65; a linen-like
+// preset with no yarn specular and a faint sheen, so the diffuse is the frame; the canvas weave
+// maps at sigma 0.3 (the kd map under On / Eo); and the 'woven-fis-diffuse' IBL (8 yarn taps, 16
+// diffuse taps replacing three.js's irradiance) at sigma 0.65.
+const withParams = (name, over) => ({ ...MATERIALS[name], parameters: { ...MATERIALS[name].parameters, ...over } });
+Object.assign(MATERIALS, {
+  'woven-rough': withParams('woven', { diffuse_roughness: 0.65 }),
+  'woven-linen-rough': preset('woven', { base_color: [0.11, 0.25, 0.30], specular_color: [0, 0, 0], sheen_color: [0.03, 0, 0], sheen_roughness: 0.9, diffuse_roughness: 0.65 }),
+  'woven-maps-canvas-rough': withParams('woven-maps-canvas', { diffuse_roughness: 0.3 }),
+  'woven-rough-fis-diffuse': withParams('woven-fis-diffuse', { diffuse_roughness: 0.65 }),
+});
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
 // s10-sun: the sun split is on by default in both renderers ("environment": {"sun": "auto"}
@@ -214,7 +228,7 @@ const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, ro
 const SUN_ENV = `${HIGH}-rot60-sun`;
 ENVS[SUN_ENV] = { path: HIGH, intensity: 0.8, rotation_y_degrees: 60, sun: 'auto' };
 const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-seed', 'cloth-filament', 'woven', 'woven-fis',
-  'woven-lobe-canvas', 'woven-lobe-twill-shiny']);
+  'woven-lobe-canvas', 'woven-lobe-twill-shiny', 'woven-rough', 'woven-linen-rough']);
 
 // s13-lm: the scene card's light map ("visibility": {"shadows": false, "light_map": {...}}; docs/web.md
 // "The light map"). `clothfit render-preview` bakes the fabric's one-bounce indirect irradiance over
@@ -226,10 +240,11 @@ const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-shee
 // far from Lambert c, so a light map that went through three.js's stock path (Lambert
 // RE_IndirectDiffuse) instead of the model's IBL diffuse weight fails them (measured: 4.52 / 25
 // and 0.47 / 3; the other presets' weights are within a few % of c); woven-lobe-maps-canvas: the
-// lobe with weave maps and the light map in one program.
+// lobe with weave maps and the light map in one program; woven-rough, woven-linen-rough (s19):
+// the light map's irradiance under the rough diffuse's albedo Eo(NoV).
 const LIGHT_MAP_ENVS = {
   'studio-lightmap': { light_map: { size: 128 }, materials: ['standard-grey', 'physical-sheen', 'cloth-filament', 'woven', 'woven-lobe-canvas', 'woven-lobe-twill', 'physical-aniso',
-    'cloth-subsurface', 'woven-tinted', 'woven-lobe-maps-canvas'] },
+    'cloth-subsurface', 'woven-tinted', 'woven-lobe-maps-canvas', 'woven-rough', 'woven-linen-rough'] },
   'studio-lightmap64': { light_map: { size: 64 }, materials: ['woven'] },
 };
 const LIGHT_MAP_SCENES = ['drape'];

@@ -4,6 +4,8 @@
 //     honoured by loadClothfitPreset for MeshPhysicalMaterial and MeshClothMaterial JSON, and a
 //     preset's "side" ('front' | 'double' or 0 / 2) too; without one, three.js's FrontSide stays;
 //   - woven presets load as MeshWovenMaterial with the table defaults and reject unknown names;
+//     diffuse_roughness (session 19): default 0 (the Lambert program), read, refused naming the
+//     field, and the shader's rough-diffuse G(mu) against its hemisphere integral;
 //   - the far-field yarn lobe ("woven": {"yarn_lobe"}): program, defines, textures, the port
 //     against C++ values (web/test/yarn-lobe-reference.json), bad blocks refused naming the field;
 //   - weave maps: web/exr.js reads tests/browser/maps/canvas.weave.exr as OpenImageIO does
@@ -59,6 +61,60 @@ check(() => assert.ok(w instanceof MeshWovenMaterial), 'woven type');
 check(() => assert.equal(w.woven.twist, 15), 'woven twist');
 check(() => assert.equal(w.woven.forward_scattering, 2), 'woven default beta');
 check(() => assert.throws(() => loadClothfitPreset({ schema: 'clothfit.preset', version: 1, model: 'woven', parameters: { twisst: 1 } }), /parameters\.twisst/), 'woven unknown');
+
+// Session 19: the rough diffuse (parameters.diffuse_roughness, brdf/woven.h On / Eo): default 0 =
+// Lambert with the old program (no WOVEN_ROUGH_DIFFUSE, the old key), read when given (its own
+// program and A, A sigma uniforms), refused as the C++ reader refuses it (the field named), a
+// change across 0 recompiles; the shader's s/t and G(mu) (taken from the compiled source and run
+// as JavaScript) against the hemisphere integral G(mu) = (1/pi) int s/t cos th_l dw_l.
+{
+  const rd = (v) => loadClothfitPreset({ schema: 'clothfit.preset', version: 1, model: 'woven', parameters: v === undefined ? {} : { diffuse_roughness: v } });
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
+  const compile = (m) => { const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: 'void main() {\n#include <project_vertex>\n}' }; m.onBeforeCompile(sh); return sh; };
+  const lam = rd(), lam0 = rd(0), rough = rd(0.65);
+  check(() => assert.equal(lam.woven.diffuse_roughness, 0), 'woven default diffuse_roughness 0');
+  check(() => assert.ok(!lam.roughDiffuse && !lam0.roughDiffuse && rough.roughDiffuse && rough.woven.diffuse_roughness === 0.65), 'diffuse_roughness read');
+  check(() => assert.ok(lam.customProgramCacheKey() === 'woven:additive:uniform:split' && lam0.customProgramCacheKey() === 'woven:additive:uniform:split'
+    && rough.customProgramCacheKey() === 'woven:additive:uniform:split:rough-diffuse'), 'rough diffuse: its own program key, Lambert the old one');
+  const shL = compile(lam), shR = compile(rough);
+  check(() => assert.ok(!shL.fragmentShader.includes('#define WOVEN_ROUGH_DIFFUSE') && shR.fragmentShader.includes('#define WOVEN_ROUGH_DIFFUSE\n')
+    && compile(lam0).fragmentShader === shL.fragmentShader), 'WOVEN_ROUGH_DIFFUSE only with sigma > 0');
+  const A = 1 / (1 + (0.5 - 2 / (3 * Math.PI)) * 0.65);
+  check(() => assert.ok(Math.abs(shR.uniforms.wovenOnA.value - A) < 1e-15 && Math.abs(shR.uniforms.wovenOnB.value - A * 0.65) < 1e-15
+    && shL.uniforms.wovenOnA.value === 1 && shL.uniforms.wovenOnB.value === 0), 'rough diffuse uniforms A, A sigma');
+  for (const [v, re] of [['0.5', /parameters\.diffuse_roughness: expected a number/], [null, /parameters\.diffuse_roughness: expected a number/],
+    [1.5, /parameters\.diffuse_roughness: value 1\.5 outside \[0, 1\]/], [-0.1, /parameters\.diffuse_roughness: value -0\.1 outside/],
+    [NaN, /parameters\.diffuse_roughness: not finite/], [Infinity, /parameters\.diffuse_roughness: not finite/]]) {
+    check(() => assert.throws(() => rd(v), re), `diffuse_roughness ${v} refused`);
+  }
+  check(() => assert.throws(() => new MeshWovenMaterial({ diffuse_roughness: 2 }), /MeshWovenMaterial: diffuse_roughness: value 2 outside/), 'material diffuse_roughness refused');
+  const m = rd(0), v0 = m.version;
+  m.woven.diffuse_roughness = 0.3; m._updateWovenUniforms();
+  const v1 = m.version;
+  m.woven.diffuse_roughness = 0.5; m._updateWovenUniforms();
+  check(() => assert.ok(v1 > v0 && m.version === v1 && m.customProgramCacheKey().endsWith(':rough-diffuse')), 'sigma 0 -> 0.3 recompiles, 0.3 -> 0.5 does not');
+  // the shader's functions, in double
+  const src = shR.fragmentShader, a = src.indexOf('float wovenOnSOverT('), b = src.indexOf('#endif', a);
+  const js = src.slice(a, b)
+    .replace(/^float (\w+)\(([^)]*)\) \{/gm, (_, name, ps) => `function ${name}(${ps.replace(/const in float /g, '')}) {`)
+    .replace(/^(\s*)float /gm, '$1let ');
+  const lib = { max: Math.max, sqrt: Math.sqrt, acos: Math.acos, clamp: (x, lo, hi) => Math.min(Math.max(x, lo), hi), RECIPROCAL_PI: 1 / Math.PI };
+  const [sOverT, G] = new Function(...Object.keys(lib), `${js}\nreturn [wovenOnSOverT, wovenOnAlbedoG];`)(...Object.values(lib));
+  const integral = (mu) => {  // midpoint rule over (th_l, phi), N x 2N
+    const N = 400, sv = Math.sqrt(1 - mu * mu);
+    let sum = 0;
+    for (let i = 0; i < N; ++i) {
+      const th = (i + 0.5) * (Math.PI / 2) / N, cl = Math.cos(th), sl = Math.sin(th);
+      for (let j = 0; j < 2 * N; ++j) {
+        const lv = mu * cl + sv * sl * Math.cos((j + 0.5) * Math.PI / N);
+        sum += sOverT(mu, cl, Math.sqrt((1 + lv) / 2)) * cl * sl;
+      }
+    }
+    return sum * (Math.PI / 2 / N) * (Math.PI / N) / Math.PI;
+  };
+  const worst = Math.max(...[0.02, 0.2, 0.5, 0.8, 0.99].map((mu) => Math.abs(G(mu) - integral(mu))));
+  check(() => assert.ok(worst < 2e-4 && G(1) === 0 && Math.abs(G(0) - (Math.PI / 2 - 2 / 3) / Math.PI) < 1e-15, `G worst ${worst}`), 'shader G(mu) = hemisphere integral of s/t');
+}
 
 // Woven options ("woven": yarn_layer, tint_warp, tint_weft): the keys and meaning of the C++
 // reader (render/scene/material.cpp), unknown keys and values refused with the field named.
