@@ -158,8 +158,6 @@ FitOptions FromClothBasin(const FitOptions& options, const render::MaterialPrese
 FitOptions DiffuseStageOptions(const FitOptions& options, const render::MaterialPreset& from) {
   FitOptions d = options;
   d.start = from;
-  const int off = d.start.Offset("diffuse_roughness");
-  if (!(d.start.values[size_t(off)] > 0.0)) d.start.values[size_t(off)] = kDiffuseStageStart;
   d.init_from_reference = false;
   d.start_roughness = {0.0};  // unused without init_from_reference: one start
   d.locked = Union(options.locked, {"specular_color", "roughness", "anisotropy", "twist",

@@ -70,10 +70,10 @@ FitOptions FromClothBasin(const FitOptions& options, const render::MaterialPrese
 // stages above hold diffuse_roughness (sigma of brdf/woven.h's On; each stage already frees the
 // ten scalars the Jacobian carries). After them FitWovenImages fits once more from the best
 // result with sigma free together with base_color, sheen_color and sheen_roughness (8 free;
-// the yarn parameters held), sigma started at kDiffuseStageStart unless the start already has
-// one, and keeps it when its RMSE is lower. Skipped when diffuse_roughness is locked
-// (`--lock diffuse_roughness`: the Lambert model of sessions 7-18).
-inline constexpr double kDiffuseStageStart = 0.5;
+// the yarn parameters held), sigma started where the best result has it (0 = Lambert, unless
+// --start sets it: the images must pull it off the bound), and keeps it when its RMSE is lower.
+// Skipped when diffuse_roughness is locked (`--lock diffuse_roughness`: the Lambert model of
+// sessions 7-18).
 FitOptions DiffuseStageOptions(const FitOptions& options, const render::MaterialPreset& from);
 
 // The per-model defaults every image fit shares (clothfit fit, bench fit): metalness /
