@@ -27,10 +27,10 @@
 //          ks = `specular_color`, m = `warp_share` x WeaveSample.warp (the weft weight is
 //          (1 - warp_share) x WeaveSample.weft), tints from Options (1 = uniform)
 //   f_s  = sheen (x) D_Charlie(r_s^2, NoH) V_Neubelt(NoV, NoL)             (= cloth::SheenDV)
-//   f_d  = base (x) kd_ratio / pi x On(v, l)                  (Fujii 2012 "FON", session 19)
+//   f_d  = base (x) kd_ratio / pi x On(v, l)                  (Fujii 2012 "FON", session 18)
 //   On   = A (1 + sigma s / t),  A = 1 / (1 + (1/2 - 2/(3 pi)) sigma),  sigma = `diffuse_roughness`
 //          s = l.v - (n.l)(n.v),  t = max(n.l, n.v) if s > 0, else 1   (l.v = 2 LoH^2 - 1)
-//          sigma = 0: On = 1 exactly (Lambert; every preset before session 19). s > 0 towards
+//          sigma = 0: On = 1 exactly (Lambert; every preset before session 18). s > 0 towards
 //          the light (retro-reflection) brightens, s < 0 (light behind, forward) darkens: the
 //          yarns' self-shadowing a flat Lambert surface lacks. The single-scattering lobe of
 //          OpenPBR's EON diffuse (Portsmouth, Kutz, Hill 2025), without its multiple-
@@ -69,7 +69,7 @@
 //   forward_scattering  1    2           [0, 8]       yes   beta of Fp
 //   sheen_color         3    0,0,0       [0, 1]       yes   linear sRGB Charlie sheen (0 = off)
 //   sheen_roughness     1    0.6         [0.045, 1]   yes   perceptual r_s, alpha = r_s^2
-//   diffuse_roughness   1    0           [0, 1]       yes   sigma of On (0 = Lambert; session 19,
+//   diffuse_roughness   1    0           [0, 1]       yes   sigma of On (0 = Lambert; session 18,
 //                                                           appended: older flat vectors keep
 //                                                           their offsets)
 //

@@ -187,7 +187,7 @@ FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions
     TakeBetter(std::move(basin), best);
   }
   if (best.usable && !Has(options.locked, "diffuse_roughness")) {
-    // The rough-diffuse stage (session 19): from the best result, the diffuse roughness free
+    // The rough-diffuse stage (session 18): from the best result, the diffuse roughness free
     // with the colours it trades against (docs/fitting.md "A rough diffuse for woven").
     FitResult rough = FitImages(inputs, DiffuseStageOptions(options, best.preset), prepared);
     rough.candidates = {CandidateOf("rough-diffuse", rough)};

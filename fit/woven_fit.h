@@ -66,7 +66,7 @@ FitOptions ClothBasinOptions(const FitOptions& options);
 // The options of step (b): `options` started from (a)'s fitted preset `basin`.
 FitOptions FromClothBasin(const FitOptions& options, const render::MaterialPreset& basin);
 
-// The rough-diffuse stage (session 19; docs/fitting.md "A rough diffuse for woven"). The
+// The rough-diffuse stage (session 18; docs/fitting.md "A rough diffuse for woven"). The
 // stages above hold diffuse_roughness (sigma of brdf/woven.h's On; each stage already frees the
 // ten scalars the Jacobian carries). After them FitWovenImages fits once more from the best
 // result with sigma free together with base_color, sheen_color and sheen_roughness (8 free;

@@ -120,7 +120,7 @@ TEST(S13WovenStarts, SyntheticSheenDominatedReferenceIsRecovered) {
   ASSERT_GE(r.candidates.size(), 2u);
   EXPECT_EQ(r.candidates[0].name, "two-stage");
   EXPECT_EQ(r.candidates[1].name, "cloth-basin");
-  EXPECT_EQ(r.candidates.back().name, "rough-diffuse");  // session 19's last stage
+  EXPECT_EQ(r.candidates.back().name, "rough-diffuse");  // session 18's last stage
   for (const auto& c : r.candidates) EXPECT_LE(r.rmse, c.rmse) << c.name;
   EXPECT_LT(r.rmse, 2e-3);
 
@@ -134,11 +134,11 @@ TEST(S13WovenStarts, SyntheticSheenDominatedReferenceIsRecovered) {
               old.rmse);
 }
 
-// Session 19: a woven reference with a rough diffuse (sigma 0.6, backlit by a rim light, where
+// Session 18: a woven reference with a rough diffuse (sigma 0.6, backlit by a rim light, where
 // On darkens the diffuse): the default fit starts every stage at sigma 0 (Lambert) and its
 // rough-diffuse stage must pull sigma off the bound to the truth; with diffuse_roughness
 // locked (the Lambert model) the same images cannot be matched as well.
-TEST(S19WovenRoughDiffuse, SyntheticRoughDiffuseReferenceIsRecovered) {
+TEST(S18WovenRoughDiffuse, SyntheticRoughDiffuseReferenceIsRecovered) {
   render::Scene s = render::CameraScene(32, 32, {0, 0, 3}, {0, 0, -1}, 0.4);
   s.meshes.push_back(render::SphereMesh(0.5, 64, 32, true, 0.f));
   render::Light key, rim;

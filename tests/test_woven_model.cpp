@@ -100,7 +100,7 @@ TEST(WovenModel, ZeroSpecularIsLambertPlusScaledSheen) {
   EXPECT_NEAR(Direct(p, v, l).g, p.base_color.g / kPi * c.NoL, 1e-15);
 }
 
-// On (Fujii's improved Oren-Nayar, session 19), literally: f_d = base/pi A (1 + sigma s/t).
+// On (Fujii's improved Oren-Nayar, session 18), literally: f_d = base/pi A (1 + sigma s/t).
 TEST(WovenModel, RoughDiffuseIsFujiiOrenNayar) {
   woven::Params<double> p = SomeParams();
   p.specular_color = {0, 0, 0};

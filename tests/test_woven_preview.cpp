@@ -213,7 +213,7 @@ TEST(WovenPreview, FastKernelEqualsTheReferenceKernel) {
     for (int sheen = 0; sheen < 3; ++sheen) {
       auto xs = WovenParams();
       if (sheen == 0) xs[12] = xs[13] = xs[14] = 0.0;
-      if (sheen >= 1) xs[16] = 0.6;  // the rough diffuse On (session 19)
+      if (sheen >= 1) xs[16] = 0.6;  // the rough diffuse On (session 18)
       std::vector<Rgb<double>> a, b;
       EvaluatePreview(*fast, xs.data(), a);
       EvaluatePreview(ref, xs.data(), b);

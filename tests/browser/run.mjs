@@ -18,7 +18,7 @@
 // Cases: each canonical scene (datasets/scenes/*.json) x 38 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
 // bent-normal IBL + 5 woven with the far-field yarn lobe + 4 with view-dependent weave maps + 4 woven
-// with the rough diffuse, s19) x 2 environments
+// with the rough diffuse, s18) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
 // 11 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
 // drape and sphere x 3 materials under studio with three.js shadow maps against
@@ -201,7 +201,7 @@ Object.assign(MATERIALS, {
 });
 MATERIALS['woven-lobe-maps-twill-views-aniso1'] = withAniso('woven-lobe-maps-twill-views', 1);
 MATERIALS['woven-lobe-maps-canvas-views-aniso1'] = withAniso('woven-lobe-maps-canvas-views', 1);
-// s19: the rough diffuse (parameters.diffuse_roughness sigma > 0: Fujii's improved Oren-Nayar,
+// s18: the rough diffuse (parameters.diffuse_roughness sigma > 0: Fujii's improved Oren-Nayar,
 // brdf/woven.h On for the lights, its albedo Eo(NoV) under every irradiance; web/clothfit.js
 // WOVEN_ROUGH_DIFFUSE): the 'woven' preset (yarn lobes and sheen) at sigma 0.65; a linen-like
 // preset with no yarn specular and a faint sheen, so the diffuse is the frame; the canvas weave
@@ -240,7 +240,7 @@ const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-shee
 // far from Lambert c, so a light map that went through three.js's stock path (Lambert
 // RE_IndirectDiffuse) instead of the model's IBL diffuse weight fails them (measured: 4.52 / 25
 // and 0.47 / 3; the other presets' weights are within a few % of c); woven-lobe-maps-canvas: the
-// lobe with weave maps and the light map in one program; woven-rough, woven-linen-rough (s19):
+// lobe with weave maps and the light map in one program; woven-rough, woven-linen-rough (s18):
 // the light map's irradiance under the rough diffuse's albedo Eo(NoV).
 const LIGHT_MAP_ENVS = {
   'studio-lightmap': { light_map: { size: 128 }, materials: ['standard-grey', 'physical-sheen', 'cloth-filament', 'woven', 'woven-lobe-canvas', 'woven-lobe-twill', 'physical-aniso',

@@ -4,7 +4,7 @@
 //     honoured by loadClothfitPreset for MeshPhysicalMaterial and MeshClothMaterial JSON, and a
 //     preset's "side" ('front' | 'double' or 0 / 2) too; without one, three.js's FrontSide stays;
 //   - woven presets load as MeshWovenMaterial with the table defaults and reject unknown names;
-//     diffuse_roughness (session 19): default 0 (the Lambert program), read, refused naming the
+//     diffuse_roughness (session 18): default 0 (the Lambert program), read, refused naming the
 //     field, and the shader's rough-diffuse G(mu) against its hemisphere integral;
 //   - the far-field yarn lobe ("woven": {"yarn_lobe"}): program, defines, textures, the port
 //     against C++ values (web/test/yarn-lobe-reference.json), bad blocks refused naming the field;
@@ -62,7 +62,7 @@ check(() => assert.equal(w.woven.twist, 15), 'woven twist');
 check(() => assert.equal(w.woven.forward_scattering, 2), 'woven default beta');
 check(() => assert.throws(() => loadClothfitPreset({ schema: 'clothfit.preset', version: 1, model: 'woven', parameters: { twisst: 1 } }), /parameters\.twisst/), 'woven unknown');
 
-// Session 19: the rough diffuse (parameters.diffuse_roughness, brdf/woven.h On / Eo): default 0 =
+// Session 18: the rough diffuse (parameters.diffuse_roughness, brdf/woven.h On / Eo): default 0 =
 // Lambert with the old program (no WOVEN_ROUGH_DIFFUSE, the old key), read when given (its own
 // program and A, A sigma uniforms), refused as the C++ reader refuses it (the field named), a
 // change across 0 recompiles; the shader's s/t and G(mu) (taken from the compiled source and run
