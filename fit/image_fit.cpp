@@ -1121,6 +1121,14 @@ FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions&
   const auto table = render::ParameterTable(model);
   const std::vector<int> sizes = BlockSizes(table);
   CheckLockedNames(table, opt);
+  {  // the start's flat vector must hold the model's table (the preview reads it by offset)
+    size_t n = 0;
+    for (const ParamInfo& info : table) n += size_t(info.size);
+    if (opt.start.values.size() != n)
+      throw FitError("fit: the start preset of model " + render::ToString(model) + " has " +
+                     std::to_string(opt.start.values.size()) + " values; its parameter table " +
+                     "has " + std::to_string(n));
+  }
   // The Jacobian carries at most kMaxJetWidth = 10 free scalars (ceres::Jet<double, 10>).
   const int free_scalars = FreeScalars(table, opt);
   if (JetWidthFor(free_scalars) == 0)

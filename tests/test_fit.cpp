@@ -12,6 +12,7 @@
 #include "render/reference/weave_pattern.h"
 #include "render/scene/image_io.h"
 #include "render/reference/path_tracer.h"
+#include "tests/fit_fixtures.h"
 #include "tests/scene_fixtures.h"
 
 namespace clothfit::fit {
@@ -19,38 +20,8 @@ namespace {
 namespace fs = std::filesystem;
 using render::ModelKind;
 
-render::Scene TestScene(int size) {
-  render::Scene s = render::CameraScene(size, size, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(render::SphereMesh(0.5, 64, 32, true, 0.f));
-  render::Light key, rim;
-  key.type = rim.type = render::Light::Type::kDirectional;
-  key.intensity = 2.5;
-  key.direction = {0.4, -0.5, -0.768};
-  rim.intensity = 1.5;
-  rim.direction = {-0.6, 0.2, 0.77};  // from behind: grazing sheen
-  s.lights = {key, rim};
-  s.card.tone_mapping = "ACESFilmic";
-  return s;
-}
+render::Scene TestScene(int size) { return KeyRimSphereScene(size, 1.5); }
 
-// A reference made by the preview itself with known parameters.
-Reference PreviewReference(const render::Scene& s, const render::Environment* env,
-                           const render::MaterialPreset& truth) {
-  render::PreviewOptions o;
-  o.model = truth.model;
-  o.cloth = truth.cloth;
-  auto cache = render::PreviewCache::Build(s, env, o);
-  std::vector<Rgb<double>> px;
-  render::EvaluatePreview(*cache, truth.values.data(), px);
-  Reference r;
-  r.path = "synthetic";
-  r.width = s.card.width;
-  r.height = s.card.height;
-  r.rgb = render::ComposeFrame(*cache, px);
-  r.std_error.assign(r.rgb.size(), 0.f);
-  r.fabric = cache->fabric_mask;
-  return r;
-}
 
 struct Case {
   ModelKind model;
@@ -357,13 +328,14 @@ TEST(Fit, ColourPackingGivesTheSameFitAsOneSlotPerScalar) {
       {ModelKind::kGltfSheen, {0.5, 0.3, 0.2, 0.5, 0.0, 0.6, 0.5, 0.4, 0.5},
        {0.3, 0.3, 0.3, 0.7, 0.0, 0.3, 0.3, 0.3, 0.7}, {"metallic"}},
       {ModelKind::kWoven,
-       {0.5, 0.3, 0.2, 0.6, 0.5, 0.4, 0.5, 0.7, 0, 0.6, 0.1, 3.0, 0, 0, 0, 0.6},
-       {0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.7, 0.7, 0, 0.5, 0.05, 2.0, 0, 0, 0, 0.6},
-       {"anisotropy", "twist", "sheen_color", "sheen_roughness"}},
+       {0.5, 0.3, 0.2, 0.6, 0.5, 0.4, 0.5, 0.7, 0, 0.6, 0.1, 3.0, 0, 0, 0, 0.6, 0},
+       {0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.7, 0.7, 0, 0.5, 0.05, 2.0, 0, 0, 0, 0.6, 0},
+       {"anisotropy", "twist", "sheen_color", "sheen_roughness", "diffuse_roughness"}},
       {ModelKind::kWoven,
-       {0.5, 0.3, 0.2, 0.6, 0.5, 0.4, 0.5, 0.7, 0, 0.6, 0.1, 3.0, 0.2, 0.15, 0.1, 0.5},
-       {0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.5, 0.7, 0, 0.6, 0.1, 3.0, 0.05, 0.05, 0.05, 0.7},
-       {"roughness", "anisotropy", "twist", "warp_share", "specular_f0", "forward_scattering"}},
+       {0.5, 0.3, 0.2, 0.6, 0.5, 0.4, 0.5, 0.7, 0, 0.6, 0.1, 3.0, 0.2, 0.15, 0.1, 0.5, 0.4},
+       {0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.5, 0.7, 0, 0.6, 0.1, 3.0, 0.05, 0.05, 0.05, 0.7, 0.4},
+       {"roughness", "anisotropy", "twist", "warp_share", "specular_f0", "forward_scattering",
+        "diffuse_roughness"}},
   };
   for (const char* tone : {"ACESFilmic", "AgX"}) {
     render::Scene s = TestScene(32);

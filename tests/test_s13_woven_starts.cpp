@@ -6,11 +6,13 @@
 
 #include <algorithm>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "fit/image_fit.h"
 #include "fit/woven_fit.h"
 #include "render/preview/preview.h"
-#include "tests/scene_fixtures.h"
+#include "tests/fit_fixtures.h"
 
 namespace clothfit::fit {
 namespace {
@@ -73,48 +75,40 @@ TEST(S13WovenStarts, ClothBasinStartRunsOnlyForReferenceStartsWithTheSheenFree) 
   EXPECT_FALSE(UsesClothBasinStart(o));
 }
 
+// A sphere lit by a key light and a rim light from behind (grazing: the sheen and the rough
+// diffuse's forward darkening both show) under a procedural sky, and woven references the
+// preview itself renders from known parameters.
+struct SyntheticWoven {
+  render::Scene s = KeyRimSphereScene(32, 3.0);
+  render::Environment env = render::Environment::ProceduralSky(1.0, 0.7);
+  Reference ref;
+  // The woven defaults with `values` set (name -> values), rendered into `ref`.
+  void Render(std::initializer_list<std::pair<const char*, std::vector<double>>> values) {
+    render::MaterialPreset truth = render::DefaultPreset(ModelKind::kWoven);
+    for (const auto& [name, v] : values)
+      for (size_t k = 0; k < v.size(); ++k) truth.values[size_t(truth.Offset(name)) + k] = v[k];
+    ref = PreviewReference(s, &env, truth);
+  }
+  std::vector<SceneInput> Inputs() const { return {{&s, &env, &ref, nullptr, "test"}}; }
+  static FitOptions Options() {
+    FitOptions o = WovenDefaults();
+    o.level = 0;
+    o.loss = Loss::kNone;
+    return o;
+  }
+};
+
 // A woven reference in cloth's basin: no yarn specular, dark base, a broad sheen lit from
 // behind (the velvet situation). The default fit must reach it (RMSE ~0) and report the paths
 // it ran; the answer is at least as good as every path's.
 TEST(S13WovenStarts, SyntheticSheenDominatedReferenceIsRecovered) {
-  render::Scene s = render::CameraScene(32, 32, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(render::SphereMesh(0.5, 64, 32, true, 0.f));
-  render::Light key, rim;
-  key.type = rim.type = render::Light::Type::kDirectional;
-  key.intensity = 2.5;
-  key.direction = {0.4, -0.5, -0.768};
-  rim.intensity = 3.0;
-  rim.direction = {-0.6, 0.2, 0.77};  // from behind: grazing sheen
-  s.lights = {key, rim};
-  s.card.tone_mapping = "ACESFilmic";
-  const render::Environment env = render::Environment::ProceduralSky(1.0, 0.7);
-
-  render::MaterialPreset truth = render::DefaultPreset(ModelKind::kWoven);
-  auto set = [&](const char* name, std::initializer_list<double> v) {
-    int off = truth.Offset(name), k = 0;
-    for (double x : v) truth.values[size_t(off + k++)] = x;
-  };
-  set("base_color", {0.02, 0.015, 0.012});
-  set("specular_color", {0.0, 0.0, 0.0});
-  set("sheen_color", {0.35, 0.3, 0.28});
-  set("sheen_roughness", {1.0});
-  render::PreviewOptions po;
-  po.model = ModelKind::kWoven;
-  auto cache = render::PreviewCache::Build(s, &env, po);
-  std::vector<Rgb<double>> px;
-  render::EvaluatePreview(*cache, truth.values.data(), px);
-  Reference ref;
-  ref.path = "synthetic";
-  ref.width = s.card.width;
-  ref.height = s.card.height;
-  ref.rgb = render::ComposeFrame(*cache, px);
-  ref.std_error.assign(ref.rgb.size(), 0.f);
-  ref.fabric = cache->fabric_mask;
-
-  FitOptions o = WovenDefaults();
-  o.level = 0;
-  o.loss = Loss::kNone;
-  const std::vector<SceneInput> in = {{&s, &env, &ref, nullptr, "test"}};
+  SyntheticWoven w;
+  w.Render({{"base_color", {0.02, 0.015, 0.012}},
+            {"specular_color", {0.0, 0.0, 0.0}},
+            {"sheen_color", {0.35, 0.3, 0.28}},
+            {"sheen_roughness", {1.0}}});
+  FitOptions o = SyntheticWoven::Options();
+  const std::vector<SceneInput> in = w.Inputs();
   const FitResult r = FitWovenImages(in, o);
   ASSERT_TRUE(r.usable) << r.message;
   ASSERT_GE(r.candidates.size(), 2u);
@@ -134,61 +128,33 @@ TEST(S13WovenStarts, SyntheticSheenDominatedReferenceIsRecovered) {
               old.rmse);
 }
 
-// Session 18: a woven reference with a rough diffuse (sigma 0.6, backlit by a rim light, where
-// On darkens the diffuse): the default fit starts every stage at sigma 0 (Lambert) and its
-// rough-diffuse stage must pull sigma off the bound to the truth; with diffuse_roughness
-// locked (the Lambert model) the same images cannot be matched as well.
+// Session 18: a woven reference with a rough diffuse (sigma 0.6; the rim light darkens it): the
+// default fit starts every stage at sigma 0 (Lambert) and its rough-diffuse stage must pull
+// sigma off the bound to the truth; with diffuse_roughness locked (the Lambert model) the same
+// images cannot be matched as well.
 TEST(S18WovenRoughDiffuse, SyntheticRoughDiffuseReferenceIsRecovered) {
-  render::Scene s = render::CameraScene(32, 32, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(render::SphereMesh(0.5, 64, 32, true, 0.f));
-  render::Light key, rim;
-  key.type = rim.type = render::Light::Type::kDirectional;
-  key.intensity = 2.5;
-  key.direction = {0.4, -0.5, -0.768};
-  rim.intensity = 3.0;
-  rim.direction = {-0.6, 0.2, 0.77};
-  s.lights = {key, rim};
-  s.card.tone_mapping = "ACESFilmic";
-  const render::Environment env = render::Environment::ProceduralSky(1.0, 0.7);
-
-  render::MaterialPreset truth = render::DefaultPreset(ModelKind::kWoven);
-  auto set = [&](const char* name, std::initializer_list<double> v) {
-    int off = truth.Offset(name), k = 0;
-    for (double x : v) truth.values[size_t(off + k++)] = x;
-  };
-  set("base_color", {0.12, 0.26, 0.31});
-  set("specular_color", {0.0, 0.0, 0.0});
-  set("diffuse_roughness", {0.6});
-  render::PreviewOptions po;
-  po.model = ModelKind::kWoven;
-  auto cache = render::PreviewCache::Build(s, &env, po);
-  std::vector<Rgb<double>> px;
-  render::EvaluatePreview(*cache, truth.values.data(), px);
-  Reference ref;
-  ref.path = "synthetic";
-  ref.width = s.card.width;
-  ref.height = s.card.height;
-  ref.rgb = render::ComposeFrame(*cache, px);
-  ref.std_error.assign(ref.rgb.size(), 0.f);
-  ref.fabric = cache->fabric_mask;
-
-  FitOptions o = WovenDefaults();
-  o.level = 0;
-  o.loss = Loss::kNone;
-  const std::vector<SceneInput> in = {{&s, &env, &ref, nullptr, "test"}};
+  SyntheticWoven w;
+  w.Render({{"base_color", {0.12, 0.26, 0.31}},
+            {"specular_color", {0.0, 0.0, 0.0}},
+            {"diffuse_roughness", {0.6}}});
+  FitOptions o = SyntheticWoven::Options();
+  const std::vector<SceneInput> in = w.Inputs();
   const FitResult r = FitWovenImages(in, o);
   ASSERT_TRUE(r.usable) << r.message;
   EXPECT_EQ(r.candidates.back().name, "rough-diffuse");
   EXPECT_LT(r.rmse, 2e-3);
-  EXPECT_NEAR(r.preset.values[size_t(r.preset.Offset("diffuse_roughness"))], 0.6, 0.05);
+  const auto sigma = [](const FitResult& f) {
+    return f.preset.values[size_t(f.preset.Offset("diffuse_roughness"))];
+  };
+  EXPECT_NEAR(sigma(r), 0.6, 0.05);
 
   o.locked.push_back("diffuse_roughness");
   const FitResult lambert = FitWovenImages(in, o);
   ASSERT_TRUE(lambert.usable);
-  EXPECT_EQ(lambert.preset.values[size_t(lambert.preset.Offset("diffuse_roughness"))], 0.0);
+  EXPECT_EQ(sigma(lambert), 0.0);
   EXPECT_GT(lambert.rmse, 3.0 * r.rmse);
   std::printf("synthetic rough diffuse: default rmse %.6f (sigma %.4f), Lambert %.6f\n", r.rmse,
-              r.preset.values[size_t(r.preset.Offset("diffuse_roughness"))], lambert.rmse);
+              sigma(r), lambert.rmse);
 }
 
 }  // namespace

@@ -45,6 +45,19 @@ Rgb<double> Direct(const woven::Params<double>& p, const V3& v, const V3& l,
                            lut::DefaultWovenPhase());
 }
 
+// int Direct(p, v, l).r dl over the upper hemisphere (cosine included in Direct): midpoint
+// rule in (cos theta, phi), n x n cells.
+double HemisphereIntegralR(const woven::Params<double>& p, const V3& v, int n) {
+  double sum = 0;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const double mu = (i + 0.5) / n, phi = 2 * kPi * (j + 0.5) / n;
+      const double st = std::sqrt(1 - mu * mu);
+      sum += Direct(p, v, V3(st * std::cos(phi), st * std::sin(phi), mu)).r;
+    }
+  return sum * 2 * kPi / (double(n) * n);
+}
+
 // Literal transcription: anisotropic GGX with the textbook form
 // D = 1 / (pi ax ay (x^2/ax^2 + y^2/ay^2 + z^2)^2) and Heitz's anisotropic Smith
 // Lambda(w) = (-1 + sqrt(1 + (ax^2 wx^2 + ay^2 wy^2) / wz^2)) / 2, G2 = 1 / (1 + L(v) + L(l)).
@@ -135,16 +148,7 @@ TEST(WovenModel, RoughDiffuseIblAlbedoMatchesBruteForceIntegral) {
   for (double sigma : {0.0, 0.3, 1.0})
     for (double nov : {0.05, 0.3, 0.7, 0.99}) {
       p.diffuse_roughness = sigma;
-      const V3 v(std::sqrt(1 - nov * nov), 0, nov);
-      const int nt = 400, np = 400;
-      double sum = 0;
-      for (int i = 0; i < nt; ++i)
-        for (int j = 0; j < np; ++j) {
-          const double mu = (i + 0.5) / nt, phi = 2 * kPi * (j + 0.5) / np;
-          const double st = std::sqrt(1 - mu * mu);
-          sum += Direct(p, v, V3(st * std::cos(phi), st * std::sin(phi), mu)).r;
-        }
-      sum *= 2 * kPi / (double(nt) * np);
+      const double sum = HemisphereIntegralR(p, V3(std::sqrt(1 - nov * nov), 0, nov), 400);
       const woven::WovenIblWeights<double> w = woven::EvalIbl(
           p, {}, nov, woven::WeaveSample<double>{}, lut::DefaultDfg(), lut::DefaultWovenPhase());
       EXPECT_NEAR(w.diffuse.r, sum, 2e-4) << "sigma " << sigma << " NoV " << nov;
@@ -214,16 +218,7 @@ TEST(WovenModel, IblYarnAlbedoMatchesBruteForceIntegralOfTheDirectLobe) {
   p.forward_scattering = 2.0;
   p.specular_f0 = 0.1;
   for (double nov : {0.171875, 0.515625, 0.890625}) {
-    const V3 v(std::sqrt(1 - nov * nov), 0, nov);
-    const int nt = 600, np = 600;
-    double sum = 0;
-    for (int i = 0; i < nt; ++i)
-      for (int j = 0; j < np; ++j) {
-        const double mu = (i + 0.5) / nt, phi = 2 * kPi * (j + 0.5) / np;
-        const double st = std::sqrt(1 - mu * mu);
-        sum += Direct(p, v, V3(st * std::cos(phi), st * std::sin(phi), mu)).r;
-      }
-    sum *= 2 * kPi / (double(nt) * np);
+    const double sum = HemisphereIntegralR(p, V3(std::sqrt(1 - nov * nov), 0, nov), 600);
     const woven::WovenIblWeights<double> w = woven::EvalIbl(
         p, {}, nov, woven::WeaveSample<double>{}, lut::DefaultDfg(), lut::DefaultWovenPhase());
     EXPECT_NEAR(w.warp.r + w.weft.r, sum, 0.01 * sum + 2e-3) << "NoV " << nov;
