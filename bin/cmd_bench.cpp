@@ -456,6 +456,30 @@ void RegisterBrdfBenchmarks() {
                                    }
                                  });
   }
+  // Session 19: the microcylinder lobe of a sadeghi fabric (fit's default 16 x 32 summary, its
+  // wi grid refined for narrow lobes): the bake and one evaluation, against the irawan ones.
+  for (const char* fabric : {"velvet", "linen", "satin"}) {
+    const std::string path = std::string(CLOTHFIT_SOURCE_DATASETS) + "/fabrics/" + fabric + ".json";
+    benchmark::RegisterBenchmark(("brdf/yarn-lobe-summary-bake/" + std::string(fabric)).c_str(),
+                                 [path](benchmark::State& s) {
+                                   for (auto _ : s)
+                                     benchmark::DoNotOptimize(fit::MicrocylinderDescription(path, 16));
+                                 })
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+    benchmark::RegisterBenchmark(("brdf/yarn-lobe-eval/" + std::string(fabric)).c_str(),
+                                 [path](benchmark::State& s) {
+                                   const yarn_lobe::Lobe lobe(fit::MicrocylinderDescription(path, 2).lobe);
+                                   const Vec3<double> wo = Normalize(Vec3<double>(0.3, 0.1, 0.9));
+                                   Vec3<double> wi = Normalize(Vec3<double>(-0.4, 0.05, 0.8));
+                                   double out[2];
+                                   for (auto _ : s) {
+                                     benchmark::DoNotOptimize(wi);
+                                     lobe.Eval(wo, wi, out);
+                                     benchmark::DoNotOptimize(out);
+                                   }
+                                 });
+  }
 }
 
 // Needs BuildPreviewSets first.

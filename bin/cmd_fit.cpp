@@ -280,12 +280,13 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "this many directions per pixel, seed 1; no split sum); 0 = the engine (default)")
       ->check(CLI::Range(0, 65536));
   cmd->add_option("--yarn-lobe", a.yarn_lobe,
-                  "woven's yarn lobes: auto (default: 'preset' when --fabric is an irawan fabric "
+                  "woven's yarn lobes: auto (default: 'preset' when --fabric is an irawan fabric, or a "
+                  "sadeghi fabric whose threads share one hue, "
                   "and no --sheen-tilt or --woven-ibl fis|bent, else 'none'; with the visibility "
                   "flags --shadows, --ao, --indirect too), "
                   "none (woven's anisotropic GGX lobes), preset (the fabric's far-field lobe "
-                  "written into the preset, \"woven\": {\"yarn_lobe\"}: a deterministic quadrature "
-                  "for lights, its table's split sum for the environment; brdf/yarn_lobe.h, drawn "
+                  "written into the preset, \"woven\": {\"yarn_lobe\"}: irawan, a deterministic quadrature; "
+                  "sadeghi, the microcylinder BSDF in closed form; for lights, its table's split sum for the environment; brdf/yarn_lobe.h, drawn "
                   "by web/clothfit.js too). Measurement only: 'farfield' "
                   "replaces the yarn lobes by the fabric's period-averaged Irawan specular "
                   "(fit/yarn_farfield.h; needs --exact-ibl), 'table' by that lobe tabulated "
@@ -545,20 +546,24 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
         a.fis_diffuse_taps >= 0 ? a.fis_diffuse_taps : woven::kDefaultFisDiffuseTaps;
   }
   // Woven's yarn lobes (session 12): "auto" is the fabric's far-field lobe in the preset when
-  // the fabric has yarns (irawan) and nothing asks for what the lobe cannot do.
+  // the fabric has yarns (irawan) or is a microcylinder fabric of one hue (sadeghi, session 19)
+  // and nothing asks for what the lobe cannot do.
   std::string lobe = a.yarn_lobe;
   const bool lobe_compatible = a.sheen_tilt == 0.0 &&
                                (a.woven_ibl == "auto" || a.woven_ibl == "split");
-  if (lobe == "auto")
-    lobe = o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && lobe_compatible &&
-                   render::LoadFabric(a.fabric).model == "irawan"
-               ? "preset"
-               : "none";
+  if (lobe == "auto") {
+    bool has_lobe = false;
+    if (o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && lobe_compatible) {
+      const std::string m = render::LoadFabric(a.fabric).model;
+      has_lobe = m == "irawan" || (m == "sadeghi" && fit::MicrocylinderRefusal(a.fabric).empty());
+    }
+    lobe = has_lobe ? "preset" : "none";
+  }
   if (lobe == "preset") {  // docs/fitting.md "The far-field yarn lobe"
     if (o.start.model != render::ModelKind::kWoven)
       throw std::invalid_argument("--yarn-lobe preset: only for --model woven");
     if (a.fabric.empty())
-      throw std::invalid_argument("--yarn-lobe preset: needs --fabric (an irawan fabric)");
+      throw std::invalid_argument("--yarn-lobe preset: needs --fabric (an irawan or sadeghi fabric)");
     if (!lobe_compatible)
       throw std::invalid_argument("--yarn-lobe preset: not with --sheen-tilt or --woven-ibl "
                                   "fis|bent (the lobe has its own split sum)");

@@ -214,28 +214,52 @@ void Validate(const FarField& f, const std::string& where, bool need_ibl) {
     throw std::invalid_argument(where + "." + field + ": " + what);
   };
   auto finite = [](double x) { return std::isfinite(x); };
-  if (f.nodes < 1 || f.nodes > FarField::kMaxNodes) bad("nodes", "expected an integer in [1, 64]");
-  if (!finite(f.alpha) || f.alpha < 0.0) bad("alpha", "expected a finite number >= 0");
-  if (!finite(f.beta) || f.beta < 0.0) bad("beta", "expected a finite number >= 0");
-  if (!finite(f.h_width) || !(f.h_width > 0.0) || f.h_width > 1.0) bad("h_width", "expected a number in (0, 1]");
-  if (!finite(f.ss) || f.ss < 0.0 || !(f.ss < 1.0)) bad("ss", "expected a number in [0, 1)");
-  if (!finite(f.scale) || f.scale < 0.0) bad("scale", "expected a finite number >= 0");
-  if (f.groups.empty() || f.groups.size() > size_t(FarField::kMaxGroups))
-    bad("groups", "expected 1 to " + std::to_string(FarField::kMaxGroups) + " groups");
-  for (size_t i = 0; i < f.groups.size(); ++i) {
-    const FarField::Group& g = f.groups[i];
-    const std::string gi = "groups[" + std::to_string(i) + "].";
-    if (!finite(g.share) || !(g.share > 0.0) || g.share > 1.0) bad(gi + "share", "expected a number in (0, 1]");
-    for (auto [name, v] : {std::pair<const char*, double>{"width", g.width}, {"length", g.length},
-                           {"across", g.across}, {"along", g.along}})
-      if (!finite(v) || !(v > 0.0) || v > 1e6) bad(gi + name, "expected a number in (0, 1e6]");
-    if (!finite(g.umax) || !(g.umax > 0.0) || !(g.umax < 90.0)) bad(gi + "umax", "expected degrees in (0, 90)");
-    if (!(g.width * std::sin(g.umax * kDegToRad) < g.length))
-      bad(gi + "umax", "width sin(umax) must be < length");
-    if (!finite(g.psi) || !(std::abs(g.psi) < 90.0)) bad(gi + "psi", "expected degrees in (-90, 90)");
-    if (!finite(g.kappa) || g.kappa < -1.0 || g.kappa > 1e6) bad(gi + "kappa", "expected a number in [-1, 1e6]");
-    if (!finite(g.area_factor) || g.area_factor < 1.0 || g.area_factor > 1e6)
-      bad(gi + "area_factor", "expected a number in [1, 1e6]");
+  if (f.kind == FarField::Kind::kMicrocylinder) {
+    double a_sum = 0.0;
+    for (int j = 0; j < 2; ++j) {
+      const microcylinder::Thread& th = f.threads[j];
+      const std::string tj = "threads[" + std::to_string(j) + "].";
+      if (!finite(th.eta) || !(th.eta > 1.0 && th.eta < 3.0)) bad(tj + "eta", "expected a number in (1, 3)");
+      if (!finite(th.kd) || th.kd < 0.0 || th.kd > 1.0) bad(tj + "kd", "expected a number in [0, 1]");
+      if (!finite(th.gamma_s) || !(th.gamma_s > 0.0) || th.gamma_s > 90.0)
+        bad(tj + "gamma_s", "expected degrees in (0, 90]");
+      if (!finite(th.gamma_v) || !(th.gamma_v > 0.0) || th.gamma_v > 90.0)
+        bad(tj + "gamma_v", "expected degrees in (0, 90]");
+      if (!finite(th.a) || th.a < 0.0 || th.a > 1.0) bad(tj + "a", "expected a number in [0, 1]");
+      if (!finite(th.volume_scale) || th.volume_scale < 0.0 || th.volume_scale > 1.0)
+        bad(tj + "volume_scale", "expected a number in [0, 1] (this thread's albedo over the lobe's)");
+      if (th.offsets.empty() || th.offsets.size() > size_t(microcylinder::kMaxOffsets))
+        bad(tj + "offsets", "expected 1 to 64 tangent offsets");
+      for (size_t k = 0; k < th.offsets.size(); ++k)
+        if (!finite(th.offsets[k]) || th.offsets[k] < -90.0 || th.offsets[k] > 90.0)
+          bad(tj + "offsets[" + std::to_string(k) + "]", "expected degrees in [-90, 90]");
+      a_sum += th.a;
+    }
+    if (!(a_sum <= 1.0 + 1e-9)) bad("threads", "a_1 + a_2 must be <= 1");
+  } else {
+    if (f.nodes < 1 || f.nodes > FarField::kMaxNodes) bad("nodes", "expected an integer in [1, 64]");
+    if (!finite(f.alpha) || f.alpha < 0.0) bad("alpha", "expected a finite number >= 0");
+    if (!finite(f.beta) || f.beta < 0.0) bad("beta", "expected a finite number >= 0");
+    if (!finite(f.h_width) || !(f.h_width > 0.0) || f.h_width > 1.0) bad("h_width", "expected a number in (0, 1]");
+    if (!finite(f.ss) || f.ss < 0.0 || !(f.ss < 1.0)) bad("ss", "expected a number in [0, 1)");
+    if (!finite(f.scale) || f.scale < 0.0) bad("scale", "expected a finite number >= 0");
+    if (f.groups.empty() || f.groups.size() > size_t(FarField::kMaxGroups))
+      bad("groups", "expected 1 to " + std::to_string(FarField::kMaxGroups) + " groups");
+    for (size_t i = 0; i < f.groups.size(); ++i) {
+      const FarField::Group& g = f.groups[i];
+      const std::string gi = "groups[" + std::to_string(i) + "].";
+      if (!finite(g.share) || !(g.share > 0.0) || g.share > 1.0) bad(gi + "share", "expected a number in (0, 1]");
+      for (auto [name, v] : {std::pair<const char*, double>{"width", g.width}, {"length", g.length},
+                             {"across", g.across}, {"along", g.along}})
+        if (!finite(v) || !(v > 0.0) || v > 1e6) bad(gi + name, "expected a number in (0, 1e6]");
+      if (!finite(g.umax) || !(g.umax > 0.0) || !(g.umax < 90.0)) bad(gi + "umax", "expected degrees in (0, 90)");
+      if (!(g.width * std::sin(g.umax * kDegToRad) < g.length))
+        bad(gi + "umax", "width sin(umax) must be < length");
+      if (!finite(g.psi) || !(std::abs(g.psi) < 90.0)) bad(gi + "psi", "expected degrees in (-90, 90)");
+      if (!finite(g.kappa) || g.kappa < -1.0 || g.kappa > 1e6) bad(gi + "kappa", "expected a number in [-1, 1e6]");
+      if (!finite(g.area_factor) || g.area_factor < 1.0 || g.area_factor > 1e6)
+        bad(gi + "area_factor", "expected a number in [1, 1e6]");
+    }
   }
   const yarn_table::Table& t = f.ibl;
   if (!need_ibl && t.n_theta == 0 && t.n_phi == 0 && t.ibl.empty()) return;
@@ -251,6 +275,10 @@ void Validate(const FarField& f, const std::string& where, bool need_ibl) {
 
 Lobe::Lobe(const FarField& f) : f_(f) {
   Validate(f, "yarn lobe", false);
+  if (f.kind == FarField::Kind::kMicrocylinder) {
+    tangents_ = microcylinder::MakeTangents(f.threads);
+    return;
+  }
   phase_.alpha = f.alpha;
   phase_.beta = f.beta;
   phase_.von_mises_norm = 1.0 / (2.0 * kPi * BesselI0(std::abs(f.beta)));
@@ -306,16 +334,23 @@ double Lobe::GroupSum(const G& g, const Vec3<double>& wo_s, const Vec3<double>& 
 }
 
 void Lobe::Eval(const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) const {
+  if (f_.kind == FarField::Kind::kMicrocylinder) {
+    microcylinder::EvalSplit(tangents_, f_.threads, wo, wi, out);
+    return;
+  }
   out[0] = out[1] = 0.0;
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
   for (const G& g : groups_) out[g.yarn.warp ? 0 : 1] += g.weight * GroupSum(g, wo, wi);
 }
 
 yarn_table::Table Bake(const std::function<void(const Vec3<double>&, const Vec3<double>&, double[2])>& eval,
-                       int n_theta, int n_phi, bool with_lobe) {
+                       int n_theta, int n_phi, bool with_lobe, int wi_sub) {
   if (n_theta < 2 || n_theta > 64 || n_phi < 3 || n_phi > 128)
     throw std::invalid_argument("yarn table: resolution " + std::to_string(n_theta) + " x " +
                                 std::to_string(n_phi) + " not in [2, 64] x [3, 128]");
+  if (wi_sub < 1 || wi_sub > 16 || (with_lobe && wi_sub != 1))
+    throw std::invalid_argument("yarn table: wi subdivision " + std::to_string(wi_sub) +
+                                " not in [1, 16] (1 with the lobe table)");
   yarn_table::Table t;
   t.n_theta = n_theta;
   t.n_phi = n_phi;
@@ -323,24 +358,33 @@ yarn_table::Table Bake(const std::function<void(const Vec3<double>&, const Vec3<
   if (with_lobe) t.lobe.assign(2 * D * D, 0.f);
   t.ibl.assign(2 * D * 5, 0.f);
   std::vector<Vec3<double>> dirs(D);
-  std::vector<double> solid(D);
-  const double dth = 0.5 * kPi / n_theta, dph = 2.0 * kPi / n_phi;
   for (int it = 0; it < n_theta; ++it)
-    for (int ip = 0; ip < n_phi; ++ip) {
-      dirs[size_t(it) * size_t(n_phi) + size_t(ip)] = t.Direction(it, ip);
-      solid[size_t(it) * size_t(n_phi) + size_t(ip)] = std::sin((it + 0.5) * dth) * dth * dph;
+    for (int ip = 0; ip < n_phi; ++ip) dirs[size_t(it) * size_t(n_phi) + size_t(ip)] = t.Direction(it, ip);
+  // The wi quadrature: the bin centres (wi_sub = 1), or a wi_sub times finer midpoint grid
+  // for lobes narrower than a bin (session 19: the microcylinder's surface Gaussian).
+  yarn_table::Table fine;
+  fine.n_theta = n_theta * wi_sub;
+  fine.n_phi = n_phi * wi_sub;
+  const size_t Di = size_t(fine.n_theta) * size_t(fine.n_phi);
+  std::vector<Vec3<double>> wis(Di);
+  std::vector<double> solid(Di);
+  const double dth = 0.5 * kPi / fine.n_theta, dph = 2.0 * kPi / fine.n_phi;
+  for (int it = 0; it < fine.n_theta; ++it)
+    for (int ip = 0; ip < fine.n_phi; ++ip) {
+      wis[size_t(it) * size_t(fine.n_phi) + size_t(ip)] = fine.Direction(it, ip);
+      solid[size_t(it) * size_t(fine.n_phi) + size_t(ip)] = std::sin((it + 0.5) * dth) * dth * dph;
     }
   tbb::parallel_for(size_t(0), D, [&](size_t o) {
     double A[2] = {0, 0};
     Vec3<double> m[2] = {{0, 0, 0}, {0, 0, 0}};
-    for (size_t i = 0; i < D; ++i) {
+    for (size_t i = 0; i < Di; ++i) {
       double v[2] = {0.0, 0.0};
-      eval(dirs[o], dirs[i], v);
-      const double w = dirs[i].z * solid[i];
+      eval(dirs[o], wis[i], v);
+      const double w = wis[i].z * solid[i];
       for (int k = 0; k < 2; ++k) {
         if (with_lobe) t.lobe[(size_t(k) * D + o) * D + i] = float(v[k]);
         A[k] += v[k] * w;
-        m[k] = m[k] + dirs[i] * (v[k] * w);
+        m[k] = m[k] + wis[i] * (v[k] * w);
       }
     }
     for (int k = 0; k < 2; ++k) {

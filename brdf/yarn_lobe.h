@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "brdf/math.h"
+#include "brdf/microcylinder.h"
 #include "brdf/yarn_table.h"
 
 namespace clothfit::yarn_lobe {
@@ -86,7 +87,19 @@ double SegmentSpecular(const Phase& ph, const Yarn& y, const Point& p, const Vec
 
 // The preset's description of the lobe ("woven": {"yarn_lobe"}; read and written by
 // render/scene/material.cpp, made by fit/yarn_farfield.h from an Irawan fabric).
+//
+// Kind kMicrocylinder (session 19; preset "model": "sadeghi-microcylinder"): the far field of a
+// Sadeghi fabric (render/reference/sadeghi.h), which does not vary over the cloth, so its far
+// field is its BSDF: out[0] = the fibres' surface (Fresnel) reflection, white; out[1] = their
+// volume scattering per unit albedo (brdf/microcylinder.h EvalSplit). With tint_warp = 1,
+// tint_weft = the threads' albedo A, specular_color 1 and warp_share 0.5 woven's yarn term
+// ks (tint_w 2 m out[0] + tint_f 2 (1 - m) out[1]) is the reference BSDF exactly; warp_share
+// then weighs surface against volume. Only `threads` and `ibl` are used (groups, nodes and the
+// Irawan constants are ignored).
 struct FarField {
+  enum class Kind { kIrawan, kMicrocylinder };
+  Kind kind = Kind::kIrawan;
+  microcylinder::Thread threads[2];  // kMicrocylinder
   struct Group {
     bool warp = true;
     double share = 0.0;  // fraction of the tile's cells
@@ -106,7 +119,10 @@ struct FarField {
 };
 
 // Throws std::invalid_argument "<where>.<field>: <what>" (where names the object) on a value out of its documented
-// range: nodes in [1, 64], 1..16 groups, share in (0, 1], width, length, across, along > 0,
+// range (kMicrocylinder: threads[j].eta in (1, 3), kd in [0, 1], gamma_s, gamma_v in (0, 90],
+// a in [0, 1] with a_1 + a_2 <= 1, volume_scale in [0, 1], 1..64 offsets each in [-90, 90];
+// then the ibl table as
+// below); kIrawan: nodes in [1, 64], 1..16 groups, share in (0, 1], width, length, across, along > 0,
 // umax in (0, 90) deg with width sin(umax) < length, |psi| < 90 deg, kappa >= -1, area_factor
 // >= 1, 0 <= ss < 1, 0 < h_width <= 1, alpha, beta >= 0, scale >= 0, all finite; an ibl
 // table with n_theta in [2, 64], n_phi in [3, 128], 2 n_theta n_phi 5 finite values (or none:
@@ -134,6 +150,7 @@ class Lobe {
   // sum over g's nodes of SegmentSpecular (bit-identical), the node-independent work done once
   double GroupSum(const G& g, const Vec3<double>& wo, const Vec3<double>& wi) const;
   std::vector<G> groups_;
+  std::vector<microcylinder::Tangent> tangents_;  // kMicrocylinder
 };
 
 // The table of a lobe `eval` (T_warp, T_weft at (wo, wi)) on an n_theta x n_phi grid over wo
@@ -141,9 +158,11 @@ class Lobe {
 // bin centres, dw = sin theta dtheta dphi): A = sum T cos dw, dir = normalize(sum T cos wi dw),
 // r = RoughnessForMeanCosine(|sum T cos wi dw| / A); with_lobe: also Table::lobe = T at the bin
 // centres. eval must be thread-safe (parallel over wo); deterministic when eval is. Throws
-// std::invalid_argument on a grid outside [2, 64] x [3, 128].
+// std::invalid_argument on a grid outside [2, 64] x [3, 128]. wi_sub > 1: the summary's wi
+// sums run over a wi_sub times finer midpoint grid in theta and phi (wo stays at the bin
+// centres), for lobes narrower than a bin; [1, 16], 1 when with_lobe.
 yarn_table::Table Bake(const std::function<void(const Vec3<double>& wo, const Vec3<double>& wi,
                                                 double out[2])>& eval,
-                       int n_theta, int n_phi, bool with_lobe);
+                       int n_theta, int n_phi, bool with_lobe, int wi_sub = 1);
 
 }  // namespace clothfit::yarn_lobe

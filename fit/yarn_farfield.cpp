@@ -15,6 +15,7 @@
 #include "fit/image_fit.h"
 #include "render/reference/fabric.h"
 #include "render/reference/irawan.h"
+#include "render/reference/sadeghi.h"
 #include "render/reference/weave_pattern.h"
 #include "render/scene/sampler.h"
 
@@ -274,6 +275,18 @@ YarnLobeSettings YarnLobeSettingsFromJson(const nlohmann::json& j, const std::st
   return s;
 }
 
+void MicrocylinderStart(render::MaterialPreset* p) {
+  auto set = [p](const char* name, std::initializer_list<double> v) {
+    const int at = p->Offset(name);
+    int k = 0;
+    for (double x : v) p->values[size_t(at + k++)] = x;
+  };
+  set("specular_color", {1.0, 1.0, 1.0});
+  set("warp_share", {0.5});
+  set("base_color", {0.0, 0.0, 0.0});
+  set("sheen_color", {0.0, 0.0, 0.0});
+}
+
 namespace {
 void LockLobeIgnored(FitOptions* o) {
   for (const char* n : {"roughness", "anisotropy", "twist", "specular_f0", "forward_scattering"})
@@ -281,10 +294,100 @@ void LockLobeIgnored(FitOptions* o) {
 }
 }  // namespace
 
+namespace {
+// The Sadeghi fabric behind fabric_path, and the lobe's one volume colour: the brighter
+// thread's albedo (*ref, *first = thread 0 is it) and the other's strength k relative to it.
+// Returns "" or why the lobe cannot carry the fabric.
+std::string OneVolumeColour(const std::string& fabric_path, const render::Fabric& fabric,
+                            render::Rgbd* ref_out, bool* first_out, double* k_out) {
+  const auto* sadeghi = dynamic_cast<const render::SadeghiBsdf*>(fabric.bsdf.get());
+  if (!sadeghi)
+    return fabric_path + ": model '" + fabric.model +
+           "' is not a sadeghi fabric (the microcylinder lobe)";
+  const render::SadeghiFabric& sf = sadeghi->fabric();
+  const render::Rgbd& a0 = sf.thread[0].albedo;
+  const render::Rgbd& a1 = sf.thread[1].albedo;
+  const bool first = a0[0] + a0[1] + a0[2] >= a1[0] + a1[1] + a1[2];
+  const render::Rgbd& ref = first ? a0 : a1;
+  const render::Rgbd& other = first ? a1 : a0;
+  const double rsum = ref[0] + ref[1] + ref[2];
+  const double k = rsum > 0.0 ? (other[0] + other[1] + other[2]) / rsum : 0.0;
+  for (int c = 0; c < 3; ++c)
+    if (std::abs(other[c] - k * ref[c]) > 1e-9 * std::max(1.0, ref[c]))
+      return fabric_path + ": the two threads of '" + sf.name +
+             "' differ in hue, not only in strength; the microcylinder lobe carries one volume "
+             "colour (woven's tint_weft)";
+  if (ref_out) *ref_out = ref;
+  if (first_out) *first_out = first;
+  if (k_out) *k_out = k;
+  return "";
+}
+}  // namespace
+
+std::string MicrocylinderRefusal(const std::string& fabric_path) {
+  return OneVolumeColour(fabric_path, render::LoadFabric(fabric_path), nullptr, nullptr, nullptr);
+}
+
+MicrocylinderLobe MicrocylinderDescription(const std::string& fabric_path, int table_theta) {
+  const render::Fabric fabric = render::LoadFabric(fabric_path);
+  render::Rgbd ref;
+  bool first = true;
+  double k = 0.0;
+  const std::string why = OneVolumeColour(fabric_path, fabric, &ref, &first, &k);
+  if (!why.empty()) throw std::invalid_argument(why);
+  const render::SadeghiFabric& sf =
+      dynamic_cast<const render::SadeghiBsdf*>(fabric.bsdf.get())->fabric();
+  MicrocylinderLobe out;
+  out.lobe.kind = yarn_lobe::FarField::Kind::kMicrocylinder;
+  out.lobe.fabric = fabric_path;
+  double gamma_min = 90.0;
+  for (int j = 0; j < 2; ++j) {
+    const render::SadeghiThread& t = sf.thread[j];
+    microcylinder::Thread& th = out.lobe.threads[j];
+    th.eta = t.eta;
+    th.kd = t.kd;
+    th.gamma_s = t.gamma_s;
+    th.gamma_v = t.gamma_v;
+    th.a = t.a;
+    th.offsets = t.offsets;
+    th.volume_scale = (j == 0) == first ? 1.0 : k;
+    gamma_min = std::min({gamma_min, t.gamma_s, t.gamma_v});
+  }
+  for (int c = 0; c < 3; ++c) out.albedo[c] = ref[c];
+  // The summary's wi sums at a spacing of at most the narrowest Gaussian's standard deviation
+  // (satin's surface lobe is 2.5 deg wide; a 16-bin table's bins are 5.6 deg).
+  const double bin = 90.0 / double(table_theta);
+  out.wi_sub = std::clamp(int(std::ceil(bin / gamma_min)), 1, 8);
+  const yarn_lobe::Lobe lobe(out.lobe);
+  out.lobe.ibl = yarn_lobe::Bake([&lobe](const Vec3<double>& wo, const Vec3<double>& wi,
+                                         double v[2]) { lobe.Eval(wo, wi, v); },
+                                 table_theta, 2 * table_theta, false, out.wi_sub);
+  return out;
+}
+
 std::string ApplyPresetYarnLobe(const YarnLobeSettings& s, FitOptions* o) {
   if (o->start.woven.yarn_layer != woven::YarnLayer::kAdditive)
     throw std::invalid_argument("yarn lobe: the far-field lobe needs the additive yarn layer");
   const auto t0 = std::chrono::steady_clock::now();
+  if (render::LoadFabric(s.fabric).model == "sadeghi") {  // session 19: the fibres' own BSDF
+    MicrocylinderLobe m = MicrocylinderDescription(s.fabric, s.table_theta);
+    o->start.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(std::move(m.lobe));
+    o->start.woven.ibl = woven::IblMode::kSplit;
+    // out[0] (surface) white, out[1] (volume) in the threads' colour: ks = 1 and m = 0.5 draw
+    // the reference BSDF exactly, so the fit starts there (MicrocylinderStart).
+    o->start.woven.tint_warp = Rgb<double>(1.0, 1.0, 1.0);
+    o->start.woven.tint_weft = m.albedo;
+    MicrocylinderStart(&o->start);
+    LockLobeIgnored(o);
+    char buf[240];
+    std::snprintf(buf, sizeof buf,
+                  "yarn lobe: the microcylinder lobe of %s (surface white, volume albedo %.4g %.4g "
+                  "%.4g as tint_weft), environment summary %d x %d (wi %dx finer) baked in %.2f s",
+                  s.fabric.c_str(), m.albedo[0], m.albedo[1], m.albedo[2], s.table_theta,
+                  2 * s.table_theta, m.wi_sub,
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    return buf;
+  }
   const YarnFarField ff(s.fabric, s.positions);
   o->start.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(ff.Description(s.nodes, s.table_theta));
   o->start.woven.ibl = woven::IblMode::kSplit;

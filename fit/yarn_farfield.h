@@ -28,6 +28,7 @@
 
 namespace clothfit::render {
 class IrawanBsdf;
+struct MaterialPreset;
 }
 
 namespace clothfit::fit {
@@ -109,5 +110,26 @@ std::string ApplyYarnLobe(const YarnLobeSettings& s, FitOptions* options);
 // std::invalid_argument on a fabric without yarns, a bad node count or a start whose woven yarn
 // layer is not additive. Returns a log line.
 std::string ApplyPresetYarnLobe(const YarnLobeSettings& s, FitOptions* options);
+
+// Session 19: the far-field lobe of a Sadeghi fabric (render/reference/sadeghi.h), i.e. its
+// BSDF in closed form (brdf/yarn_lobe.h FarField::Kind::kMicrocylinder), with its environment
+// summary (table_theta x 2 table_theta; the wi sums wi_sub times finer, at most the narrowest
+// Gaussian width apart) and the threads' volume albedo. ApplyPresetYarnLobe takes this path for
+// a "sadeghi" fabric: tint_warp = 1, tint_weft = albedo, start at MicrocylinderStart. Throws
+// std::invalid_argument on a fabric that is not a sadeghi fabric or whose two threads differ in
+// hue (the lobe carries one volume colour; threads of one hue and different strengths are
+// carried by Thread::volume_scale).
+struct MicrocylinderLobe {
+  yarn_lobe::FarField lobe;
+  Rgb<double> albedo;
+  int wi_sub = 1;
+};
+MicrocylinderLobe MicrocylinderDescription(const std::string& fabric_path, int table_theta = 16);
+// "" when fabric_path is a sadeghi fabric the lobe carries (threads of one hue), else why not
+// (what MicrocylinderDescription would throw). Throws on a fabric file that does not load.
+std::string MicrocylinderRefusal(const std::string& fabric_path);
+// The woven values at which the microcylinder lobe is the reference BSDF: specular_color 1,
+// warp_share 0.5, base_color and sheen_color 0.
+void MicrocylinderStart(render::MaterialPreset* preset);
 
 }  // namespace clothfit::fit

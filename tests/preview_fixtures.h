@@ -82,8 +82,11 @@ void ForEachPixelGeometry(const Scene& s, const PreviewCache& cache, Fn&& fn) {
 // woven flat parameters (brdf/woven.h kParameterTable order), sheen off, sheen roughness 0.6.
 inline std::vector<double> WovenFlat(Rgb<double> base, Rgb<double> spec, double r, double aniso,
                                      double m, double f0, double beta) {
+  // The whole woven table (17 values since session 18's diffuse_roughness, 0 = Lambert): a
+  // shorter vector was read past its end (session 19: S12YarnLobe.ConvertSamplesTheLobe then
+  // depended on the heap's contents).
   return {base.r, base.g, base.b, spec.r, spec.g, spec.b, r,   aniso,
-          0.0,    m,      f0,     beta,   0.0,    0.0,    0.0, 0.6};
+          0.0,    m,      f0,     beta,   0.0,    0.0,    0.0, 0.6, 0.0};
 }
 
 // Builds the preview cache of (s, env, o) and evaluates it at x; `keep` receives the cache.

@@ -58,8 +58,11 @@ std::string ModelTitle(const std::string& model) {
 std::string ModelTitle(const ModelSpec& m) {
   std::string t = ModelTitle(m.model);
   const nlohmann::json* w = m.preset.is_object() && m.preset.contains("woven") ? &m.preset.at("woven") : nullptr;
-  if (m.model == "woven" && w && w->is_object() && w->contains("yarn_lobe"))
-    t += ", far-field yarn lobe";
+  if (m.model == "woven" && w && w->is_object() && w->contains("yarn_lobe")) {
+    const nlohmann::json& y = w->at("yarn_lobe");
+    const bool micro = y.is_object() && y.contains("model") && y.at("model") == "sadeghi-microcylinder";
+    t += micro ? ", microcylinder fibre lobe" : ", far-field yarn lobe";
+  }
   else if (m.model == "woven")
     t += ", GGX yarn lobes";
   return t;

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "brdf/microcylinder.h"
 #include "render/reference/woven_sampling.h"
 
 namespace clothfit::render {
@@ -16,16 +17,6 @@ constexpr double kDegToRad = kPi / 180.0;
 
 std::atomic<uint64_t> g_next_sadeghi_id{1};
 uint64_t Bits(double x) { return std::bit_cast<uint64_t>(x); }
-
-double Gaussian(double sigma, double x) {
-  return std::exp(-x * x / (2.0 * sigma * sigma)) / (sigma * std::sqrt(2.0 * kPi));
-}
-
-double WrapAngle(double a) {
-  while (a > kPi) a -= 2.0 * kPi;
-  while (a < -kPi) a += 2.0 * kPi;
-  return a;
-}
 
 SadeghiThread Thread(double eta, Rgbd colour, double scale, double kd, double gs, double gv,
                      double a, std::vector<double> offsets) {
@@ -43,13 +34,7 @@ SadeghiThread Thread(double eta, Rgbd colour, double scale, double kd, double gs
 }  // namespace
 
 double FresnelDielectric(double cos_i, double eta) {
-  const double ci = std::clamp(cos_i, 0.0, 1.0);
-  const double sin_t2 = (1.0 - ci * ci) / (eta * eta);
-  if (sin_t2 >= 1.0) return 1.0;
-  const double ct = std::sqrt(1.0 - sin_t2);
-  const double rs = (ci - eta * ct) / (ci + eta * ct);
-  const double rp = (eta * ci - ct) / (eta * ci + ct);
-  return 0.5 * (rs * rs + rp * rp);
+  return microcylinder::FresnelDielectric(cos_i, eta);
 }
 
 const std::vector<SadeghiFabric>& SadeghiPresets() {
@@ -120,21 +105,17 @@ SadeghiBsdf::SadeghiBsdf(SadeghiFabric fabric) : fabric_(std::move(fabric)) {
       throw std::invalid_argument(where + "needs 1 to 64 tangent offsets");
     }
     a_sum += th.a;
-    const Vec3d d = j == 0 ? Vec3d(1, 0, 0) : Vec3d(0, 1, 0);
-    const Vec3d n(0, 0, 1);
     for (double off : th.offsets) {
       if (!(off >= -90.0 && off <= 90.0)) {
         throw std::invalid_argument(where + "offsets must be in [-90, 90] degrees");
       }
-      const double o = off * kDegToRad;
-      Tangent tg;
-      tg.t = d * std::cos(o) + n * std::sin(o);
-      tg.n = d * -std::sin(o) + n * std::cos(o);
-      tg.b = Cross(tg.t, tg.n);
-      tg.thread = j;
-      tg.weight = th.a / double(th.offsets.size());
-      tangents_.push_back(tg);
+      tangents_.push_back(microcylinder::MakeTangent(j, off, th.a / double(th.offsets.size())));
     }
+    optics_[j].eta = th.eta;
+    optics_[j].kd = th.kd;
+    optics_[j].gamma_s = th.gamma_s;
+    optics_[j].gamma_v = th.gamma_v;
+    optics_[j].a = th.a;
     scale_s_[j] = 2.0 * th.gamma_s * kDegToRad * std::sqrt(3.0) / kPi;
     scale_v_[j] = 2.0 * th.gamma_v * kDegToRad * std::sqrt(3.0) / kPi;
   }
@@ -154,21 +135,12 @@ void SadeghiBsdf::ComputeState(const Vec3d& wo, WoState* s) const {
   s->q = (1.0 - fabric_.thread[0].a - fabric_.thread[1].a) * wo.z;
   double total = 0.0;
   for (size_t k = 0; k < tangents_.size(); ++k) {
-    const Tangent& tg = tangents_[k];
+    const microcylinder::Tangent& tg = tangents_[k];
     WoTangent& w = s->tg[k];
-    w.proj = std::max(0.0, Dot(wo, tg.n));
-    s->q += tg.weight * w.proj;
+    microcylinder::OutgoingAngles(tg, wo, &w.angles);
+    s->q += tg.weight * w.angles.proj;
     s->prob[k] = 0.0;
-    if (w.proj <= 0.0) continue;
-    w.sin_o = std::clamp(Dot(wo, tg.t), -1.0, 1.0);
-    w.theta_o = std::asin(w.sin_o);
-    w.cos_o = std::sqrt(std::max(0.0, 1.0 - w.sin_o * w.sin_o));  // = cos(asin(sin_o))
-    const double x = Dot(wo, tg.n), y = Dot(wo, tg.b);
-    w.phi_o = std::atan2(y, x);
-    const double r = std::sqrt(x * x + y * y);
-    // cos and sin of atan2(y, x); atan2(0, 0) = 0.
-    w.cos_phi_o = r > 0.0 ? x / r : 1.0;
-    w.sin_phi_o = r > 0.0 ? y / r : 0.0;
+    if (w.angles.proj <= 0.0) continue;
     const int j = tg.thread;
     w.cone_s = woven::MakeCone(wo, tg.t, scale_s_[j]);
     w.cone_v = woven::MakeCone(wo, tg.t, scale_v_[j]);
@@ -178,7 +150,7 @@ void SadeghiBsdf::ComputeState(const Vec3d& wo, WoState* s) const {
     full.lo = -0.5 * kPi;
     full.hi = 0.5 * kPi;
     const double m = full.Mass();
-    s->prob[k] = tg.weight * w.proj * (m > 0.0 ? w.cone_v.mass / m : 0.0);
+    s->prob[k] = tg.weight * w.angles.proj * (m > 0.0 ? w.cone_v.mass / m : 0.0);
     total += s->prob[k];
   }
   s->lobe = total > 0.0;
@@ -200,55 +172,18 @@ const SadeghiBsdf::WoState& SadeghiBsdf::StateFor(const Vec3d& wo) const {
   return memo.state;
 }
 
-// Per tangent, only what depends on wi is computed here; the trigonometry of the angles in
-// sadeghi.h is evaluated through identities (exact in real arithmetic):
-//   cos(asin(s)) = sqrt(1 - s^2);  cos(atan2(y, x)) = x / sqrt(x^2 + y^2);
-//   cos(theta_d) = sqrt((1 + cos(theta_i - theta_o)) / 2), theta_d in [-pi/2, pi/2];
-//   cos(phi_d / 2) = sqrt((1 + cos(phi_i - phi_o)) / 2), phi_d in [-pi, pi] (wrapped; the
-//   cosine of the difference does not depend on the wrap).
+// Per tangent, only what depends on wi is computed here (brdf/microcylinder.h Scatter; the
+// wo part is in the memo).
 Rgbd SadeghiBsdf::Eval(const Vec3d& wo, const Vec3d& wi, const ShadingPoint&) const {
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return Rgbd(0, 0, 0);
   const WoState& s = StateFor(wo);
-  const double sigma_m = kMaskingSigmaDeg * kDegToRad;
   Rgbd sum(0, 0, 0);
   for (size_t k = 0; k < tangents_.size(); ++k) {
-    const Tangent& tg = tangents_[k];
-    const WoTangent& w = s.tg[k];
-    if (w.proj <= 0.0) continue;
-    const double x = Dot(wi, tg.n), y = Dot(wi, tg.b);
-    const double r = std::sqrt(x * x + y * y);
-    const double cos_phi_i = r > 0.0 ? x / r : 1.0;
-    // Masking-shadowing (Sadeghi et al. eq. 10): correlated when phi_d is small. Both
-    // terms vanish when either factor does (m_o > 0 here, since wo.n_k > 0).
-    const double m_i = std::max(0.0, cos_phi_i), m_o = std::max(0.0, w.cos_phi_o);
-    if (m_i <= 0.0 || m_o <= 0.0) continue;
-    const double phi_d = WrapAngle(std::atan2(y, x) - w.phi_o);
-    const double uu = std::exp(-phi_d * phi_d / (2.0 * sigma_m * sigma_m));
-    const double mask = (1.0 - uu) * m_i * m_o + uu * std::min(m_i, m_o);
-    if (mask <= 0.0) continue;
-    const SadeghiThread& th = fabric_.thread[tg.thread];
-    const double sin_i = std::clamp(Dot(wi, tg.t), -1.0, 1.0);
-    const double theta_i = std::asin(sin_i);
-    const double cos_i = std::sqrt(std::max(0.0, 1.0 - sin_i * sin_i));
-    const double theta_h = 0.5 * (theta_i + w.theta_o);
-    const double cos_diff = cos_i * w.cos_o + sin_i * w.sin_o;  // cos(theta_i - theta_o)
-    const double cos_d = std::sqrt(std::clamp(0.5 * (1.0 + cos_diff), 0.0, 1.0));
-    const double sin_phi_i = r > 0.0 ? y / r : 0.0;
-    const double cos_phi_diff = cos_phi_i * w.cos_phi_o + sin_phi_i * w.sin_phi_o;
-    const double cos_half_phi = std::sqrt(std::clamp(0.5 * (1.0 + cos_phi_diff), 0.0, 1.0));
-    const double fr = FresnelDielectric(cos_d * cos_half_phi, th.eta);
-    const double ft = 1.0 - fr;
-    // Surface reflection (eq. 4) and volume scattering (eq. 5).
-    const double f_surface = fr * cos_half_phi * Gaussian(th.gamma_s * kDegToRad, theta_h);
-    // Guard: cos_i + cos_o vanishes only when both directions run along the fibre; floored
-    // at 1e-4 (changes nothing elsewhere).
-    const double vol = ft * ft *
-                       ((1.0 - th.kd) * Gaussian(th.gamma_v * kDegToRad, theta_h) + th.kd) /
-                       std::max(cos_i + w.cos_o, 1e-4);
-    // Guard: cos^2(theta_d) floored at 1e-4 (theta_d within 0.6 deg of 90 deg only).
-    const double inv_cd2 = 1.0 / std::max(cos_d * cos_d, 1e-4);
-    const double wt = tg.weight * w.proj * mask * cos_i * inv_cd2;
-    sum += Rgbd::Splat(wt * f_surface) + th.albedo * (wt * vol);
+    const microcylinder::Tangent& tg = tangents_[k];
+    double surface = 0.0, volume = 0.0;
+    if (!microcylinder::Scatter(tg, s.tg[k].angles, optics_[tg.thread], wi, &surface, &volume))
+      continue;
+    sum += Rgbd::Splat(surface) + fabric_.thread[tg.thread].albedo * volume;
   }
   if (!(s.q > 0.0)) return Rgbd(0, 0, 0);
   return sum * (1.0 / (s.q * wi.z));

@@ -39,6 +39,7 @@
 #include <string>
 #include <vector>
 
+#include "brdf/microcylinder.h"
 #include "render/reference/bsdf.h"
 #include "render/reference/woven_sampling.h"
 
@@ -84,12 +85,6 @@ class SadeghiBsdf final : public Bsdf {
   const SadeghiFabric& fabric() const { return fabric_; }
 
  private:
-  struct Tangent {
-    Vec3d t, n;  // fibre tangent and thread surface normal (shading frame)
-    Vec3d b;     // t x n
-    int thread = 0;
-    double weight = 0;  // a_j / N_j
-  };
   static constexpr size_t kMaxTangents = 128;  // 2 threads x 64 offsets
   using Probabilities = std::array<double, kMaxTangents>;
   // Everything that depends on wo only, per tangent: Eval's outgoing fibre angles and the
@@ -98,9 +93,7 @@ class SadeghiBsdf final : public Bsdf {
   // kept in a one-entry thread-local memo keyed by the BSDF instance and the bits of wo (a
   // pure function of its key: the results are exactly those of recomputing it).
   struct WoTangent {
-    double proj = 0.0;                                     // max(0, wo.n_k)
-    double sin_o = 0.0, theta_o = 0.0, cos_o = 1.0;        // theta_o = asin(wo.t)
-    double phi_o = 0.0, cos_phi_o = 1.0, sin_phi_o = 0.0;  // phi_o = atan2(wo.b, wo.n_k)
+    microcylinder::Outgoing angles;  // Eval's outgoing fibre angles (brdf/microcylinder.h)
     woven::Cone cone_s, cone_v;  // the lobe strategy's cones (surface, volume width)
   };
   struct WoState {
@@ -116,7 +109,8 @@ class SadeghiBsdf final : public Bsdf {
   double MixturePdf(const WoState& s, const Vec3d& wi) const;
 
   SadeghiFabric fabric_;
-  std::vector<Tangent> tangents_;
+  std::vector<microcylinder::Tangent> tangents_;  // brdf/microcylinder.h
+  microcylinder::Thread optics_[2];  // the threads' constants without offsets and colour
   double scale_s_[2] = {0, 0}, scale_v_[2] = {0, 0};
   uint64_t instance_id_ = 0;
 };

@@ -171,54 +171,85 @@ std::shared_ptr<const yarn_lobe::FarField> ParseYarnLobe(const json& y, const st
       Fail(where, field, "expected an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
     return int(v.get<long long>());
   };
+  const json& model = need(y, base, "model");
+  const bool micro = model.is_string() && model.get<std::string>() == "sadeghi-microcylinder";
+  if (!model.is_string() || (!micro && model.get<std::string>() != "irawan-far-field"))
+    Fail(where, base + ".model", "expected \"irawan-far-field\" or \"sadeghi-microcylinder\"");
   static const char* kKeys[] = {"model", "fabric", "nodes", "alpha", "beta", "h_width", "ss",
                                 "scale", "groups", "ibl"};
+  static const char* kMicroKeys[] = {"model", "fabric", "threads", "ibl"};
   for (auto it = y.begin(); it != y.end(); ++it) {
     bool known = false;
-    for (const char* k : kKeys) known = known || it.key() == k;
+    if (micro)
+      for (const char* k : kMicroKeys) known = known || it.key() == k;
+    else
+      for (const char* k : kKeys) known = known || it.key() == k;
     if (!known)
       Fail(where, base + "." + it.key(),
-           "unknown key (valid: model, fabric, nodes, alpha, beta, h_width, ss, scale, groups, ibl)");
+           micro ? "unknown key (valid for sadeghi-microcylinder: model, fabric, threads, ibl)"
+                 : "unknown key (valid: model, fabric, nodes, alpha, beta, h_width, ss, scale, groups, ibl)");
   }
   auto f = std::make_shared<yarn_lobe::FarField>();
-  const json& model = need(y, base, "model");
-  if (!model.is_string() || model.get<std::string>() != "irawan-far-field")
-    Fail(where, base + ".model", "expected \"irawan-far-field\"");
   if (y.contains("fabric")) {
     if (!y["fabric"].is_string()) Fail(where, base + ".fabric", "expected a string");
     f->fabric = y["fabric"].get<std::string>();
   }
-  f->nodes = integer(need(y, base, "nodes"), base + ".nodes", 1, yarn_lobe::FarField::kMaxNodes);
-  f->alpha = Number(need(y, base, "alpha"), where, base + ".alpha");
-  f->beta = Number(need(y, base, "beta"), where, base + ".beta");
-  f->h_width = Number(need(y, base, "h_width"), where, base + ".h_width");
-  f->ss = Number(need(y, base, "ss"), where, base + ".ss");
-  f->scale = Number(need(y, base, "scale"), where, base + ".scale");
-  const json& groups = need(y, base, "groups");
-  if (!groups.is_array() || groups.empty() || groups.size() > size_t(yarn_lobe::FarField::kMaxGroups))
-    Fail(where, base + ".groups", "expected an array of 1 to " +
-                                      std::to_string(yarn_lobe::FarField::kMaxGroups) + " groups");
-  for (size_t i = 0; i < groups.size(); ++i) {
-    const json& g = groups[i];
-    const std::string gf = base + ".groups[" + std::to_string(i) + "]";
-    if (!g.is_object() || g.size() != 10)
-      Fail(where, gf, "expected an object with type, share, psi, umax, kappa, width, length, "
-                      "across, along, area_factor");
-    yarn_lobe::FarField::Group q;
-    const json& type = need(g, gf, "type");
-    if (!type.is_string() || (type.get<std::string>() != "warp" && type.get<std::string>() != "weft"))
-      Fail(where, gf + ".type", "expected \"warp\" or \"weft\"");
-    q.warp = type.get<std::string>() == "warp";
-    q.share = Number(need(g, gf, "share"), where, gf + ".share");
-    q.psi = Number(need(g, gf, "psi"), where, gf + ".psi");
-    q.umax = Number(need(g, gf, "umax"), where, gf + ".umax");
-    q.kappa = Number(need(g, gf, "kappa"), where, gf + ".kappa");
-    q.width = Number(need(g, gf, "width"), where, gf + ".width");
-    q.length = Number(need(g, gf, "length"), where, gf + ".length");
-    q.across = Number(need(g, gf, "across"), where, gf + ".across");
-    q.along = Number(need(g, gf, "along"), where, gf + ".along");
-    q.area_factor = Number(need(g, gf, "area_factor"), where, gf + ".area_factor");
-    f->groups.push_back(q);
+  if (micro) {  // brdf/yarn_lobe.h FarField::Kind::kMicrocylinder
+    f->kind = yarn_lobe::FarField::Kind::kMicrocylinder;
+    const json& threads = need(y, base, "threads");
+    if (!threads.is_array() || threads.size() != 2)
+      Fail(where, base + ".threads", "expected an array of 2 threads");
+    for (size_t j = 0; j < 2; ++j) {
+      const json& t = threads[j];
+      const std::string tf = base + ".threads[" + std::to_string(j) + "]";
+      if (!t.is_object() || t.size() != 7)
+        Fail(where, tf, "expected an object with eta, kd, gamma_s, gamma_v, a, volume_scale, offsets");
+      microcylinder::Thread& th = f->threads[j];
+      th.eta = Number(need(t, tf, "eta"), where, tf + ".eta");
+      th.kd = Number(need(t, tf, "kd"), where, tf + ".kd");
+      th.gamma_s = Number(need(t, tf, "gamma_s"), where, tf + ".gamma_s");
+      th.gamma_v = Number(need(t, tf, "gamma_v"), where, tf + ".gamma_v");
+      th.a = Number(need(t, tf, "a"), where, tf + ".a");
+      th.volume_scale = Number(need(t, tf, "volume_scale"), where, tf + ".volume_scale");
+      const json& off = need(t, tf, "offsets");
+      if (!off.is_array() || off.empty() || off.size() > size_t(microcylinder::kMaxOffsets))
+        Fail(where, tf + ".offsets", "expected an array of 1 to 64 numbers (degrees)");
+      for (size_t k = 0; k < off.size(); ++k)
+        th.offsets.push_back(Number(off[k], where, tf + ".offsets[" + std::to_string(k) + "]"));
+    }
+  } else {
+    f->nodes = integer(need(y, base, "nodes"), base + ".nodes", 1, yarn_lobe::FarField::kMaxNodes);
+    f->alpha = Number(need(y, base, "alpha"), where, base + ".alpha");
+    f->beta = Number(need(y, base, "beta"), where, base + ".beta");
+    f->h_width = Number(need(y, base, "h_width"), where, base + ".h_width");
+    f->ss = Number(need(y, base, "ss"), where, base + ".ss");
+    f->scale = Number(need(y, base, "scale"), where, base + ".scale");
+    const json& groups = need(y, base, "groups");
+    if (!groups.is_array() || groups.empty() || groups.size() > size_t(yarn_lobe::FarField::kMaxGroups))
+      Fail(where, base + ".groups", "expected an array of 1 to " +
+                                        std::to_string(yarn_lobe::FarField::kMaxGroups) + " groups");
+    for (size_t i = 0; i < groups.size(); ++i) {
+      const json& g = groups[i];
+      const std::string gf = base + ".groups[" + std::to_string(i) + "]";
+      if (!g.is_object() || g.size() != 10)
+        Fail(where, gf, "expected an object with type, share, psi, umax, kappa, width, length, "
+                        "across, along, area_factor");
+      yarn_lobe::FarField::Group q;
+      const json& type = need(g, gf, "type");
+      if (!type.is_string() || (type.get<std::string>() != "warp" && type.get<std::string>() != "weft"))
+        Fail(where, gf + ".type", "expected \"warp\" or \"weft\"");
+      q.warp = type.get<std::string>() == "warp";
+      q.share = Number(need(g, gf, "share"), where, gf + ".share");
+      q.psi = Number(need(g, gf, "psi"), where, gf + ".psi");
+      q.umax = Number(need(g, gf, "umax"), where, gf + ".umax");
+      q.kappa = Number(need(g, gf, "kappa"), where, gf + ".kappa");
+      q.width = Number(need(g, gf, "width"), where, gf + ".width");
+      q.length = Number(need(g, gf, "length"), where, gf + ".length");
+      q.across = Number(need(g, gf, "across"), where, gf + ".across");
+      q.along = Number(need(g, gf, "along"), where, gf + ".along");
+      q.area_factor = Number(need(g, gf, "area_factor"), where, gf + ".area_factor");
+      f->groups.push_back(q);
+    }
   }
   const json& ibl = need(y, base, "ibl");
   const std::string bf = base + ".ibl";
@@ -351,18 +382,26 @@ void ParseParameter(const std::string& name, const json& value, const std::strin
 }
 
 json YarnLobeToJson(const yarn_lobe::FarField& f) {
+  json summary = json::array();
+  for (float v : f.ibl.ibl) summary.push_back(double(v));
+  const json ibl = {{"n_theta", f.ibl.n_theta}, {"n_phi", f.ibl.n_phi}, {"summary", summary}};
+  if (f.kind == yarn_lobe::FarField::Kind::kMicrocylinder) {
+    json threads = json::array();
+    for (const microcylinder::Thread& th : f.threads)
+      threads.push_back({{"eta", th.eta}, {"kd", th.kd}, {"gamma_s", th.gamma_s},
+                         {"gamma_v", th.gamma_v}, {"a", th.a}, {"volume_scale", th.volume_scale},
+                         {"offsets", th.offsets}});
+    return {{"model", "sadeghi-microcylinder"}, {"fabric", f.fabric}, {"threads", threads}, {"ibl", ibl}};
+  }
   json groups = json::array();
   for (const yarn_lobe::FarField::Group& g : f.groups)
     groups.push_back({{"type", g.warp ? "warp" : "weft"}, {"share", g.share}, {"psi", g.psi},
                       {"umax", g.umax}, {"kappa", g.kappa}, {"width", g.width},
                       {"length", g.length}, {"across", g.across}, {"along", g.along},
                       {"area_factor", g.area_factor}});
-  json summary = json::array();
-  for (float v : f.ibl.ibl) summary.push_back(double(v));
   return {{"model", "irawan-far-field"}, {"fabric", f.fabric}, {"nodes", f.nodes},
           {"alpha", f.alpha}, {"beta", f.beta}, {"h_width", f.h_width}, {"ss", f.ss},
-          {"scale", f.scale}, {"groups", groups},
-          {"ibl", {{"n_theta", f.ibl.n_theta}, {"n_phi", f.ibl.n_phi}, {"summary", summary}}}};
+          {"scale", f.scale}, {"groups", groups}, {"ibl", ibl}};
 }
 
 }  // namespace

@@ -75,7 +75,7 @@ MaterialPreset DefaultPreset(ModelKind m);
 // The woven renderer options a preview of preset `p` uses: p.woven with the lobe frame of
 // "ibl": "bent" (bent_anisotropy, bent_twist) taken from p's `anisotropy` and `twist` values
 // (p.woven unchanged for other models).
-woven::Options PreviewWovenOptions(const MaterialPreset& p);
+::clothfit::woven::Options PreviewWovenOptions(const MaterialPreset& p);
 
 MaterialPreset ReadPreset(const std::string& path);
 MaterialPreset ParsePreset(const nlohmann::json& j, const std::string& where);
