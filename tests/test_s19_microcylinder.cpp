@@ -238,5 +238,39 @@ TEST(S19Microcylinder, FinerWiGridForNarrowLobes) {
   EXPECT_LT(err_sub, 0.5 * err_one);
 }
 
+// web/test/microcylinder-reference.json (tests/browser/unit.mjs compares the JS port and the
+// generated GLSL with it) is what the C++ kernel computes today: every pair recomputed.
+TEST(S19Microcylinder, WebFixtureIsTheKernel) {
+  std::ifstream in(std::string(CLOTHFIT_TEST_SOURCE_DIR) + "/web/test/microcylinder-reference.json");
+  ASSERT_TRUE(in.good());
+  const json j = json::parse(in);
+  size_t pairs = 0;
+  for (const auto& [name, fab] : j.at("fabrics").items()) {
+    microcylinder::Thread th[2];
+    for (int k = 0; k < 2; ++k) {
+      const json& t = fab.at("threads").at(size_t(k));
+      th[k].eta = t.at("eta");
+      th[k].kd = t.at("kd");
+      th[k].gamma_s = t.at("gamma_s");
+      th[k].gamma_v = t.at("gamma_v");
+      th[k].a = t.at("a");
+      th[k].volume_scale = t.at("volume_scale");
+      th[k].offsets = t.at("offsets").get<std::vector<double>>();
+    }
+    const auto tangents = microcylinder::MakeTangents(th);
+    for (const json& p : fab.at("pairs")) {
+      const auto v = [](const json& a) { return Vec3<double>(a.at(0), a.at(1), a.at(2)); };
+      double out[2];
+      microcylinder::EvalSplit(tangents, th, v(p.at("wo")), v(p.at("wi")), out);
+      for (int k = 0; k < 2; ++k) {
+        const double want = p.at("out").at(size_t(k));
+        ASSERT_NEAR(out[k], want, 1e-12 * std::max(1.0, std::abs(want))) << name << " " << p.dump();
+      }
+      ++pairs;
+    }
+  }
+  EXPECT_GT(pairs, 600u);
+}
+
 }  // namespace
 }  // namespace clothfit

@@ -445,7 +445,8 @@ export function wovenLobes(p) {
 // Table::Ibl). Local frame: x = t (+u, warp), y = b (+v, weft), z = n.
 // yarnLobeOptions checks the block (errors name the field), yarnLobeEval is a double-precision
 // port of the lobe for node-side tests, yarnLobePack makes the shader's source (yarnLobeGlsl) and
-// the IBL texture.
+// the IBL texture. Session 19 adds a second model, "sadeghi-microcylinder" (below: the
+// microcylinder lobe), in the same two slots, with the same IBL summary and texture.
 
 export const YARN_LOBE_MAX_GROUPS = 16, YARN_LOBE_MAX_NODES = 64;
 const YL_DEG = Math.PI / 180;
@@ -502,13 +503,15 @@ const YARN_GROUP_KEYS = ['type', 'share', 'psi', 'umax', 'kappa', 'width', 'leng
  * A preset's "woven": {"yarn_lobe": {...}} checked; throws naming the field
  * (`woven.yarn_lobe.groups[1].umax: ...`). Returns {model, fabric, nodes, alpha, beta, h_width,
  * ss, scale, groups: [{type, share, psi, umax, kappa, width, length, across, along,
- * area_factor}], ibl: {n_theta, n_phi, summary: Float32Array}} (angles still in degrees).
+ * area_factor}], ibl: {n_theta, n_phi, summary: Float32Array}} (angles still in degrees); for
+ * "model": "sadeghi-microcylinder" (session 19) {model, fabric, threads: [{eta, kd, gamma_s,
+ * gamma_v, a, volume_scale, offsets}] x 2, ibl} (microcylinderThreads; the C++ messages).
  */
 export function yarnLobeOptions(v, f = 'woven.yarn_lobe') {
   const fail = (field, msg) => { throw new Error(`loadClothfitPreset: ${field}: ${msg}`); };
   const obj = (x, field, keys) => {
     if (x === null || typeof x !== 'object' || Array.isArray(x)) fail(field, 'expected an object');
-    for (const k of Object.keys(x)) if (!keys.includes(k)) fail(`${field}.${k}`, `unknown key (valid: ${keys.join(', ')})`);
+    for (const k of Object.keys(x)) if (!keys.includes(k)) fail(`${field}.${ylKeyShown(k)}`, `unknown key (valid: ${keys.join(', ')})`);
     for (const k of keys) if (x[k] === undefined && k !== 'fabric') fail(`${field}.${k}`, 'missing');
   };
   const num = (x, field, ok = () => true, range = '') => {
@@ -522,8 +525,16 @@ export function yarnLobeOptions(v, f = 'woven.yarn_lobe') {
     if (x < lo || x > hi) fail(field, `must be in [${lo}, ${hi}]`);
     return x;
   };
+  // the model first (it decides the keys), as the C++ reader
+  if (v === null || typeof v !== 'object' || Array.isArray(v)) fail(f, 'expected an object');
+  if (v.model === undefined) fail(`${f}.model`, 'missing');
+  if (v.model !== 'irawan-far-field' && v.model !== MICROCYLINDER_MODEL) fail(`${f}.model`, `expected "irawan-far-field" or "${MICROCYLINDER_MODEL}"`);
+  if (v.model === MICROCYLINDER_MODEL) {
+    obj(v, f, MICROCYLINDER_KEYS);
+    if (v.fabric !== undefined && typeof v.fabric !== 'string') fail(`${f}.fabric`, 'expected a string');
+    return { model: v.model, fabric: v.fabric ?? '', threads: microcylinderThreads(v.threads, `${f}.threads`, fail, obj), ibl: yarnLobeIblOptions(v.ibl, `${f}.ibl`, fail, obj, int) };
+  }
   obj(v, f, YARN_LOBE_KEYS);
-  if (v.model !== 'irawan-far-field') fail(`${f}.model`, 'expected "irawan-far-field"');
   if (v.fabric !== undefined && typeof v.fabric !== 'string') fail(`${f}.fabric`, 'expected a string');
   const out = {
     model: v.model, fabric: v.fabric ?? '',
@@ -553,21 +564,33 @@ export function yarnLobeOptions(v, f = 'woven.yarn_lobe') {
     if (!(q.width * Math.sin(q.umax * YL_DEG) < q.length)) fail(`${gf}.umax`, 'width sin(umax) must be < length');
     return q;
   });
-  const ibl = v.ibl;
-  obj(ibl, `${f}.ibl`, ['n_theta', 'n_phi', 'summary']);
-  const nt = int(ibl.n_theta, `${f}.ibl.n_theta`, 2, 64), np = int(ibl.n_phi, `${f}.ibl.n_phi`, 3, 128);
+  out.ibl = yarnLobeIblOptions(v.ibl, `${f}.ibl`, fail, obj, int);
+  return out;
+}
+
+// The lobe's "ibl" block (both models; brdf/yarn_table.h Table): n_theta in [2, 64], n_phi in
+// [3, 128], 2 x n_theta x n_phi x 5 finite summary numbers (|x| <= 1e30), as a Float32Array.
+function yarnLobeIblOptions(ibl, f, fail, obj, int) {
+  obj(ibl, f, ['n_theta', 'n_phi', 'summary']);
+  const nt = int(ibl.n_theta, `${f}.n_theta`, 2, 64), np = int(ibl.n_phi, `${f}.n_phi`, 3, 128);
   const want = 2 * nt * np * 5;
-  if (!Array.isArray(ibl.summary) && !(ibl.summary instanceof Float32Array)) fail(`${f}.ibl.summary`, 'expected an array');
-  if (ibl.summary.length !== want) fail(`${f}.ibl.summary`, `${ibl.summary.length} numbers, expected 2 x n_theta x n_phi x 5 = ${want}`);
+  if (!Array.isArray(ibl.summary) && !(ibl.summary instanceof Float32Array)) fail(`${f}.summary`, 'expected an array');
+  if (ibl.summary.length !== want) fail(`${f}.summary`, `${ibl.summary.length} numbers, expected 2 x n_theta x n_phi x 5 = ${want}`);
   const summary = new Float32Array(want);
   ibl.summary.forEach((x, i) => {
-    if (typeof x !== 'number') fail(`${f}.ibl.summary[${i}]`, 'expected a number');
-    if (!Number.isFinite(x)) fail(`${f}.ibl.summary[${i}]`, 'not finite');
-    if (Math.abs(x) > 1e30) fail(`${f}.ibl.summary[${i}]`, 'out of float range');
+    if (typeof x !== 'number') fail(`${f}.summary[${i}]`, 'expected a number');
+    if (!Number.isFinite(x)) fail(`${f}.summary[${i}]`, 'not finite');
+    if (Math.abs(x) > 1e30) fail(`${f}.summary[${i}]`, 'out of float range');
     summary[i] = x;
   });
-  out.ibl = { n_theta: nt, n_phi: np, summary };
-  return out;
+  return { n_theta: nt, n_phi: np, summary };
+}
+
+// A key of the preset shown in an error: as it is when it is a plain identifier, else
+// JSON-quoted and cut to 40 characters (no control character, quote or markup reaches the
+// message unescaped).
+function ylKeyShown(k) {
+  return /^[A-Za-z0-9_]{1,40}$/.test(k) ? k : JSON.stringify(k.slice(0, 40)).replace(/[<>&]/g, (c) => `\\u${c.charCodeAt(0).toString(16).padStart(4, '0')}`);
 }
 
 const ylSmoothStep01 = (x) => { const c = clamp01(x); return c * c * (3 - 2 * c); };
@@ -585,6 +608,7 @@ const ylToYarn = (d, weft) => (weft ? [-d[0], -d[1], d[2]] : [-d[1], d[0], d[2]]
  * The shader evaluates the same (wovenYarnLobe), in float.
  */
 export function yarnLobeEval(lobe, wo, wi) {
+  if (lobe.model === MICROCYLINDER_MODEL) return microcylinderEvalSplit(lobe, wo, wi);
   const T = [0, 0];
   if (!(wo[2] > 0) || !(wi[2] > 0)) return T;
   const N = lobe.nodes, vmNorm = 1 / (2 * Math.PI * besselI0(Math.abs(lobe.beta)));
@@ -788,12 +812,13 @@ function yarnLobeRadiusConic(kappa, umaxS, w, l) {
   return [3, b, b / -rhat, rhat];
 }
 
-// The shader side of a lobe: wovenYarnLobe's source (yarnLobeGlsl) and its digest for the
-// program key, and the IBL summary as an RGBA32F texture, 2 n_phi x 2 n_theta: texel (2 p,
+// The shader side of a lobe: wovenYarnLobe's source (yarnLobeGlsl, or microcylinderGlsl) and
+// its digest for the program key, and the IBL summary as an RGBA32F texture, 2 n_phi x 2 n_theta: texel (2 p,
 // k n_theta + t) = entries 0..3 of (lobe k, theta bin t, phi bin p), texel (2 p + 1, ...) =
 // (entry 4, 0, 0, 0), read with texelFetch (no filtering, no float-linear extension).
 export function yarnLobePack(lobe) {
-  const glsl = yarnLobeGlsl(lobe);
+  const micro = lobe.model === MICROCYLINDER_MODEL;
+  const glsl = micro ? microcylinderGlsl(lobe) : yarnLobeGlsl(lobe);
   const { n_theta: nt, n_phi: np, summary } = lobe.ibl;
   const ibl = new Float32Array(2 * np * 2 * nt * 4);
   for (let k = 0; k < 2; ++k) {
@@ -809,12 +834,239 @@ export function yarnLobePack(lobe) {
   t.minFilter = THREE.NearestFilter; t.magFilter = THREE.NearestFilter;
   t.generateMipmaps = false; t.flipY = false; t.colorSpace = THREE.NoColorSpace;
   t.needsUpdate = true;
+  // the program key's lobe part: groups x nodes (Irawan), -mc and the tangent calls (microcylinder)
+  const shape = micro ? `-mc${(glsl.match(/^\twovenMcTangent\( /gm) ?? []).length}` : `${lobe.groups.length}x${lobe.nodes}`;
   return {
-    groups: lobe.groups.length, nodes: lobe.nodes, nTheta: nt, nPhi: np,
+    model: lobe.model, shape, nTheta: nt, nPhi: np,
+    ...(micro ? {} : { groups: lobe.groups.length, nodes: lobe.nodes }),
     glsl, digest: ylDigest(glsl),
     iblTexture: t,
     dispose() { this.iblTexture.dispose(); },
   };
+}
+
+// ---------------------------------------------------------------------------------------------
+// The microcylinder lobe (session 19; "yarn_lobe": {"model": "sadeghi-microcylinder"}, written by
+// `clothfit fit --model woven --fabric <sadeghi fabric> --yarn-lobe preset`; docs/web.md "The
+// microcylinder lobe"). A Sadeghi fabric (Sadeghi, Bisker, De Deken, Jensen 2013, "A Practical
+// Microcylinder Appearance Model for Cloth Rendering", ACM TOG 32(2)) does not vary over the
+// cloth, so its far field is its BSDF, in closed form (brdf/microcylinder.h EvalSplit):
+// [the fibres' surface (Fresnel) reflection, white; their volume scattering per unit albedo,
+// each thread's times its volume_scale], no cosine. The two values take the Irawan lobe's slots
+// [T_warp, T_weft]: woven draws ks (tint_warp 2 m_w out[0] + tint_weft 2 m_f out[1]), and the
+// fit starts at tint_warp 1, tint_weft = the threads' albedo, ks 1, m 0.5 (the reference BSDF).
+// Local frame x = +u (thread 0, the warp), y = +v (thread 1, the weft), z = n; angles in degrees.
+// Per tangent k (thread j, offset o): t = cos(o) d_j + sin(o) n, n_k = -sin(o) d_j + cos(o) n,
+// b_k = t x n_k, weight a_j / N_j. The environment uses the same "ibl" summary as the Irawan lobe.
+
+export const MICROCYLINDER_MODEL = 'sadeghi-microcylinder';
+export const MICROCYLINDER_MAX_OFFSETS = 64;
+const MICROCYLINDER_KEYS = ['model', 'fabric', 'threads', 'ibl'];
+const MICROCYLINDER_THREAD_KEYS = ['eta', 'kd', 'gamma_s', 'gamma_v', 'a', 'volume_scale', 'offsets'];
+const MC_MASKING_SIGMA = 20 * YL_DEG;  // Sadeghi et al. eq. 10's sigma (microcylinder::kMaskingSigmaDeg)
+
+const ylTypeName = (x) => (x === null ? 'null' : Array.isArray(x) ? 'array' : typeof x);
+
+// The "threads" of a microcylinder lobe, checked as render/scene/material.cpp ParseYarnLobe and
+// brdf/yarn_lobe.cpp Validate check them (the same messages): exactly 2 objects of exactly the 7
+// keys; eta in (1, 3), kd in [0, 1], gamma_s, gamma_v degrees in (0, 90], a in [0, 1],
+// volume_scale in [0, 1], 1 to 64 offsets each degrees in [-90, 90]; a_1 + a_2 <= 1 (+1e-9).
+function microcylinderThreads(v, f, fail, obj) {
+  if (!Array.isArray(v) || v.length !== 2) fail(f, 'expected an array of 2 threads');
+  const num = (x, field, ok, what) => {
+    if (typeof x !== 'number') fail(field, `expected a number, got ${ylTypeName(x)}`);
+    if (!Number.isFinite(x)) fail(field, 'not finite');
+    if (!ok(x)) fail(field, what);
+    return x;
+  };
+  const unit = (x) => x >= 0 && x <= 1, deg = (x) => x > 0 && x <= 90;
+  const threads = v.map((t, j) => {
+    const tf = `${f}[${j}]`;
+    obj(t, tf, MICROCYLINDER_THREAD_KEYS);
+    const th = {
+      eta: num(t.eta, `${tf}.eta`, (x) => x > 1 && x < 3, 'expected a number in (1, 3)'),
+      kd: num(t.kd, `${tf}.kd`, unit, 'expected a number in [0, 1]'),
+      gamma_s: num(t.gamma_s, `${tf}.gamma_s`, deg, 'expected degrees in (0, 90]'),
+      gamma_v: num(t.gamma_v, `${tf}.gamma_v`, deg, 'expected degrees in (0, 90]'),
+      a: num(t.a, `${tf}.a`, unit, 'expected a number in [0, 1]'),
+      volume_scale: num(t.volume_scale, `${tf}.volume_scale`, unit, 'expected a number in [0, 1] (this thread\'s albedo over the lobe\'s)'),
+    };
+    const o = t.offsets;
+    if (!Array.isArray(o) || o.length < 1 || o.length > MICROCYLINDER_MAX_OFFSETS) {
+      fail(`${tf}.offsets`, `expected an array of 1 to ${MICROCYLINDER_MAX_OFFSETS} numbers (degrees)${Array.isArray(o) ? `, got ${o.length}` : ''}`);
+    }
+    th.offsets = o.map((x, k) => num(x, `${tf}.offsets[${k}]`, (y) => y >= -90 && y <= 90, 'expected degrees in [-90, 90]'));
+    return th;
+  });
+  if (!(threads[0].a + threads[1].a <= 1 + 1e-9)) fail(f, 'a_1 + a_2 must be <= 1');
+  return threads;
+}
+
+const mcDot = (p, q) => p[0] * q[0] + p[1] * q[1] + p[2] * q[2];
+
+/**
+ * brdf/microcylinder.h MakeTangents in double: [{t, n, b, thread, weight}], thread 0's first,
+ * offsets in order (duplicates kept).
+ */
+export function microcylinderTangents(lobe) {
+  const out = [];
+  lobe.threads.forEach((th, j) => {
+    for (const off of th.offsets) out.push(mcTangent(j, off, th.a / th.offsets.length));
+  });
+  return out;
+}
+// microcylinder::MakeTangent: thread j (0: along x, 1: along y), offset in degrees.
+function mcTangent(j, offsetDeg, weight) {
+  const o = offsetDeg * YL_DEG, c = Math.cos(o), s = Math.sin(o);
+  const t = j === 0 ? [c, 0, s] : [0, c, s], n = j === 0 ? [-s, 0, c] : [0, -s, c];
+  const b = [t[1] * n[2] - t[2] * n[1], t[2] * n[0] - t[0] * n[2], t[0] * n[1] - t[1] * n[0]];
+  return { t, n, b, thread: j, weight };
+}
+
+const mcFresnel = (cosI, eta) => {
+  const ci = Math.min(Math.max(cosI, 0), 1);
+  const st2 = (1 - ci * ci) / (eta * eta);
+  if (st2 >= 1) return 1;
+  const ct = Math.sqrt(1 - st2);
+  const rs = (ci - eta * ct) / (ci + eta * ct), rp = (eta * ci - ct) / (eta * ci + ct);
+  return 0.5 * (rs * rs + rp * rp);
+};
+const mcGaussian = (sigma, x) => Math.exp(-x * x / (2 * sigma * sigma)) / (sigma * Math.sqrt(2 * Math.PI));
+const mcWrap = (a) => { while (a > Math.PI) a -= 2 * Math.PI; while (a < -Math.PI) a += 2 * Math.PI; return a; };
+
+/**
+ * brdf/microcylinder.h EvalSplit, operation for operation in double (asin, atan2, the wrap, the
+ * identities for cos(theta_d) and cos(phi_d / 2), the 1e-4 guards): [surface, volume] at local
+ * unit directions wo (to the viewer), wi (to the light) for yarnLobeOptions' result `lobe`
+ * (model sadeghi-microcylinder). 0 unless wo.z, wi.z > 0. No cosine. The shader evaluates the
+ * same in float (microcylinderGlsl).
+ */
+export function microcylinderEvalSplit(lobe, wo, wi, tangents = microcylinderTangents(lobe)) {
+  const out = [0, 0];
+  if (!(wo[2] > 0) || !(wi[2] > 0)) return out;
+  const threads = lobe.threads;
+  let q = (1 - threads[0].a - threads[1].a) * wo[2], sSum = 0, vSum = 0;
+  for (const tg of tangents) {
+    const proj = Math.max(0, mcDot(wo, tg.n));  // OutgoingAngles
+    q += tg.weight * proj;
+    if (proj <= 0) continue;
+    const th = threads[tg.thread];
+    const sinO = Math.min(Math.max(mcDot(wo, tg.t), -1), 1), thetaO = Math.asin(sinO);
+    const cosO = Math.sqrt(Math.max(0, 1 - sinO * sinO));
+    const xo = mcDot(wo, tg.n), yo = mcDot(wo, tg.b), phiO = Math.atan2(yo, xo), ro = Math.sqrt(xo * xo + yo * yo);
+    const cosPhiO = ro > 0 ? xo / ro : 1, sinPhiO = ro > 0 ? yo / ro : 0;
+    const x = mcDot(wi, tg.n), y = mcDot(wi, tg.b), r = Math.sqrt(x * x + y * y);  // Scatter
+    const cosPhiI = r > 0 ? x / r : 1;
+    const mi = Math.max(0, cosPhiI), mo = Math.max(0, cosPhiO);
+    if (mi <= 0 || mo <= 0) continue;
+    const phiD = mcWrap(Math.atan2(y, x) - phiO);
+    const uu = Math.exp(-phiD * phiD / (2 * MC_MASKING_SIGMA * MC_MASKING_SIGMA));
+    const mask = (1 - uu) * mi * mo + uu * Math.min(mi, mo);
+    if (mask <= 0) continue;
+    const sinI = Math.min(Math.max(mcDot(wi, tg.t), -1), 1), thetaI = Math.asin(sinI);
+    const cosI = Math.sqrt(Math.max(0, 1 - sinI * sinI));
+    const thetaH = 0.5 * (thetaI + thetaO);
+    const cosDiff = cosI * cosO + sinI * sinO;
+    const cosD = Math.sqrt(Math.min(Math.max(0.5 * (1 + cosDiff), 0), 1));
+    const sinPhiI = r > 0 ? y / r : 0;
+    const cosPhiDiff = cosPhiI * cosPhiO + sinPhiI * sinPhiO;
+    const cosHalfPhi = Math.sqrt(Math.min(Math.max(0.5 * (1 + cosPhiDiff), 0), 1));
+    const fr = mcFresnel(cosD * cosHalfPhi, th.eta), ft = 1 - fr;
+    const fSurface = fr * cosHalfPhi * mcGaussian(th.gamma_s * YL_DEG, thetaH);
+    const vol = ft * ft * ((1 - th.kd) * mcGaussian(th.gamma_v * YL_DEG, thetaH) + th.kd) / Math.max(cosI + cosO, 1e-4);
+    const wt = tg.weight * proj * mask * cosI * (1 / Math.max(cosD * cosD, 1e-4));
+    sSum += wt * fSurface;
+    vSum += wt * vol * th.volume_scale;
+  }
+  if (!(q > 0)) return out;
+  const k = 1 / (q * wi[2]);
+  out[0] = sSum * k;
+  out[1] = vSum * k;
+  return out;
+}
+
+// wovenYarnLobe(wo, wi) of a microcylinder lobe as GLSL: (surface, volume) = EvalSplit in float,
+// every per-lobe number a compile-time constant (rounded once from double, as yarnLobeGlsl),
+// one call of wovenMcTangent per distinct tangent with its frame, weight and thread constants as
+// literals (no loop, no texture). Rearranged where equal in exact arithmetic:
+//   - a thread's identical offsets are one tangent of weight count x a_j / N_j (satin's
+//     -32, -32, 0, 0, 32, 32) and a thread with a_j = 0 has no tangent (its terms are 0 x finite);
+//   - phi_d = phi_i - phi_o is one atan(r_i r_o sin phi_d, r_i r_o cos phi_d) =
+//     atan(y_i x_o - x_i y_o, x_i x_o + y_i y_o) instead of two atan2 and the wrap: a term needs
+//     cos phi_i > 0 and cos phi_o > 0, so |phi_i|, |phi_o| < pi/2 and |phi_d| < pi (the wrap does
+//     nothing); its arguments are never both 0 (x_o > 0), so GLSL's atan(0, 0) never occurs; r_i = 0
+//     (wi along the fibre) is atan2(0, 0) = 0 in C++: (x_i, y_i) taken as (1, 0);
+//   - cos^2(theta_d) is the clamped (1 + cos(theta_i - theta_o)) / 2 itself (its sqrt only for
+//     the Fresnel cosine); volume_scale is folded into the volume Gaussian's and kd's constants;
+//   - conditions select (no early return), so the quad's lanes stay converged.
+export function microcylinderGlsl(lobe) {
+  const F = ylFloat, threads = lobe.threads;
+  const tangents = [];
+  threads.forEach((th, j) => {
+    if (!(th.a > 0)) return;
+    const count = new Map();
+    for (const off of th.offsets) count.set(off, (count.get(off) ?? 0) + 1);
+    for (const [off, c] of count) tangents.push({ ...mcTangent(j, off, c * th.a / th.offsets.length), off, count: c });
+  });
+  const v3 = (p) => `vec3( ${p.map(F).join(', ')} )`;
+  const gs = threads.map((th) => { const s = th.gamma_s * YL_DEG; return [1 / (2 * s * s), 1 / (s * Math.sqrt(2 * Math.PI))]; });
+  const gv = threads.map((th) => { const s = th.gamma_v * YL_DEG; return [1 / (2 * s * s), (1 - th.kd) * th.volume_scale / (s * Math.sqrt(2 * Math.PI))]; });
+  const L = [
+    `// generated by microcylinderGlsl: ${tangents.length} tangents (thread offsets ${threads.map((th) => `[${th.offsets.join(', ')}]`).join(' / ')})`,
+    '// Unpolarised Fresnel reflectance of a dielectric of index eta > 1 (microcylinder::FresnelDielectric).',
+    'float wovenMcFresnel( const in float cosI, const in float eta ) {',
+    '\tfloat ci = clamp( cosI, 0.0, 1.0 );',
+    '\tfloat st2 = ( 1.0 - ci * ci ) / ( eta * eta );',
+    '\tfloat ct = sqrt( max( 1.0 - st2, 0.0 ) );',
+    '\tfloat rs = ( ci - eta * ct ) / ( ci + eta * ct ), rp = ( eta * ci - ct ) / ( eta * ci + ct );',
+    '\treturn st2 >= 1.0 ? 1.0 : 0.5 * ( rs * rs + rp * rp );',
+    '}',
+    '// One tangent (t, n_k, b_k; weight w) of microcylinder::EvalSplit\'s sum: acc.x (Q(wo)) += w P(wo),',
+    '// acc.yz += w P(wo) mask cos_i / max(cos^2 theta_d, 1e-4) x (f_r,s, f_r,v volume_scale) (Scatter;',
+    '// 0 unless x_o = wo.n_k > 0, cos phi_i > 0, mask > 0). g = (1 / (2 gamma_s^2), 1 / (gamma_s',
+    '// sqrt(2 pi)), 1 / (2 gamma_v^2), (1 - kd) volume_scale / (gamma_v sqrt(2 pi))) in radians,',
+    '// kv = kd volume_scale.',
+    'void wovenMcTangent( const in vec3 wo, const in vec3 wi, const in vec3 t, const in vec3 nk, const in vec3 bk, const in float w,',
+    '\t\tconst in float eta, const in vec4 g, const in float kv, inout vec3 acc ) {',
+    '\tfloat xo = dot( wo, nk ), yo = dot( wo, bk );',
+    '\tacc.x += w * max( xo, 0.0 );',
+    '\tfloat xi = dot( wi, nk ), yi = dot( wi, bk );',
+    '\tbool alongFibre = !( xi * xi + yi * yi > 0.0 );  // r_i = 0: phi_i = atan2(0, 0) = 0',
+    '\txi = alongFibre ? 1.0 : xi;',
+    '\tyi = alongFibre ? 0.0 : yi;',
+    '\tfloat ri = sqrt( xi * xi + yi * yi ), ro = sqrt( xo * xo + yo * yo );',
+    '\tfloat mi = xi / ri, mo = xo / ro;  // cos phi_i, cos phi_o',
+    '\tfloat cpd = xi * xo + yi * yo;     // r_i r_o cos(phi_d)',
+    '\tfloat pd = atan( yi * xo - xi * yo, cpd );  // phi_d in (-pi, pi) when mi, mo > 0',
+    `\tfloat uu = exp( -pd * pd * ${F(1 / (2 * MC_MASKING_SIGMA * MC_MASKING_SIGMA))} );`,
+    '\tfloat mask = ( 1.0 - uu ) * mi * mo + uu * min( mi, mo );  // Sadeghi et al. eq. 10',
+    '\tfloat so = clamp( dot( wo, t ), -1.0, 1.0 ), si = clamp( dot( wi, t ), -1.0, 1.0 );',
+    '\tfloat co = sqrt( max( 1.0 - so * so, 0.0 ) ), ci = sqrt( max( 1.0 - si * si, 0.0 ) );',
+    '\tfloat th = 0.5 * ( asin( si ) + asin( so ) );  // theta_h',
+    '\tfloat cd2 = clamp( 0.5 * ( 1.0 + ci * co + si * so ), 0.0, 1.0 );  // cos^2 theta_d',
+    '\tfloat chp = sqrt( clamp( 0.5 * ( 1.0 + cpd / ( ri * ro ) ), 0.0, 1.0 ) );  // cos(phi_d / 2)',
+    '\tfloat fr = wovenMcFresnel( sqrt( cd2 ) * chp, eta ), ft = 1.0 - fr;',
+    '\tfloat th2 = th * th;',
+    '\tfloat fs = fr * chp * g.y * exp( -th2 * g.x );                             // eq. 4',
+    '\tfloat fv = ft * ft * ( g.w * exp( -th2 * g.z ) + kv ) / max( ci + co, 1e-4 );  // eq. 5; guard 1e-4',
+    '\tfloat wt = w * xo * mask * ci / max( cd2, 1e-4 );  // guard: cos^2 theta_d >= 1e-4',
+    '\tbool lit = xo > 0.0 && mi > 0.0 && mask > 0.0;',
+    '\tacc.y += lit ? wt * fs : 0.0;',
+    '\tacc.z += lit ? wt * fv : 0.0;',
+    '}',
+    'vec2 wovenYarnLobe( const in vec3 wo, const in vec3 wi ) {',
+    '\tif ( !( wo.z > 0.0 ) || !( wi.z > 0.0 ) ) return vec2( 0.0 );',
+    '\t// (Q(wo), surface sum, volume sum); Q starts with the gaps between the threads',
+    `\tvec3 acc = vec3( ${F(1 - threads[0].a - threads[1].a)} * wo.z, 0.0, 0.0 );`,
+  ];
+  for (const tg of tangents) {
+    const j = tg.thread;
+    L.push(`\t// thread ${j}, offset ${tg.off}${tg.count > 1 ? ` (x ${tg.count})` : ''}`,
+      `\twovenMcTangent( wo, wi, ${v3(tg.t)}, ${v3(tg.n)}, ${v3(tg.b)}, ${F(tg.weight)}, ${F(threads[j].eta)}, `
+      + `vec4( ${[...gs[j], ...gv[j]].map(F).join(', ')} ), ${F(threads[j].kd * threads[j].volume_scale)}, acc );`);
+  }
+  L.push('\tfloat k = 1.0 / ( acc.x * wi.z );', '\treturn acc.x > 0.0 ? vec2( acc.y * k, acc.z * k ) : vec2( 0.0 );', '}', '');
+  return L.join('\n');
 }
 
 const WOVEN_VERTEX_PARS = /* glsl */ `
@@ -1493,7 +1745,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
   customProgramCacheKey() {
     const ibl = this.ibl === 'fis' ? `fis${this.fisTaps}/${this.fisDiffuseTaps}` : this.ibl;
     const yl = this._yarnLobePack;
-    const lobe = yl ? [`yarn-lobe${yl.groups}x${yl.nodes}/${yl.nTheta}x${yl.nPhi}/${yl.digest}`] : [];
+    const lobe = yl ? [`yarn-lobe${yl.shape}/${yl.nTheta}x${yl.nPhi}/${yl.digest}`] : [];
     const maps = this.weaveMaps ? (this.viewBands ? `maps-views${this.viewBands}` : 'maps') : 'uniform';
     const rough = this.roughDiffuse ? ['rough-diffuse'] : [];
     return ['woven', this.yarnLayer, maps, ibl, ...lobe, ...rough].join(':');

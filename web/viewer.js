@@ -54,7 +54,9 @@ async function main() {
       // a far-field yarn lobe is summarised (its IBL table is thousands of numbers)
       (p.woven ? `woven options ${JSON.stringify({ ...p.woven, yarn_lobe: undefined })} (ibl ${m.ibl ?? 'split'}${m.ibl === 'fis' ? `, ${m.fisTaps} + ${m.fisDiffuseTaps} taps` : ''})\n` : '') +
       (m.weaveMaps ? `weave maps ${m.weaveMaps.size} x ${m.weaveMaps.size}, uv_repeats ${m.weaveMaps.uvRepeats}, anisotropy ${m.weaveMaps.anisotropy}${m.viewBands ? `, ${m.viewBands} view bands blended by NoV (cosines ${m.weaveMaps.viewCosines.map((c) => c.toFixed(3)).join(' ')})` : ''}\n` : '') +
-      (m.yarnLobe ? `far-field yarn lobe: ${m.yarnLobe.fabric || 'fabric not named'}, ${m.yarnLobe.groups.length} yarn groups x ${m.yarnLobe.nodes} nodes, IBL table ${m.yarnLobe.ibl.n_theta} x ${m.yarnLobe.ibl.n_phi}\n` : '') +
+      (m.yarnLobe ? `far-field yarn lobe: ${m.yarnLobe.fabric || 'fabric not named'}, ${m.yarnLobe.threads
+        ? `${m.yarnLobe.model}, ${m.yarnLobe.threads.map((t) => t.offsets.length).join(' + ')} tangents`
+        : `${m.yarnLobe.groups.length} yarn groups x ${m.yarnLobe.nodes} nodes`}, IBL table ${m.yarnLobe.ibl.n_theta} x ${m.yarnLobe.ibl.n_phi}\n` : '') +
       `tone mapping ${sc.card.tone_mapping ?? 'ACESFilmic'}, exposure ${sc.exposure}, three.js r${THREE.REVISION}`;
   };
   // renderer: the weave maps' texture.anisotropy (the preset's weave_maps.anisotropy) is clamped

@@ -15,12 +15,12 @@
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //   A light-map case reports "with (without)": the same material timed without its light map too.
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 38 materials (6 + 3 woven + 2 physical-aniso
+// Cases: each canonical scene (datasets/scenes/*.json) x 42 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
 // bent-normal IBL + 5 woven with the far-field yarn lobe + 4 with view-dependent weave maps + 4 woven
-// with the rough diffuse, s18) x 2 environments
+// with the rough diffuse, s18 + 4 woven with the microcylinder lobe, s19) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
-// 11 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
+// 15 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
 // drape and sphere x 3 materials under studio with three.js shadow maps against
 // `render-preview --shadows` (the */studio-shadows/* cases), plus (s13-lm) 13 cases on the drape
 // with the card's baked light map (env "studio-lightmap*", below), plus (s13) the drape card as it
@@ -199,6 +199,21 @@ Object.assign(MATERIALS, {
   'woven-lobe-maps-twill-views': lobePreset('twill-maps-views'),
   'woven-lobe-maps-canvas-views': lobePreset('canvas-maps-views'),
 });
+// s19: the microcylinder lobe ("yarn_lobe": {"model": "sadeghi-microcylinder"}, docs/web.md "The
+// microcylinder lobe"): the presets `clothfit fit --model woven --fabric
+// datasets/fabrics/{velvet,linen,satin}.json --yarn-lobe preset` writes, committed in web/test/
+// (yarn-lobe-{velvet,linen,satin}.json): Sadeghi et al.'s BSDF in closed form per light (velvet's
+// vertical pile and 6 tangents, linen's +-25 degree tangents, satin's 2.5-degree surface lobe) and
+// its split-sum table for the environment. The satin fit puts warp_share at 1, which leaves the
+// volume slot unweighted, so 'woven-lobe-mc-satin-bsdf' draws the satin lobe at the values where
+// woven is the reference BSDF exactly (fit/yarn_farfield.h MicrocylinderStart: specular 1,
+// warp_share 0.5, no base colour, no sheen): both slots, the narrow surface lobe at full strength.
+Object.assign(MATERIALS, {
+  'woven-lobe-mc-velvet': lobePreset('velvet'),
+  'woven-lobe-mc-linen': lobePreset('linen'),
+  'woven-lobe-mc-satin': lobePreset('satin'),
+  'woven-lobe-mc-satin-bsdf': lobePreset('satin', { specular_color: [1, 1, 1], warp_share: 0.5, base_color: [0, 0, 0], sheen_color: [0, 0, 0] }),
+});
 MATERIALS['woven-lobe-maps-twill-views-aniso1'] = withAniso('woven-lobe-maps-twill-views', 1);
 MATERIALS['woven-lobe-maps-canvas-views-aniso1'] = withAniso('woven-lobe-maps-canvas-views', 1);
 // s18: the rough diffuse (parameters.diffuse_roughness sigma > 0: Fujii's improved Oren-Nayar,
@@ -228,7 +243,7 @@ const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, ro
 const SUN_ENV = `${HIGH}-rot60-sun`;
 ENVS[SUN_ENV] = { path: HIGH, intensity: 0.8, rotation_y_degrees: 60, sun: 'auto' };
 const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-seed', 'cloth-filament', 'woven', 'woven-fis',
-  'woven-lobe-canvas', 'woven-lobe-twill-shiny', 'woven-rough', 'woven-linen-rough']);
+  'woven-lobe-canvas', 'woven-lobe-twill-shiny', 'woven-rough', 'woven-linen-rough', 'woven-lobe-mc-velvet', 'woven-lobe-mc-linen', 'woven-lobe-mc-satin', 'woven-lobe-mc-satin-bsdf']);
 
 // s13-lm: the scene card's light map ("visibility": {"shadows": false, "light_map": {...}}; docs/web.md
 // "The light map"). `clothfit render-preview` bakes the fabric's one-bounce indirect irradiance over

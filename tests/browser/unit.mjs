@@ -8,6 +8,9 @@
 //     field, and the shader's rough-diffuse G(mu) against its hemisphere integral;
 //   - the far-field yarn lobe ("woven": {"yarn_lobe"}): program, defines, textures, the port
 //     against C++ values (web/test/yarn-lobe-reference.json), bad blocks refused naming the field;
+//     the microcylinder lobe (session 19, "model": "sadeghi-microcylinder"): the same, its port
+//     against brdf/microcylinder.h EvalSplit (web/test/microcylinder-reference.json) and the
+//     generated shader run as JavaScript against the port;
 //   - weave maps: web/exr.js reads tests/browser/maps/canvas.weave.exr as OpenImageIO does
 //     (oiiotool, when installed), tile means 1, box mips, texture settings, uv_repeats, the
 //     anisotropyMap encoding, the preset's "weave_maps" required / refused / fetched;
@@ -34,7 +37,7 @@ globalThis.fetch = async (url, ...rest) => {
   return realFetch(url, ...rest);
 };
 const THREE = await import(pathToFileURL(path.join(repo, 'web', 'node_modules', 'three', 'build', 'three.module.js')).href);
-const { loadClothfitPreset, MeshWovenMaterial, MeshClothMaterial, yarnLobeOptions, yarnLobeEval, yarnLobeIbl, lightMapTextureFromExr, lightMapUvBox, applyLightMap } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+const { loadClothfitPreset, MeshWovenMaterial, MeshClothMaterial, yarnLobeOptions, yarnLobeEval, yarnLobeIbl, microcylinderEvalSplit, lightMapTextureFromExr, lightMapUvBox, applyLightMap } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
 
 const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, all) => {
   if (a.startsWith('--')) acc.push([a.slice(2), all[i + 1]]);
@@ -316,6 +319,155 @@ check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps:
   check(() => assert.throws(() => loadClothfitPreset({ ...wp(), woven: { yarn_lobe: null } }), /woven\.yarn_lobe: expected an object/), 'yarn lobe null refused');
   check(() => assert.throws(() => loadClothfitPreset(JSON.stringify(wp({ yarn_lobe: lobe })).replace('"nodes":16', '"nodes":16.0')), /woven\.yarn_lobe\.nodes: expected an integer/), 'nodes 16.0 literal refused');
   check(() => assert.throws(() => new MeshWovenMaterial({}, { yarnLayer: 'albedo-scaled', yarnLobe: lobe }), /MeshWovenMaterial: a yarnLobe needs yarnLayer 'additive'/), 'material: yarn lobe with albedo-scaled refused');
+}
+
+// Session 19: the microcylinder lobe ("woven": {"yarn_lobe": {"model": "sadeghi-microcylinder"}};
+// docs/web.md "The microcylinder lobe"): the double-precision port (microcylinderEvalSplit, also
+// through yarnLobeEval) against brdf/microcylinder.h EvalSplit's values
+// (web/test/microcylinder-reference.json: velvet, linen and satin as fit/yarn_farfield.cpp
+// MicrocylinderDescription builds them, and a made-up fabric with unequal threads, kd 0 and a
+// 1-degree surface lobe; random, near-mirror, grazing and along-the-fibre pairs); the shader's
+// generated wovenYarnLobe run as JavaScript against the port; the fixtures of the browser cases
+// load with their own program; bad blocks are refused with the field named.
+{
+  const ref = JSON.parse(fs.readFileSync(path.join(repo, 'web', 'test', 'microcylinder-reference.json'), 'utf8'));
+  const noIbl = { n_theta: 2, n_phi: 3, summary: new Array(60).fill(0) };
+  const mcBlock = (threads) => ({ model: 'sadeghi-microcylinder', fabric: 'test', threads, ibl: noIbl });
+  for (const [name, r] of Object.entries(ref.fabrics)) {
+    const lobe = yarnLobeOptions(mcBlock(r.threads));
+    let worst = 0, lit = 0;
+    for (const q of r.pairs) {
+      const a = microcylinderEvalSplit(lobe, q.wo, q.wi), b = yarnLobeEval(lobe, q.wo, q.wi);
+      if (q.out[0] > 0) ++lit;
+      for (let k = 0; k < 2; ++k) {
+        worst = Math.max(worst, Math.abs(a[k] - q.out[k]) / Math.max(Math.abs(q.out[k]), 1e-300));
+        if (a[k] !== b[k]) worst = Infinity;
+      }
+    }
+    check(() => assert.ok(worst < 1e-9 && lit > r.pairs.length / 2, `${name}: worst relative ${worst}, ${lit} lit of ${r.pairs.length}`), `microcylinder port = EvalSplit (${name})`);
+    if (args.verbose) console.log(`microcylinder port ${name}: worst relative ${worst.toExponential(1)}, ${lit} lit of ${r.pairs.length}`);
+  }
+  // The generated GLSL (taken from the compiled fragment source) in double with its float
+  // constants, against the port. Relative to the pair's surface + volume, 1e-4 (measured worst
+  // in --verbose); the same zeros (below the horizon, masked, behind every tangent).
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
+  const compiled = (block) => {
+    const m = loadClothfitPreset(wp({ yarn_lobe: block }));
+    const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: 'void main() {\n#include <project_vertex>\n}' };
+    m.onBeforeCompile(sh);
+    return { m, sh };
+  };
+  const mcShaderAsJs = (src) => {
+    const a = src.indexOf('// generated by microcylinderGlsl'), b = src.indexOf('// Table::Ibl\'s entry');
+    assert.ok(a > 0 && b > a, 'microcylinder source in the program');
+    const js = src.slice(a, b)
+      .replace(/^(float|vec2|vec3|vec4|void) (\w+)\(([^)]*)\) \{/gm, (_, t, name, ps) => `function ${name}(${ps.replace(/(const in|inout) (float|vec3|vec4) /g, '')}) {`)
+      .replace(/^(\s*)(float|vec2|vec3|vec4|bool) /gm, '$1let ');
+    const vec = (x, ...r) => (r.length ? { x, y: r[0], z: r[1], w: r[2] } : { x, y: x, z: x, w: x });
+    const lib = {
+      vec2: vec, vec3: vec, vec4: vec, dot: (p, q) => p.x * q.x + p.y * q.y + p.z * q.z, exp: Math.exp, sqrt: Math.sqrt, asin: Math.asin,
+      min: Math.min, max: Math.max, atan: (y, x) => Math.atan2(y, x), clamp: (x, lo, hi) => Math.min(Math.max(x, lo), hi),
+    };
+    const f = new Function(...Object.keys(lib), `${js}\nreturn wovenYarnLobe;`)(...Object.values(lib));
+    return (wo, wi) => { const T = f(vec(...wo), vec(...wi)); return [T.x, T.y]; };
+  };
+  for (const [name, r] of Object.entries(ref.fabrics)) {
+    const block = mcBlock(r.threads), lobe = yarnLobeOptions(block);
+    const shader = mcShaderAsJs(compiled(block).sh.fragmentShader);
+    let beyond = 0, lit = 0;
+    const rel = [];
+    for (const q of r.pairs) {
+      const P = microcylinderEvalSplit(lobe, q.wo, q.wi), S = shader(q.wo, q.wi), p = P[0] + P[1];
+      if (!(p > 0)) { if (S[0] !== 0 || S[1] !== 0) ++beyond; continue; }
+      ++lit;
+      const d = Math.max(Math.abs(S[0] - P[0]), Math.abs(S[1] - P[1])) / p;
+      rel.push(d);
+      if (!(d < 1e-4)) ++beyond;
+    }
+    rel.sort((x, y) => x - y);
+    const msg = `${name}: ${lit} lit of ${r.pairs.length}, median relative ${rel[rel.length >> 1]?.toExponential(1)}, worst ${rel[rel.length - 1]?.toExponential(1)}, ${beyond} beyond 1e-4`;
+    check(() => assert.ok(lit > r.pairs.length / 2 && beyond === 0, msg), `microcylinder shader = port (${name})`);
+    if (args.verbose) console.log(`microcylinder shader ${msg}`);
+  }
+  // identical offsets merged: satin's 8 + 1 offsets are 5 + 1 tangent calls
+  {
+    const { sh } = compiled(mcBlock(ref.fabrics.satin.threads));
+    check(() => assert.equal((sh.fragmentShader.match(/^\twovenMcTangent\( /gm) ?? []).length, 6), 'microcylinder: satin has 6 distinct tangents');
+  }
+  // The browser cases' presets (web/test/yarn-lobe-{velvet,linen,satin}.json, written by
+  // `clothfit fit --yarn-lobe preset`): loaded as MeshWovenMaterial with the lobe, own program key,
+  // the #defines and the IBL texture of the Irawan lobe, survive clone; a lobe of the other model
+  // compiles another program.
+  for (const fab of ['velvet', 'linen', 'satin']) {
+    const file = path.join(repo, 'web', 'test', `yarn-lobe-${fab}.json`);
+    const j = JSON.parse(fs.readFileSync(file, 'utf8'));
+    const m = loadClothfitPreset(fs.readFileSync(file, 'utf8'));
+    const yl = m.yarnLobe;
+    const n = new Set(yl.threads.flatMap((t, k) => (t.a > 0 ? t.offsets.map((o) => `${k}:${o}`) : []))).size;
+    check(() => assert.ok(yl.model === 'sadeghi-microcylinder' && yl.threads.length === 2 && yl.ibl.summary.length === 2 * yl.ibl.n_theta * yl.ibl.n_phi * 5), `${fab}: microcylinder lobe loaded`);
+    const key = m.customProgramCacheKey();
+    check(() => assert.match(key, new RegExp(`^woven:additive:uniform:split:yarn-lobe-mc${n}/${yl.ibl.n_theta}x${yl.ibl.n_phi}/[0-9a-f]{16}$`)), `${fab}: its own program (${key})`);
+    const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: 'void main() {\n#include <project_vertex>\n}' };
+    m.onBeforeCompile(sh);
+    check(() => assert.ok(['WOVEN_YARN_LOBE\n', `WOVEN_YL_N_THETA ${yl.ibl.n_theta}\n`, `WOVEN_YL_N_PHI ${yl.ibl.n_phi}\n`].every((d) => sh.fragmentShader.includes(`#define ${d}`))
+      && (sh.fragmentShader.match(/^\twovenMcTangent\( /gm) ?? []).length === n && !sh.fragmentShader.includes('@wovenYarnLobe')
+      && (sh.fragmentShader.match(/^vec2 wovenYarnLobe\( /gm) ?? []).length === 1), `${fab}: microcylinder source generated`);
+    check(() => assert.ok(sh.uniforms.wovenYlIbl.value.image.width === 2 * yl.ibl.n_phi && sh.uniforms.wovenYlIbl.value.image.height === 2 * yl.ibl.n_theta), `${fab}: IBL texture`);
+    // the shader's value at the preset's tints: out[0] in the warp slot, out[1] in the weft slot
+    check(() => assert.deepEqual(j.woven.tint_warp, [1, 1, 1]), `${fab}: surface white (tint_warp)`);
+    const clone = m.clone();
+    check(() => assert.ok(clone.yarnLobe.model === 'sadeghi-microcylinder' && clone.customProgramCacheKey() === key), `${fab}: survives clone`);
+    const canvas = JSON.parse(fs.readFileSync(path.join(repo, 'web', 'test', 'yarn-lobe-canvas.json'), 'utf8')).woven.yarn_lobe;
+    clone.setYarnLobe(canvas);
+    check(() => assert.ok(clone.customProgramCacheKey().startsWith('woven:additive:uniform:split:yarn-lobe2x')), `${fab}: Irawan lobe set: the Irawan program`);
+    clone.setYarnLobe(j.woven.yarn_lobe);
+    check(() => assert.equal(clone.customProgramCacheKey(), key), `${fab}: back to the same program`);
+  }
+  // bad blocks: each field named (the C++ reader's messages), wrong key counts, escaped keys
+  const good = JSON.parse(fs.readFileSync(path.join(repo, 'web', 'test', 'yarn-lobe-satin.json'), 'utf8')).woven.yarn_lobe;
+  check(() => assert.ok(loadClothfitPreset(wp({ yarn_lobe: good })).yarnLobe.threads[1].offsets.length === 1), 'microcylinder block accepted');
+  const bad = (edit) => { const b = JSON.parse(JSON.stringify(good)); edit(b); return wp({ yarn_lobe: b }); };
+  const T = 'woven\\.yarn_lobe\\.threads';
+  for (const [edit, re] of [
+    [(b) => { b.model = 'sadeghi'; }, /woven\.yarn_lobe\.model: expected "irawan-far-field" or "sadeghi-microcylinder"$/],
+    [(b) => { delete b.model; }, /woven\.yarn_lobe\.model: missing/],
+    [(b) => { b.nodes = 8; }, /woven\.yarn_lobe\.nodes: unknown key \(valid: model, fabric, threads, ibl\)/],
+    [(b) => { b['<img src=x>'] = 1; }, /woven\.yarn_lobe\."\\u003cimg src=x\\u003e": unknown key/],
+    [(b) => { delete b.threads; }, /woven\.yarn_lobe\.threads: missing/],
+    [(b) => { b.fabric = 3; }, /woven\.yarn_lobe\.fabric: expected a string/],
+    [(b) => { b.threads = b.threads.slice(0, 1); }, new RegExp(`${T}: expected an array of 2 threads`)],
+    [(b) => { b.threads.push(b.threads[0]); }, new RegExp(`${T}: expected an array of 2 threads`)],
+    [(b) => { b.threads = { 0: 1 }; }, new RegExp(`${T}: expected an array of 2 threads`)],
+    [(b) => { b.threads[1] = [1, 2]; }, new RegExp(`${T}\\[1\\]: expected an object`)],
+    [(b) => { b.threads[0].albedo = 0.3; }, new RegExp(`${T}\\[0\\]\\.albedo: unknown key \\(valid: eta, kd, gamma_s, gamma_v, a, volume_scale, offsets\\)`)],
+    [(b) => { delete b.threads[1].volume_scale; }, new RegExp(`${T}\\[1\\]\\.volume_scale: missing`)],
+    [(b) => { b.threads[0].eta = 1; }, new RegExp(`${T}\\[0\\]\\.eta: expected a number in \\(1, 3\\)`)],
+    [(b) => { b.threads[1].eta = 3; }, new RegExp(`${T}\\[1\\]\\.eta: expected a number in \\(1, 3\\)`)],
+    [(b) => { b.threads[0].eta = '1.5'; }, new RegExp(`${T}\\[0\\]\\.eta: expected a number, got string`)],
+    [(b) => { b.threads[0].kd = -0.1; }, new RegExp(`${T}\\[0\\]\\.kd: expected a number in \\[0, 1\\]`)],
+    [(b) => { b.threads[1].kd = null; }, new RegExp(`${T}\\[1\\]\\.kd: expected a number, got null`)],
+    [(b) => { b.threads[1].gamma_s = 0; }, new RegExp(`${T}\\[1\\]\\.gamma_s: expected degrees in \\(0, 90\\]`)],
+    [(b) => { b.threads[0].gamma_s = 90.5; }, new RegExp(`${T}\\[0\\]\\.gamma_s: expected degrees in \\(0, 90\\]`)],
+    [(b) => { b.threads[0].gamma_v = -5; }, new RegExp(`${T}\\[0\\]\\.gamma_v: expected degrees in \\(0, 90\\]`)],
+    [(b) => { b.threads[1].a = 1.5; }, new RegExp(`${T}\\[1\\]\\.a: expected a number in \\[0, 1\\]`)],
+    [(b) => { b.threads[1].a = 0.2; }, new RegExp(`${T}: a_1 \\+ a_2 must be <= 1`)],
+    [(b) => { b.threads[0].volume_scale = 1.2; }, new RegExp(`${T}\\[0\\]\\.volume_scale: expected a number in \\[0, 1\\]`)],
+    [(b) => { b.threads[0].offsets = []; }, new RegExp(`${T}\\[0\\]\\.offsets: expected an array of 1 to 64 numbers \\(degrees\\), got 0`)],
+    [(b) => { b.threads[1].offsets = Array(65).fill(0); }, new RegExp(`${T}\\[1\\]\\.offsets: expected an array of 1 to 64 numbers \\(degrees\\), got 65`)],
+    [(b) => { b.threads[1].offsets = 0; }, new RegExp(`${T}\\[1\\]\\.offsets: expected an array of 1 to 64 numbers \\(degrees\\)$`)],
+    [(b) => { b.threads[0].offsets[3] = 91; }, new RegExp(`${T}\\[0\\]\\.offsets\\[3\\]: expected degrees in \\[-90, 90\\]`)],
+    [(b) => { b.threads[0].offsets[2] = 'x'; }, new RegExp(`${T}\\[0\\]\\.offsets\\[2\\]: expected a number, got string`)],
+    [(b) => { delete b.ibl; }, /woven\.yarn_lobe\.ibl: missing/],
+    [(b) => { b.ibl.summary.pop(); }, /woven\.yarn_lobe\.ibl\.summary: \d+ numbers, expected 2 x n_theta x n_phi x 5 = \d+/],
+    [(b) => { b.ibl.n_phi = 2; }, /woven\.yarn_lobe\.ibl\.n_phi: must be in \[3, 128\]/],
+  ]) {
+    check(() => assert.throws(() => loadClothfitPreset(bad(edit)), re), `bad microcylinder yarn_lobe ${edit}`);
+  }
+  // a_1 + a_2 = 1 exactly (satin) is accepted, up to the C++ reader's 1e-9
+  check(() => assert.ok(loadClothfitPreset(bad((b) => { b.threads[1].a = 0.1 + 5e-10; })).yarnLobe), 'a_1 + a_2 <= 1 + 1e-9 accepted');
+  // the same text checks as for the Irawan lobe (n_theta 16.0 refused) and its preset rules
+  check(() => assert.throws(() => loadClothfitPreset(JSON.stringify(wp({ yarn_lobe: good })).replace('"n_theta":16', '"n_theta":16.0')), /woven\.yarn_lobe\.ibl\.n_theta: expected an integer/), 'microcylinder: n_theta 16.0 literal refused');
+  check(() => assert.throws(() => loadClothfitPreset(wp({ ibl: 'fis', yarn_lobe: good })), /woven\.ibl: must be "split" with a yarn_lobe/), 'microcylinder lobe needs the split sum');
 }
 
 // From the real converter: a glTF with one single-sided and one double-sided material.
