@@ -174,22 +174,49 @@ inline std::vector<Tangent> MakeTangents(const Thread threads[2]) {
   return out;
 }
 
-// The fabric's BSDF split by colour: out[0] = the surface (Fresnel) reflection, white; out[1]
-// = the volume scattering per unit albedo, each thread's weighted by its volume_scale (the
-// fabric's BSDF is out[0] + A out[1] when thread j has albedo volume_scale_j A). 0 unless
-// wo.z > 0 and wi.z > 0. No cosine.
-inline void EvalSplit(const std::vector<Tangent>& tangents, const Thread threads[2],
-                      const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
+// Tangents of one thread with the same direction merged into one of the summed weight (satin's
+// warp lists offsets twice): the same BSDF in real arithmetic, fewer terms (not the reference
+// renderer's order of operations, so not its bits; woven's lobe uses it).
+inline std::vector<Tangent> MergeDuplicates(const std::vector<Tangent>& in) {
+  std::vector<Tangent> out;
+  for (const Tangent& tg : in) {
+    bool merged = false;
+    for (Tangent& o : out)
+      if (o.thread == tg.thread && o.t.x == tg.t.x && o.t.y == tg.t.y && o.t.z == tg.t.z) {
+        o.weight += tg.weight;
+        merged = true;
+        break;
+      }
+    if (!merged) out.push_back(tg);
+  }
+  return out;
+}
+
+// What EvalSplit needs from wo alone: per tangent its Outgoing (w[k], tangents.size() of
+// them), and Q(wo) (returned). Evaluating many wi for one wo (a table bake) prepares once.
+inline double PrepareOutgoing(const std::vector<Tangent>& tangents, const Thread threads[2],
+                              const Vec3<double>& wo, Outgoing* w) {
+  double q = (1.0 - threads[0].a - threads[1].a) * wo.z;
+  for (size_t k = 0; k < tangents.size(); ++k) {
+    w[k] = Outgoing{};
+    OutgoingAngles(tangents[k], wo, &w[k]);
+    q += tangents[k].weight * w[k].proj;
+  }
+  return q;
+}
+
+// EvalSplit (below) from PrepareOutgoing's w and q for this wo: the same operations in the
+// same order, so the same bits.
+inline void EvalSplitPrepared(const std::vector<Tangent>& tangents, const Thread threads[2],
+                              const Outgoing* w, double q, const Vec3<double>& wo,
+                              const Vec3<double>& wi, double out[2]) {
   out[0] = out[1] = 0.0;
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
-  double q = (1.0 - threads[0].a - threads[1].a) * wo.z;
   double s_sum = 0.0, v_sum = 0.0;
-  for (const Tangent& tg : tangents) {
-    Outgoing w;
-    OutgoingAngles(tg, wo, &w);
-    q += tg.weight * w.proj;
+  for (size_t k = 0; k < tangents.size(); ++k) {
+    const Tangent& tg = tangents[k];
     double s = 0.0, v = 0.0;
-    if (Scatter(tg, w, threads[tg.thread], wi, &s, &v)) {
+    if (Scatter(tg, w[k], threads[tg.thread], wi, &s, &v)) {
       s_sum += s;
       v_sum += v * threads[tg.thread].volume_scale;
     }
@@ -198,6 +225,22 @@ inline void EvalSplit(const std::vector<Tangent>& tangents, const Thread threads
   const double k = 1.0 / (q * wi.z);
   out[0] = s_sum * k;
   out[1] = v_sum * k;
+}
+
+// The fabric's BSDF split by colour: out[0] = the surface (Fresnel) reflection, white; out[1]
+// = the volume scattering per unit albedo, each thread's weighted by its volume_scale (the
+// fabric's BSDF is out[0] + A out[1] when thread j has albedo volume_scale_j A). 0 unless
+// wo.z > 0 and wi.z > 0. No cosine.
+inline void EvalSplit(const std::vector<Tangent>& tangents, const Thread threads[2],
+                      const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
+  out[0] = out[1] = 0.0;
+  if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
+  constexpr size_t kStack = 2 * kMaxOffsets;  // what a validated description can have
+  Outgoing stack[kStack];
+  std::vector<Outgoing> heap(tangents.size() > kStack ? tangents.size() : 0);
+  Outgoing* w = tangents.size() > kStack ? heap.data() : stack;
+  const double q = PrepareOutgoing(tangents, threads, wo, w);
+  EvalSplitPrepared(tangents, threads, w, q, wo, wi, out);
 }
 
 }  // namespace clothfit::microcylinder

@@ -2,6 +2,7 @@
 #include "brdf/yarn_lobe.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <stdexcept>
 
@@ -276,7 +277,9 @@ void Validate(const FarField& f, const std::string& where, bool need_ibl) {
 Lobe::Lobe(const FarField& f) : f_(f) {
   Validate(f, "yarn lobe", false);
   if (f.kind == FarField::Kind::kMicrocylinder) {
-    tangents_ = microcylinder::MakeTangents(f.threads);
+    tangents_ = microcylinder::MergeDuplicates(microcylinder::MakeTangents(f.threads));
+    static std::atomic<uint64_t> next_id{1};
+    id_ = next_id.fetch_add(1);
     return;
   }
   phase_.alpha = f.alpha;
@@ -335,7 +338,25 @@ double Lobe::GroupSum(const G& g, const Vec3<double>& wo_s, const Vec3<double>& 
 
 void Lobe::Eval(const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) const {
   if (f_.kind == FarField::Kind::kMicrocylinder) {
-    microcylinder::EvalSplit(tangents_, f_.threads, wo, wi, out);
+    // The wo-only work once per wo and thread: a bake runs every wi of one wo on one thread,
+    // the preview every light of one pixel. Keyed by the lobe's id (unique per constructed
+    // lobe; copies share the description) and wo's bits; the same values as EvalSplit.
+    thread_local struct {
+      uint64_t id = 0;
+      double wo[3] = {0, 0, 0};
+      double q = 0.0;
+      microcylinder::Outgoing w[2 * microcylinder::kMaxOffsets];
+    } cache;
+    out[0] = out[1] = 0.0;
+    if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
+    if (cache.id != id_ || cache.wo[0] != wo.x || cache.wo[1] != wo.y || cache.wo[2] != wo.z) {
+      cache.q = microcylinder::PrepareOutgoing(tangents_, f_.threads, wo, cache.w);
+      cache.id = id_;
+      cache.wo[0] = wo.x;
+      cache.wo[1] = wo.y;
+      cache.wo[2] = wo.z;
+    }
+    microcylinder::EvalSplitPrepared(tangents_, f_.threads, cache.w, cache.q, wo, wi, out);
     return;
   }
   out[0] = out[1] = 0.0;

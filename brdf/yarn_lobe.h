@@ -25,6 +25,7 @@
 // pattern's umax noise is not modelled (nominal umax). T has no cosine and no ks.
 #pragma once
 
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
@@ -150,7 +151,8 @@ class Lobe {
   // sum over g's nodes of SegmentSpecular (bit-identical), the node-independent work done once
   double GroupSum(const G& g, const Vec3<double>& wo, const Vec3<double>& wi) const;
   std::vector<G> groups_;
-  std::vector<microcylinder::Tangent> tangents_;  // kMicrocylinder
+  std::vector<microcylinder::Tangent> tangents_;  // kMicrocylinder (duplicates merged)
+  uint64_t id_ = 0;  // kMicrocylinder: keys Eval's per-thread cache of the wo-only work
 };
 
 // The table of a lobe `eval` (T_warp, T_weft at (wo, wi)) on an n_theta x n_phi grid over wo

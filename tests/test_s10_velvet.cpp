@@ -30,7 +30,8 @@ std::vector<double> ClothFlat(double base = 0.05) {
 }
 // woven flat parameters (twist 0: t -> -t is then a symmetry of the yarn lobes), sheen on.
 std::vector<double> WovenFlat() {
-  return {0.05, 0.04, 0.03, 0.3, 0.28, 0.25, 0.6, 0.7, 0.0, 0.6, 0.1, 2.0, 0.5, 0.45, 0.4, 0.35};
+  return {0.05, 0.04, 0.03, 0.3, 0.28, 0.25, 0.6, 0.7, 0.0, 0.6, 0.1, 2.0, 0.5, 0.45, 0.4, 0.35,
+          0.0};  // diffuse_roughness (session 18; all 17 woven values, session 19)
 }
 
 std::vector<Rgb<double>> Frame(const Scene& s, const Environment* env, const PreviewOptions& o,

@@ -130,6 +130,32 @@ TEST(S19Microcylinder, DatasetLobeIsTheFabricBsdf) {
   EXPECT_GT(std::min(s0, s1), 0.0);
 }
 
+// Lobe::Eval keeps the wo-only work per thread between calls: interleaving two lobes (and a copy)
+// at one wo and many wi gives each lobe's own values (EvalSplit on its unmerged tangents).
+TEST(S19Microcylinder, EvalCacheFollowsTheLobeAndWo) {
+  const fit::MicrocylinderLobe a = fit::MicrocylinderDescription(FabricPath("velvet.json"), 2);
+  const fit::MicrocylinderLobe b = fit::MicrocylinderDescription(FabricPath("satin.json"), 2);
+  const yarn_lobe::Lobe la(a.lobe), lb(b.lobe);
+  const yarn_lobe::Lobe la_copy = la;
+  const auto ta = microcylinder::MakeTangents(a.lobe.threads), tb = microcylinder::MakeTangents(b.lobe.threads);
+  std::mt19937_64 rng(11);
+  for (int i = 0; i < 300; ++i) {
+    const Vec3<double> wo = i % 3 == 0 ? RandomUpper(rng) : Vec3<double>(0.0, 0.6, 0.8);
+    const Vec3<double> wi = RandomUpper(rng);
+    double x[2], y[2], z[2], ex[2], ey[2];
+    la.Eval(wo, wi, x);
+    lb.Eval(wo, wi, y);
+    la_copy.Eval(wo, wi, z);
+    microcylinder::EvalSplit(ta, a.lobe.threads, wo, wi, ex);
+    microcylinder::EvalSplit(tb, b.lobe.threads, wo, wi, ey);
+    for (int k = 0; k < 2; ++k) {
+      ASSERT_NEAR(x[k], ex[k], 1e-12 * std::max(1.0, ex[k])) << i;
+      ASSERT_NEAR(y[k], ey[k], 1e-12 * std::max(1.0, ey[k])) << i;
+      ASSERT_EQ(x[k], z[k]) << i;
+    }
+  }
+}
+
 // A fabric whose threads differ in hue has no one volume colour: refused, naming the file;
 // a non-sadeghi fabric is refused too.
 TEST(S19Microcylinder, DescriptionRefusesWhatItCannotCarry) {

@@ -38,7 +38,8 @@ WeaveMaps RandomMaps(unsigned seed) {
 }
 
 std::vector<double> WovenParams() {
-  return {0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75, -9.0, 0.54, 0.07, 1.6, 0.1, 0.05, 0.02, 0.6};
+  return {0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75, -9.0, 0.54, 0.07, 1.6, 0.1, 0.05, 0.02, 0.6,
+          0.0};  // diffuse_roughness (session 18; all 17 woven values, session 19)
 }
 
 // The preview's pixels of a woven preset read from `preset_path` (as clothfit render-preview

@@ -206,7 +206,8 @@ TEST(WeaveBake, FollowsTheReferenceWeaveAndLowersTheTexelError) {
 }
 
 std::vector<double> WovenParams() {
-  return {0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75, -9.0, 0.54, 0.07, 1.6, 0.1, 0.05, 0.02, 0.6};
+  return {0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75, -9.0, 0.54, 0.07, 1.6, 0.1, 0.05, 0.02, 0.6,
+          0.0};  // diffuse_roughness (session 18; all 17 woven values, session 19)
 }
 
 std::vector<Rgb<double>> Frame(const Scene& s, const PreviewOptions& o) {
