@@ -118,7 +118,7 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
     render::IblEngine engine = render::IblEngine::kFilament;
     woven::IblMode woven_ibl = woven::IblMode::kSplit;
     int map_anisotropy = 0;  // > 0: weave maps (synthetic, below) with this max anisotropy
-    const char* yarn_lobe_fabric = nullptr;  // the far-field yarn lobe of this irawan fabric
+    const char* yarn_lobe_fabric = nullptr;  // the far-field yarn lobe of this irawan or sadeghi fabric
   };
   const Def defs[] = {{"full (direct+ibl+subsurface+shadows)", &scene, env.get(), true, true},
                       {"direct+ibl", &scene, env.get(), false, false},
@@ -148,10 +148,18 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
                       // evaluates cached values (web/ evaluates the quadrature per fragment)
                       {"threejs: woven direct+ibl, far-field lobe (canvas)", &scene, env.get(),
                        false, false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 0,
-                       "datasets/fabrics/canvas.json"},
+                       "fabrics/canvas.json"},
                       {"threejs: woven direct+ibl, far-field lobe (twill)", &scene, env.get(),
                        false, false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 0,
-                       "datasets/fabrics/twill.json"}};
+                       "fabrics/twill.json"},
+                      // session 19: the microcylinder lobe of a sadeghi fabric (the same cached
+                      // path; web/ evaluates it per fragment)
+                      {"threejs: woven direct+ibl, microcylinder lobe (velvet)", &scene, env.get(),
+                       false, false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 0,
+                       "fabrics/velvet.json"},
+                      {"threejs: woven direct+ibl, microcylinder lobe (satin)", &scene, env.get(),
+                       false, false, render::IblEngine::kThreejs, woven::IblMode::kSplit, 0,
+                       "fabrics/satin.json"}};
   // Synthetic maps for the map sets: 64 x 64 per period, 60 periods per uv unit (the canvas's),
   // a fixed pseudo-random pattern (the cost does not depend on the values).
   std::vector<float> level0(64 * 64 * render::WeaveMaps::kChannels);
@@ -175,10 +183,13 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
       maps->anisotropy = d.map_anisotropy;
       o.weave_maps = maps;
     }
-    if (d.yarn_lobe_fabric) {  // run from the repository root (datasets/ relative)
+    if (d.yarn_lobe_fabric) {  // relative to the source tree's datasets/ (any working directory)
+      const std::string path = std::string(CLOTHFIT_SOURCE_DATASETS) + "/" + d.yarn_lobe_fabric;
       render::MaterialPreset p = render::DefaultPreset(render::ModelKind::kWoven);
       p.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(
-          fit::YarnFarField(d.yarn_lobe_fabric).Description(16, 16));
+          render::LoadFabric(path).model == "sadeghi"
+              ? fit::MicrocylinderDescription(path, 16).lobe
+              : fit::YarnFarField(path).Description(16, 16));
       render::ApplyPresetYarnLobe(p, &o);
     }
     auto cache = render::PreviewCache::Build(*d.s, d.e, o);
@@ -191,12 +202,16 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
 
 template <typename T>
 void BM_Preview(benchmark::State& state, const render::PreviewCache* cache, bool sheen) {
-  // cloth: 10 parameters; woven: 16 (a canvas-like fit: the stage-1 fit has the sheen off, the
-  // "sheen on" set uses the fitted canvas sheen (0.08, 0.03, 0.03)), the first 10 differentiated.
+  // cloth: 10 parameters; woven: 17 (a canvas-like fit: the stage-1 fit has the sheen off, the
+  // "sheen on" set uses the fitted canvas sheen (0.08, 0.03, 0.03); diffuse_roughness 0), the
+  // first 10 differentiated. Sized by the table (session 19: 16-value arrays were written past
+  // their end once woven had 17 parameters, and `bench preview` crashed).
+  constexpr size_t kN = size_t(woven::kParameterCount);
+  static_assert(kN >= 17);
   const bool woven = cache->options.model == render::ModelKind::kWoven;
-  const std::array<double, 16> cloth_values{0.6, 0.4, 0.3, 0.8, 0.7, 0.6, 0.55, 0.2, 0.1, 0.05};
-  std::array<double, 16> woven_values{0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75,
-                                      -9.0, 0.54, 0.07, 1.6, 0.0, 0.0, 0.0, 0.6};
+  const std::array<double, kN> cloth_values{0.6, 0.4, 0.3, 0.8, 0.7, 0.6, 0.55, 0.2, 0.1, 0.05};
+  std::array<double, kN> woven_values{0.47, 0.41, 0.31, 0.54, 0.51, 0.46, 0.6, 0.75, -9.0,
+                                      0.54, 0.07, 1.6,  0.0,  0.0,  0.0,  0.6,  0.0};
   if (sheen) {
     woven_values[12] = 0.08;
     woven_values[13] = 0.03;
@@ -204,7 +219,7 @@ void BM_Preview(benchmark::State& state, const render::PreviewCache* cache, bool
   }
   const auto& values = woven ? woven_values : cloth_values;
   const int n = woven ? woven::kParameterCount : 10;
-  std::array<T, 16> x{};
+  std::array<T, kN> x{};
   for (int k = 0; k < n; ++k) {
     if constexpr (std::is_same_v<T, double>) {
       x[size_t(k)] = values[size_t(k)];

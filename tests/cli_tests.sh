@@ -75,6 +75,13 @@ PY
       || fail "bench exited non-zero: $out"
     grep -q "brdf/cloth/filament/double" <<< "$out" || fail "no double benchmark in: $out"
     grep -q "brdf/cloth/filament/jet10" <<< "$out" || fail "no jet benchmark in: $out"
+    # bench preview with woven's full parameter vector (session 19: 16-value arrays written past
+    # their end crashed it) and a microcylinder lobe, from a directory that is not the source tree
+    out=$(cd "$TMP" && "$BIN" bench preview \
+            --benchmark_filter='woven direct\+ibl, sheen on/double|microcylinder lobe \(velvet\)/double' \
+            --benchmark_min_time=0.01 2>&1) || fail "bench preview exited non-zero: $out"
+    grep -q "woven direct+ibl, sheen on/double" <<< "$out" || fail "no woven preview benchmark in: $out"
+    grep -q "microcylinder lobe (velvet)/double" <<< "$out" || fail "no microcylinder preview benchmark in: $out"
     ;;
   compare)
     "$BIN" --quiet lut --size 16 --out "$TMP/a.exr" >/dev/null || fail "lut a"
