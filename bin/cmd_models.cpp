@@ -37,6 +37,12 @@ void AddModelsCommand(CLI::App& app, const Globals&, int& exit_code) {
     PrintTable("woven (warp/weft anisotropic GGX x phase Fresnel + Charlie sheen + rough diffuse; "
                "see brdf/woven.h)",
                woven::kParameterTable);
+    std::printf("  yarn lobes: a preset's \"woven\": {\"yarn_lobe\"} replaces the GGX lobes by the "
+                "fabric's far field (brdf/yarn_lobe.h; fit's default with --fabric):\n"
+                "    irawan-far-field        Irawan-Marschner yarn specular averaged over the weave "
+                "(irawan fabrics)\n"
+                "    sadeghi-microcylinder   the microcylinder BSDF in closed form, surface white + "
+                "volume x tint_weft (sadeghi fabrics)\n\n");
     PrintTable("physical-aniso (three.js r187 MeshPhysicalMaterial sheen + anisotropy + specular; "
                "see brdf/physical_aniso.h)",
                physical_aniso::kParameterTable);
