@@ -138,11 +138,18 @@ PY
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
       --yarn-lobe quadrature --ao --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe with --ao accepted"
     grep -q -- "not with --sheen-tilt, --ao or --indirect" <<< "$err" || fail "--yarn-lobe with --ao: $err"
-    # --yarn-lobe preset (session 12; the default "auto" for irawan fabrics): refused on a fabric
-    # without yarns and with what the lobe has no path for, nothing written.
+    # --yarn-lobe preset (session 12; the default "auto" for irawan fabrics, and since session 19
+    # for sadeghi fabrics of one hue): refused on a sadeghi fabric whose threads differ in hue
+    # (silk_shot) and with what the lobe has no path for, nothing written.
+    printf '{"format": "clothfit-fabric", "version": 1, "name": "shot", "model": "sadeghi", "preset": "silk_shot", "uv_repeats": 80}\n' > "$TMP/shot.json"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
-      --yarn-lobe preset --fabric "$D/fabrics/velvet.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe preset on velvet accepted"
-    grep -q "velvet.json: model 'sadeghi' has no yarns" <<< "$err" || fail "--yarn-lobe preset on velvet: $err"
+      --yarn-lobe preset --fabric "$TMP/shot.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe preset on silk_shot accepted"
+    grep -q "shot.json: the two threads of 'silk_shot' differ in hue" <<< "$err" || fail "--yarn-lobe preset on silk_shot: $err"
+    [ ! -e "$TMP/y.json" ] || fail "preset written despite a --yarn-lobe preset error on silk_shot"
+    # ... and on velvet it is the microcylinder lobe (the missing reference is what stops it)
+    err=$("$BIN" fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
+      --yarn-lobe preset --fabric "$D/fabrics/velvet.json" --out "$TMP/y.json" 2>&1) && fail "fit without a reference accepted"
+    grep -q "the microcylinder lobe of .*velvet.json" <<< "$err" || fail "--yarn-lobe preset on velvet: $err"
     err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$D/scenes/sphere.json" --model woven \
       --yarn-lobe preset --woven-ibl fis --fabric "$D/fabrics/canvas.json" --out "$TMP/y.json" 2>&1) && fail "--yarn-lobe preset with FIS accepted"
     grep -q -- "--yarn-lobe preset: not with" <<< "$err" || fail "--yarn-lobe preset with FIS: $err"
