@@ -7,9 +7,13 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <memory>
 #include <mutex>
 #include <random>
 #include <sstream>
+
+#include "brdf/microcylinder.h"
+#include "brdf/yarn_lobe.h"
 
 namespace clothfit::stress {
 namespace {
@@ -191,6 +195,74 @@ void EvaluateOne(ModelId m, const Input& in, Tally& t) {
   }
 }
 
+// Session 19: woven's microcylinder lobe (brdf/microcylinder.h through yarn_lobe::Lobe, which
+// merges duplicate tangents and caches the wo-only work): `count` evaluations over random
+// fabrics (every constant uniform in its documented range, a quarter of them at a bound: eta
+// 1 + 1e-9 or 3 - 1e-9, kd 0 or 1, widths 1e-3 or 90 degrees, a_1 + a_2 = 1, offsets +-90 or 0,
+// repeated offsets) and directions (uniform, and adversarial: z in {0, 1e-12, 1e-8, 1}, wi = wo,
+// the mirror direction, wi or wo along a fibre tangent, below the surface). A new fabric every
+// 16 evaluations. Counts non-finite and negative values of both outputs; the lobe is evaluated
+// in double only (the browser's float version is tested against it in tests/browser/unit.mjs).
+void EvaluateMicrocylinder(int64_t count, SplitMix& rng, Tally& t) {
+  auto uniform = [&](double lo, double hi) { return lo + (hi - lo) * rng.Uniform(); };
+  auto bound = [&]() { return rng.Index(4) == 0; };
+  auto dir = [&](double z) {
+    const double phi = uniform(0.0, 2.0 * kPi), r = std::sqrt(std::max(0.0, 1.0 - z * z));
+    return Vec3<double>(r * std::cos(phi), r * std::sin(phi), z);
+  };
+  constexpr std::array<double, 6> kZ{0.0, 1e-12, 1e-8, 1.0, -1e-8, -0.3};
+  yarn_lobe::FarField f;
+  f.kind = yarn_lobe::FarField::Kind::kMicrocylinder;
+  std::vector<microcylinder::Tangent> tangents;
+  std::unique_ptr<yarn_lobe::Lobe> lobe;
+  for (int64_t e = 0; e < count; ++e) {
+    if (e % 16 == 0) {
+      for (int j = 0; j < 2; ++j) {
+        microcylinder::Thread& th = f.threads[j];
+        th.eta = bound() ? (rng.Index(2) ? 1.0 + 1e-9 : 3.0 - 1e-9) : uniform(1.0 + 1e-6, 3.0 - 1e-6);
+        th.kd = bound() ? double(rng.Index(2)) : rng.Uniform();
+        th.gamma_s = bound() ? (rng.Index(2) ? 1e-3 : 90.0) : uniform(0.5, 90.0);
+        th.gamma_v = bound() ? (rng.Index(2) ? 1e-3 : 90.0) : uniform(0.5, 90.0);
+        th.volume_scale = bound() ? double(rng.Index(2)) : rng.Uniform();
+        th.offsets.assign(size_t(1 + rng.Index(8)), 0.0);
+        for (double& o : th.offsets) o = bound() ? 90.0 * double(rng.Index(3) - 1) : uniform(-90.0, 90.0);
+        if (rng.Index(4) == 0) th.offsets.push_back(th.offsets.front());  // a repeated offset
+      }
+      f.threads[0].a = bound() ? double(rng.Index(2)) : rng.Uniform();
+      f.threads[1].a = bound() ? 1.0 - f.threads[0].a : rng.Uniform() * (1.0 - f.threads[0].a);
+      lobe = std::make_unique<yarn_lobe::Lobe>(f);
+      tangents = microcylinder::MakeTangents(f.threads);
+    }
+    Vec3<double> wo = rng.Index(3) ? dir(rng.Uniform()) : dir(kZ[size_t(rng.Index(int(kZ.size())))]);
+    Vec3<double> wi = dir(rng.Uniform());
+    switch (rng.Index(6)) {
+      case 0: wi = dir(kZ[size_t(rng.Index(int(kZ.size())))]); break;
+      case 1: wi = wo; break;
+      case 2: wi = Vec3<double>(-wo.x, -wo.y, wo.z); break;
+      case 3: {
+        const Vec3<double> tg = tangents[size_t(rng.Index(int(tangents.size())))].t;
+        (rng.Index(2) ? wi : wo) = tg * (rng.Index(2) ? 1.0 : -1.0);
+        break;
+      }
+      default: break;
+    }
+    double v[2];
+    lobe->Eval(wo, wi, v);
+    ++t.evaluations;
+    if (!std::isfinite(v[0]) || !std::isfinite(v[1])) {
+      ++t.non_finite;
+      std::ostringstream os;
+      os.precision(17);
+      os << "non-finite at wo=(" << wo.x << "," << wo.y << "," << wo.z << ") wi=(" << wi.x << ","
+         << wi.y << "," << wi.z << ")";
+      t.Fail(os.str());
+    } else if (v[0] < 0.0 || v[1] < 0.0) {
+      ++t.negative;
+      t.Fail("negative");
+    }
+  }
+}
+
 }  // namespace
 
 Report Run(int64_t evals, uint64_t seed, const std::function<void(int64_t, int64_t)>& progress) {
@@ -199,7 +271,8 @@ Report Run(int64_t evals, uint64_t seed, const std::function<void(int64_t, int64
   (void)lut::DefaultSheenAlbedo();
   (void)lut::DefaultWovenPhase();
 
-  const int num_models = int(kAllModels.size());
+  // kAllModels, then woven's microcylinder lobe (session 19) as one more row
+  const int num_models = int(kAllModels.size()) + 1;
   const int64_t per_model = (evals + num_models - 1) / num_models;
   constexpr int64_t kChunk = 4096;
   const int64_t chunks_per_model = (per_model + kChunk - 1) / kChunk;
@@ -211,12 +284,16 @@ Report Run(int64_t evals, uint64_t seed, const std::function<void(int64_t, int64
   tbb::parallel_for(int64_t(0), total_chunks, [&](int64_t chunk) {
     const int mi = int(chunk / chunks_per_model);
     const int64_t ci = chunk % chunks_per_model;
-    const ModelId m = kAllModels[size_t(mi)];
     const int64_t begin = ci * kChunk;
     const int64_t end = std::min(per_model, begin + kChunk);
     SplitMix rng{seed * 0x100000001B3ull + uint64_t(chunk) * 0x9E3779B97F4A7C15ull};
     Tally& t = tallies[size_t(chunk)];
-    for (int64_t e = begin; e < end; ++e) EvaluateOne(m, Draw(m, rng), t);
+    if (mi == int(kAllModels.size())) {
+      EvaluateMicrocylinder(end - begin, rng, t);
+    } else {
+      const ModelId m = kAllModels[size_t(mi)];
+      for (int64_t e = begin; e < end; ++e) EvaluateOne(m, Draw(m, rng), t);
+    }
     const int64_t d = done.fetch_add(end - begin) + (end - begin);
     if (progress) {
       std::lock_guard<std::mutex> lock(progress_mutex);
@@ -226,14 +303,15 @@ Report Run(int64_t evals, uint64_t seed, const std::function<void(int64_t, int64
 
   Report r;
   for (int mi = 0; mi < num_models; ++mi) {
+    const bool lobe = mi == int(kAllModels.size());
     ModelReport mr;
-    mr.model = std::string(ModelName(kAllModels[size_t(mi)]));
+    mr.model = lobe ? std::string("woven lobe: microcylinder") : std::string(ModelName(kAllModels[size_t(mi)]));
     for (int64_t ci = 0; ci < chunks_per_model; ++ci) {  // merge in chunk order: deterministic
       const Tally& t = tallies[size_t(mi * chunks_per_model + ci)];
       mr.evaluations += t.evaluations;
       mr.non_finite += t.non_finite;
       mr.negative += t.negative;
-      if (t.max_dev > mr.max_rel_float_dev) {
+      if (!lobe && t.max_dev > mr.max_rel_float_dev) {
         mr.max_rel_float_dev = t.max_dev;
         mr.worst_float_deviation =
             Describe(kAllModels[size_t(mi)], t.worst, "largest float deviation");

@@ -7,6 +7,9 @@
 // bounds, 0 and 1, and beyond the clamps). Counts non-finite values or derivatives and
 // negative values of the direct reflectance and of the uniform-environment IBL response,
 // and the maximum float-vs-double relative deviation |f - d| / max(|d|, 1e-3).
+// One more row (session 19), "woven lobe: microcylinder": woven's microcylinder yarn lobe
+// (brdf/yarn_lobe.h) over random and bound-valued fabrics and adversarial directions (grazing,
+// along a fibre, mirror, below the surface), double only: non-finite and negative values.
 #pragma once
 
 #include <cstdint>
