@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <sstream>
 #include <string>
@@ -96,6 +97,16 @@ struct PreviewSet {
   std::unique_ptr<render::PreviewCache> cache;
   bool sheen = false;  // woven: evaluate with a non-zero sheen colour (the full sheen path)
 };
+
+// The preset lobe `clothfit fit` writes for the fabric at `path` (an irawan fabric's far-field
+// lobe with `nodes` nodes, a sadeghi fabric's microcylinder lobe), as a function of the summary's
+// table_theta (0: none; the microcylinder lobe then gets the smallest table, 2).
+std::function<yarn_lobe::FarField(int)> LobeDescriber(const std::string& path, int nodes = 8) {
+  if (render::LoadFabric(path).model == "sadeghi")
+    return [path](int theta) { return fit::MicrocylinderDescription(path, std::max(theta, 2)).lobe; };
+  auto ff = std::make_shared<const fit::YarnFarField>(path);
+  return [ff, nodes](int theta) { return ff->Description(nodes, theta); };
+}
 
 std::vector<PreviewSet>& PreviewSets() {
   static std::vector<PreviewSet> sets;
@@ -186,10 +197,7 @@ void BuildPreviewSets(const std::string& scene_path, bool quiet) {
     if (d.yarn_lobe_fabric) {  // relative to the source tree's datasets/ (any working directory)
       const std::string path = std::string(CLOTHFIT_SOURCE_DATASETS) + "/" + d.yarn_lobe_fabric;
       render::MaterialPreset p = render::DefaultPreset(render::ModelKind::kWoven);
-      p.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(
-          render::LoadFabric(path).model == "sadeghi"
-              ? fit::MicrocylinderDescription(path, 16).lobe
-              : fit::YarnFarField(path).Description(16, 16));
+      p.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(LobeDescriber(path, 16)(16));
       render::ApplyPresetYarnLobe(p, &o);
     }
     auto cache = render::PreviewCache::Build(*d.s, d.e, o);
@@ -448,43 +456,20 @@ void RegisterBrdfBenchmarks() {
   }
   // The far-field yarn lobe a woven fit bakes (fit --yarn-lobe defaults: 8 nodes, a 16 x 32
   // environment summary; session 14 made it 2-3x faster): the whole bake, and one lobe
-  // evaluation (a light's read in the preview).
-  for (const char* fabric : {"canvas", "twill"}) {
+  // evaluation (a light's read in the preview; wo fixed, as for one pixel's lights). Session 19
+  // adds the microcylinder lobe of the sadeghi fabrics (its wi grid refined for narrow lobes).
+  for (const char* fabric : {"canvas", "twill", "velvet", "linen", "satin"}) {
     const std::string path = std::string(CLOTHFIT_SOURCE_DATASETS) + "/fabrics/" + fabric + ".json";
     benchmark::RegisterBenchmark(("brdf/yarn-lobe-summary-bake/" + std::string(fabric)).c_str(),
                                  [path](benchmark::State& s) {
-                                   const fit::YarnFarField ff(path);
-                                   for (auto _ : s) benchmark::DoNotOptimize(ff.Description(8, 16));
+                                   const auto describe = LobeDescriber(path);  // (fabric loaded once)
+                                   for (auto _ : s) benchmark::DoNotOptimize(describe(16));
                                  })
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
     benchmark::RegisterBenchmark(("brdf/yarn-lobe-eval/" + std::string(fabric)).c_str(),
                                  [path](benchmark::State& s) {
-                                   const yarn_lobe::Lobe lobe(fit::YarnFarField(path).Description(8, 0));
-                                   const Vec3<double> wo = Normalize(Vec3<double>(0.3, 0.1, 0.9));
-                                   Vec3<double> wi = Normalize(Vec3<double>(-0.4, 0.05, 0.8));
-                                   double out[2];
-                                   for (auto _ : s) {
-                                     benchmark::DoNotOptimize(wi);
-                                     lobe.Eval(wo, wi, out);
-                                     benchmark::DoNotOptimize(out);
-                                   }
-                                 });
-  }
-  // Session 19: the microcylinder lobe of a sadeghi fabric (fit's default 16 x 32 summary, its
-  // wi grid refined for narrow lobes): the bake and one evaluation, against the irawan ones.
-  for (const char* fabric : {"velvet", "linen", "satin"}) {
-    const std::string path = std::string(CLOTHFIT_SOURCE_DATASETS) + "/fabrics/" + fabric + ".json";
-    benchmark::RegisterBenchmark(("brdf/yarn-lobe-summary-bake/" + std::string(fabric)).c_str(),
-                                 [path](benchmark::State& s) {
-                                   for (auto _ : s)
-                                     benchmark::DoNotOptimize(fit::MicrocylinderDescription(path, 16));
-                                 })
-        ->Unit(benchmark::kMillisecond)
-        ->UseRealTime();
-    benchmark::RegisterBenchmark(("brdf/yarn-lobe-eval/" + std::string(fabric)).c_str(),
-                                 [path](benchmark::State& s) {
-                                   const yarn_lobe::Lobe lobe(fit::MicrocylinderDescription(path, 2).lobe);
+                                   const yarn_lobe::Lobe lobe(LobeDescriber(path)(0));
                                    const Vec3<double> wo = Normalize(Vec3<double>(0.3, 0.1, 0.9));
                                    Vec3<double> wi = Normalize(Vec3<double>(-0.4, 0.05, 0.8));
                                    double out[2];

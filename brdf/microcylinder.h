@@ -235,12 +235,11 @@ inline void EvalSplit(const std::vector<Tangent>& tangents, const Thread threads
                       const Vec3<double>& wo, const Vec3<double>& wi, double out[2]) {
   out[0] = out[1] = 0.0;
   if (!(wo.z > 0.0) || !(wi.z > 0.0)) return;
-  constexpr size_t kStack = 2 * kMaxOffsets;  // what a validated description can have
-  Outgoing stack[kStack];
-  std::vector<Outgoing> heap(tangents.size() > kStack ? tangents.size() : 0);
-  Outgoing* w = tangents.size() > kStack ? heap.data() : stack;
-  const double q = PrepareOutgoing(tangents, threads, wo, w);
-  EvalSplitPrepared(tangents, threads, w, q, wo, wi, out);
+  // (one wo at a time: tests and references; a bake or the preview goes through yarn_lobe::Lobe,
+  // which prepares wo once)
+  std::vector<Outgoing> w(tangents.size());
+  const double q = PrepareOutgoing(tangents, threads, wo, w.data());
+  EvalSplitPrepared(tangents, threads, w.data(), q, wo, wi, out);
 }
 
 }  // namespace clothfit::microcylinder

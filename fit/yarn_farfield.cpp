@@ -343,14 +343,7 @@ MicrocylinderLobe MicrocylinderDescription(const std::string& fabric_path, int t
   double gamma_min = 90.0;
   for (int j = 0; j < 2; ++j) {
     const render::SadeghiThread& t = sf.thread[j];
-    microcylinder::Thread& th = out.lobe.threads[j];
-    th.eta = t.eta;
-    th.kd = t.kd;
-    th.gamma_s = t.gamma_s;
-    th.gamma_v = t.gamma_v;
-    th.a = t.a;
-    th.offsets = t.offsets;
-    th.volume_scale = (j == 0) == first ? 1.0 : k;
+    out.lobe.threads[j] = render::MicrocylinderThread(t, (j == 0) == first ? 1.0 : k);
     gamma_min = std::min({gamma_min, t.gamma_s, t.gamma_v});
   }
   for (int c = 0; c < 3; ++c) out.albedo[c] = ref[c];

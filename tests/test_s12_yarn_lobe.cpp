@@ -8,6 +8,7 @@
 
 // preview_fixtures.h (material.h's woven::Options) before the reference renderer's headers,
 // whose render::woven namespace would shadow clothfit::woven inside namespace render.
+#include "tests/preset_fixtures.h"
 #include "tests/preview_fixtures.h"
 #include "brdf/yarn_lobe.h"
 #include "fit/yarn_farfield.h"
@@ -245,12 +246,7 @@ TEST(S12YarnLobe, BadFieldsAreNamed) {
   p.yarn_lobe = std::make_shared<const yarn_lobe::FarField>(ff.Description(4, 2));
   const json good = render::PresetToJson(p);
   EXPECT_NO_THROW(render::ParsePreset(good, "p.json"));
-  struct Case {
-    const char* what;
-    std::function<void(json&)> edit;
-    const char* field;
-  };
-  const std::vector<Case> cases = {
+  const std::vector<testing::BadLobeField> cases = {
       {"nodes 0", [](json& y) { y["nodes"] = 0; }, "woven.yarn_lobe.nodes"},
       {"nodes 65", [](json& y) { y["nodes"] = 65; }, "woven.yarn_lobe.nodes"},
       {"nodes huge", [](json& y) { y["nodes"] = 18446744073709551615ull; }, "woven.yarn_lobe.nodes"},
@@ -278,18 +274,7 @@ TEST(S12YarnLobe, BadFieldsAreNamed) {
       {"n_phi 1e6", [](json& y) { y["ibl"]["n_phi"] = 1000000; }, "woven.yarn_lobe.ibl.n_phi"},
       {"ibl extra", [](json& y) { y["ibl"]["x"] = 1; }, "woven.yarn_lobe.ibl"},
   };
-  for (const Case& c : cases) {
-    json j = good;
-    c.edit(j["woven"]["yarn_lobe"]);
-    try {
-      render::ParsePreset(j, "p.json");
-      ADD_FAILURE() << c.what << ": accepted";
-    } catch (const render::MaterialError& e) {
-      const std::string m = e.what();
-      EXPECT_NE(m.find("p.json"), std::string::npos) << c.what << ": " << m;
-      EXPECT_NE(m.find(c.field), std::string::npos) << c.what << ": " << m;
-    }
-  }
+  testing::ExpectBadLobeFieldsNamed(good, cases);
   // The lobe belongs to the additive layer and its own split sum.
   for (auto [key, value] : {std::pair<const char*, const char*>{"yarn_layer", "albedo-scaled"},
                             {"ibl", "fis"}, {"ibl", "bent"}}) {

@@ -19,6 +19,7 @@
 #include "render/reference/fabric.h"
 #include "render/reference/sadeghi.h"
 #include "render/scene/material.h"
+#include "tests/preset_fixtures.h"
 
 namespace clothfit {
 namespace {
@@ -36,26 +37,16 @@ Vec3<double> RandomUpper(std::mt19937_64& rng) {
   return {r * std::cos(phi), r * std::sin(phi), z};
 }
 
-microcylinder::Thread ThreadOf(const render::SadeghiThread& t, double volume_scale) {
-  microcylinder::Thread th;
-  th.eta = t.eta;
-  th.kd = t.kd;
-  th.gamma_s = t.gamma_s;
-  th.gamma_v = t.gamma_v;
-  th.a = t.a;
-  th.offsets = t.offsets;
-  th.volume_scale = volume_scale;
-  return th;
-}
-
 // The split is the reference renderer's BSDF: for every published fabric (threads of any
 // colour), surface + A_1 volume_1 + A_2 volume_2 (EvalSplit once per thread, the other's
 // volume_scale 0) equals SadeghiBsdf::Eval at random direction pairs, to rounding.
 TEST(S19Microcylinder, EvalSplitIsTheReferenceBsdf) {
   for (const render::SadeghiFabric& fab : render::SadeghiPresets()) {
     const render::SadeghiBsdf bsdf(fab);
-    const microcylinder::Thread only0[2] = {ThreadOf(fab.thread[0], 1.0), ThreadOf(fab.thread[1], 0.0)};
-    const microcylinder::Thread only1[2] = {ThreadOf(fab.thread[0], 0.0), ThreadOf(fab.thread[1], 1.0)};
+    const microcylinder::Thread only0[2] = {render::MicrocylinderThread(fab.thread[0], 1.0),
+                                            render::MicrocylinderThread(fab.thread[1], 0.0)};
+    const microcylinder::Thread only1[2] = {render::MicrocylinderThread(fab.thread[0], 0.0),
+                                            render::MicrocylinderThread(fab.thread[1], 1.0)};
     const std::vector<microcylinder::Tangent> tangents = microcylinder::MakeTangents(only0);
     std::mt19937_64 rng(19);
     int lit = 0;
@@ -79,7 +70,8 @@ TEST(S19Microcylinder, EvalSplitIsTheReferenceBsdf) {
 // Both directions must be above the surface; the value is finite at grazing angles.
 TEST(S19Microcylinder, BelowTheSurfaceIsZeroAndGrazingIsFinite) {
   const render::SadeghiFabric& fab = render::SadeghiPreset("velvet");
-  const microcylinder::Thread th[2] = {ThreadOf(fab.thread[0], 1.0), ThreadOf(fab.thread[1], 1.0)};
+  const microcylinder::Thread th[2] = {render::MicrocylinderThread(fab.thread[0]),
+                                       render::MicrocylinderThread(fab.thread[1])};
   const auto tangents = microcylinder::MakeTangents(th);
   double out[2];
   microcylinder::EvalSplit(tangents, th, {0, 0.6, -0.8}, {0, 0, 1}, out);
@@ -201,12 +193,7 @@ TEST(S19Microcylinder, PresetRoundTripAndBadFields) {
     EXPECT_EQ(x[0], z[0]);
     EXPECT_EQ(x[1], z[1]);
   }
-  struct Case {
-    const char* what;
-    std::function<void(json&)> edit;
-    const char* field;
-  };
-  const std::vector<Case> cases = {
+  const std::vector<testing::BadLobeField> cases = {
       {"eta 3", [](json& j) { j["threads"][0]["eta"] = 3.0; }, "woven.yarn_lobe.threads[0].eta"},
       {"eta string", [](json& j) { j["threads"][1]["eta"] = "1.5"; }, "woven.yarn_lobe.threads[1].eta"},
       {"kd -1", [](json& j) { j["threads"][1]["kd"] = -1.0; }, "woven.yarn_lobe.threads[1].kd"},
@@ -224,18 +211,7 @@ TEST(S19Microcylinder, PresetRoundTripAndBadFields) {
       {"model", [](json& j) { j["model"] = "sadeghi"; }, "woven.yarn_lobe.model"},
       {"summary short", [](json& j) { j["ibl"]["summary"].erase(0); }, "woven.yarn_lobe.ibl.summary"},
   };
-  for (const Case& c : cases) {
-    json j = good;
-    c.edit(j["woven"]["yarn_lobe"]);
-    try {
-      render::ParsePreset(j, "p.json");
-      ADD_FAILURE() << c.what << ": accepted";
-    } catch (const render::MaterialError& e) {
-      const std::string m = e.what();
-      EXPECT_NE(m.find("p.json"), std::string::npos) << c.what << ": " << m;
-      EXPECT_NE(m.find(c.field), std::string::npos) << c.what << ": " << m;
-    }
-  }
+  testing::ExpectBadLobeFieldsNamed(good, cases);
 }
 
 // Bake's finer wi grid: wi_sub = 1 is the bin-centre midpoint rule; for satin's 2.5-degree

@@ -37,6 +37,18 @@ double FresnelDielectric(double cos_i, double eta) {
   return microcylinder::FresnelDielectric(cos_i, eta);
 }
 
+microcylinder::Thread MicrocylinderThread(const SadeghiThread& t, double volume_scale) {
+  microcylinder::Thread th;
+  th.eta = t.eta;
+  th.kd = t.kd;
+  th.gamma_s = t.gamma_s;
+  th.gamma_v = t.gamma_v;
+  th.a = t.a;
+  th.offsets = t.offsets;
+  th.volume_scale = volume_scale;
+  return th;
+}
+
 const std::vector<SadeghiFabric>& SadeghiPresets() {
   // Sadeghi et al. 2013, table 2 (as publicly transcribed; shared/reference/woven-cloth.md 2).
   static const std::vector<SadeghiFabric> presets = [] {
@@ -111,11 +123,7 @@ SadeghiBsdf::SadeghiBsdf(SadeghiFabric fabric) : fabric_(std::move(fabric)) {
       }
       tangents_.push_back(microcylinder::MakeTangent(j, off, th.a / double(th.offsets.size())));
     }
-    optics_[j].eta = th.eta;
-    optics_[j].kd = th.kd;
-    optics_[j].gamma_s = th.gamma_s;
-    optics_[j].gamma_v = th.gamma_v;
-    optics_[j].a = th.a;
+    optics_[j] = MicrocylinderThread(th);
     scale_s_[j] = 2.0 * th.gamma_s * kDegToRad * std::sqrt(3.0) / kPi;
     scale_v_[j] = 2.0 * th.gamma_v * kDegToRad * std::sqrt(3.0) / kPi;
   }

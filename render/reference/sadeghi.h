@@ -60,6 +60,11 @@ struct SadeghiFabric {
   SadeghiThread thread[2];
 };
 
+// A thread's optical constants and offsets as brdf/microcylinder.h takes them (its colour is
+// the caller's: volume_scale, 1 by default, only weighs woven's lobe). The one conversion used
+// by SadeghiBsdf, woven's microcylinder lobe (fit/yarn_farfield.h) and the tests.
+microcylinder::Thread MicrocylinderThread(const SadeghiThread& t, double volume_scale = 1.0);
+
 // The six published fabrics (Sadeghi et al. 2013, table 2): linen_plain,
 // silk_crepe_de_chine, polyester_satin_charmeuse, polyester_satin_charmeuse_back, silk_shot,
 // velvet.
@@ -110,7 +115,7 @@ class SadeghiBsdf final : public Bsdf {
 
   SadeghiFabric fabric_;
   std::vector<microcylinder::Tangent> tangents_;  // brdf/microcylinder.h
-  microcylinder::Thread optics_[2];  // the threads' constants without offsets and colour
+  microcylinder::Thread optics_[2];  // the threads' constants (MicrocylinderThread)
   double scale_s_[2] = {0, 0}, scale_v_[2] = {0, 0};
   uint64_t instance_id_ = 0;
 };
