@@ -108,7 +108,24 @@ std::string CachedReference(const std::string& scene_path, const std::string& fa
   const render::Fabric fabric = render::LoadFabric(fabric_path);
   const fs::path weave = fs::path(fabric_path).parent_path() / ".." / "weaves" / (fabric.preset + ".weave");
   key_text += "|" + ReadFileOrEmpty(weave.string());
-  if (scene.card.environment) key_text += "|" + scene.card.environment->path;
+  if (scene.card.environment) {
+    // What the renderer will draw, not only the card's name for it (session 20): a map's
+    // bytes, or the procedural sky that stands in for a map that is not installed. Before,
+    // a reference rendered under the stand-in sky (scripts/fetch-data not run yet) was reused
+    // under the real map once it was installed.
+    const render::EnvironmentSpec& e = *scene.card.environment;
+    key_text += "|" + e.path;
+    if (e.path == "procedural-sky") {
+      key_text += "|procedural-sky";
+    } else if (e.found && fs::is_regular_file(e.path)) {
+      char map_key[48];
+      std::snprintf(map_key, sizeof map_key, "|map-fnv1a=%016llx",
+                    (unsigned long long)Fnv1a(ReadFileOrEmpty(e.path)));
+      key_text += map_key;
+    } else {
+      key_text += "|not-installed:procedural-sky";
+    }
+  }
   // Adaptive references: the target and the allocation's constants (spp is the budget).
   render::RenderSettings st;
   if (target_error > 0.0) {

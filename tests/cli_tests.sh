@@ -276,6 +276,31 @@ PY
     refs "$TMP/one" "sphere=0.05" 1 0/1 > /dev/null 2>&1 && fail "no target for drape/swatch accepted"
     "$BIN" render-references --fabrics "$mat" --shard 2/2 --dry-run > /dev/null 2>&1 && fail "--shard 2/2 accepted"
     ;;
+  cacheenv)
+    # Session 20: the reference cache keys what the renderer draws. A reference rendered while
+    # the card's map is not installed (the procedural sky stands in) must not be reused once
+    # the map is installed, and a changed map is a new entry; the same map is reused.
+    D=$(cd "$(dirname "$0")/.." && pwd)/datasets
+    mat=$D/materials/lambert.json
+    refs() { CLOTHFIT_CACHE="$TMP/cache" CLOTHFIT_DATA="$1" "$BIN" --quiet render-references \
+               --fabrics "$mat" --width 16 --spp 16 --seeds 1; }
+    mkdir -p "$TMP/data/hdri"
+    refs "$TMP/data" > "$TMP/sky.txt" || fail "render without the map exited $?"
+    [ "$(wc -l < "$TMP/sky.txt")" -eq 3 ] || fail "expected 3 references: $(cat "$TMP/sky.txt")"
+    oiiotool --pattern constant:color=0.9,0.2,0.1 32x16 3 -d half -o "$TMP/data/hdri/studio.exr" \
+      || fail "oiiotool could not write a map"
+    refs "$TMP/data" > "$TMP/map.txt" || fail "render with the map exited $?"
+    grep -qxFf "$TMP/sky.txt" "$TMP/map.txt" && fail "a procedural-sky reference was reused under the installed map"
+    s=$(head -1 "$TMP/sky.txt"); m=$(head -1 "$TMP/map.txt")
+    grep -q '^PASS' <<< "$(oiiotool --fail 0 --diff "$s" "$m")" && fail "the map changed no pixel: $s $m"
+    refs "$TMP/data" > "$TMP/again.txt" || fail "second render with the map exited $?"
+    diff "$TMP/map.txt" "$TMP/again.txt" > /dev/null || fail "the same map was not reused"
+    [ "$(ls "$TMP/cache" | wc -l)" -eq 6 ] || fail "cache holds $(ls "$TMP/cache" | wc -l) files, not 6"
+    oiiotool --pattern constant:color=0.1,0.2,0.9 32x16 3 -d half -o "$TMP/data/hdri/studio.exr" \
+      || fail "oiiotool could not rewrite the map"
+    refs "$TMP/data" > "$TMP/map2.txt" || fail "render with the changed map exited $?"
+    grep -qxFf "$TMP/map.txt" "$TMP/map2.txt" && fail "a reference of the old map was reused under a changed map"
+    ;;
   *) fail "unknown case $CASE" ;;
 esac
 echo "PASS: $CASE"
