@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <optional>
+#include <vector>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -56,6 +57,23 @@ uint64_t Fnv1a(const std::string& s, uint64_t h = 0xcbf29ce484222325ull) {
     h ^= c;
     h *= 0x100000001b3ull;
   }
+  return h;
+}
+
+// FNV-1a 64 over a file's bytes, read in 1 MiB chunks (a map is hashed without holding it in
+// memory); nullopt when the file cannot be read.
+std::optional<uint64_t> FileFnv1a(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return std::nullopt;
+  uint64_t h = 0xcbf29ce484222325ull;
+  std::vector<char> buf(size_t(1) << 20);
+  while (f) {
+    f.read(buf.data(), std::streamsize(buf.size()));
+    const std::streamsize n = f.gcount();
+    if (n <= 0) break;
+    h = Fnv1a(std::string(buf.data(), size_t(n)), h);
+  }
+  if (f.bad()) return std::nullopt;
   return h;
 }
 
@@ -117,10 +135,9 @@ std::string CachedReference(const std::string& scene_path, const std::string& fa
     key_text += "|" + e.path;
     if (e.path == "procedural-sky") {
       key_text += "|procedural-sky";
-    } else if (e.found && fs::is_regular_file(e.path)) {
+    } else if (const auto h = e.found ? FileFnv1a(e.path) : std::nullopt) {
       char map_key[48];
-      std::snprintf(map_key, sizeof map_key, "|map-fnv1a=%016llx",
-                    (unsigned long long)Fnv1a(ReadFileOrEmpty(e.path)));
+      std::snprintf(map_key, sizeof map_key, "|map-fnv1a=%016llx", (unsigned long long)*h);
       key_text += map_key;
     } else {
       key_text += "|not-installed:procedural-sky";
