@@ -45,6 +45,24 @@ const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, all) =>
 }, []));
 let checks = 0;
 const check = (fn, what) => { fn(); checks++; };
+// A yarn-lobe shader (as JS) against the JS port over reference direction pairs: `port` and
+// `shader` map (wo, wi) to [T_warp, T_weft]. Relative error max|S - P| / (P_warp + P_weft) per
+// lit pair; `beyond` counts pairs over 1e-4 and unlit pairs the shader lights.
+const compareLobePairs = (name, pairs, port, shader) => {
+  let beyond = 0, lit = 0;
+  const rel = [];
+  for (const q of pairs) {
+    const P = port(q.wo, q.wi), S = shader(q.wo, q.wi), p = P[0] + P[1];
+    if (!(p > 0)) { if (S[0] !== 0 || S[1] !== 0) ++beyond; continue; }
+    ++lit;
+    const d = Math.max(Math.abs(S[0] - P[0]), Math.abs(S[1] - P[1])) / p;
+    rel.push(d);
+    if (!(d < 1e-4)) ++beyond;
+  }
+  rel.sort((x, y) => x - y);
+  const msg = `${name}: ${lit} lit of ${pairs.length}, median relative ${rel[rel.length >> 1]?.toExponential(1)}, worst ${rel[rel.length - 1]?.toExponential(1)}, ${beyond} beyond 1e-4`;
+  return { lit, beyond, msg };
+};
 
 const physical = (side) => ({ metadata: { version: 4.6, type: 'Material', generator: 'test' }, type: 'MeshPhysicalMaterial', color: 0x808080, roughness: 0.5, sheen: 1, sheenColor: 0xffffff, sheenRoughness: 0.5, ...(side === undefined ? {} : { side }) });
 const cloth = (side) => ({ metadata: { version: 4.6, type: 'Material' }, type: 'MeshClothMaterial', color: 0x808080, sheen: 0xffffff, roughness: 0.6, ...(side === undefined ? {} : { side }) });
@@ -258,20 +276,10 @@ check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps:
     const blocks = [];
     for (let i = 0; i < r.block.groups.length; i += 5) blocks.push({ ...r.block, groups: r.block.groups.slice(i, i + 5) });
     const ports = blocks.map((b) => yarnLobeOptions(b)), shaders = blocks.map(glslLobe);
-    let beyond = 0, lit = 0;
-    const rel = [];
-    for (const q of r.pairs) {
-      const add = (a, b) => [a[0] + b[0], a[1] + b[1]];
-      const P = ports.map((pp) => yarnLobeEval(pp, q.wo, q.wi)).reduce(add), S = shaders.map((s) => s(q.wo, q.wi)).reduce(add);
-      const p = P[0] + P[1];
-      if (!(p > 0)) { if (S[0] !== 0 || S[1] !== 0) ++beyond; continue; }
-      ++lit;
-      const d = Math.max(Math.abs(S[0] - P[0]), Math.abs(S[1] - P[1])) / p;
-      rel.push(d);
-      if (!(d < 1e-4)) ++beyond;
-    }
-    rel.sort((x, y) => x - y);
-    const msg = `${name}: ${lit} lit of ${r.pairs.length}, median relative ${rel[rel.length >> 1]?.toExponential(1)}, worst ${rel[rel.length - 1]?.toExponential(1)}, ${beyond} beyond 1e-4`;
+    const add = (a, b) => [a[0] + b[0], a[1] + b[1]];
+    const { lit, beyond, msg } = compareLobePairs(name, r.pairs,
+      (wo, wi) => ports.map((pp) => yarnLobeEval(pp, wo, wi)).reduce(add),
+      (wo, wi) => shaders.map((sh) => sh(wo, wi)).reduce(add));
     check(() => assert.ok(lit > r.pairs.length / 2 && beyond <= 0.01 * r.pairs.length, msg), `yarn lobe shader = port (${name})`);
     if (args.verbose) console.log(msg);
   }
@@ -374,18 +382,8 @@ check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps:
   for (const [name, r] of Object.entries(ref.fabrics)) {
     const block = mcBlock(r.threads), lobe = yarnLobeOptions(block);
     const shader = mcShaderAsJs(compiled(block).sh.fragmentShader);
-    let beyond = 0, lit = 0;
-    const rel = [];
-    for (const q of r.pairs) {
-      const P = microcylinderEvalSplit(lobe, q.wo, q.wi), S = shader(q.wo, q.wi), p = P[0] + P[1];
-      if (!(p > 0)) { if (S[0] !== 0 || S[1] !== 0) ++beyond; continue; }
-      ++lit;
-      const d = Math.max(Math.abs(S[0] - P[0]), Math.abs(S[1] - P[1])) / p;
-      rel.push(d);
-      if (!(d < 1e-4)) ++beyond;
-    }
-    rel.sort((x, y) => x - y);
-    const msg = `${name}: ${lit} lit of ${r.pairs.length}, median relative ${rel[rel.length >> 1]?.toExponential(1)}, worst ${rel[rel.length - 1]?.toExponential(1)}, ${beyond} beyond 1e-4`;
+    const { lit, beyond, msg } = compareLobePairs(name, r.pairs,
+      (wo, wi) => microcylinderEvalSplit(lobe, wo, wi), shader);
     check(() => assert.ok(lit > r.pairs.length / 2 && beyond === 0, msg), `microcylinder shader = port (${name})`);
     if (args.verbose) console.log(`microcylinder shader ${msg}`);
   }
