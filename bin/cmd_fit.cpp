@@ -52,13 +52,14 @@ std::string ReadFileOrEmpty(const std::string& path) {
 }
 
 // FNV-1a 64 over a byte string.
-uint64_t Fnv1a(const std::string& s, uint64_t h = 0xcbf29ce484222325ull) {
-  for (unsigned char c : s) {
-    h ^= c;
+uint64_t Fnv1a(const char* p, size_t n, uint64_t h = 0xcbf29ce484222325ull) {
+  for (size_t i = 0; i < n; ++i) {
+    h ^= static_cast<unsigned char>(p[i]);
     h *= 0x100000001b3ull;
   }
   return h;
 }
+uint64_t Fnv1a(const std::string& s) { return Fnv1a(s.data(), s.size()); }
 
 // FNV-1a 64 over a file's bytes, read in 1 MiB chunks (a map is hashed without holding it in
 // memory); nullopt when the file cannot be read.
@@ -71,7 +72,7 @@ std::optional<uint64_t> FileFnv1a(const std::string& path) {
     f.read(buf.data(), std::streamsize(buf.size()));
     const std::streamsize n = f.gcount();
     if (n <= 0) break;
-    h = Fnv1a(std::string(buf.data(), size_t(n)), h);
+    h = Fnv1a(buf.data(), size_t(n), h);
   }
   if (f.bad()) return std::nullopt;
   return h;
