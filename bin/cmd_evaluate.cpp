@@ -134,12 +134,12 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   } else if (fj.contains("env_sun")) {
     const std::string field = a.preset + ": field 'fit.env_sun'";
     if (!fj["env_sun"].is_string())
-      throw std::runtime_error(field + ": expected \"auto\", \"off\" or \"card\"");
+      throw std::runtime_error(field + ": expected \"auto\", \"off\", \"panels\" or \"card\"");
     const std::string v = fj["env_sun"].get<std::string>();
     if (v == "card") o.env_sun_default = render::kCliDefaultSunMode;
-    else if (v == "auto" || v == "off") o.env_sun = render::ParseSunMode(v, field);
+    else if (v == "auto" || v == "off" || v == "panels") o.env_sun = render::ParseSunMode(v, field);
     else  // the value is escaped by the command's error handler (main.cpp)
-      throw std::runtime_error(field + ": expected \"auto\", \"off\" or \"card\", got \"" + v + "\"");
+      throw std::runtime_error(field + ": expected \"auto\", \"off\", \"panels\" or \"card\", got \"" + v + "\"");
   }
   // The IBL engine: as the fit recorded it (fit.ibl_engine; presets before session 8 were
   // fitted on Filament's), or --ibl-engine. The woven IBL mode is the preset's "woven" object.
@@ -286,7 +286,8 @@ void AddEvaluateCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--env-sun", args->env_sun,
                   "s10-sun: the environment's sun as a directional light (docs/sun.md): preset "
                   "(default: the fit's fit.env_sun; presets without it: each card's "
-                  "environment.sun, else off, as they were fitted), auto or off");
+                  "environment.sun, else off, as they were fitted), auto, off or panels (auto, then "
+                  "broad bright sources such as softboxes as more lights)");
   cmd->add_option("--ibl-engine", args->ibl_engine,
                   "whose image-based lighting: preset (default: the fit's recorded "
                   "fit.ibl_engine, filament for presets without it), auto, threejs or filament")

@@ -364,7 +364,8 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
       ->check(CLI::IsMember({"auto", "threejs", "filament"}));
   cmd->add_option("--env-sun", a.env_sun,
                   "s10-sun: the environment's sun as a directional light in the previews "
-                  "(docs/sun.md): auto or off; default: each card's environment.sun, else auto. "
+                  "(docs/sun.md): auto, off or panels (auto, then broad bright sources such as "
+                  "softboxes as more lights); default: each card's environment.sun, else auto. "
                   "Recorded as fit.env_sun (\"card\" without the flag; evaluate reuses it)");
   cmd->add_option("--woven-ibl", a.woven_ibl,
                   "woven's yarn-lobe IBL on the three.js engine: auto (default: split), fis "

@@ -128,7 +128,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
       ->check(CLI::Range(0, 65536));
   cmd->add_option("--env-sun", args->env_sun,
                   "the environment's sun as a directional light (docs/sun.md): auto (detect a "
-                  "compact sun, split it off the IBL's map) or off; default: the card's "
+                  "compact sun, split it off the IBL's map), off, or panels (auto, then up to 8 broad "
+                  "bright sources such as softboxes, each one more light); default: the card's "
                   "environment.sun, else auto (web/ draws the same)");
   cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
   cmd->callback([args, &g, &exit_code]() {

@@ -40,6 +40,17 @@ check "--env-sun" evaluate --preset "$TMP/f.json" --env-sun bogus
 python3 -c 'import json,sys; p=json.load(open(sys.argv[1])); p["fit"]["env_sun"]="maybe"; json.dump(p, open(sys.argv[2], "w"))' "$TMP/f.json" "$TMP/g.json"
 check "field 'fit.env_sun'" evaluate --preset "$TMP/g.json"
 "$BIN" --quiet evaluate --preset "$TMP/f.json" > /dev/null 2>&1 || fail "evaluate of a good preset failed"
+# s21-panels: the mode "panels" is accepted everywhere auto is, recorded by the fit, reused by
+# evaluate, and render-preview says what it split (the panels line: "panels: N").
+"$BIN" --quiet fit --references "$TMP/ref.exr" --scenes "$small" --model standard --level 2 \
+  --max-iterations 2 --env-sun panels --out "$TMP/fp.json" > /dev/null 2>&1 || [ $? = 3 ] || fail "fit --env-sun panels failed"
+python3 -c 'import json,sys; v=json.load(open(sys.argv[1]))["fit"].get("env_sun"); sys.exit(0 if v == "panels" else "fit.env_sun = %r" % v)' "$TMP/fp.json" || fail "fit.env_sun panels not recorded"
+out=$("$BIN" --quiet evaluate --preset "$TMP/fp.json" --json 2>&1) || fail "evaluate of a panels preset failed: $out"
+echo "$out" | python3 -c 'import json,sys; v=json.load(sys.stdin).get("env_sun"); sys.exit(0 if v == "panels" else "env_sun = %r" % v)' \
+  || fail "evaluate does not reuse fit.env_sun panels"
+out=$("$BIN" render-preview --scene "$small" --material "$TMP/std.json" --env-sun panels --out "$TMP/pp.png" 2>&1) \
+  || fail "render-preview --env-sun panels failed: $out"
+grep -q "panels: [0-9]" <<< "$out" || fail "render-preview --env-sun panels does not report the panels: $out"
 # Review s10: evaluate reports a woven "ibl": "bent" preset as bent (it had said split), and a
 # bad fit.sheen_tilt_degrees names the preset and the field.
 python3 - "$TMP/f.json" "$TMP" <<'PY'

@@ -28,9 +28,9 @@ import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { EXRLoader } from 'three/addons/loaders/EXRLoader.js';
 import { HDRLoader } from 'three/addons/loaders/HDRLoader.js';
 import { parseExr } from './exr.js';
-import { detectSun, parseSunMode } from './sun.js';
+import { detectSun, parseSunMode, splitEnvironment } from './sun.js';
 
-export { detectSun, parseSunMode };
+export { detectSun, parseSunMode, splitEnvironment };
 
 const HERE = new URL('.', import.meta.url);
 
@@ -2509,26 +2509,27 @@ async function pmremFor(renderer, url) {
 // The environment's sun (web/sun.js, docs/sun.md): detected once per map on the texture's own
 // texels (half floats from EXRLoader, rows bottom-up), at intensity 1 and rotation 0; when found,
 // a sun-free copy of the texture (the sun texels set to the fill) feeds the PMREM.
-const sunCache = new Map();  // url -> Promise<{split, sunFree: THREE.DataTexture | null}>
-async function sunSplitFor(url) {
-  if (!sunCache.has(url)) {
-    sunCache.set(url, loadEquirect(url).then((eq) => {
+const sunCache = new Map();  // url#mode -> Promise<{split, sunFree: THREE.DataTexture | null}>
+async function sunSplitFor(url, mode = 'auto') {
+  const key = `${url}#${mode}`;
+  if (!sunCache.has(key)) {
+    sunCache.set(key, loadEquirect(url).then((eq) => {
       const { data, width, height } = eq.image;
       const channels = data.length / (width * height);
       const half = eq.type === THREE.HalfFloatType;
-      const decode = half ? THREE.DataUtils.fromHalfFloat : null;
-      const split = detectSun(data, width, height, { channels, decode, rowsBottomUp: !eq.flipY });
-      if (!split.found) return { split, sunFree: null };
-      const copy = data.slice();
-      const fill = split.fill.map((x) => (half ? THREE.DataUtils.toHalfFloat(x) : x));
-      for (const t of split.sunTexels) for (let k = 0; k < 3; ++k) copy[t * channels + k] = fill[k];
+      const split = splitEnvironment(data, width, height, {
+        mode, channels, rowsBottomUp: !eq.flipY,
+        decode: half ? THREE.DataUtils.fromHalfFloat : null,
+        encode: half ? THREE.DataUtils.toHalfFloat : null,
+      });
+      if (!split.data) return { split, sunFree: null };
       const sunFree = eq.clone();
-      sunFree.source = new THREE.Source({ data: copy, width, height });
+      sunFree.source = new THREE.Source({ data: split.data, width, height });
       sunFree.needsUpdate = true;
       return { split, sunFree };
     }));
   }
-  return sunCache.get(url);
+  return sunCache.get(key);
 }
 
 async function pmremForTexture(renderer, key, texture) {
@@ -2707,6 +2708,8 @@ export async function loadSceneCard(url, options = {}) {
     environment: null,
     sun: null,        // the sun split of the environment (web/sun.js detectSun), when asked for
     sunLight: null,   // its THREE.DirectionalLight, when one was found
+    panels: [],       // sun 'panels': the panels found (web/sun.js splitEnvironment)
+    panelLights: [],  // their THREE.DirectionalLights
     // The fabric's material: keeps the side GLTFLoader derived from the glTF doubleSided.
     setMaterial(m) {
       for (const mesh of fabricMeshes) {
@@ -2717,11 +2720,15 @@ export async function loadSceneCard(url, options = {}) {
     },
     // sun: 'auto' (default, as `clothfit render-preview`) draws a compact sun of the map as a
     // THREE.DirectionalLight (this.sunLight) and builds the PMREM from the sun-free map
-    // (web/sun.js, docs/sun.md); 'off': the map as is.
+    // (web/sun.js, docs/sun.md); 'panels': the same, then up to 8 broad bright sources
+    // (softboxes) as more DirectionalLights (this.panelLights); 'off': the map as is.
     async setEnvironment(path, { intensity = 1, rotationYDegrees = 0, sun = 'auto' } = {}) {
       this.environment = null;
       this.sun = null;
-      if (this.sunLight) { scene.remove(this.sunLight); this.sunLight.dispose(); this.sunLight = null; }
+      this.panels = [];
+      for (const l of [this.sunLight, ...this.panelLights]) if (l) { scene.remove(l); l.dispose(); }
+      this.sunLight = null;
+      this.panelLights = [];
       parseSunMode(sun, 'environment.sun');
       if (!path) {
         scene.environment = null;
@@ -2735,23 +2742,36 @@ export async function loadSceneCard(url, options = {}) {
       const eq = await loadEquirect(url);
       const rot = THREE.MathUtils.degToRad(rotationYDegrees);
       let target;
-      const sp = sun === 'auto' ? await sunSplitFor(url) : null;
-      if (sp?.split.found) {
-        target = await pmremForTexture(renderer, `${url}#sun-free`, sp.sunFree);
-        // render/scene/sun.cpp: E = excess x intensity; world = R_y(rotation) map direction.
-        const E = sp.split.irradiance.map((x) => x * intensity);
+      const sp = sun !== 'off' ? await sunSplitFor(url, sun) : null;
+      // render/scene/sun.cpp: E = excess x intensity; world = R_y(rotation) map direction.
+      const lightFor = (split, name) => {
+        const E = split.irradiance.map((x) => x * intensity);
         const emax = Math.max(...E);
-        const m = sp.split.mapDirection, cr = Math.cos(rot), sr = Math.sin(rot);
+        const m = split.mapDirection, cr = Math.cos(rot), sr = Math.sin(rot);
         const w = [cr * m[0] + sr * m[2], m[1], -sr * m[0] + cr * m[2]];
         const light = new THREE.DirectionalLight(new THREE.Color(E[0] / emax, E[1] / emax, E[2] / emax), emax);
-        light.name = 'environment sun';
+        light.name = name;
         light.position.set(w[0], w[1], w[2]);  // shines from w towards the target at the origin
         scene.add(light);
-        this.sunLight = light;
-        this.sun = { ...sp.split, irradiance: E, worldDirection: w };
+        return { light, split: { ...split, irradiance: E, worldDirection: w } };
+      };
+      if (sp?.sunFree) {
+        target = await pmremForTexture(renderer, `${url}#sun-free#${sun}`, sp.sunFree);
+        if (sp.split.sun.found) {
+          const { light, split } = lightFor(sp.split.sun, 'environment sun');
+          this.sunLight = light;
+          this.sun = split;
+        } else {
+          this.sun = sp.split.sun;
+        }
+        sp.split.panels.forEach((p, k) => {
+          const { light, split } = lightFor(p, `environment panel ${k + 1}`);
+          this.panelLights.push(light);
+          this.panels.push(split);
+        });
       } else {
         target = await pmremFor(renderer, url);
-        if (sp) this.sun = sp.split;
+        if (sp) this.sun = sp.split.sun;
       }
       this.environment = target;
       scene.environment = target.texture;

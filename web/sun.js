@@ -15,6 +15,19 @@ export const SUN_DETECT_DEFAULTS = Object.freeze({
   minAnnulusTexels: 8,
 });
 
+// Panels (sun mode 'panels', render/scene/sun.h kPanelDetectParams / kMaxPanelLights; why in
+// docs/sun.md "Panels"): after the auto sun, detectSun again on the map with everything found so
+// far filled, up to MAX_PANEL_LIGHTS times, with a wider window, a lower contrast, no
+// compactness test and a lower power share.
+export const PANEL_DETECT_PARAMS = Object.freeze({
+  maxRadiusDeg: 8.0,
+  contrast: 5.0,
+  minPowerFraction: 0.02,
+  maxAnnulusExcess: Infinity,
+  minAnnulusTexels: 8,
+});
+export const MAX_PANEL_LIGHTS = 8;
+
 const KY = [0.2126, 0.7152, 0.0722];  // Rec.709 luminance
 const clean = (x) => (Number.isFinite(x) && x > 0 ? x : 0);
 function lowerMedian(v) {
@@ -136,8 +149,49 @@ export function detectSun(data, width, height, { channels = 3, intensity = 1, ro
   return s;
 }
 
-/** "auto" | "off" (a scene card's environment.sun); anything else throws naming the field. */
+/** "auto" | "off" | "panels" (a scene card's environment.sun); anything else throws naming the field. */
 export function parseSunMode(value, field = 'environment.sun') {
-  if (value === 'auto' || value === 'off') return value;
-  throw new Error(`${field}: expected "auto" or "off", got ${JSON.stringify(value)}`);
+  if (value === 'auto' || value === 'off' || value === 'panels') return value;
+  throw new Error(`${field}: expected "auto", "off" or "panels", got ${JSON.stringify(value)}`);
+}
+
+/**
+ * The split of a map in a sun mode (render/scene/sun.cpp SplitEnvironmentSun): the auto sun,
+ * then ('panels') up to MAX_PANEL_LIGHTS panels, each detected on the map with the earlier
+ * sources filled. Arguments as detectSun's; `encode` maps a fill value to the storage type
+ * (THREE.DataUtils.toHalfFloat for a HalfFloat texture; default: as is).
+ * Returns {sun, panels, lights, summary, data}: `sun` = detectSun's result, `panels` the panels
+ * found (detectSun results), `lights` = the found ones in light order (the sun, then the panels),
+ * `data` = a copy of the texels with every light's texels set to its fill (null when nothing
+ * was found, or mode 'off').
+ */
+export function splitEnvironment(data, width, height, { mode = 'auto', channels = 3, intensity = 1, rotationY = 0, decode = null, encode = null, rowsBottomUp = false } = {}) {
+  parseSunMode(mode, 'sun mode');
+  const out = { sun: null, panels: [], lights: [], summary: 'no sun: off', data: null };
+  if (mode === 'off') return out;
+  const opts = { channels, intensity, rotationY, decode, rowsBottomUp };
+  let cur = data;
+  const take = (split) => {
+    if (cur === data) cur = data.slice();
+    const fill = split.fill.map((x) => (encode ? encode(x) : x));
+    for (const t of split.sunTexels) for (let k = 0; k < 3; ++k) cur[t * channels + k] = fill[k];
+    out.lights.push(split);
+  };
+  out.sun = detectSun(cur, width, height, opts);
+  out.summary = out.sun.summary;
+  if (out.sun.found) take(out.sun);
+  if (mode === 'panels') {
+    let stop = '';
+    for (let k = 0; k < MAX_PANEL_LIGHTS; ++k) {
+      const p = detectSun(cur, width, height, { ...opts, params: PANEL_DETECT_PARAMS });
+      if (!p.found) { stop = p.summary; break; }
+      out.panels.push(p);
+      take(p);
+    }
+    out.summary += `; panels: ${out.panels.length}`;
+    out.panels.forEach((p, k) => { out.summary += `; panel ${k + 1}: ${p.summary.replace(/^sun: /, '')}`; });
+    if (stop && out.panels.length < MAX_PANEL_LIGHTS) out.summary += `; then ${stop}`;
+  }
+  if (out.lights.length) out.data = cur;
+  return out;
 }

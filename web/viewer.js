@@ -1,7 +1,8 @@
 // web/viewer.html: a scene card + a clothfit preset in three.js r187, with orbit controls and
 // environment / preset switching. Query: card, preset, presets (comma list), env, sun (auto |
-// off: the environment's sun as a directional light, docs/sun.md; default the card's
-// environment.sun, else auto), shot (=1: POST the first finished frame as PNG to /shot, for
+// off | panels: the environment's sun, and with panels its softboxes, as directional lights,
+// docs/sun.md; default the card's environment.sun, else auto; a preset fitted with
+// `--env-sun panels` (fit.env_sun) is drawn as fitted with ?sun=panels), shot (=1: POST the first finished frame as PNG to /shot, for
 // web/tools/screenshot.mjs), shadows (1 | 0 | a JSON object of shadow settings; session 13).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -69,6 +70,7 @@ async function main() {
     else if (v === 'none') await sc.setEnvironment(null);
     else await sc.setEnvironment(v, { intensity: sc.card.environment?.intensity ?? 1, sun });
     if (sc.sun) console.info(`viewer: environment ${sc.sun.summary}`);
+    sc.panels.forEach((p, k) => console.info(`viewer: environment panel ${k + 1}: ${p.summary}`));
   };
   if ((q.get('env') ?? 'card') !== 'card' || q.has('sun')) await setEnv(q.get('env') ?? 'card');
 

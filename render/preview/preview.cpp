@@ -828,9 +828,9 @@ std::unique_ptr<PreviewCache> PreviewCache::Build(
   if (env) {
     sun = SplitEnvironmentSun(*env, EffectiveSunMode(scene, opt.env_sun, opt.env_sun_default));
     env = sun->environment.get();
-    if (sun->split.found) lights.push_back(sun->split.light);
-    c->sun_summary = sun->split.summary;
-    c->sun_split = sun->split.found;
+    lights.insert(lights.end(), sun->lights.begin(), sun->lights.end());
+    c->sun_summary = sun->summary;
+    c->sun_split = sun->found();
   }
   const bool exact_ibl = env != nullptr && opt.exact_ibl_samples > 0;
   if (opt.yarn_lobe) {  // far-field yarn lobe (measurement): every light a light sample

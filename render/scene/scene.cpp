@@ -1009,7 +1009,8 @@ EnvironmentSpec ReadCardEnvironment(const FieldReader& r, const fs::path& card_d
     const std::string sun = e.String("sun", "", true);
     if (sun == "auto") env.sun = SunMode::kAuto;
     else if (sun == "off") env.sun = SunMode::kOff;
-    else e.Bad("sun", "expected \"auto\" or \"off\", got " + Quote(sun));
+    else if (sun == "panels") env.sun = SunMode::kPanels;
+    else e.Bad("sun", "expected \"auto\", \"off\" or \"panels\", got " + Quote(sun));
   }
   ResolveEnvironment(r.file(), card_dir, env);
   return env;

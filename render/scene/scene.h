@@ -74,9 +74,11 @@ struct Light {
 
 // Whether the preview draws a compact sun of the environment as a directional light
 // (render/scene/sun.h, docs/sun.md): kOff = the map as is; kAuto = detect one and, if found,
-// split it off the map (the IBL gets the sun-free map, the sun becomes one more light).
+// split it off the map (the IBL gets the sun-free map, the sun becomes one more light);
+// kPanels = kAuto, then up to kMaxPanelLights broad bright sources (softboxes, lit windows)
+// split off the same way, each one more directional light (docs/sun.md "Panels").
 // The reference renderer ignores it (it renders the full map; the sun is the same light).
-enum class SunMode { kOff, kAuto };
+enum class SunMode { kOff, kAuto, kPanels };
 
 struct EnvironmentSpec {
   std::string name;         // as written in the card ("studio", "maps/x.exr", ...)
@@ -85,7 +87,7 @@ struct EnvironmentSpec {
                             // the renderer falls back to the procedural sky and warns
   double intensity = 1.0;   // multiplies the map's radiance
   double rotation_y = 0.0;  // radians, rotation of the map about +Y (three.js environmentRotation)
-  // "sun": "auto" | "off" (docs/scene-card.md); unset = not in the card (the preview's default).
+  // "sun": "auto" | "off" | "panels" (docs/scene-card.md); unset = not in the card (the preview's default).
   std::optional<SunMode> sun;
 };
 

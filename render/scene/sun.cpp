@@ -16,10 +16,19 @@ namespace clothfit::render {
 SunMode ParseSunMode(const std::string& value, const std::string& field) {
   if (value == "auto") return SunMode::kAuto;
   if (value == "off") return SunMode::kOff;
-  throw std::invalid_argument(field + ": expected \"auto\" or \"off\", got \"" + value + "\"");
+  if (value == "panels") return SunMode::kPanels;
+  throw std::invalid_argument(field + ": expected \"auto\", \"off\" or \"panels\", got \"" +
+                              value + "\"");
 }
 
-const char* SunModeName(SunMode m) { return m == SunMode::kAuto ? "auto" : "off"; }
+const char* SunModeName(SunMode m) {
+  switch (m) {
+    case SunMode::kAuto: return "auto";
+    case SunMode::kPanels: return "panels";
+    case SunMode::kOff: break;
+  }
+  return "off";
+}
 
 SunMode EffectiveSunMode(const Scene& scene, const std::optional<SunMode>& forced,
                          SunMode fallback) {
@@ -221,6 +230,7 @@ std::shared_ptr<const SunSplitEnvironment> SplitEnvironmentSun(const Environment
   auto unchanged = [&](const std::string& why) {
     auto r = std::make_shared<SunSplitEnvironment>();
     r->split.summary = why;
+    r->summary = why;
     r->environment = std::shared_ptr<const Environment>(&env, [](const Environment*) {});
     return std::shared_ptr<const SunSplitEnvironment>(r);
   };
@@ -230,23 +240,50 @@ std::shared_ptr<const SunSplitEnvironment> SplitEnvironmentSun(const Environment
   const auto* bytes = reinterpret_cast<const unsigned char*>(env.pixels().data());
   for (size_t k = 0, nb = env.pixels().size() * sizeof(float); k < nb; ++k)
     h = (h ^ bytes[k]) * 1099511628211ull;
-  using Key = std::tuple<uint64_t, int, int, double, double, std::string>;
+  using Key = std::tuple<uint64_t, int, int, double, double, std::string, int>;
   static std::mutex mu;
   static std::map<Key, std::shared_ptr<const SunSplitEnvironment>> memo;
-  const Key key{h, env.width(), env.height(), env.intensity(), env.rotation_y(), env.source()};
+  const Key key{h,          env.width(),  env.height(), env.intensity(), env.rotation_y(),
+                env.source(), int(mode)};
   {
     std::lock_guard<std::mutex> lock(mu);
     if (auto it = memo.find(key); it != memo.end()) {
       // Found: the memo owns the sun-free map; not found: the caller's own map.
-      if (it->second->split.found) return it->second;
-      return unchanged(it->second->split.summary);
+      if (it->second->found()) return it->second;
+      return unchanged(it->second->summary);
     }
   }
   auto r = std::make_shared<SunSplitEnvironment>();
   std::vector<float> free_px;
   r->split = DetectSun(env.width(), env.height(), env.pixels().data(), env.intensity(),
                        env.rotation_y(), SunDetectParams{}, &free_px);
-  if (r->split.found)
+  r->summary = r->split.summary;
+  if (r->split.found) r->lights.push_back(r->split.light);
+  if (mode == SunMode::kPanels) {
+    // Each panel on the map with everything found so far filled (DetectSun's sun_free output).
+    std::string stop;
+    for (int k = 0; k < kMaxPanelLights; ++k) {
+      const float* px = r->lights.empty() ? env.pixels().data() : free_px.data();
+      std::vector<float> next;
+      SunSplit p = DetectSun(env.width(), env.height(), px, env.intensity(), env.rotation_y(),
+                             kPanelDetectParams, &next);
+      if (!p.found) {
+        stop = p.summary;
+        break;
+      }
+      p.light.name = "environment panel " + std::to_string(k + 1);
+      r->lights.push_back(p.light);
+      r->panels.push_back(std::move(p));
+      free_px = std::move(next);
+    }
+    r->summary += "; panels: " + std::to_string(r->panels.size());
+    for (size_t k = 0; k < r->panels.size(); ++k)
+      r->summary += "; panel " + std::to_string(k + 1) + ": " +  // DetectSun says "sun: ..."
+                    r->panels[k].summary.substr(r->panels[k].summary.rfind("sun: ", 0) == 0 ? 5 : 0);
+    if (!stop.empty() && r->panels.size() < size_t(kMaxPanelLights))
+      r->summary += "; then " + stop;
+  }
+  if (r->found())
     r->environment = std::make_shared<const Environment>(
         Environment::FromPixels(env.width(), env.height(), std::move(free_px), env.intensity(),
                                 env.rotation_y(), env.source() + "#sun-free"));
@@ -254,7 +291,7 @@ std::shared_ptr<const SunSplitEnvironment> SplitEnvironmentSun(const Environment
     std::lock_guard<std::mutex> lock(mu);
     memo.emplace(key, r);
   }
-  if (!r->split.found) return unchanged(r->split.summary);
+  if (!r->found()) return unchanged(r->summary);
   return r;
 }
 

@@ -20,7 +20,8 @@
 // bent-normal IBL + 5 woven with the far-field yarn lobe + 4 with view-dependent weave maps + 4 woven
 // with the rough diffuse, s18 + 4 woven with the microcylinder lobe, s19) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
-// 15 of the materials under blender-city with its sun split off as a directional light, plus (s13-web)
+// 15 of the materials under blender-city with its sun split off as a directional light, plus
+// (s21-panels) 8 under the studio map with its softboxes split off as lights, plus (s13-web)
 // drape and sphere x 3 materials under studio with three.js shadow maps against
 // `render-preview --shadows` (the */studio-shadows/* cases), plus (s13-lm) 13 cases on the drape
 // with the card's baked light map (env "studio-lightmap*", below), plus (s13) the drape card as it
@@ -242,6 +243,15 @@ const ENVS = { studio: null, [`${HIGH}-rot60`]: { path: HIGH, intensity: 1.0, ro
 // a subset of the materials (the lit models and a sharp metal highlight of the sun).
 const SUN_ENV = `${HIGH}-rot60-sun`;
 ENVS[SUN_ENV] = { path: HIGH, intensity: 0.8, rotation_y_degrees: 60, sun: 'auto' };
+// s21-panels: the demo's studio map with sun mode "panels" (web/sun.js splitEnvironment,
+// render/scene/sun.cpp SplitEnvironmentSun; docs/sun.md "Panels"): its four softboxes drawn as
+// four more directional lights, the PMREM built from the map with them filled; rotated 30 degrees
+// so the lights' rotation is exercised. A subset of the materials: the lit models, a sharp metal
+// highlight of a panel, and the woven lobes whose grazing peaks the panels feed.
+const PANEL_ENV = 'studio-rot30-panels';
+ENVS[PANEL_ENV] = { path: 'studio', intensity: 1.0, rotation_y_degrees: 30, sun: 'panels' };
+const PANEL_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-filament', 'woven', 'woven-lobe-canvas',
+  'woven-lobe-mc-velvet', 'woven-lobe-mc-linen']);
 const SUN_MATERIALS = new Set(['standard-grey', 'standard-metal', 'physical-sheen', 'cloth-seed', 'cloth-filament', 'woven', 'woven-fis',
   'woven-lobe-canvas', 'woven-lobe-twill-shiny', 'woven-rough', 'woven-linen-rough', 'woven-lobe-mc-velvet', 'woven-lobe-mc-linen', 'woven-lobe-mc-satin', 'woven-lobe-mc-satin-bsdf']);
 
@@ -279,6 +289,7 @@ for (const s of scenes) {
     fs.writeFileSync(cardPath, JSON.stringify(c, null, 1));
     for (const m of Object.keys(MATERIALS)) {
       if (env === SUN_ENV && !SUN_MATERIALS.has(m)) continue;
+      if (env === PANEL_ENV && !PANEL_MATERIALS.has(m)) continue;
       const name = `${s}/${env}/${m}`;
       if (args.only && !name.includes(args.only)) continue;
       cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png: path.join(work, `${s}-${env}-${m}.png`) });
