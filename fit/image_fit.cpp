@@ -1108,6 +1108,26 @@ FitResult FitWithLightMapAlbedo(
   second.iterations += first.iterations;
   second.setup_seconds += first.setup_seconds;
   second.albedo_pass = true;
+  // The record's errors are those of the preset as it is drawn (session 21): its light map
+  // bounces the preset's own albedo, as evaluate, render-preview and web/ bake it, not the
+  // first pass's that the second pass fitted with. One locked pass at the solution (no
+  // iteration; re-weighted in place when the light maps allow). Before, fit.rmse and evaluate
+  // differed in the 5th digit wherever a strong light bounced (the studio's panels, docs/sun.md).
+  const std::array<double, 3> kd_final = render::DiffuseAlbedo(second.preset);
+  if (kd_final[0] >= 0 && kd_final != o2.visibility.fabric_albedo) {
+    FitOptions o3 = o2;
+    o3.visibility.fabric_albedo = kd_final;
+    o3.start = second.preset;
+    o3.locked.clear();
+    for (const auto& p : render::ParameterTable(o3.start.model)) o3.locked.emplace_back(p.name);
+    o3.start_roughness = {0.5};
+    const bool rw = reweighted && ReweightLightMaps(own.get(), kd_final);
+    const FitResult at = FitImages(inputs, o3, rw ? own.get() : nullptr);
+    if (at.usable) {
+      second.rmse = at.rmse;
+      second.scenes = at.scenes;
+    }
+  }
   second.seconds = SecondsSince(t0);
   return second;
 }
