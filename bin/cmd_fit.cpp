@@ -222,7 +222,7 @@ struct FitArgs {
   // -1: not given (the FIS defaults apply). Given without --woven-ibl fis: an error, not ignored.
   int fis_taps = -1, fis_diffuse_taps = -1;
   VisibilityFlags visibility;  // s9-vis: --shadows, --ao, --indirect (docs/visibility.md)
-  std::string env_sun;  // s10-sun: "" = the cards' environment.sun (else auto); auto | off
+  std::string env_sun;  // s10-sun: "" = the cards' environment.sun (else auto); auto | off | panels
 };
 
 // woven fits on the three.js IBL engine: the yarn lobes' IBL by the split sum unless

@@ -1120,13 +1120,15 @@ FitResult FitWithLightMapAlbedo(
     o3.start = second.preset;
     o3.locked.clear();
     for (const auto& p : render::ParameterTable(o3.start.model)) o3.locked.emplace_back(p.name);
-    o3.start_roughness = {0.5};
+    o3.start_roughness = {0.0};
     const bool rw = reweighted && ReweightLightMaps(own.get(), kd_final);
     const FitResult at = FitImages(inputs, o3, rw ? own.get() : nullptr);
     if (at.usable) {
       second.rmse = at.rmse;
       second.scenes = at.scenes;
-    }
+      second.final_cost = at.final_cost;  // the objective at the solution, same light map
+      if (!rw) second.setup_seconds += at.setup_seconds;  // a rebuild (no in-place re-weight)
+    }  // else (the same inputs just fitted; not seen): the albedo pass's errors stay
   }
   second.seconds = SecondsSince(t0);
   return second;

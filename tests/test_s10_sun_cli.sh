@@ -51,6 +51,10 @@ echo "$out" | python3 -c 'import json,sys; v=json.load(sys.stdin).get("env_sun")
 out=$("$BIN" render-preview --scene "$small" --material "$TMP/std.json" --env-sun panels --out "$TMP/pp.png" 2>&1) \
   || fail "render-preview --env-sun panels failed: $out"
 grep -q "panels: [0-9]" <<< "$out" || fail "render-preview --env-sun panels does not report the panels: $out"
+# With the studio map installed (scripts/fetch-data), its four softboxes are found.
+if [ -f "${CLOTHFIT_DATA:-$HOME/.cache/clothfit}/hdri/studio.exr" ]; then
+  grep -q "panels: 4;" <<< "$out" || fail "render-preview --env-sun panels on the studio map: $out"
+fi
 # Review s10: evaluate reports a woven "ibl": "bent" preset as bent (it had said split), and a
 # bad fit.sheen_tilt_degrees names the preset and the field.
 python3 - "$TMP/f.json" "$TMP" <<'PY'

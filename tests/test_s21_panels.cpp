@@ -216,6 +216,47 @@ TEST(S21Panels, SplitMapPlusLightsConservesTheExactIbl) {
   EXPECT_LT(diff, std::max(3.0 * noise, 0.005));
 }
 
+// Review s21: the preview shares prefiltered chains by the map's source name, so each mode's
+// light-free map must carry its own name. A panels preview built after an auto preview of the
+// same map (one process, the Filament split-sum engine) must equal one built on a fresh copy of
+// the map (another source name, so nothing shared); with one name for both it drew the auto
+// map's chains, boxes included, under the panel lights.
+TEST(S21Panels, EachModeHasItsOwnPrefilteredMap) {
+  const int W = 256, H = 128;
+  const std::vector<Source> src = {{40.0, 0.62, 2.0, {3000.0, 2800.0, 2500.0}},
+                                   {10.0, 0.20, 9.0, {40.0, 40.0, 38.0}}};
+  const std::vector<float> px = SourcesMap(W, H, src, kSky);
+  const Environment a = Environment::FromPixels(W, H, px, 1.0, 0.0, "/test/s21-cache-a");
+  const Environment b = Environment::FromPixels(W, H, px, 1.0, 0.0, "/test/s21-cache-b");
+  ASSERT_GE(SplitEnvironmentSun(a, SunMode::kPanels)->panels.size(), 1u)
+      << SplitEnvironmentSun(a, SunMode::kPanels)->summary;
+  Scene s = CameraScene(16, 16, {0, 0, 3}, {0, 0, -1}, 0.4);
+  s.meshes.push_back(SphereMesh(0.5, 32, 16, true, 0.f));
+  s.card.environment = EnvironmentSpec{};
+  const std::vector<double> x = {0.6, 0.5, 0.4, 0.3, 0.0};
+  auto frame = [&](const Environment& env, SunMode mode) {
+    PreviewOptions o;
+    o.model = ModelKind::kStandard;
+    o.ibl_engine = IblEngine::kFilament;
+    o.env_sun = mode;
+    auto cache = PreviewCache::Build(s, &env, o);
+    std::vector<Rgb<double>> out;
+    EvaluatePreview(*cache, x.data(), out);
+    return out;
+  };
+  const std::vector<Rgb<double>> auto_a = frame(a, SunMode::kAuto);
+  const std::vector<Rgb<double>> panels_a = frame(a, SunMode::kPanels);
+  const std::vector<Rgb<double>> panels_b = frame(b, SunMode::kPanels);
+  ASSERT_EQ(panels_a.size(), panels_b.size());
+  double diff = 0.0, moved = 0.0;
+  for (size_t i = 0; i < panels_a.size(); ++i) {
+    diff = std::max(diff, std::abs(panels_a[i].g - panels_b[i].g));
+    moved = std::max(moved, std::abs(panels_a[i].g - auto_a[i].g));
+  }
+  EXPECT_EQ(diff, 0.0) << "the panels preview depends on an earlier auto preview of the map";
+  EXPECT_GT(moved, 1e-4);  // and the modes differ at all
+}
+
 TEST(S21Panels, ModeNamesCardKeyAndBadValues) {
   EXPECT_EQ(ParseSunMode("panels", "--env-sun"), SunMode::kPanels);
   EXPECT_STREQ(SunModeName(SunMode::kPanels), "panels");

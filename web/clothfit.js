@@ -2723,6 +2723,8 @@ export async function loadSceneCard(url, options = {}) {
     // (web/sun.js, docs/sun.md); 'panels': the same, then up to 8 broad bright sources
     // (softboxes) as more DirectionalLights (this.panelLights); 'off': the map as is.
     async setEnvironment(path, { intensity = 1, rotationYDegrees = 0, sun = 'auto' } = {}) {
+      // Overlapping calls: only the latest one's lights and maps are applied (review s21).
+      const generation = (this.environmentGeneration = (this.environmentGeneration ?? 0) + 1);
       this.environment = null;
       this.sun = null;
       this.panels = [];
@@ -2743,6 +2745,8 @@ export async function loadSceneCard(url, options = {}) {
       const rot = THREE.MathUtils.degToRad(rotationYDegrees);
       let target;
       const sp = sun !== 'off' ? await sunSplitFor(url, sun) : null;
+      const pm = sp?.sunFree ? await pmremForTexture(renderer, `${url}#sun-free#${sun}`, sp.sunFree) : await pmremFor(renderer, url);
+      if (generation !== this.environmentGeneration) return;  // a later call took over
       // render/scene/sun.cpp: E = excess x intensity; world = R_y(rotation) map direction.
       const lightFor = (split, name) => {
         const E = split.irradiance.map((x) => x * intensity);
@@ -2755,8 +2759,8 @@ export async function loadSceneCard(url, options = {}) {
         scene.add(light);
         return { light, split: { ...split, irradiance: E, worldDirection: w } };
       };
+      target = pm;
       if (sp?.sunFree) {
-        target = await pmremForTexture(renderer, `${url}#sun-free#${sun}`, sp.sunFree);
         if (sp.split.sun.found) {
           const { light, split } = lightFor(sp.split.sun, 'environment sun');
           this.sunLight = light;
@@ -2769,10 +2773,11 @@ export async function loadSceneCard(url, options = {}) {
           this.panelLights.push(light);
           this.panels.push(split);
         });
-      } else {
-        target = await pmremFor(renderer, url);
-        if (sp) this.sun = sp.split.sun;
+      } else if (sp) {
+        this.sun = sp.split.sun;
       }
+      // Shadow maps already on (setShadows / apply ran before): the new lights cast too.
+      if (this.shadows && (this.sunLight || this.panelLights.length)) this.setShadows(this.shadows);
       this.environment = target;
       scene.environment = target.texture;
       scene.environmentIntensity = intensity;

@@ -1,8 +1,9 @@
 // web/viewer.html: a scene card + a clothfit preset in three.js r187, with orbit controls and
 // environment / preset switching. Query: card, preset, presets (comma list), env, sun (auto |
 // off | panels: the environment's sun, and with panels its softboxes, as directional lights,
-// docs/sun.md; default the card's environment.sun, else auto; a preset fitted with
-// `--env-sun panels` (fit.env_sun) is drawn as fitted with ?sun=panels), shot (=1: POST the first finished frame as PNG to /shot, for
+// docs/sun.md; default: the preset's fit.env_sun when it names a mode (a preset fitted with
+// `--env-sun panels` is drawn with its panels, as `clothfit evaluate` draws it), else the card's
+// environment.sun, else auto), shot (=1: POST the first finished frame as PNG to /shot, for
 // web/tools/screenshot.mjs), shadows (1 | 0 | a JSON object of shadow settings; session 13).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -64,7 +65,14 @@ async function main() {
   // to renderer.capabilities.getMaxAnisotropy(), with a console.info when it is.
   console.info(`viewer: max texture anisotropy ${renderer.capabilities.getMaxAnisotropy()}`);
   setPreset(await fetchClothfitPreset(presetUrl, { renderer }));
-  const sun = q.get('sun') ?? sc.card.environment?.sun ?? 'auto';
+  // The sun mode: ?sun, else the preset's fit.env_sun when it names a mode (as `clothfit
+  // evaluate` draws a preset: "auto", "off" or "panels"; "card" or absent: the card's), else the
+  // card's environment.sun, else auto (docs/sun.md "Where the option lives").
+  const fitSun = material?.userData?.clothfit?.fit?.env_sun;
+  const cardSun = sc.card.environment?.sun ?? 'auto';
+  if (fitSun !== undefined && !['auto', 'off', 'panels', 'card'].includes(fitSun))
+    console.warn(`viewer: ${presetUrl}: fit.env_sun ${JSON.stringify(fitSun)} is not "auto", "off", "panels" or "card"; using the card's`);
+  const sun = q.get('sun') ?? (['auto', 'off', 'panels'].includes(fitSun) ? fitSun : cardSun);
   const setEnv = async (v) => {
     if (v === 'card') { const e = sc.card.environment; await sc.setEnvironment(e?.path ?? null, { intensity: e?.intensity ?? 1, rotationYDegrees: e?.rotation_y_degrees ?? 0, sun }); }
     else if (v === 'none') await sc.setEnvironment(null);
@@ -72,7 +80,7 @@ async function main() {
     if (sc.sun) console.info(`viewer: environment ${sc.sun.summary}`);
     sc.panels.forEach((p, k) => console.info(`viewer: environment panel ${k + 1}: ${p.summary}`));
   };
-  if ((q.get('env') ?? 'card') !== 'card' || q.has('sun')) await setEnv(q.get('env') ?? 'card');
+  if ((q.get('env') ?? 'card') !== 'card' || sun !== cardSun) await setEnv(q.get('env') ?? 'card');
 
   document.getElementById('card').onchange = (e) => { q.set('card', e.target.value); location.search = q.toString(); };
   document.getElementById('preset').onchange = async (e) => setPreset(await fetchClothfitPreset(e.target.value, { renderer }));

@@ -274,7 +274,8 @@ class PreviewCache {
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
   const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table
   double build_seconds = 0.0;
-  bool sun_split = false;   // the environment's sun was drawn as a light (PreviewOptions::env_sun)
+  bool sun_split = false;   // lights were split off the environment (its sun, or with
+                            // SunMode::kPanels also panels; PreviewOptions::env_sun)
   std::string sun_summary;  // what the sun detection found (empty without an environment)
 };
 

@@ -283,16 +283,21 @@ std::shared_ptr<const SunSplitEnvironment> SplitEnvironmentSun(const Environment
     if (!stop.empty() && r->panels.size() < size_t(kMaxPanelLights))
       r->summary += "; then " + stop;
   }
+  // The name keys the preview's shared prefiltered chains (render/preview/preview.cpp
+  // SharedPrefilter keys by source, not content): each mode its own name, or one mode's map
+  // would be prefiltered for the other (review s21).
   if (r->found())
-    r->environment = std::make_shared<const Environment>(
-        Environment::FromPixels(env.width(), env.height(), std::move(free_px), env.intensity(),
-                                env.rotation_y(), env.source() + "#sun-free"));
+    r->environment = std::make_shared<const Environment>(Environment::FromPixels(
+        env.width(), env.height(), std::move(free_px), env.intensity(), env.rotation_y(),
+        env.source() + (mode == SunMode::kPanels ? "#panels-free" : "#sun-free")));
+  std::shared_ptr<const SunSplitEnvironment> shared;
   {
     std::lock_guard<std::mutex> lock(mu);
-    memo.emplace(key, r);
+    // Two threads that both missed: the first one's split is the one every caller shares.
+    shared = memo.emplace(key, r).first->second;
   }
-  if (!r->found()) return unchanged(r->summary);
-  return r;
+  if (!shared->found()) return unchanged(shared->summary);
+  return shared;
 }
 
 }  // namespace clothfit::render
