@@ -333,19 +333,28 @@ for (const s of LIGHT_MAP_SCENES) {
 // s13: the canonical cards as they are, with their "visibility" block (the drape: shadow maps
 // and the baked light map, what `make demo` fits and reports): the page reads the block from the
 // card (shadows, web/clothfit.js defaults) and draws the texture render-preview writes.
+// s21-panels: the same cards with "sun": "panels" (the studio's four softboxes as directional
+// lights, each with a three.js shadow map / a ray-traced shadow, and bounced by the light map).
 const CARD_MATERIALS = ['standard-grey', 'physical-sheen', 'cloth-filament', 'woven-lobe-canvas', 'woven-lobe-maps-twill'];
+const CARD_PANEL_MATERIALS = new Set(['standard-grey', 'woven-lobe-canvas']);
 for (const s of scenes) {
   const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
   if (!card.visibility) continue;
-  const cardPath = path.join(work, `${s}-studio-card.card.json`);
-  fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf) }, null, 1));
+  for (const variant of ['studio-card', 'studio-card-panels']) {
+  const panels = variant === 'studio-card-panels';
+  const cardPath = path.join(work, `${s}-${variant}.card.json`);
+  const c = { ...card, gltf: path.join(sceneDir, card.gltf) };
+  if (panels) c.environment = { ...card.environment, sun: 'panels' };
+  fs.writeFileSync(cardPath, JSON.stringify(c, null, 1));
   for (const m of CARD_MATERIALS) {
-    const name = `${s}/studio-card/${m}`;
+    if (panels && !CARD_PANEL_MATERIALS.has(m)) continue;
+    const name = `${s}/${variant}/${m}`;
     if (args.only && !name.includes(args.only)) continue;
-    const png = path.join(work, `${s}-studio-card-${m}.png`);
+    const png = path.join(work, `${s}-${variant}-${m}.png`);
     cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png,
       ...(card.visibility.shadows ? { shadows: true } : {}),
       ...(card.visibility.light_map ? { lightMap: png.replace(/\.png$/, '.lm.exr') } : {}) });
+  }
   }
 }
 say(`${cases.length} cases, work dir ${work}`);
