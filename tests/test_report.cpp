@@ -105,6 +105,7 @@ class ReportTest : public ::testing::Test {
           {"block_pixels", 8},
           {"rmse", 0.0123},
           {"solver", "Ceres Solver Report: Iterations: 17"},
+          {"env_sun", "panels"},
           {"scenes", scenes}}},
         {"provenance", {{"tool", "clothfit test"}, {"fabric", "datasets/fabrics/testcloth.json"}}}};
     const std::string path = (dir_ / name).string();
@@ -226,6 +227,7 @@ TEST_F(ReportTest, HtmlContainsEveryImageAndNumber) {
   EXPECT_NE(text.find("CONVERGENCE"), std::string::npos);
   EXPECT_NE(text.find("<td>0.1250</td>"), std::string::npos);  // final cost
   EXPECT_NE(text.find("<td>0.0040</td>"), std::string::npos);  // fit noise floor
+  EXPECT_NE(text.find("<td class=\"l\">panels</td>"), std::string::npos);  // fit.env_sun (s21)
   EXPECT_EQ(text.find("nan"), std::string::npos);
   EXPECT_EQ(text.find("n/a"), std::string::npos);  // nothing missing here
 

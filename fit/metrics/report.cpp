@@ -1101,7 +1101,8 @@ void FabricPageSolver(std::ostream& h, const FabricSpec& spec) {
        "<table><tr><th class=\"l\">model</th><th>iterations</th><th>starts</th>"
        "<th>initial cost</th><th>final cost</th><th>fit s</th><th>setup s</th>"
        "<th class=\"l\">termination</th><th class=\"l\">space</th><th class=\"l\">loss</th>"
-       "<th>block px</th><th>fit RMSE</th><th>fit noise floor</th></tr>\n";
+       "<th>block px</th><th>fit RMSE</th><th>fit noise floor</th>"
+       "<th class=\"l\">environment sun</th></tr>\n";
   for (const ModelSpec& m : spec.models) {
     const nlohmann::json fit = m.preset.value("fit", nlohmann::json::object());
     const std::string floor = FitNoiseFloorText(fit);
@@ -1114,7 +1115,11 @@ void FabricPageSolver(std::ostream& h, const FabricSpec& spec) {
       << FitValue(fit, "space", 0)
       << "</td><td class=\"l\">" << FitValue(fit, "loss", 0) << "</td><td>"
       << FitValue(fit, "block_pixels", 0) << "</td><td>" << FitValue(fit, "rmse", 4) << "</td><td>"
-      << floor << "</td></tr>\n";
+      << floor << "</td><td class=\"l\">"
+      // s21: the sun mode the fit's previews used (docs/sun.md): "card" = each card's
+      // environment.sun, else auto; "panels" = softboxes as lights too
+      << (fit.contains("env_sun") ? FitValue(fit, "env_sun", 0) : std::string("not recorded"))
+      << "</td></tr>\n";
   }
   h << "</table>\n";
   for (const ModelSpec& m : spec.models) {
