@@ -72,8 +72,12 @@ async function main() {
   const cardSun = sc.card.environment?.sun ?? 'auto';
   if (fitSun !== undefined && !['auto', 'off', 'panels', 'card'].includes(fitSun))
     console.warn(`viewer: ${presetUrl}: fit.env_sun ${JSON.stringify(fitSun)} is not "auto", "off", "panels" or "card"; using the card's`);
-  const sun = q.get('sun') ?? (['auto', 'off', 'panels'].includes(fitSun) ? fitSun : cardSun);
+  let sun = q.get('sun') ?? (['auto', 'off', 'panels'].includes(fitSun) ? fitSun : cardSun);
+  let envChoice = q.get('env') ?? 'card';
+  const sunSelect = document.getElementById('sun');
+  sunSelect.value = sun;
   const setEnv = async (v) => {
+    envChoice = v;
     if (v === 'card') { const e = sc.card.environment; await sc.setEnvironment(e?.path ?? null, { intensity: e?.intensity ?? 1, rotationYDegrees: e?.rotation_y_degrees ?? 0, sun }); }
     else if (v === 'none') await sc.setEnvironment(null);
     else await sc.setEnvironment(v, { intensity: sc.card.environment?.intensity ?? 1, sun });
@@ -85,6 +89,7 @@ async function main() {
   document.getElementById('card').onchange = (e) => { q.set('card', e.target.value); location.search = q.toString(); };
   document.getElementById('preset').onchange = async (e) => setPreset(await fetchClothfitPreset(e.target.value, { renderer }));
   document.getElementById('env').onchange = (e) => setEnv(e.target.value);
+  sunSelect.onchange = (e) => { sun = e.target.value; return setEnv(envChoice); };
   document.getElementById('file').onchange = async (e) => {
     const { loadClothfitPreset } = await import('./clothfit.js');
     // A local file cannot fetch the weave maps it names: drawn uniform (open it by URL instead).
