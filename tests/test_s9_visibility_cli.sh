@@ -58,12 +58,17 @@ check -- --light-map-out render-preview --scene "$TMP/lm.json" --material "$TMP/
 # Session 15: a woven fit on a card with a light map runs two passes (the light map re-baked with
 # the first pass's albedo); fit.woven_paths keeps both passes' paths, the first pass's (with the
 # cloth-basin start) under "first pass: ", the second's under "albedo pass: ".
-"$BIN" --quiet render-reference --scene "$TMP/lm.json" --fabric "$SRC/datasets/fabrics/canvas.json" \
-  --spp 2 --out "$TMP/lmref.exr" > /dev/null 2>&1 || fail "render-reference of the light-map card failed"
-"$BIN" --quiet fit --references "$TMP/lmref.exr" --scenes "$TMP/lm.json" --model woven \
-  --max-iterations 2 --level 2 --out "$TMP/lmfit.json" > "$TMP/lmfit.log" 2>&1
-rc=$?
-[ $rc -eq 0 ] || [ $rc -eq 3 ] || fail "woven fit on the light-map card exited $rc: $(cat "$TMP/lmfit.log")"
+# fit_card <card> <spp> <model> <iterations> <name>: a canvas reference of the card, then a fit
+# of it at level 2 to $TMP/<name>.json (exit 0 or 3 = flagged accepted; the log on failure).
+fit_card() {
+  "$BIN" --quiet render-reference --scene "$1" --fabric "$SRC/datasets/fabrics/canvas.json" \
+    --spp "$2" --out "$TMP/$5.ref.exr" > /dev/null 2>&1 || fail "render-reference of $1 failed"
+  "$BIN" --quiet fit --references "$TMP/$5.ref.exr" --scenes "$1" --model "$3" \
+    --max-iterations "$4" --level 2 --out "$TMP/$5.json" > "$TMP/$5.log" 2>&1
+  local rc=$?
+  [ $rc -eq 0 ] || [ $rc -eq 3 ] || fail "$3 fit on $1 exited $rc: $(cat "$TMP/$5.log")"
+}
+fit_card "$TMP/lm.json" 2 woven 2 lmfit
 python3 - "$TMP/lmfit.json" <<'PY' || fail "fit.woven_paths does not keep both passes"
 import json, sys
 f = json.load(open(sys.argv[1]))["fit"]
@@ -86,12 +91,7 @@ c["width"] = c["height"] = 48
 c["visibility"]["light_map"].update({"size": 32, "samples": 16, "hit_samples": 2})
 json.dump(c, open(sys.argv[2], "w"))
 PY
-"$BIN" --quiet render-reference --scene "$TMP/drape.json" --fabric "$SRC/datasets/fabrics/canvas.json" \
-  --spp 4 --out "$TMP/dref.exr" > /dev/null 2>&1 || fail "render-reference of the drape failed"
-"$BIN" --quiet fit --references "$TMP/dref.exr" --scenes "$TMP/drape.json" --model standard \
-  --max-iterations 20 --level 2 --out "$TMP/dfit.json" > "$TMP/dfit.log" 2>&1
-rc=$?
-[ $rc -eq 0 ] || [ $rc -eq 3 ] || fail "standard fit on the drape exited $rc: $(cat "$TMP/dfit.log")"
+fit_card "$TMP/drape.json" 4 standard 20 dfit
 "$BIN" --quiet evaluate --preset "$TMP/dfit.json" --json > "$TMP/deval.json" 2>&1 || fail "evaluate of the drape fit failed: $(cat "$TMP/deval.json")"
 python3 - "$TMP/dfit.json" "$TMP/deval.json" <<'PY' || fail "fit.rmse is not the preset's own error"
 import json, sys
