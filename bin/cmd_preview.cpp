@@ -83,6 +83,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
     std::string scene, material, model, out, ibl_engine = "filament", map_aniso_rule = "spec";
     std::string env_sun;  // "": the card's environment.sun (else auto, the commands' default)
     bool shadows = false;
+    bool no_horizon_fade = false;
     bool no_card_visibility = false;
     std::string light_map_out;
     int exact_ibl = 0, exact_irradiance = 0;
@@ -103,6 +104,10 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                 "when the scene card's \"visibility\" says \"shadows\": true)");
   cmd->add_flag("--no-card-visibility", args->no_card_visibility,
                 "ignore the scene card's \"visibility\" block (its shadows and light map)");
+  cmd->add_flag("--no-horizon-fade", args->no_horizon_fade,
+                "measurement (woven): draw the environment's sun and panels as delta lights, "
+                "without the fade across the surface's horizon (docs/sun.md \"Terminator "
+                "fade\"; as before session 22)");
   cmd->add_option("--light-map-out", args->light_map_out,
                   "write the fabric's baked light map (the card's \"visibility\": "
                   "{\"light_map\"}) as an EXR: RGB = irradiance E (three.js lightMap, "
@@ -185,6 +190,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
         o.weave_maps = m;
       }
       o.shadows = args->shadows;
+      o.horizon_fade = !args->no_horizon_fade;
       // the card's light map bounces off the fabric with the material's own albedo (session 13)
       o.visibility.fabric_albedo = render::DiffuseAlbedo(preset);
       o.card_visibility = !args->no_card_visibility;

@@ -28,7 +28,7 @@ import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { EXRLoader } from 'three/addons/loaders/EXRLoader.js';
 import { HDRLoader } from 'three/addons/loaders/HDRLoader.js';
 import { parseExr } from './exr.js';
-import { detectSun, parseSunMode, splitEnvironment } from './sun.js';
+import { detectSun, MAX_PANEL_LIGHTS, parseSunMode, splitEnvironment } from './sun.js';
 
 export { detectSun, parseSunMode, splitEnvironment };
 
@@ -1088,7 +1088,27 @@ vWovenWeaveUv = ( wovenWeaveTransform * vec3( uv, 1.0 ) ).xy;
 #endif
 `;
 
+// The horizon fade's light slots: the environment's sun and its panels (web/sun.js).
+const WOVEN_AREA_LIGHTS = 1 + MAX_PANEL_LIGHTS;
+const _areaDir = new THREE.Vector3(), _areaTarget = new THREE.Vector3();
+
 const WOVEN_PARS = /* glsl */ `
+// The environment's sun and panels (loadSceneCard's setEnvironment: scene.userData.clothfitAreaLights),
+// filled per frame by MeshWovenMaterial.onBeforeRender: xyz = the light's view-space direction
+// as three.js computes directionalLights[ i ].direction, w = sin of its angular radius (0: unused).
+uniform vec4 wovenAreaLights[ ${WOVEN_AREA_LIGHTS} ];
+// render/scene/lights.h ClipDiscAtHorizon: a disc light of angular radius asin( sinR ) whose
+// centre is at n.l = NoL, clipped at the horizon; returns ( visible fraction, n.l' of the
+// visible part's centroid ).
+vec2 wovenClipDiscAtHorizon( const in float NoL, const in float sinR ) {
+	if ( sinR <= 0.0 || NoL >= sinR ) return vec2( 1.0, NoL );
+	if ( NoL <= -sinR ) return vec2( 0.0, NoL );
+	float a = -NoL / sinR;
+	float q = sqrt( max( 1.0 - a * a, 0.0 ) );
+	float A = acos( a ) - a * q;
+	float yc = A > 0.0 ? 2.0 * q * q * q / ( 3.0 * A ) : 1.0;
+	return vec2( A * RECIPROCAL_PI, max( NoL + sinR * yc, 0.0 ) );
+}
 uniform vec3 wovenSpecularColor;
 uniform vec3 wovenSheenColor;
 uniform vec3 wovenTintWarp;
@@ -1329,6 +1349,24 @@ void wovenYarnLobeIbl( const in vec3 wo, const in vec3 t, const in vec3 b, const
 
 void RE_Direct_Woven( const in IncidentLight directLight, const in vec3 geometryPosition, const in vec3 geometryNormal, const in vec3 geometryViewDir, const in vec3 geometryClearcoatNormal, const in PhysicalMaterial material, inout ReflectedLight reflectedLight ) {
 	vec3 n = geometryNormal, v = geometryViewDir, l = directLight.direction;
+	vec3 lightColor = directLight.color;
+	// The horizon fade of a light split off the environment (render/preview GatherLights): the
+	// disc's visible fraction, drawn from its visible part's centroid.
+	float sinR = 0.0;
+	for ( int k = 0; k < ${WOVEN_AREA_LIGHTS}; ++k ) {
+		if ( wovenAreaLights[ k ].w > 0.0 && dot( l, wovenAreaLights[ k ].xyz ) > 0.99999 ) sinR = wovenAreaLights[ k ].w;
+	}
+	if ( sinR > 0.0 ) {
+		float NoL0 = dot( n, l );
+		vec2 clip = wovenClipDiscAtHorizon( NoL0, sinR );
+		if ( clip.x <= 0.0 ) return;
+		if ( clip.x < 1.0 ) {
+			vec3 u = l - n * NoL0;
+			float len = length( u );
+			if ( len > 1e-12 ) l = n * clip.y + u * ( sqrt( max( 1.0 - clip.y * clip.y, 0.0 ) ) / len );
+			lightColor *= clip.x;
+		}
+	}
 	vec3 h = normalize( l + v );
 	vec3 t, b;
 	wovenFrame( n, t, b );
@@ -1362,8 +1400,8 @@ void RE_Direct_Woven( const in IncidentLight directLight, const in vec3 geometry
 	float y = min( wovenYarnScaling( NoV, rE ), wovenYarnScaling( NoL, rE ) );
 	float s = min( wovenSheenScaling( NoV ), wovenSheenScaling( NoL ) );
 	float dv = wovenCharlie( wovenRS * wovenRS, NoH ) / max( 4.0 * ( NoL + NoV - NoL * NoV ), 1e-12 );
-	reflectedLight.directSpecular += directLight.color * NoL * ( wovenSheenColor * dv + yarn * s );
-	reflectedLight.directDiffuse += directLight.color * NoL * ( diffuse * ( y * s ) );
+	reflectedLight.directSpecular += lightColor * NoL * ( wovenSheenColor * dv + yarn * s );
+	reflectedLight.directDiffuse += lightColor * NoL * ( diffuse * ( y * s ) );
 }
 
 void RE_IndirectDiffuse_Woven( const in vec3 irradiance, const in vec3 geometryPosition, const in vec3 geometryNormal, const in vec3 geometryViewDir, const in vec3 geometryClearcoatNormal, const in PhysicalMaterial material, inout ReflectedLight reflectedLight ) {
@@ -1624,6 +1662,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
       wovenWeaveWeights: { value: null }, wovenWeaveKd: { value: null },
       wovenWeaveTransform: { value: new THREE.Matrix3() },
       wovenViewMaps: { value: [] }, wovenViewCosines: { value: [] },
+      wovenAreaLights: { value: Array.from({ length: WOVEN_AREA_LIGHTS }, () => new THREE.Vector4()) },
     };
     this.weaveMaps = null;  // a WeaveMaps (weaveMapsFromExr) or null: the uniform material
     this._setYarnLobe(yarnLobe);
@@ -1702,6 +1741,20 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
   onBeforeRender(renderer, scene, camera, geometry) {
     if (!geometry.attributes.tangent && geometry.attributes.uv && geometry.index) geometry.computeTangents();
     this._updateWovenUniforms();
+    // The horizon fade's lights (scene.userData.clothfitAreaLights, set by setEnvironment: the
+    // environment's sun and panels, each with userData.sinAngularRadius), in view space as
+    // three.js's WebGLLights computes a directional light's direction.
+    const area = scene?.userData?.clothfitAreaLights ?? [];
+    const slots = this._wovenUniforms.wovenAreaLights.value;
+    for (let k = 0; k < slots.length; ++k) {
+      const light = area[k];
+      const sinR = light?.userData?.sinAngularRadius ?? 0;
+      if (!light || !(sinR > 0)) { slots[k].set(0, 0, 0, 0); continue; }
+      _areaDir.setFromMatrixPosition(light.matrixWorld);
+      _areaTarget.setFromMatrixPosition(light.target.matrixWorld);
+      _areaDir.sub(_areaTarget).transformDirection(camera.matrixWorldInverse);
+      slots[k].set(_areaDir.x, _areaDir.y, _areaDir.z, sinR);
+    }
   }
 
   onBeforeCompile(shader) {
@@ -2731,6 +2784,7 @@ export async function loadSceneCard(url, options = {}) {
       for (const l of [this.sunLight, ...this.panelLights]) if (l) { scene.remove(l); l.dispose(); }
       this.sunLight = null;
       this.panelLights = [];
+      scene.userData.clothfitAreaLights = [];
       parseSunMode(sun, 'environment.sun');
       if (!path) {
         scene.environment = null;
@@ -2756,6 +2810,10 @@ export async function loadSceneCard(url, options = {}) {
         const light = new THREE.DirectionalLight(new THREE.Color(E[0] / emax, E[1] / emax, E[2] / emax), emax);
         light.name = name;
         light.position.set(w[0], w[1], w[2]);  // shines from w towards the target at the origin
+        // The cap with the source's solid angle, cos r = 1 - Omega / (2 pi): MeshWovenMaterial's
+        // horizon fade (render/scene/sun.cpp sets Light::sin_angular_radius the same way).
+        const cosR = Math.min(Math.max(1 - split.solidAngle / (2 * Math.PI), -1), 1);
+        light.userData.sinAngularRadius = Math.sqrt(Math.max(1 - cosR * cosR, 0));
         scene.add(light);
         return { light, split: { ...split, irradiance: E, worldDirection: w } };
       };
@@ -2776,6 +2834,7 @@ export async function loadSceneCard(url, options = {}) {
       } else if (sp) {
         this.sun = sp.split.sun;
       }
+      scene.userData.clothfitAreaLights = [this.sunLight, ...this.panelLights].filter(Boolean);
       // Shadow maps already on (setShadows / apply ran before): the new lights cast too.
       if (this.shadows && (this.sunLight || this.panelLights.length)) this.setShadows(this.shadows);
       this.environment = target;

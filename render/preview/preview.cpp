@@ -156,9 +156,14 @@ struct PrimaryHit {
 // The punctual lights reaching a point (with the terminator wrap of Filament's subsurface
 // cloth on the fabric), each with its cosines and irradiance.
 // `light_tangent` (woven only, else null) receives t.l, b.l, t.h, b.h per kept light.
+// `horizon_fade` (woven's fabric pixels): a light split off the environment
+// (Light::sin_angular_radius > 0) is clipped at the horizon as a disc (ClipDiscAtHorizon): its
+// irradiance times the visible fraction, its cosines those of the visible part's centroid. The
+// shadow test keeps the disc's centre, as three.js's shadow map does.
 std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const PreviewCache& c,
                                              const PrimaryHit& hit,
-                                             std::vector<float>* light_tangent = nullptr) {
+                                             std::vector<float>* light_tangent = nullptr,
+                                             bool horizon_fade = false) {
   const Vec3d& p = hit.p;
   const Vec3d& n = hit.n;
   const Vec3d& v = hit.v;
@@ -167,21 +172,35 @@ std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const Previe
     const LightSample s = EvaluateLight(light, p);
     if (s.scale <= 0.0) continue;
     const double NoL = Dot(n, s.wi);
-    if (NoL <= 0.0 && !(x.wrap_past_terminator && hit.mesh->is_fabric && NoL > -0.5)) continue;
+    const bool fade = horizon_fade && light.sin_angular_radius > 0.0;
+    if (NoL <= (fade ? -light.sin_angular_radius : 0.0) &&
+        !(x.wrap_past_terminator && hit.mesh->is_fabric && NoL > -0.5))
+      continue;
     if (c.features.shadows &&
         x.bvh.Occluded({p.x, p.y, p.z}, {s.wi.x, s.wi.y, s.wi.z}, 0.0,
                        std::isinf(s.distance) ? s.distance : s.distance * (1 - 1e-6)))
       continue;
-    const Vec3d hv = Normalize(v + s.wi);
+    Vec3d wi = s.wi;
+    double scale = s.scale, cos_l = NoL;
+    if (fade) {
+      const HorizonClip clip = ClipDiscAtHorizon(NoL, light.sin_angular_radius);
+      if (!(clip.visible > 0.0)) continue;
+      if (clip.visible < 1.0) {
+        wi = TiltToCosine(s.wi, n, clip.NoL);
+        cos_l = Dot(n, wi);
+        scale *= clip.visible;
+      }
+    }
+    const Vec3d hv = Normalize(v + wi);
     PreviewLightSample q;
-    q.NoL = float(NoL);
+    q.NoL = float(cos_l);
     q.NoH = float(Dot(n, hv));
-    q.LoH = float(Dot(s.wi, hv));
-    for (int k = 0; k < 3; ++k) q.irradiance[k] = float(s.scale * light.color[size_t(k)]);
+    q.LoH = float(Dot(wi, hv));
+    for (int k = 0; k < 3; ++k) q.irradiance[k] = float(scale * light.color[size_t(k)]);
     ls.push_back(q);
     if (light_tangent)
       light_tangent->insert(light_tangent->end(),
-                            {float(Dot(hit.t, s.wi)), float(Dot(hit.b, s.wi)),
+                            {float(Dot(hit.t, wi)), float(Dot(hit.b, wi)),
                              float(Dot(hit.t, hv)), float(Dot(hit.b, hv))});
   }
   return ls;
@@ -590,7 +609,10 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     // Sheen tilt (sheen_tilt.h): the tilted cosines come from the tangent cosines, so a cloth
     // fabric pixel gathers them too.
     const bool tangent_cosines = woven_frame || (SheenTiltOn(x.opt) && hit.mesh->is_fabric);
-    std::vector<PreviewLightSample> ls = GatherLights(x, *c, hit, tangent_cosines ? &lt : nullptr);
+    std::vector<PreviewLightSample> ls =
+        GatherLights(x, *c, hit, tangent_cosines ? &lt : nullptr,
+                     x.opt.horizon_fade && x.opt.model == ModelKind::kWoven &&
+                         hit.mesh->is_fabric);
     if (x.env && x.opt.exact_ibl_samples > 0 && hit.mesh->is_fabric)
       AppendEnvironmentSamples(x, hit, pix, &ls, tangent_cosines ? &lt : nullptr,
                                x.opt.exact_ibl_samples);

@@ -83,6 +83,11 @@ struct PreviewOptions {
   // (brdf/woven.h's split evaluation) is checked against. false: the fast kernel.
   bool woven_reference_kernel = false;
   bool shadows = false;      // ray-traced light visibility (a perfect shadow map)
+  // Woven's fabric pixels: a light split off the environment (the sun, the panels; non-zero
+  // Light::sin_angular_radius) fades across the surface's horizon as a disc of its size
+  // (render/scene/lights.h ClipDiscAtHorizon; web/clothfit.js draws the same). false (a
+  // measurement): every light a delta, as before session 22. Card lights are always deltas.
+  bool horizon_fade = true;
   // Visibility prototype (render/preview/visibility.h, docs/visibility.md; measurement, default
   // off = bit-identical): a ray-traced AO map and one-bounce light map applied as three.js r187
   // applies aoMap / lightMap, to the split-sum IBL (not with exact_ibl_samples). With a

@@ -70,6 +70,11 @@ struct Light {
   std::array<double, 3> direction{0, 0, -1};        // world, direction the light TRAVELS
   double range = 0.0;                               // 0 = infinite
   double inner_cone = 0.0, outer_cone = kPi / 4.0;  // radians (spot)
+  // Directional lights split off an environment map (render/scene/sun.h: the sun, the panels):
+  // sin of the angular radius of the spherical cap with the source's solid angle; 0 = a delta
+  // light (every card light). Only woven's preview shading reads it, for the horizon fade
+  // (render/scene/lights.h ClipDiscAtHorizon); the reference renderer renders the map itself.
+  double sin_angular_radius = 0.0;
 };
 
 // Whether the preview draws a compact sun of the environment as a directional light

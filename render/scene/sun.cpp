@@ -207,6 +207,11 @@ SunSplit DetectSun(int W, int H, const float* rgb, double intensity, double rota
   s.light.type = Light::Type::kDirectional;
   s.light.name = "environment sun";
   s.light.intensity = emax;
+  // The cap with the source's solid angle: cos r = 1 - Omega / (2 pi) (the horizon fade's size).
+  {
+    const double cos_r = std::clamp(1.0 - s.solid_angle / (2.0 * kPi), -1.0, 1.0);
+    s.light.sin_angular_radius = std::sqrt(std::max(1.0 - cos_r * cos_r, 0.0));
+  }
   for (int k = 0; k < 3; ++k) {
     s.light.color[size_t(k)] = emax > 0.0 ? s.irradiance[size_t(k)] / emax : 0.0;
     s.light.direction[size_t(k)] = -s.world_direction[size_t(k)];
