@@ -247,6 +247,18 @@ function routeLightMapToIblDiffuse(shader, who) {
     .replace(mapsChunk, maps.replace(add, 'clothfitLightMapIrradiance += lightMapIrradiance;'));
 }
 
+// The horizon fade (MeshWovenMaterial) applies to directional lights only: three.js r187's
+// lights_fragment_begin is inlined with wovenDirectional = true around the RE_Direct call of its
+// directional-light loop (the flag is declared in WOVEN_PARS), so RE_Direct_Woven can tell a
+// directional light from a point or spot light that happens to lie in the same direction.
+function markDirectionalLights(shader, who) {
+  const fs = shader.fragmentShader, chunkInclude = '#include <lights_fragment_begin>';
+  const chunk = THREE.ShaderChunk.lights_fragment_begin;
+  const loop = /(getDirectionalLightInfo\( directionalLight, directLight \);)([\s\S]*?)(RE_Direct\( directLight,[^;]*;)/;
+  if (!fs.includes(chunkInclude) || chunk.split('getDirectionalLightInfo( directionalLight, directLight );').length !== 2 || !loop.test(chunk)) throw new Error(`${who}: unexpected three.js lights_fragment_begin (the horizon fade needs r187's)`);
+  shader.fragmentShader = fs.replace(chunkInclude, () => chunk.replace(loop, '$1\n\t\twovenDirectional = true;$2$3\n\t\twovenDirectional = false;'));
+}
+
 /**
  * MeshClothMaterial: clothfit's cloth model on three.js's MeshStandardMaterial program.
  *
@@ -1097,6 +1109,7 @@ const WOVEN_PARS = /* glsl */ `
 // filled per frame by MeshWovenMaterial.onBeforeRender: xyz = the light's view-space direction
 // as three.js computes directionalLights[ i ].direction, w = sin of its angular radius (0: unused).
 uniform vec4 wovenAreaLights[ ${WOVEN_AREA_LIGHTS} ];
+bool wovenDirectional = false;
 // render/scene/lights.h ClipDiscAtHorizon: a disc light of angular radius asin( sinR ) whose
 // centre is at n.l = NoL, clipped at the horizon; returns ( visible fraction, n.l' of the
 // visible part's centroid ).
@@ -1352,9 +1365,13 @@ void RE_Direct_Woven( const in IncidentLight directLight, const in vec3 geometry
 	vec3 lightColor = directLight.color;
 	// The horizon fade of a light split off the environment (render/preview GatherLights): the
 	// disc's visible fraction, drawn from its visible part's centroid.
+	// Only three.js's directional lights (wovenDirectional: set around RE_Direct in their loop,
+	// MeshWovenMaterial.onBeforeCompile); a point or spot light is always a delta.
 	float sinR = 0.0;
-	for ( int k = 0; k < ${WOVEN_AREA_LIGHTS}; ++k ) {
-		if ( wovenAreaLights[ k ].w > 0.0 && dot( l, wovenAreaLights[ k ].xyz ) > 0.99999 ) sinR = wovenAreaLights[ k ].w;
+	if ( wovenDirectional ) {
+		for ( int k = 0; k < ${WOVEN_AREA_LIGHTS}; ++k ) {
+			if ( wovenAreaLights[ k ].w > 0.0 && dot( l, wovenAreaLights[ k ].xyz ) > 0.99999 ) sinR = wovenAreaLights[ k ].w;
+		}
 	}
 	if ( sinR > 0.0 ) {
 		float NoL0 = dot( n, l );
@@ -1789,6 +1806,7 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     }
     injectPhysicalChunks(shader, 'MeshWovenMaterial', defs.join('\n') + '\nuniform float wovenRE;\n', pars, setup);
     routeLightMapToIblDiffuse(shader, 'MeshWovenMaterial');
+    markDirectionalLights(shader, 'MeshWovenMaterial');
     const vs = shader.vertexShader;
     if (!vs.includes('void main() {') || !vs.includes('#include <project_vertex>')) throw new Error('MeshWovenMaterial: unexpected three.js vertex shader');
     shader.vertexShader = (this.weaveMaps ? '#define WOVEN_WEAVE_MAPS\n' : '') + vs.replace('void main() {', WOVEN_VERTEX_PARS + 'void main() {')

@@ -158,8 +158,8 @@ struct PrimaryHit {
 // `light_tangent` (woven only, else null) receives t.l, b.l, t.h, b.h per kept light.
 // `horizon_fade` (woven's fabric pixels): a light split off the environment
 // (Light::sin_angular_radius > 0) is clipped at the horizon as a disc (ClipDiscAtHorizon): its
-// irradiance times the visible fraction, its cosines those of the visible part's centroid. The
-// shadow test keeps the disc's centre, as three.js's shadow map does.
+// irradiance times the visible fraction, its cosines and its shadow ray those of the visible
+// part's centroid.
 std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const PreviewCache& c,
                                              const PrimaryHit& hit,
                                              std::vector<float>* light_tangent = nullptr,
@@ -176,10 +176,6 @@ std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const Previe
     if (NoL <= (fade ? -light.sin_angular_radius : 0.0) &&
         !(x.wrap_past_terminator && hit.mesh->is_fabric && NoL > -0.5))
       continue;
-    if (c.features.shadows &&
-        x.bvh.Occluded({p.x, p.y, p.z}, {s.wi.x, s.wi.y, s.wi.z}, 0.0,
-                       std::isinf(s.distance) ? s.distance : s.distance * (1 - 1e-6)))
-      continue;
     Vec3d wi = s.wi;
     double scale = s.scale, cos_l = NoL;
     if (fade) {
@@ -191,6 +187,12 @@ std::vector<PreviewLightSample> GatherLights(const PixelContext& x, const Previe
         scale *= clip.visible;
       }
     }
+    // A clipped disc is tested towards its visible part's centroid (above the horizon): the
+    // disc's centre may be below it, where the surface itself would shadow it (review s22).
+    if (c.features.shadows &&
+        x.bvh.Occluded({p.x, p.y, p.z}, {wi.x, wi.y, wi.z}, 0.0,
+                       std::isinf(s.distance) ? s.distance : s.distance * (1 - 1e-6)))
+      continue;
     const Vec3d hv = Normalize(v + wi);
     PreviewLightSample q;
     q.NoL = float(cos_l);

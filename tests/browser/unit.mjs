@@ -90,7 +90,7 @@ check(() => assert.throws(() => loadClothfitPreset({ schema: 'clothfit.preset', 
 // as JavaScript) against the hemisphere integral G(mu) = (1/pi) int s/t cos th_l dw_l.
 {
   const rd = (v) => loadClothfitPreset({ schema: 'clothfit.preset', version: 1, model: 'woven', parameters: v === undefined ? {} : { diffuse_roughness: v } });
-  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_begin>\n#include <lights_fragment_maps>\n';
   const compile = (m) => { const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: 'void main() {\n#include <project_vertex>\n}' }; m.onBeforeCompile(sh); return sh; };
   const lam = rd(), lam0 = rd(0), rough = rd(0.65);
   check(() => assert.equal(lam.woven.diffuse_roughness, 0), 'woven default diffuse_roughness 0');
@@ -98,6 +98,17 @@ check(() => assert.throws(() => loadClothfitPreset({ schema: 'clothfit.preset', 
   check(() => assert.ok(lam.customProgramCacheKey() === 'woven:additive:uniform:split' && lam0.customProgramCacheKey() === 'woven:additive:uniform:split'
     && rough.customProgramCacheKey() === 'woven:additive:uniform:split:rough-diffuse'), 'rough diffuse: its own program key, Lambert the old one');
   const shL = compile(lam), shR = compile(rough);
+  // Session 22: the horizon fade applies to directional lights only. The flag is raised around
+  // the RE_Direct call of three.js's directional loop alone (the point, spot and area loops keep
+  // theirs untouched), and the shader only looks lights up under it.
+  {
+    const f = shL.fragmentShader;
+    const dirLoop = f.slice(f.indexOf('getDirectionalLightInfo( directionalLight, directLight );'));
+    const before = f.slice(0, f.indexOf('getDirectionalLightInfo( directionalLight, directLight );'));
+    check(() => assert.ok(!f.includes('#include <lights_fragment_begin>') && f.split('wovenDirectional = true;').length === 2
+      && /^getDirectionalLightInfo[^]*?wovenDirectional = true;[^]*?RE_Direct\( directLight,[^;]*;\s*wovenDirectional = false;/.test(dirLoop)
+      && !before.includes('wovenDirectional = true;') && /if \( wovenDirectional \) \{\s*for \( int k = 0; k < 9;/.test(f)), 'woven: the horizon fade only in the directional-light loop');
+  }
   check(() => assert.ok(!shL.fragmentShader.includes('#define WOVEN_ROUGH_DIFFUSE') && shR.fragmentShader.includes('#define WOVEN_ROUGH_DIFFUSE\n')
     && compile(lam0).fragmentShader === shL.fragmentShader), 'WOVEN_ROUGH_DIFFUSE only with sigma > 0');
   const A = 1 / (1 + (0.5 - 2 / (3 * Math.PI)) * 0.65);
@@ -166,7 +177,7 @@ check(() => assert.notEqual(wf.customProgramCacheKey(), loadClothfitPreset(wp({ 
 check(() => assert.equal(loadClothfitPreset(wp({ ibl: 'split' })).customProgramCacheKey(), wd.customProgramCacheKey()), 'explicit split = the default program');
 {
   // The defines the shader sees (onBeforeCompile on a stand-in of three.js r187's shader).
-  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_begin>\n#include <lights_fragment_maps>\n';
   const vsrc = 'void main() {\n#include <project_vertex>\n}';
   const compiled = (m) => { const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: vsrc }; m.onBeforeCompile(sh); return sh.fragmentShader; };
   const ff = compiled(wf), fd = compiled(wd);
@@ -198,7 +209,7 @@ check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps:
   check(() => assert.ok(yl && yl.groups.length === 2 && yl.nodes === 16 && yl.ibl.summary.length === 2 * 16 * 32 * 5), 'yarn lobe loaded');
   const key = wl.customProgramCacheKey();
   check(() => assert.match(key, /^woven:additive:uniform:split:yarn-lobe2x16\/16x32\/[0-9a-f]{16}$/), 'yarn lobe: its own program');
-  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_begin>\n#include <lights_fragment_maps>\n';
   const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: 'void main() {\n#include <project_vertex>\n}' };
   wl.onBeforeCompile(sh);
   check(() => assert.ok(['WOVEN_YARN_LOBE\n', 'WOVEN_YL_N_THETA 16\n', 'WOVEN_YL_N_PHI 32\n'].every((d) => sh.fragmentShader.includes(`#define ${d}`))), 'yarn lobe defines');
@@ -358,7 +369,7 @@ check(() => assert.throws(() => new MeshWovenMaterial({}, { ibl: 'fis', fisTaps:
   // The generated GLSL (taken from the compiled fragment source) in double with its float
   // constants, against the port. Relative to the pair's surface + volume, 1e-4 (measured worst
   // in --verbose); the same zeros (below the horizon, masked, behind every tangent).
-  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_maps>\n';
+  const fsrc = '#include <lights_physical_pars_fragment>\n#include <lights_physical_fragment>\n#include <lights_fragment_begin>\n#include <lights_fragment_maps>\n';
   const compiled = (block) => {
     const m = loadClothfitPreset(wp({ yarn_lobe: block }));
     const sh = { uniforms: {}, fragmentShader: fsrc, vertexShader: 'void main() {\n#include <project_vertex>\n}' };
@@ -690,7 +701,8 @@ if (args.clothfit) {
       && f.indexOf('vec3 nonPerturbedNormal') < f.indexOf('wovenNoVView') && f.indexOf('#include <normal_fragment_maps>') < f.indexOf('wovenNoVView')), 'views: NoV from the normal before the normal map');
     check(() => assert.ok(sh.uniforms.wovenViewMaps.value.length === 4 && sh.uniforms.wovenViewMaps.value[2] === vm.viewTextures[2] && sh.uniforms.wovenViewCosines.value.join(' ') === GL.join(' ')), 'views: uniforms');
     // band 1's kd.G is packed channel 5 + 3 = 8: texture 2, x
-    check(() => assert.ok(/wovenVW\[ 1 \] \* wovenVT2\.x/.test(f.split('vec3(').pop())), 'views: band 1 kd.G = texture 2 .x');
+    // (the last vec3( before three.js's lights_fragment_begin, which the horizon fade inlines)
+    check(() => assert.ok(/wovenVW\[ 1 \] \* wovenVT2\.x/.test(f.slice(0, f.indexOf('vec3 geometryPosition = - vViewPosition;')).split('vec3(').pop())), 'views: band 1 kd.G = texture 2 .x');
     const clone = vmat.clone();
     check(() => assert.ok(clone.viewBands === 3 && clone.customProgramCacheKey() === vmat.customProgramCacheKey() && clone._wovenUniforms.wovenViewMaps.value.length === 4), 'views survive clone');
   }
