@@ -168,6 +168,10 @@ std::unique_ptr<render::PreviewCache> Subset(const render::PreviewCache& full,
       if (!full.irradiance.empty()) c->irradiance.push_back(full.irradiance[ui * 3 + k]);
     for (size_t k = 0; k < 3; ++k)  // the light map's fabric bounce per unit albedo
       if (!full.irradiance_unit.empty()) c->irradiance_unit.push_back(full.irradiance_unit[ui * 3 + k]);
+    for (size_t k = 0; k < 3; ++k)  // woven: the light map the yarn lobes reflect
+      if (!full.light_map.empty()) c->light_map.push_back(full.light_map[ui * 3 + k]);
+    for (size_t k = 0; k < 2; ++k)  // woven far-field: the lobes' albedos
+      if (!full.yarn_albedo.empty()) c->yarn_albedo.push_back(full.yarn_albedo[ui * 2 + k]);
     if (!full.radiance.empty())
       c->radiance.insert(c->radiance.end(), full.radiance.begin() + long(ui * KR),
                          full.radiance.begin() + long((ui + 1) * KR));
@@ -1035,6 +1039,7 @@ bool ReweightLightMaps(PreparedScenes* p, const std::array<double, 3>& kd_new) {
     const render::PreviewCache& c = *d->cache;
     if (c.options.visibility.indirect && c.irradiance_unit.size() != c.irradiance.size())
       return false;
+    if (!c.light_map.empty() && c.light_map.size() != c.irradiance_unit.size()) return false;
   }
   for (auto& d : p->data) {
     render::PreviewCache& c = *d->cache;
@@ -1044,6 +1049,10 @@ bool ReweightLightMaps(PreparedScenes* p, const std::array<double, 3>& kd_new) {
     for (size_t i = 0; i < c.irradiance.size(); ++i)
       c.irradiance[i] = float(double(c.irradiance[i]) +
                               (kd_new[i % 3] - kd[i % 3]) * double(c.irradiance_unit[i]));
+    // the light map alone (woven's yarn lobes reflect it): the same bounce, the same re-weighting
+    for (size_t i = 0; i < c.light_map.size(); ++i)
+      c.light_map[i] = float(double(c.light_map[i]) +
+                             (kd_new[i % 3] - kd[i % 3]) * double(c.irradiance_unit[i]));
     c.options.visibility.fabric_albedo = kd_new;
   }
   p->visibility.fabric_albedo = kd_new;

@@ -1353,6 +1353,11 @@ void wovenYarnLobeIbl( const in vec3 wo, const in vec3 t, const in vec3 b, const
 		vec4 e = wovenYlIblEntry( k, wo, r );
 		vec3 d = transformDirectionByInverseViewMatrix( normalize( t * e.y + b * e.z + n * e.w ), viewMatrix );
 		vec3 L = textureLod( envMap, envMapRotation * d, roughnessToMip( r ) ).rgb * envMapIntensity;
+		#ifdef USE_LIGHTMAP
+			// the light map's E_ind / pi as uniform radiance, under the lobe's albedo e.x (session 22;
+			// render/preview PreviewCache::light_map)
+			L += clothfitLightMapIrradiance * RECIPROCAL_PI;
+		#endif
 		if ( k == 0 ) yw = e.x * L;
 		else yf = e.x * L;
 	}
@@ -1529,6 +1534,13 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 	float s = wovenSheenScaling( NoV );
 	vec3 yarn = wovenSpecularColor * ( s * ws.glint * wovenYarnAlbedo( NoV, rE ) );
 	vec3 lobes = yarn * ( wovenTintWarp * ( wovenM * ws.warp ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft ) );
+	// The yarn lobes reflect the card's light map too, as uniform radiance E_ind / pi (session 22;
+	// the far-field lobes add it inside wovenYarnLobeIbl). The sheen lobe does not, as three.js's.
+	#ifdef USE_LIGHTMAP
+		vec3 wovenLm = clothfitLightMapIrradiance * RECIPROCAL_PI;
+	#else
+		vec3 wovenLm = vec3( 0.0 );
+	#endif
 	#if defined( WOVEN_YARN_LOBE )
 		// far-field lobe: ks (tint_w 2 m_w A_w L_w + tint_f 2 m_f A_f L_f) s_v glint
 		#if defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM )
@@ -1538,7 +1550,7 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 			reflectedLight.indirectSpecular += wovenSpecularColor * ( wovenTintWarp * ( 2.0 * wovenM * ws.warp ) * ylW + wovenTintWeft * ( 2.0 * ( 1.0 - wovenM ) * ws.weft ) * ylF ) * ( s * ws.glint );
 		#endif
 	#elif defined( WOVEN_FIS ) && defined( USE_ENVMAP ) && defined( ENVMAP_TYPE_PMREM )
-		reflectedLight.indirectSpecular += lobes * wovenFisRadiance( geometryNormal, geometryViewDir, rE, radiance );
+		reflectedLight.indirectSpecular += lobes * ( wovenFisRadiance( geometryNormal, geometryViewDir, rE, radiance ) + wovenLm );
 	#elif defined( WOVEN_BENT ) && defined( USE_ENVMAP ) && defined( STANDARD )
 		// brdf/woven.h IblMode::kBent: each lobe's radiance about its bent normal, the fibre axis
 		// as three.js's anisotropy bitangent, w = (1 - s (1 - r_e))^4, read at r_e.
@@ -1548,9 +1560,9 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 		float wB = pow2( pow2( 1.0 - wovenAniso * ( 1.0 - rE ) ) );
 		vec3 radW = getIBLRadiance( geometryViewDir, wovenBentNormal( geometryNormal, geometryViewDir, aW, wB ), rE );
 		vec3 radF = getIBLRadiance( geometryViewDir, wovenBentNormal( geometryNormal, geometryViewDir, aF, wB ), rE );
-		reflectedLight.indirectSpecular += yarn * ( wovenTintWarp * ( wovenM * ws.warp ) * radW + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft ) * radF );
+		reflectedLight.indirectSpecular += yarn * ( wovenTintWarp * ( wovenM * ws.warp ) * ( radW + wovenLm ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft ) * ( radF + wovenLm ) );
 	#else
-		reflectedLight.indirectSpecular += lobes * radiance;
+		reflectedLight.indirectSpecular += lobes * ( radiance + wovenLm );
 	#endif
 	#if defined( USE_ENVMAP ) && defined( STANDARD )
 		vec3 sheenRadiance = getIBLRadiance( geometryViewDir, geometryNormal, wovenRS );

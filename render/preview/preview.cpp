@@ -124,7 +124,16 @@ struct PixelData {
   std::array<float, WeaveMaps::kChannels> weave{};  // woven with maps: the sampled maps
   std::array<float, 6> yibl{};  // PreviewOptions::yarn_ibl: A_w L_w, A_f L_f
   std::array<float, 3> irr_unit{};  // VisibilityTerms::fabric_unit (light map, one bounce)
+  std::array<float, 3> lm{};        // woven: the light map's E_ind / pi (PreviewCache::light_map)
+  std::array<float, 2> yalb{};      // woven far-field: A_w, A_f (PreviewCache::yarn_albedo)
 };
+
+// Session 22: woven's yarn lobes reflect the light map's bounce light too (PreviewCache::
+// light_map), with a split-sum environment; not with the measurement's yarn_ibl_taps reads.
+bool WovenYarnReflectsLightMap(const PreviewCache& c) {
+  return c.options.model == ModelKind::kWoven && c.options.visibility.indirect &&
+         c.features.ibl && !c.options.yarn_ibl_taps;
+}
 
 // What the per-pixel work of a cache build reads.
 struct PixelContext {
@@ -670,6 +679,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
     pd.weave = weave;
     for (int k = 0; k < 3; ++k) pd.irr[size_t(k)] = float(Ed[k]);
     for (int k = 0; k < 3; ++k) pd.irr_unit[size_t(k)] = float(vis.fabric_unit[k]);
+    for (int k = 0; k < 3; ++k) pd.lm[size_t(k)] = vis_on ? float(vis.indirect_over_pi[k]) : 0.f;
     const bool split_sum = x.env && x.opt.exact_ibl_samples <= 0;
     if (split_sum && x.opt.model == ModelKind::kPhysicalAniso)
       FillAnisoRadianceTables(x, hit, x.opt.weave_maps ? weave.data() : nullptr, &pd);
@@ -700,6 +710,7 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
         const Rgb<double> L = PrefilteredRead(x, dd, lobes[k].roughness);
         for (int ch = 0; ch < 3; ++ch)
           pd.yibl[size_t(k * 3 + ch)] = float(lobes[k].albedo * so * L[ch]);
+        pd.yalb[size_t(k)] = float(lobes[k].albedo);
       }
     }
     if (split_sum && SheenTiltOn(x.opt)) {  // the sheen lobe's table about n_s (sheen_tilt.h)
@@ -764,6 +775,11 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
       c->sheen_tilt_radiance.insert(c->sheen_tilt_radiance.end(), pd.trad.begin(), pd.trad.end());
       if ((c->options.yarn_ibl || c->options.yarn_ibl_taps) && c->features.ibl)
         c->yarn_ibl.insert(c->yarn_ibl.end(), pd.yibl.begin(), pd.yibl.end());
+      if (WovenYarnReflectsLightMap(*c)) {  // session 22: the yarn lobes reflect the light map
+        c->light_map.insert(c->light_map.end(), pd.lm.begin(), pd.lm.end());
+        if (c->options.yarn_ibl)
+          c->yarn_albedo.insert(c->yarn_albedo.end(), pd.yalb.begin(), pd.yalb.end());
+      }
       if (c->options.model == ModelKind::kWoven ||
           c->options.model == ModelKind::kPhysicalAniso || SheenTiltOn(c->options)) {
         c->tangent_v.insert(c->tangent_v.end(), pd.tv.begin(), pd.tv.end());
@@ -1131,19 +1147,29 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
         // yarn lobes: the FIS table when the cache has one (woven ibl "fis"), else the split sum's
         const woven::WovenIblWeights<T> w = woven::EvalIblView(wp, f, vt, ws);
         Rgb<T> ibl;
+        // the light map's E_ind / pi, which the yarn lobes reflect too (PreviewCache::light_map)
+        const float* lm = c.light_map.empty() ? nullptr : &c.light_map[i * 3];
         if (far_field) {  // PreviewOptions::yarn_ibl: A_k L_k per lobe, cached
           const float* y = &c.yarn_ibl[i * 6];
           const Rgb<T> yw = f.tint_w * (vt.mw * Const<T>(2.0)), yf = f.tint_f * (vt.mf * Const<T>(2.0));
           Rgb<T> lobes;
           for (int ch = 0; ch < 3; ++ch)
             lobes[ch] = yw[ch] * G(double(y[ch])) + yf[ch] * G(double(y[3 + ch]));
+          if (lm && !c.yarn_albedo.empty()) {
+            const float* ya = &c.yarn_albedo[i * 2];
+            for (int ch = 0; ch < 3; ++ch)
+              lobes[ch] = lobes[ch] + (yw[ch] * G(double(ya[0])) + yf[ch] * G(double(ya[1]))) *
+                                          G(double(lm[ch]));
+          }
           ibl = wp.specular_color * lobes * (vt.s_v * ws.glint);
         } else if (bent) {  // woven "bent": the warp lobe's table, then the weft lobe's
           const float* yw = &c.yarn_radiance[i * size_t(K) * 6];
           ibl = w.warp * ApplyTableWeights(yw, tw_e) + w.weft * ApplyTableWeights(yw + K * 3, tw_e);
+          if (lm) ibl = ibl + TimesConstRgb(w.warp + w.weft, lm);
         } else {
           const float* yrad = c.yarn_radiance.empty() ? rad : &c.yarn_radiance[i * size_t(K) * 3];
           ibl = (w.warp + w.weft) * ApplyTableWeights(yrad, tw_e);
+          if (lm) ibl = ibl + TimesConstRgb(w.warp + w.weft, lm);
         }
         if (!f.sheen_off) ibl = ibl + w.sheen * ApplyTableWeights(rad, tw_s);
         L += ibl + TimesConstRgb(w.diffuse, &c.irradiance[i * 3]);
@@ -1273,6 +1299,8 @@ void Kernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
                            w.weft * TableRadiance(yrad + K * 3, K, wl.r_e)
                      : (w.warp + w.weft) * TableRadiance(yrad, K, wl.r_e)) +
                w.sheen * TableRadiance(srad, K, wl.r_s) + w.diffuse * Ed;
+          if (!c.light_map.empty())  // the yarn lobes reflect the light map (PreviewCache::light_map)
+            L += (w.warp + w.weft) * LoadRgb<T>(&c.light_map[i * 3]);
         } else if constexpr (M == ModelKind::kPhysicalAniso) {
           const IblWeights<T> w = physical_aniso::EvalIbl(apx, so, NoV, *c.dfg);
           const T r = standard::ClampedRoughness(apx.roughness, so);

@@ -275,6 +275,17 @@ class PreviewCache {
   // (VisibilityTerms::fabric_unit), so irradiance + (kd' - kd) x irradiance_unit is the cache
   // baked with albedo kd' instead of options.visibility.fabric_albedo's kd (fit: second pass).
   std::vector<float> irradiance_unit;
+  // Woven with a light map (visibility.indirect) and a split-sum environment (session 22), else
+  // empty: 3 per fabric pixel, the light map's E_ind / pi alone (the part of `irradiance` it
+  // adds). The yarn lobes reflect it as uniform radiance E_ind / pi: each lobe's weight times
+  // its directional albedo (the far-field lobes: yarn_albedo; the GGX lobes: their IBL
+  // weights), as the diffuse reflects `irradiance`. web/clothfit.js does the same with
+  // three.js's lightMap; the baselines keep three.js's (the light map in the diffuse only).
+  // The fit's albedo pass re-weights it with irradiance_unit as it does `irradiance`.
+  std::vector<float> light_map;
+  // With light_map and yarn_ibl: 2 per fabric pixel, the far-field lobes' directional albedos
+  // A_w, A_f (the weights yarn_ibl's reads carry).
+  std::vector<float> yarn_albedo;
   const Table2D* woven_phase = nullptr;   // lut::DefaultWovenPhase() (woven only)
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)
   const Table2D* sheen_albedo = nullptr;  // glTF sheen albedo table

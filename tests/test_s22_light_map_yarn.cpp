@@ -1,0 +1,132 @@
+// s22-lm: woven's yarn lobes reflect the light map's bounce light (render/preview/preview.h
+// PreviewCache::light_map; web/clothfit.js does the same with three.js's lightMap). Checks, in a
+// constant environment of radiance c, where every split-sum read of the yarn lobes returns c: a
+// yarn-only woven preset (no diffuse, no sheen) lit by the environment and a light map gives
+// (c + E_ind / pi) / c times the frame without the light map, pixel by pixel, for the GGX yarn
+// lobes and for far-field lobes (PreviewOptions::yarn_ibl); before session 22 the ratio was 1
+// (the light map reached the diffuse only). The cache's light_map is the light map's part of
+// `irradiance`, and it is empty for the baselines.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+#include "render/preview/preview.h"
+#include "render/scene/environment.h"
+#include "render/scene/scene.h"
+#include "tests/preview_fixtures.h"
+#include "tests/scene_fixtures.h"
+
+namespace clothfit::render {
+namespace {
+
+constexpr double kC = 0.7;  // the environment's radiance
+
+// A fabric sphere above a large grey non-fabric sphere (the "floor" whose bounce the light map
+// carries).
+Scene SphereAboveFloor() {
+  Scene s = CameraScene(40, 40, {0, 0.2, 3}, {0, -0.07, -1}, 0.5);
+  s.meshes.push_back(SphereMesh(0.5, 48, 24, true, 0.f));
+  Mesh floor = SphereMesh(20.0, 64, 32, false, 0.8f);
+  for (auto& p : floor.positions) p[1] -= 20.6f;
+  s.meshes.push_back(floor);
+  s.card.environment = EnvironmentSpec{};
+  return s;
+}
+
+PreviewOptions LightMapOptions(bool light_map) {
+  PreviewOptions o;
+  o.model = ModelKind::kWoven;
+  o.visibility.indirect = light_map;
+  o.visibility.samples = 64;
+  o.visibility.hit_samples = 4;
+  return o;
+}
+
+// max |with / without - (1 + lm / c)| over the pixels and channels, and max lm / c.
+void CompareRatios(const std::vector<Rgb<double>>& with, const std::vector<Rgb<double>>& without,
+                   const PreviewCache& c, double* worst, double* lm_max) {
+  ASSERT_EQ(with.size(), without.size());
+  ASSERT_EQ(c.light_map.size(), 3 * with.size());
+  *worst = 0.0;
+  *lm_max = 0.0;
+  for (size_t i = 0; i < with.size(); ++i)
+    for (int ch = 0; ch < 3; ++ch) {
+      const double lm = double(c.light_map[i * 3 + size_t(ch)]) / kC;
+      *lm_max = std::max(*lm_max, lm);
+      if (!(without[i][ch] > 1e-6)) continue;
+      *worst = std::max(*worst, std::abs(with[i][ch] / without[i][ch] - (1.0 + lm)));
+    }
+}
+
+TEST(S22LightMapYarn, GgxYarnLobesReflectTheLightMap) {
+  const Scene s = SphereAboveFloor();
+  const Environment env =
+      EnvironmentFrom(64, 32, [](const Vec3<double>&) { return Rgb<double>(kC, kC, kC); });
+  // yarn only: base colour 0, specular colour 1, sheen off (WovenFlat)
+  const auto x = WovenFlat({0, 0, 0}, {1, 1, 1}, 0.5, 0.6, 0.5, 0.04, 2.0);
+  std::unique_ptr<PreviewCache> cw, co;
+  const auto with = PreviewFrame(s, env, LightMapOptions(true), x, &cw);
+  const auto without = PreviewFrame(s, env, LightMapOptions(false), x, &co);
+  EXPECT_TRUE(co->light_map.empty());
+  // the cache's light_map is the light map's part of the irradiance
+  ASSERT_EQ(cw->irradiance.size(), co->irradiance.size());
+  double part = 0.0;
+  for (size_t i = 0; i < cw->irradiance.size(); ++i)
+    part = std::max(part, std::abs(double(cw->irradiance[i]) - double(co->irradiance[i]) -
+                                   double(cw->light_map[i])));
+  EXPECT_LT(part, 1e-5);
+  double worst, lm_max;
+  CompareRatios(with, without, *cw, &worst, &lm_max);
+  std::printf("S22LightMapYarn GGX: max |ratio - (1 + lm / c)| %.2g, max lm / c %.3f\n", worst,
+              lm_max);
+  EXPECT_GT(lm_max, 0.05);  // the floor bounces light onto the sphere
+  EXPECT_LT(worst, 1e-4);
+}
+
+TEST(S22LightMapYarn, FarFieldLobesReflectTheLightMap) {
+  const Scene s = SphereAboveFloor();
+  const Environment env =
+      EnvironmentFrom(64, 32, [](const Vec3<double>&) { return Rgb<double>(kC, kC, kC); });
+  const auto x = WovenFlat({0, 0, 0}, {1, 1, 1}, 0.5, 0.6, 0.5, 0.04, 2.0);
+  auto far_field = [](PreviewOptions o) {
+    o.yarn_lobe = [](const Vec3<double>&, const Vec3<double>&, double out[2]) {
+      out[0] = 0.2;
+      out[1] = 0.1;
+    };
+    o.yarn_ibl = [](const Vec3<double>& wo, yarn_table::IblLobe out[2]) {
+      out[0].albedo = 0.4 + 0.2 * wo.x;
+      out[0].dir = Normalize(Vec3<double>(-wo.x, -wo.y, wo.z));
+      out[0].roughness = 0.3;
+      out[1].albedo = 0.1;
+      out[1].dir = {0.0, 0.0, 1.0};
+      out[1].roughness = 0.9;
+    };
+    return o;
+  };
+  std::unique_ptr<PreviewCache> cw, co;
+  const auto with = PreviewFrame(s, env, far_field(LightMapOptions(true)), x, &cw);
+  const auto without = PreviewFrame(s, env, far_field(LightMapOptions(false)), x, &co);
+  ASSERT_EQ(cw->yarn_albedo.size(), 2 * with.size());
+  double worst, lm_max;
+  CompareRatios(with, without, *cw, &worst, &lm_max);
+  std::printf("S22LightMapYarn far field: max |ratio - (1 + lm / c)| %.2g, max lm / c %.3f\n",
+              worst, lm_max);
+  EXPECT_GT(lm_max, 0.05);
+  EXPECT_LT(worst, 1e-4);
+}
+
+TEST(S22LightMapYarn, BaselinesKeepTheLightMapInTheDiffuse) {
+  const Scene s = SphereAboveFloor();
+  const Environment env =
+      EnvironmentFrom(64, 32, [](const Vec3<double>&) { return Rgb<double>(kC, kC, kC); });
+  for (ModelKind m : {ModelKind::kStandard, ModelKind::kCloth, ModelKind::kPhysicalAniso}) {
+    PreviewOptions o = LightMapOptions(true);
+    o.model = m;
+    EXPECT_TRUE(PreviewCache::Build(s, &env, o)->light_map.empty()) << ToString(m);
+  }
+}
+
+}  // namespace
+}  // namespace clothfit::render
