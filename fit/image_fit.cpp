@@ -1040,12 +1040,14 @@ bool ReweightLightMaps(PreparedScenes* p, const std::array<double, 3>& kd_new) {
     if (c.options.visibility.indirect && c.irradiance_unit.size() != c.irradiance.size())
       return false;
     if (!c.light_map.empty() && c.light_map.size() != c.irradiance_unit.size()) return false;
+    const std::array<double, 3>& kd = c.options.visibility.fabric_albedo;
+    if (!c.irradiance_unit.empty() && (kd[0] < 0 || kd[1] < 0 || kd[2] < 0))
+      return false;  // the glTF's colour: not known here (checked before anything changes)
   }
   for (auto& d : p->data) {
     render::PreviewCache& c = *d->cache;
     if (c.irradiance_unit.empty()) continue;
     const std::array<double, 3> kd = c.options.visibility.fabric_albedo;
-    if (kd[0] < 0 || kd[1] < 0 || kd[2] < 0) return false;  // the glTF's colour: not known here
     for (size_t i = 0; i < c.irradiance.size(); ++i)
       c.irradiance[i] = float(double(c.irradiance[i]) +
                               (kd_new[i % 3] - kd[i % 3]) * double(c.irradiance_unit[i]));

@@ -1536,7 +1536,8 @@ void RE_IndirectSpecular_Woven( const in vec3 radiance, const in vec3 iblIrradia
 	vec3 lobes = yarn * ( wovenTintWarp * ( wovenM * ws.warp ) + wovenTintWeft * ( ( 1.0 - wovenM ) * ws.weft ) );
 	// The yarn lobes reflect the card's light map too, as uniform radiance E_ind / pi (session 22;
 	// the far-field lobes add it inside wovenYarnLobeIbl). The sheen lobe does not, as three.js's.
-	#ifdef USE_LIGHTMAP
+	#if defined( USE_LIGHTMAP ) && defined( USE_ENVMAP )
+		// (with an environment only, as the C++ preview, whose yarn IBL path needs one)
 		vec3 wovenLm = clothfitLightMapIrradiance * RECIPROCAL_PI;
 	#else
 		vec3 wovenLm = vec3( 0.0 );

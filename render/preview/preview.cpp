@@ -129,10 +129,10 @@ struct PixelData {
 };
 
 // Session 22: woven's yarn lobes reflect the light map's bounce light too (PreviewCache::
-// light_map), with a split-sum environment; not with the measurement's yarn_ibl_taps reads.
+// light_map), with a split-sum environment (the far-field lobes' reads, yarn_ibl or the
+// measurement's yarn_ibl_taps, carry their albedos in yarn_albedo).
 bool WovenYarnReflectsLightMap(const PreviewCache& c) {
-  return c.options.model == ModelKind::kWoven && c.options.visibility.indirect &&
-         c.features.ibl && !c.options.yarn_ibl_taps;
+  return c.options.model == ModelKind::kWoven && c.options.visibility.indirect && c.features.ibl;
 }
 
 // What the per-pixel work of a cache build reads.
@@ -695,8 +695,10 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
         const double so =  // the AO map's specular occlusion at the read's roughness
             vis_on ? SpecularOcclusion(std::clamp(hit.NoV, 0.0, 1.0), vis.ao, tp.roughness) : 1.0;
         const Rgb<double> L = PrefilteredRead(x, dd, tp.roughness) * so;
-        for (int k = 0; k < 2; ++k)
+        for (int k = 0; k < 2; ++k) {
           for (int ch = 0; ch < 3; ++ch) pd.yibl[size_t(k * 3 + ch)] += float(tp.weight[k] * L[ch]);
+          pd.yalb[size_t(k)] += float(tp.weight[k]);  // the reads' weights sum to the albedo
+        }
       }
     } else if (split_sum && x.opt.yarn_ibl) {  // the tabulated lobes' split sum (PreviewOptions::yarn_ibl)
       yarn_table::IblLobe lobes[2];
@@ -777,7 +779,7 @@ void AssembleFabricPixels(std::vector<std::vector<PixelData>>& rows, PreviewCach
         c->yarn_ibl.insert(c->yarn_ibl.end(), pd.yibl.begin(), pd.yibl.end());
       if (WovenYarnReflectsLightMap(*c)) {  // session 22: the yarn lobes reflect the light map
         c->light_map.insert(c->light_map.end(), pd.lm.begin(), pd.lm.end());
-        if (c->options.yarn_ibl)
+        if (c->options.yarn_ibl || c->options.yarn_ibl_taps)
           c->yarn_albedo.insert(c->yarn_albedo.end(), pd.yalb.begin(), pd.yalb.end());
       }
       if (c->options.model == ModelKind::kWoven ||
@@ -1092,6 +1094,13 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
   const bool far_field = bool(c.options.yarn_lobe);
   if (far_field && kIbl && c.yarn_ibl.size() != c.pixels.size() * 6)
     throw std::invalid_argument("preview: the cache has no yarn IBL values (PreviewOptions::yarn_ibl)");
+  if (!c.light_map.empty() &&
+      (c.light_map.size() != c.pixels.size() * 3 ||
+       (far_field && kIbl && c.yarn_albedo.size() != c.pixels.size() * 2)))
+    throw std::invalid_argument("preview: the cache's light map (" +
+                                std::to_string(c.light_map.size()) + " values) or yarn albedos (" +
+                                std::to_string(c.yarn_albedo.size()) + ") do not match its " +
+                                std::to_string(c.pixels.size()) + " pixels");
   if (far_field && c.yarn_lobe.size() != c.light_samples.size() * 2)  // e.g. a copied cache
     throw std::invalid_argument("preview: the cache has " + std::to_string(c.yarn_lobe.size()) +
                                 " yarn lobe values for " + std::to_string(c.light_samples.size()) +
@@ -1155,7 +1164,7 @@ void WovenKernel(const PreviewCache& c, const T* x, std::vector<Rgb<T>>& out) {
           Rgb<T> lobes;
           for (int ch = 0; ch < 3; ++ch)
             lobes[ch] = yw[ch] * G(double(y[ch])) + yf[ch] * G(double(y[3 + ch]));
-          if (lm && !c.yarn_albedo.empty()) {
+          if (lm) {
             const float* ya = &c.yarn_albedo[i * 2];
             for (int ch = 0; ch < 3; ++ch)
               lobes[ch] = lobes[ch] + (yw[ch] * G(double(ya[0])) + yf[ch] * G(double(ya[1]))) *

@@ -283,8 +283,8 @@ class PreviewCache {
   // three.js's lightMap; the baselines keep three.js's (the light map in the diffuse only).
   // The fit's albedo pass re-weights it with irradiance_unit as it does `irradiance`.
   std::vector<float> light_map;
-  // With light_map and yarn_ibl: 2 per fabric pixel, the far-field lobes' directional albedos
-  // A_w, A_f (the weights yarn_ibl's reads carry).
+  // With light_map and far-field lobes (yarn_ibl, or the measurement's yarn_ibl_taps): 2 per
+  // fabric pixel, the lobes' directional albedos A_w, A_f (the weights their reads carry).
   std::vector<float> yarn_albedo;
   const Table2D* woven_phase = nullptr;   // lut::DefaultWovenPhase() (woven only)
   const Table2D* dfg = nullptr;           // DFG LUT (brdf/lut.h default)

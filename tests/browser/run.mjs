@@ -335,8 +335,8 @@ for (const s of LIGHT_MAP_SCENES) {
 // card (shadows, web/clothfit.js defaults) and draws the texture render-preview writes.
 // s21-panels: the same cards with "sun": "panels" (the studio's four softboxes as directional
 // lights, each with a three.js shadow map / a ray-traced shadow, and bounced by the light map).
-// s22: 'woven' (the GGX yarn lobes) too, since the yarn lobes reflect the light map.
-const CARD_MATERIALS = ['standard-grey', 'physical-sheen', 'cloth-filament', 'woven', 'woven-lobe-canvas', 'woven-lobe-maps-twill'];
+// s22: 'woven' (the GGX yarn lobes; split sum, FIS, bent) too: the yarn lobes reflect the light map.
+const CARD_MATERIALS = ['standard-grey', 'physical-sheen', 'cloth-filament', 'woven', 'woven-fis', 'woven-bent', 'woven-lobe-canvas', 'woven-lobe-maps-twill'];
 const CARD_PANEL_MATERIALS = new Set(['standard-grey', 'woven-lobe-canvas']);
 for (const s of scenes) {
   const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
