@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "render/preview/preview.h"
@@ -28,7 +29,12 @@ constexpr double kC = 0.7;  // the environment's radiance
 // carries).
 Scene SphereAboveFloor() {
   Scene s = CameraScene(40, 40, {0, 0.2, 3}, {0, -0.07, -1}, 0.5);
-  s.meshes.push_back(SphereMesh(0.5, 48, 24, true, 0.f));
+  Mesh sphere = SphereMesh(0.5, 48, 24, true, 0.f);
+  // SphereMesh winds its triangles inwards; the three.js engine takes the facing from the
+  // winding (gl_FrontFacing) and would flip the near side's normals inwards. Wind them out.
+  for (size_t t = 0; t + 2 < sphere.indices.size(); t += 3)
+    std::swap(sphere.indices[t + 1], sphere.indices[t + 2]);
+  s.meshes.push_back(sphere);
   Mesh floor = SphereMesh(20.0, 64, 32, false, 0.8f);
   for (auto& p : floor.positions) p[1] -= 20.6f;
   s.meshes.push_back(floor);
@@ -99,9 +105,7 @@ TEST(S22LightMapYarn, GgxYarnLobesReflectTheLightMap) {
     CompareRatios(with, without, *cw, &worst, &lm_max);
     std::printf("S22LightMapYarn GGX, %s: max |ratio - (1 + lm / c)| %.2g, max lm / c %.3f\n",
                 variant, worst, lm_max);
-    // the floor bounces light onto the sphere (0.48 c with the Filament engine's irradiance,
-    // 0.034 c with three.js's PMREM of this 64 x 32 map)
-    EXPECT_GT(lm_max, 0.02) << variant;
+    EXPECT_GT(lm_max, 0.05) << variant;  // the floor bounces light onto the sphere
     // FIS and the bent tables read the PMREM's constant to its float precision
     EXPECT_LT(worst, 1e-3) << variant;
   }
