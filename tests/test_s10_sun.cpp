@@ -15,6 +15,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "render/preview/preview.h"
@@ -243,7 +244,12 @@ TEST(S10Sun, SharedSyntheticMapMatchesTheRecordedFigures) {
 
 Scene SunSphere(int size) {
   Scene s = CameraScene(size, size, {0, 0, 3}, {0, 0, -1}, 0.4);
-  s.meshes.push_back(SphereMesh(0.5, 64, 32, true, 0.f));
+  Mesh sphere = SphereMesh(0.5, 64, 32, true, 0.f);
+  // SphereMesh winds its triangles inwards; the three.js engine takes the facing from the
+  // winding (gl_FrontFacing) and would flip the near side's normals inwards (session 22).
+  for (size_t t = 0; t + 2 < sphere.indices.size(); t += 3)
+    std::swap(sphere.indices[t + 1], sphere.indices[t + 2]);
+  s.meshes.push_back(sphere);
   s.card.environment = EnvironmentSpec{};
   return s;
 }
