@@ -89,6 +89,17 @@ inline std::vector<double> WovenFlat(Rgb<double> base, Rgb<double> spec, double 
           0.0,    m,      f0,     beta,   0.0,    0.0,    0.0, 0.6, 0.0};
 }
 
+// A synthetic far-field split sum (PreviewOptions::yarn_ibl) for tests: a view-dependent warp
+// lobe about the mirror direction and a constant, rough weft lobe about the normal.
+inline void SyntheticYarnIbl(const Vec3<double>& wo, yarn_table::IblLobe out[2]) {
+  out[0].albedo = 0.4 + 0.2 * wo.x;
+  out[0].dir = Normalize(Vec3<double>(-wo.x, -wo.y, wo.z));
+  out[0].roughness = 0.3;
+  out[1].albedo = 0.1;
+  out[1].dir = {0.0, 0.0, 1.0};
+  out[1].roughness = 0.9;
+}
+
 // Builds the preview cache of (s, env, o) and evaluates it at x; `keep` receives the cache.
 inline std::vector<Rgb<double>> PreviewFrame(const Scene& s, const Environment& env,
                                              const PreviewOptions& o, const std::vector<double>& x,

@@ -357,14 +357,7 @@ TEST(S11YarnTable, SplitSumWeightsUnderAConstantSky) {
     o.ibl_engine = engine;
     o.yarn_lobe = TestLobe;
     if (variant < 2) {
-      o.yarn_ibl = [](const Vec3<double>& wo, yarn_table::IblLobe out[2]) {
-        out[0].albedo = 0.4 + 0.2 * wo.x;
-        out[0].dir = Normalize(Vec3<double>(-wo.x, -wo.y, wo.z));
-        out[0].roughness = 0.3;
-        out[1].albedo = 0.1;
-        out[1].dir = {0.0, 0.0, 1.0};
-        out[1].roughness = 0.9;
-      };
+      o.yarn_ibl = render::SyntheticYarnIbl;
     } else {  // the same weights as three reads (yarn_ibl_taps): they sum
       o.yarn_ibl_taps = [](const Vec3<double>& wo, std::vector<yarn_table::IblTap>* taps) {
         taps->clear();

@@ -121,14 +121,7 @@ TEST(S22LightMapYarn, FarFieldLobesReflectTheLightMap) {
       out[0] = 0.2;
       out[1] = 0.1;
     };
-    o.yarn_ibl = [](const Vec3<double>& wo, yarn_table::IblLobe out[2]) {
-      out[0].albedo = 0.4 + 0.2 * wo.x;
-      out[0].dir = Normalize(Vec3<double>(-wo.x, -wo.y, wo.z));
-      out[0].roughness = 0.3;
-      out[1].albedo = 0.1;
-      out[1].dir = {0.0, 0.0, 1.0};
-      out[1].roughness = 0.9;
-    };
+    o.yarn_ibl = SyntheticYarnIbl;
     return o;
   };
   std::unique_ptr<PreviewCache> cw, co;
