@@ -1883,12 +1883,51 @@ const WOVEN_DEFAULTS = Object.freeze({
 // rounded to float32 exactly as WeaveMaps::FromLevel0 / BuildBoxMips do, and uploaded level by
 // level; level 0 is renormalised to a tile mean of 1 per channel as the C++ reader does. The
 // textures are 32-bit float (RG32F weights, RGBA32F kd with alpha 1), filtered with
-// OES_texture_float_linear (SwiftShader and desktop GPUs expose it); without that extension they
-// fall back to HALF floats (rounding each texel to 11 significant bits, about 5e-4 relative).
+// OES_texture_float_linear (SwiftShader and desktop GPUs expose it). Without that extension (iOS
+// Safari, many Android GPUs) a 32-bit float texture is not filterable, WebGL treats it as
+// incomplete and the fabric draws nearly black (measured, session 23), so the textures are then
+// uploaded as HALF floats, which WebGL2 always filters (rounding each texel to 11 significant bits,
+// about 5e-4 relative): floatTexturesFilterable() decides, `halfFloat` forces either way.
 // Not drawn by web/ (refused with a clear error): a relief normal map (channels N.X/N.Y/N.Z,
 // `--weave-maps relief`) and a glint map ("glint_file", `--weave-maps glint`).
 
 export const WEAVE_MAP_CHANNELS = Object.freeze(['warp', 'weft', 'kd.R', 'kd.G', 'kd.B']);
+
+// Does this WebGL context filter 32-bit float textures (OES_texture_float_linear)? With a
+// renderer: its own context (three.js enables the extension when it exists). Without one: a
+// throw-away WebGL2 context, probed once per page; outside a browser (node): true, i.e. 32-bit
+// floats as before. A probe that cannot create a context answers false (half floats: filterable
+// everywhere, so the safe side).
+let floatLinearProbe;
+export function floatTexturesFilterable(renderer) {
+  if (renderer?.extensions?.has) return renderer.extensions.has('OES_texture_float_linear');
+  if (floatLinearProbe === undefined) {
+    floatLinearProbe = true;
+    if (typeof document !== 'undefined' && document.createElement) {
+      try {
+        const gl = document.createElement('canvas').getContext('webgl2');
+        floatLinearProbe = Boolean(gl?.getExtension('OES_texture_float_linear'));
+        gl?.getExtension('WEBGL_lose_context')?.loseContext();
+      } catch {
+        floatLinearProbe = false;
+      }
+    }
+  }
+  return floatLinearProbe;
+}
+
+// The float textures' upload type: `halfFloat` when the caller says (true / false), else half
+// floats exactly when the context cannot filter 32-bit ones (logged once).
+let halfFloatNoted = false;
+function useHalfFloat(halfFloat, renderer) {
+  if (halfFloat !== undefined && halfFloat !== null) return Boolean(halfFloat);
+  const half = !floatTexturesFilterable(renderer);
+  if (half && !halfFloatNoted) {
+    halfFloatNoted = true;
+    console.info('clothfit: this WebGL context has no OES_texture_float_linear: weave maps and light maps are uploaded as half floats (filterable; about 5e-4 relative rounding)');
+  }
+  return half;
+}
 
 function boxMip(src, s, nc) {  // s = the source side; returns side s/2
   const h = s >> 1, out = new Float32Array(h * h * nc);
@@ -1949,8 +1988,9 @@ function ratioLevel0(img, names, n, fail) {
  * weightsTexture (RG: warp, weft), kdTexture (RGBA: kd, 1), uvTransform (THREE.Matrix3),
  * anisotropyTexture(), dispose()}.
  */
-export function weaveMapsFromExr(buffer, { field = {}, name = 'weave maps', halfFloat = false, maxAnisotropy = Infinity } = {}) {
+export function weaveMapsFromExr(buffer, { field = {}, name = 'weave maps', halfFloat, renderer, maxAnisotropy = Infinity } = {}) {
   const fail = (msg) => { throw new Error(`${name}: weave maps: ${msg}`); };
+  halfFloat = useHalfFloat(halfFloat, renderer);
   const requested = weaveMapAnisotropy(field);
   const anisotropy = Math.max(1, Math.min(requested, Math.floor(maxAnisotropy)));
   if (anisotropy !== requested) console.info(`clothfit: weave_maps.anisotropy ${requested} clamped to the renderer's max anisotropy ${anisotropy} (renderer.capabilities.getMaxAnisotropy())`);
@@ -2215,7 +2255,7 @@ export async function fetchWeaveMaps(preset, presetUrl, options = {}) {
   const r = await fetch(url);
   if (!r.ok) throw new Error(`weave_maps.${hasUri ? 'uri' : 'file'}: ${url}: HTTP ${r.status}`);
   const maxAnisotropy = options.maxAnisotropy ?? options.renderer?.capabilities?.getMaxAnisotropy?.() ?? Infinity;
-  return weaveMapsFromExr(await r.arrayBuffer(), { field, name: hasUri ? field.uri : field.file, halfFloat: options.halfFloat, maxAnisotropy });
+  return weaveMapsFromExr(await r.arrayBuffer(), { field, name: hasUri ? field.uri : field.file, halfFloat: options.halfFloat, renderer: options.renderer, maxAnisotropy });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -2241,10 +2281,12 @@ export function lightMapUvBox(box, name = 'light map') {
 
 /**
  * A light-map texture from a parsed EXR (web/exr.js parseExr) or its bytes (ArrayBuffer / typed
- * array). meta: {name (in errors), uvBox (overrides the file's clothfit:uv_box), halfFloat}.
+ * array). meta: {name (in errors), uvBox (overrides the file's clothfit:uv_box), halfFloat (true /
+ * false; default: half floats exactly when floatTexturesFilterable(meta.renderer) is false)}.
  * Returns a THREE.DataTexture (RGBA, A = 1) with the conventions above; texture.userData.clothfit
  * = {uvBox, size}.
  */
+const HALF_MAX = 65504;
 export function lightMapTextureFromExr(exr, meta = {}) {
   const name = meta.name ?? 'light map';
   const img = exr && exr.channels ? exr : parseExr(exr, name);
@@ -2260,8 +2302,14 @@ export function lightMapTextureFromExr(exr, meta = {}) {
     }
     data[t * 4 + 3] = 1;
   }
-  const type = meta.halfFloat ? THREE.HalfFloatType : THREE.FloatType;
-  const t = new THREE.DataTexture(meta.halfFloat ? Uint16Array.from(data, (x) => THREE.DataUtils.toHalfFloat(x)) : data, w, h, THREE.RGBAFormat, type);
+  const half = useHalfFloat(meta.halfFloat, meta.renderer);
+  if (half) {  // irradiance above the half range (65504) would become Infinity: clamp, and say so
+    let over = 0;
+    for (let i = 0; i < data.length; ++i) if (data[i] > HALF_MAX) { data[i] = HALF_MAX; ++over; }
+    if (over) console.warn(`clothfit: ${name}: ${over} light-map values above ${HALF_MAX} clamped to it (half-float upload)`);
+  }
+  const type = half ? THREE.HalfFloatType : THREE.FloatType;
+  const t = new THREE.DataTexture(half ? Uint16Array.from(data, (x) => THREE.DataUtils.toHalfFloat(x)) : data, w, h, THREE.RGBAFormat, type);
   t.flipY = false;                 // data row 0 (the file's first row) = t 0 = glTF v0
   t.magFilter = THREE.LinearFilter;
   t.minFilter = THREE.LinearFilter;

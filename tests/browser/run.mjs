@@ -358,6 +358,26 @@ for (const s of scenes) {
   }
   }
 }
+// s23: a GPU without OES_texture_float_linear (iOS Safari, many Android GPUs): the page draws
+// these cases with a second renderer whose context hides the extension (web/test/browser-test.js
+// makeRenderer), so web/clothfit.js must upload the weave maps and the light map as half floats
+// (floatTexturesFilterable). Without that fallback the 32-bit float textures are incomplete and
+// the fabric draws nearly black (measured: twill yarn-lobe maps mean sRGB 69.7 / 130.2 / 98.9 ->
+// 0.6 / 1.3 / 1.0). The C++ preview is the same as the base case's (32-bit floats): the half
+// rounding (about 5e-4 relative) must stay within the acceptance. Chosen to cover every float
+// texture web/ uploads: the main maps and a light map (woven lobe, canvas), the packed view bands
+// (twill), physical-aniso's map + anisotropyMap.
+const NO_FLOAT_LINEAR = [['drape', 'studio-lightmap', 'woven-lobe-maps-canvas'], ['swatch', 'studio', 'woven-lobe-maps-twill-views-aniso1'],
+  ['sphere', 'studio', 'physical-aniso-maps']];
+for (const [s, env, m] of NO_FLOAT_LINEAR) {
+  const name = `${s}/${env}-no-float-linear/${m}`;
+  if (args.only && !name.includes(args.only)) continue;
+  const card = path.join(work, `${s}-${env}.card.json`);  // written above, whatever --only says
+  if (!fs.existsSync(card) || !MATERIALS[m]) { console.error(`${name}: no card ${card} or material ${m}`); process.exit(1); }
+  const png = path.join(work, `${s}-${env}-no-float-linear-${m}.png`);
+  cases.push({ name, card, preset: path.join(work, `${m}.json`), png, noFloatLinear: true,
+    ...(LIGHT_MAP_ENVS[env] ? { lightMap: png.replace(/\.png$/, '.lm.exr') } : {}) });
+}
 say(`${cases.length} cases, work dir ${work}`);
 
 // ---- C++ previews (in parallel with the browser; 2 at a time) -------------------------------

@@ -25,41 +25,71 @@ function mutateLightMap(t, m) {
 async function run() {
   const planUrl = new URLSearchParams(location.search).get('plan');
   const plan = await (await fetch(planUrl)).json();
-  const canvas = document.getElementById('c');
-  const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true, powerPreference: 'high-performance' });
-  const gl = renderer.getContext();
-  // A shader that does not compile is reported through /log (three.js would only console.error).
-  renderer.debug.onShaderError = (g, program, vs, fs) => {
-    log(`shader error: ${g.getProgramInfoLog(program)}\n${g.getShaderInfoLog(fs)}\n${g.getShaderInfoLog(vs)}`.slice(0, 4000));
+  // The main renderer, and (s23, cases with c.noFloatLinear) a second one on its own canvas
+  // whose context hides OES_texture_float_linear, as a GPU without it (iOS Safari, many Android
+  // GPUs): 32-bit float textures are then not filterable, and web/clothfit.js must upload its
+  // weave maps and light maps as half floats (floatTexturesFilterable). SwiftShader has the
+  // extension, so hiding it from getExtension is the only way to see that path here: three.js
+  // never enables it, and WebGL then treats linear-filtered float textures as incomplete.
+  const makeRenderer = (canvas, hideFloatLinear) => {
+    if (hideFloatLinear) {
+      const getContext = canvas.getContext.bind(canvas);
+      canvas.getContext = (type, attrs) => {
+        const ctx = getContext(type, attrs);
+        if (ctx && !ctx.clothfitHidden) {
+          const ge = ctx.getExtension.bind(ctx), gs = ctx.getSupportedExtensions.bind(ctx);
+          ctx.getExtension = (n) => (n === 'OES_texture_float_linear' ? null : ge(n));
+          ctx.getSupportedExtensions = () => gs().filter((n) => n !== 'OES_texture_float_linear');
+          ctx.clothfitHidden = true;
+        }
+        return ctx;
+      };
+    }
+    const r = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true, powerPreference: 'high-performance' });
+    const g = r.getContext();
+    // A shader that does not compile is reported through /log (three.js would only console.error).
+    r.debug.onShaderError = (gg, program, vs, fs) => {
+      log(`shader error: ${gg.getProgramInfoLog(program)}\n${gg.getShaderInfoLog(fs)}\n${gg.getShaderInfoLog(vs)}`.slice(0, 4000));
+    };
+    log(`WebGL${hideFloatLinear ? ' (OES_texture_float_linear hidden)' : ''}: ${g.getParameter(g.VERSION)} / ${g.getParameter(g.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? g.RENDERER)}; OES_texture_float_linear: ${r.extensions.has('OES_texture_float_linear')}; max anisotropy: ${r.capabilities.getMaxAnisotropy()}`);
+    return { renderer: r, gl: g };
   };
-  log(`WebGL: ${gl.getParameter(gl.VERSION)} / ${gl.getParameter(gl.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? gl.RENDERER)}; OES_texture_float_linear: ${renderer.extensions.has('OES_texture_float_linear')}; max anisotropy: ${renderer.capabilities.getMaxAnisotropy()}`);
+  const main = makeRenderer(document.getElementById('c'), false);
+  let noFloatLinear = null;
   const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
   const cards = new Map();
   for (const c of plan.cases) {
     const t0 = performance.now();
-    let sc = cards.get(c.card);
+    if (c.noFloatLinear && !noFloatLinear) {
+      const cv = document.createElement('canvas');
+      document.body.appendChild(cv);
+      noFloatLinear = makeRenderer(cv, true);
+    }
+    const { renderer, gl } = c.noFloatLinear ? noFloatLinear : main;
+    const cardKey = `${c.noFloatLinear ? 'nfl:' : ''}${c.card}`;
+    let sc = cards.get(cardKey);
     if (!sc) {
       sc = await loadSceneCard(fsUrl(c.card), { renderer, resolvePath: (p, base) => {
         if (!p.includes('/') && !/\.[A-Za-z0-9]+$/.test(p) && base && p !== c.card) return fsUrl(`${plan.hdri_dir}/${p}.exr`);
         return resolvePath(p, base);
       } });
-      cards.set(c.card, sc);
+      cards.set(cardKey, sc);
     }
     // fetchClothfitPreset: also fetches a preset's weave maps; their "file" is an absolute
     // file-system path here, served under /fs.
     // renderer: texture.anisotropy of the maps clamped to getMaxAnisotropy() (logged when it is).
     const material = await fetchClothfitPreset(fsUrl(c.preset), { renderer, resolveWeaveMapPath: (file) => fsUrl(file) });
     const wmap = material.userData.clothfit?.weave_maps;
-    if (wmap) log(`${c.name}: weave maps ${wmap.file}${wmap.anisotropy ? `, anisotropy ${wmap.anisotropy} (max ${renderer.capabilities.getMaxAnisotropy()})` : ''}${material.viewBands ? `, ${material.viewBands} view bands (${material.weaveMaps.viewCosines.join(' ')}; max texture units ${renderer.capabilities.maxTextures})` : ''}`);
+    if (wmap) log(`${c.name}: weave maps ${wmap.file}${wmap.anisotropy ? `, anisotropy ${wmap.anisotropy} (max ${renderer.capabilities.getMaxAnisotropy()})` : ''}${material.viewBands ? `, ${material.viewBands} view bands (${material.weaveMaps.viewCosines.join(' ')}; max texture units ${renderer.capabilities.maxTextures})` : ''}${material.weaveMaps?.weightsTexture ? `, ${material.weaveMaps.weightsTexture.type === THREE.HalfFloatType ? 'half' : '32-bit'} float` : ''}`);
     // s13-lm: the card's light map, baked by the case's own `clothfit render-preview
     // --light-map-out` (c.lightMap, an EXR: irradiance E over the fabric's uv box), on the fabric
     // material only (applyLightMap; the non-fabric meshes get none, as in the preview).
     let lightMap = null;
     if (c.lightMap) {
-      lightMap = applyLightMap(material, await fetchLightMap(fsUrl(c.lightMap)));
+      lightMap = applyLightMap(material, await fetchLightMap(fsUrl(c.lightMap), { renderer }));
       if (c.lightMapMutation) mutateLightMap(lightMap, c.lightMapMutation);
       const { uvBox, width } = lightMap.userData.clothfit;
-      log(`${c.name}: light map ${width}x${width}, uv box ${uvBox.join(' ')}${c.lightMapMutation ? `, MUTATED: ${c.lightMapMutation}` : ''}`);
+      log(`${c.name}: light map ${width}x${width}, uv box ${uvBox.join(' ')}, ${lightMap.type === THREE.HalfFloatType ? 'half' : '32-bit'} float${c.lightMapMutation ? `, MUTATED: ${c.lightMapMutation}` : ''}`);
     }
     sc.setMaterial(material);
     // Shadow cases (run.mjs SHADOW_CASES, session 13): three.js shadow maps with the case's
