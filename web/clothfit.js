@@ -2786,6 +2786,36 @@ export function fitShadowCamera(light, receivers, casters, mapSize) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// The shadow maps' texture units (session 23; docs/web.md "Real GPUs"). Each shadow-casting light
+// costs every lit program one more sampler (three.js's directionalShadowMap[i] etc.), and
+// WebGL2 guarantees only 16 fragment samplers (MAX_TEXTURE_IMAGE_UNITS; Apple GPUs and many
+// Android ones have exactly 16). Woven with view-band maps, a light map and the studio map's
+// four panels as shadowed lights needs 17; with the 8 panels of some maps, 21. A program over the
+// limit fails to link and three.js draws nothing for it. So, with shadows on, the card compiles
+// its programs, counts each one's samplers and checks that it linked; if any program is over the
+// limit (or did not link, e.g. for too many varyings), the environment's weakest split-off lights
+// stop casting shadows first (panels, then the sun, then the card's own lights), and the check
+// repeats. What was dropped is logged (console.warn) and kept in sc.shadowBudget.
+
+const SAMPLER_TYPES = new Set([0x8b5e, 0x8b60, 0x8b5f, 0x8b62, 0x8dc1, 0x8dc4, 0x8dc5, 0x8dc9, 0x8dca, 0x8dcb, 0x8dcc, 0x8dcf,
+  0x8dd0, 0x8dd2, 0x8dd3, 0x8dd4, 0x8dd7]);  // SAMPLER_2D, _CUBE, _3D, _2D_SHADOW, _2D_ARRAY, _2D_ARRAY_SHADOW, _CUBE_SHADOW, INT_ and UNSIGNED_INT_ variants
+
+/** Active sampler uniforms of a linked WebGL program (array elements counted), or null if it did not link. */
+export function programSamplerCount(gl, program) {
+  if (!gl.getProgramParameter(program, gl.LINK_STATUS)) return null;
+  let n = 0;
+  const count = gl.getProgramParameter(program, gl.ACTIVE_UNIFORMS);
+  for (let i = 0; i < count; ++i) {
+    const u = gl.getActiveUniform(program, i);
+    if (u && SAMPLER_TYPES.has(u.type)) n += u.size;
+  }
+  return n;
+}
+
+// The lights' power for the drop order: intensity x the colour's luminance.
+const lightPower = (l) => l.intensity * (0.2126 * l.color.r + 0.7152 * l.color.g + 0.0722 * l.color.b);
+
 /**
  * Load a scene card: returns {card, gltf, scene, camera, fabricMeshes, setMaterial(m),
  * setEnvironment(pathOrNull, {intensity, rotationYDegrees}), apply(renderer), width, height}.
@@ -2849,6 +2879,8 @@ export async function loadSceneCard(url, options = {}) {
         mm.side = mesh.userData.gltfMaterial.side;
         mesh.material = mm;
       }
+      // a new program: check the shadow maps' samplers again (with the card's renderer)
+      if (this.shadows && options.renderer) this.fitShadowBudget(options.renderer);
     },
     // sun: 'auto' (default, as `clothfit render-preview`) draws a compact sun of the map as a
     // THREE.DirectionalLight (this.sunLight) and builds the PMREM from the sun-free map
@@ -2952,6 +2984,63 @@ export async function loadSceneCard(url, options = {}) {
         fitShadowCamera(obj, receivers, casters, o.mapSize);
         sh.needsUpdate = true;
       });
+      // the lights fitShadowBudget took the shadow from stay without it (checked again there)
+      if (o && this.shadowBudget) for (const l of this.shadowBudget.droppedLights) l.castShadow = false;
+    },
+    // Shadows over the renderer's sampler limit: see programSamplerCount above. maxSamplers:
+    // this.samplerLimit ?? renderer.capabilities.maxTextures (MAX_TEXTURE_IMAGE_UNITS). Compiles
+    // (renderer.compile) only when the materials, the shadow-casting lights or the limit changed.
+    // Returns this.shadowBudget: {maxSamplers, samplers (the most any program uses), dropped
+    // (light names), droppedLights, linked}.
+    samplerLimit: null,
+    shadowBudget: null,
+    fitShadowBudget(renderer) {
+      if (!this.shadows) { this.shadowBudget = null; return null; }
+      const maxSamplers = this.samplerLimit ?? renderer.capabilities.maxTextures;
+      const lights = [], materials = new Set();
+      scene.traverse((o) => {
+        if ((o.isDirectionalLight || o.isSpotLight || o.isPointLight) && o.visible) lights.push(o);
+        if (o.isMesh && o.visible) for (const m of Array.isArray(o.material) ? o.material : [o.material]) materials.add(m);
+      });
+      const prev = this.shadowBudget;
+      for (const l of lights) l.castShadow = true;  // as setShadows left them; drops re-decided below
+      const key = [maxSamplers, this.shadows.type, ...lights.map((l) => l.uuid), ...[...materials].map((m) => `${m.uuid}:${m.version}`)].join('|');
+      if (prev && prev.key === key) {
+        for (const l of prev.droppedLights) l.castShadow = false;
+        return prev;
+      }
+      // Drop order: the environment's panels (weakest first), its sun, then the card's lights.
+      const env = new Set([this.sunLight, ...this.panelLights].filter(Boolean));
+      const order = [...this.panelLights].sort((a, b) => lightPower(a) - lightPower(b));
+      if (this.sunLight) order.push(this.sunLight);
+      order.push(...lights.filter((l) => !env.has(l)).sort((a, b) => lightPower(a) - lightPower(b)));
+      const gl = renderer.getContext();
+      const droppedLights = [];
+      let samplers = 0, linked = true;
+      renderer.shadowMap.enabled = true;
+      for (let pass = 0; pass <= lights.length; ++pass) {
+        renderer.compile(scene, camera);
+        samplers = 0; linked = true;
+        for (const m of materials) {
+          const prog = renderer.properties.get(m).currentProgram;
+          if (!prog) continue;
+          const n = programSamplerCount(gl, prog.program);
+          if (n === null) linked = false;
+          else samplers = Math.max(samplers, n);
+        }
+        if (linked && samplers <= maxSamplers) break;
+        const casting = order.filter((l) => l.castShadow);
+        if (!casting.length) break;
+        // over by k samplers: k lights (one shadow map each); a failed link: half of them
+        const k = linked ? samplers - maxSamplers : Math.ceil(casting.length / 2);
+        for (const l of casting.slice(0, k)) { l.castShadow = false; droppedLights.push(l); }
+      }
+      const dropped = droppedLights.map((l) => l.name || l.type);
+      if (dropped.length) {
+        console.warn(`clothfit: shadow maps: ${dropped.length} of ${lights.length} lights cast no shadow (${dropped.join(', ')}): with them a program needs more than the renderer's ${maxSamplers} texture units${linked ? '' : ', or did not link'} (docs/web.md "Real GPUs")`);
+      }
+      this.shadowBudget = { key, maxSamplers, samplers, linked, dropped, droppedLights };
+      return this.shadowBudget;
     },
     apply(renderer) {
       renderer.toneMapping = this.toneMapping;
@@ -2962,6 +3051,7 @@ export async function loadSceneCard(url, options = {}) {
       if (this.shadows) {
         renderer.shadowMap.type = SHADOW_TYPES[this.shadows.type];
         this.setShadows(this.shadows);  // a sun light added since is fitted too
+        this.fitShadowBudget(renderer);  // within the renderer's texture units (session 23)
       }
     },
   };

@@ -358,6 +358,27 @@ for (const s of scenes) {
   }
   }
 }
+// s23: the shadow maps within a GPU's texture units (web/clothfit.js fitShadowBudget; docs/web.md
+// "Real GPUs"). The drape card as it is (shadow maps + light map) with the studio's four panels as
+// shadowed lights and the twill lobe's view-band maps (at anisotropy 1, so that the image compares without the
+// anisotropic-filter residual of bounds.json): its program needs 17 samplers (SwiftShader
+// allows 32; WebGL2 guarantees 16, and Apple GPUs have exactly 16). The case at samplerLimit 16
+// must come out at <= 16 with the program linked, by taking the shadow from the weakest panel(s)
+// (samplersMax, droppedExactly: checked below); its twin without a limit must keep every shadow
+// (droppedExactly 0) and, since SwiftShader has 32 units, matches the C++ preview (which shadows
+// every light) as the other card cases do. The limited case differs from the C++ preview by the
+// dropped panel's shadow: its image bound is in bounds.json.
+{
+  const s = 'drape', variant = 'studio-card-panels', m = 'woven-lobe-maps-twill-views-aniso1';
+  const card = path.join(work, `${s}-${variant}.card.json`);
+  for (const [suffix, limit, dropped] of [['', null, 0], ['-16units', 16, 1]]) {
+    const name = `${s}/${variant}${suffix}/${m}`;
+    if (args.only && !name.includes(args.only)) continue;
+    const png = path.join(work, `${s}-${variant}${suffix}-${m}.png`);
+    cases.push({ name, card, preset: path.join(work, `${m}.json`), png, shadows: true, lightMap: png.replace(/\.png$/, '.lm.exr'),
+      samplerLimit: limit, budgetCheck: { samplersMax: limit ?? 32, droppedExactly: dropped } });
+  }
+}
 // s23: a GPU without OES_texture_float_linear (iOS Safari, many Android GPUs): the page draws
 // these cases with a second renderer whose context hides the extension (web/test/browser-test.js
 // makeRenderer), so web/clothfit.js must upload the weave maps and the light map as half floats
@@ -438,7 +459,9 @@ const server = await startServer({
   onPost: (url, body) => {
     if (url.pathname === '/result') {
       const name = url.searchParams.get('name');
-      results.set(name, { w: Number(url.searchParams.get('w')), h: Number(url.searchParams.get('h')), ms: Number(url.searchParams.get('ms')), msFrame: url.searchParams.get('msFrame') || '', body });
+      const q = url.searchParams;
+      results.set(name, { w: Number(q.get('w')), h: Number(q.get('h')), ms: Number(q.get('ms')), msFrame: q.get('msFrame') || '', body,
+        budget: q.has('samplers') ? { samplers: Number(q.get('samplers')), maxSamplers: Number(q.get('maxSamplers')), linked: q.get('linked') === 'true', dropped: q.get('dropped') ? q.get('dropped').split(',') : [] } : null });
     } else if (url.pathname === '/done') {
       finish(body.toString());
     }
@@ -591,7 +614,13 @@ for (const c of cases) {
   const b = bounds.cases?.[c.name];
   const accept = mean <= ACCEPT.mean && p99 <= ACCEPT.p99;
   const bound = b && b.acceptance === false ? b : ACCEPT;
-  const pass = n > 0 && mean <= bound.mean && p99 <= bound.p99;
+  let pass = n > 0 && mean <= bound.mean && p99 <= bound.p99;
+  if (c.budgetCheck) {  // s23: the shadow budget (samplers, link, which lights lost their shadow)
+    const bud = r.budget, want = c.budgetCheck;
+    const ok = bud && bud.linked && bud.samplers <= want.samplersMax && bud.dropped.length === want.droppedExactly;
+    say(`${c.name}: shadow budget ${bud ? `${bud.samplers} samplers (limit ${bud.maxSamplers}), linked ${bud.linked}, no shadow from [${bud.dropped.join(', ')}]` : 'not reported'}; expected <= ${want.samplersMax} samplers, ${want.droppedExactly} dropped: ${ok ? 'ok' : 'FAILED'}`);
+    if (!ok) pass = false;
+  }
   if (!pass) failures++;
   rows.push({ name: c.name, pixels: n, mean, p99, accept, pass, bound, ms: r.ms, msFrame: r.msFrame, note: b?.note ?? '' });
   fs.writeFileSync(c.png.replace(/\.png$/, '.mask.pgm'), Buffer.concat([Buffer.from(`P5\n${w} ${h}\n255\n`), mask]));

@@ -95,7 +95,12 @@ async function run() {
     // Shadow cases (run.mjs SHADOW_CASES, session 13): three.js shadow maps with the case's
     // settings; a case without them leaves the scene as loaded (no shadows).
     if (c.shadows || sc.shadows) sc.setShadows(c.shadows ?? null);
+    // s23: a case with c.samplerLimit checks the card's shadow budget at that many texture units
+    // (WebGL2's minimum is 16; SwiftShader has 32): web/clothfit.js fitShadowBudget.
+    sc.samplerLimit = c.samplerLimit ?? null;
     sc.apply(renderer);
+    const budget = sc.shadowBudget;
+    if (c.samplerLimit) log(`${c.name}: shadow budget ${budget ? `${budget.samplers} of ${budget.maxSamplers} samplers, linked ${budget.linked}, no shadow from: ${budget.dropped.join(', ') || 'none'}` : 'none (no shadows)'}`);
     renderer.setSize(sc.width, sc.height, false);
     renderer.render(sc.scene, sc.camera);
     const W = sc.width, H = sc.height;
@@ -155,7 +160,7 @@ async function run() {
         out[W * H * 4 + y * W + x] = mk[(src + x) * 4] > 127 ? 255 : 0;
       }
     }
-    await post(`/result?name=${encodeURIComponent(c.name)}&w=${W}&h=${H}&ms=${(performance.now() - t0).toFixed(0)}&msFrame=${encodeURIComponent(msFrame)}`, out);
+    await post(`/result?name=${encodeURIComponent(c.name)}&w=${W}&h=${H}&ms=${(performance.now() - t0).toFixed(0)}&msFrame=${encodeURIComponent(msFrame)}${budget ? `&samplers=${budget.samplers}&maxSamplers=${budget.maxSamplers}&linked=${budget.linked}&dropped=${encodeURIComponent(budget.dropped.join(','))}` : ''}`, out);
   }
   await post('/done', 'ok');
 }
