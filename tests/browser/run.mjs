@@ -443,7 +443,12 @@ async function cppAll(list = cases.filter((c) => !c.lightMap)) {
     for (const c of lm) if (cppErrors.has(c.name)) c.skipBrowser = true;  // no texture: no frame
   }
 }
-fs.writeFileSync(path.join(work, 'plan.json'), JSON.stringify({ hdri_dir: hdriDir, frames: Number(args.frames ?? 0), cases: cases.filter((c) => !c.skipBrowser) }, null, 1));
+// The page draws the plan grouped by preset (s23; the table keeps the order above): consecutive
+// cases of one preset share three.js programs (web/test/browser-test.js disposes each material
+// one case later), so SwiftShader compiles each program about once instead of once per case.
+const planCases = cases.filter((c) => !c.skipBrowser).map((c, i) => [c, i])
+  .sort((a, b) => (a[0].preset < b[0].preset ? -1 : a[0].preset > b[0].preset ? 1 : a[1] - b[1])).map(([c]) => c);
+fs.writeFileSync(path.join(work, 'plan.json'), JSON.stringify({ hdri_dir: hdriDir, frames: Number(args.frames ?? 0), cases: planCases }, null, 1));
 // With --frames the previews run after the browser, so they do not share the CPU with the timing.
 const cppPromise = Number(args.frames ?? 0) > 0 ? null : cppAll();
 

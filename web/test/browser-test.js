@@ -58,6 +58,7 @@ async function run() {
   let noFloatLinear = null;
   const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
   const cards = new Map();
+  let previous = null;  // the last case's material and light map, disposed after the next case
   for (const c of plan.cases) {
     const t0 = performance.now();
     if (c.noFloatLinear && !noFloatLinear) {
@@ -150,8 +151,12 @@ async function run() {
     gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, mk);
     renderer.toneMapping = tm; sc.scene.background = bg;
     for (const [o, m] of saved) o.material = m;
-    material.dispose();
-    lightMap?.dispose();
+    // Disposed one case later (s23): a material's program stays in three.js's cache only while a
+    // material uses it, so the next case's material (run.mjs orders the plan by preset) reuses it
+    // instead of compiling it again. Only the compile time changes: same programs, same frames.
+    previous?.material.dispose();
+    previous?.lightMap?.dispose();
+    previous = { material, lightMap };
     const out = new Uint8Array(W * H * 5);
     for (let y = 0; y < H; ++y) {
       const src = (H - 1 - y) * W;  // readPixels rows are bottom-up
