@@ -1924,7 +1924,7 @@ function useHalfFloat(halfFloat, renderer) {
   const half = !floatTexturesFilterable(renderer);
   if (half && !halfFloatNoted) {
     halfFloatNoted = true;
-    console.info('clothfit: this WebGL context has no OES_texture_float_linear: weave maps and light maps are uploaded as half floats (filterable; about 5e-4 relative rounding)');
+    console.info(`clothfit: ${renderer ? "the renderer's WebGL context has" : 'a probed WebGL2 context has (or no context could be made, so'} no OES_texture_float_linear${renderer ? '' : ')'}: weave maps and light maps are uploaded as half floats (filterable; about 5e-4 relative rounding)`);
   }
   return half;
 }
@@ -2303,7 +2303,7 @@ export function lightMapTextureFromExr(exr, meta = {}) {
     data[t * 4 + 3] = 1;
   }
   const half = useHalfFloat(meta.halfFloat, meta.renderer);
-  if (half) {  // irradiance above the half range (65504) would become Infinity: clamp, and say so
+  if (half) {  // irradiance above the half range (65504): clamped here, with one warning (three.js's toHalfFloat would warn per value)
     let over = 0;
     for (let i = 0; i < data.length; ++i) if (data[i] > HALF_MAX) { data[i] = HALF_MAX; ++over; }
     if (over) console.warn(`clothfit: ${name}: ${over} light-map values above ${HALF_MAX} clamped to it (half-float upload)`);
@@ -2900,6 +2900,7 @@ export async function loadSceneCard(url, options = {}) {
       if (!path) {
         scene.environment = null;
         scene.background = new THREE.Color(bg[0], bg[1], bg[2]);
+        if (this.shadows && options.renderer) this.fitShadowBudget(options.renderer);  // lights removed
         return;
       }
       if (path === 'procedural-sky') throw new Error('procedural-sky is not available in the browser');
@@ -2955,6 +2956,8 @@ export async function loadSceneCard(url, options = {}) {
       scene.background = eq;
       scene.backgroundIntensity = intensity;
       scene.backgroundRotation.set(0, rot, 0);
+      // new lights (the sun, the panels) and a new map: the shadow maps' samplers again (s23)
+      if (this.shadows) this.fitShadowBudget(renderer);
     },
     shadows: null,    // the shadow settings in force (shadowOptions), null = no shadow maps
     // Shadow maps on or off (see shadowOptions): castShadow on the punctual lights (the card's and
@@ -2985,7 +2988,8 @@ export async function loadSceneCard(url, options = {}) {
         sh.needsUpdate = true;
       });
       // the lights fitShadowBudget took the shadow from stay without it (checked again there)
-      if (o && this.shadowBudget) for (const l of this.shadowBudget.droppedLights) l.castShadow = false;
+      if (!o) this.shadowBudget = null;
+      else if (this.shadowBudget) for (const l of this.shadowBudget.droppedLights) l.castShadow = false;
     },
     // Shadows over the renderer's sampler limit: see programSamplerCount above. maxSamplers:
     // this.samplerLimit ?? renderer.capabilities.maxTextures (MAX_TEXTURE_IMAGE_UNITS). Compiles
@@ -2997,49 +3001,67 @@ export async function loadSceneCard(url, options = {}) {
     fitShadowBudget(renderer) {
       if (!this.shadows) { this.shadowBudget = null; return null; }
       const maxSamplers = this.samplerLimit ?? renderer.capabilities.maxTextures;
-      const lights = [], materials = new Set();
+      const prev = this.shadowBudget;
+      const prevDropped = new Set(prev?.droppedLights ?? []);
+      // The lights that want a shadow: casting now, or dropped by the last check (a page's own
+      // castShadow = false on a light is left alone). Visible punctual lights only.
+      const wanted = [], materials = new Set();
       scene.traverse((o) => {
-        if ((o.isDirectionalLight || o.isSpotLight || o.isPointLight) && o.visible) lights.push(o);
+        if ((o.isDirectionalLight || o.isSpotLight || o.isPointLight) && o.visible && (o.castShadow || prevDropped.has(o))) wanted.push(o);
         if (o.isMesh && o.visible) for (const m of Array.isArray(o.material) ? o.material : [o.material]) materials.add(m);
       });
-      const prev = this.shadowBudget;
-      for (const l of lights) l.castShadow = true;  // as setShadows left them; drops re-decided below
-      const key = [maxSamplers, this.shadows.type, ...lights.map((l) => l.uuid), ...[...materials].map((m) => `${m.uuid}:${m.version}`)].join('|');
+      const key = [maxSamplers, this.shadows.type, scene.environment?.uuid ?? '-', ...wanted.map((l) => `${l.uuid}:${l.map?.uuid ?? ''}`),
+        ...[...materials].map((m) => `${m.uuid}:${m.version}`)].join('|');
       if (prev && prev.key === key) {
-        for (const l of prev.droppedLights) l.castShadow = false;
+        for (const l of wanted) l.castShadow = !prevDropped.has(l);
         return prev;
       }
-      // Drop order: the environment's panels (weakest first), its sun, then the card's lights.
+      // Keep order: the card's own lights (strongest first), the environment's sun, its panels
+      // (strongest first); the drop order is the reverse.
       const env = new Set([this.sunLight, ...this.panelLights].filter(Boolean));
-      const order = [...this.panelLights].sort((a, b) => lightPower(a) - lightPower(b));
-      if (this.sunLight) order.push(this.sunLight);
-      order.push(...lights.filter((l) => !env.has(l)).sort((a, b) => lightPower(a) - lightPower(b)));
+      const byPower = (a, b) => lightPower(b) - lightPower(a);
+      const keep = [...wanted.filter((l) => !env.has(l)).sort(byPower), ...(this.sunLight && wanted.includes(this.sunLight) ? [this.sunLight] : []),
+        ...this.panelLights.filter((l) => wanted.includes(l)).sort(byPower)];
       const gl = renderer.getContext();
-      const droppedLights = [];
-      let samplers = 0, linked = true;
-      renderer.shadowMap.enabled = true;
-      for (let pass = 0; pass <= lights.length; ++pass) {
+      renderer.shadowMap.enabled = true;  // as apply sets them, so the programs checked are the ones drawn
+      renderer.shadowMap.type = SHADOW_TYPES[this.shadows.type];
+      // Compiles with the first n of `keep` casting; returns {linked, samplers} over every program.
+      const check = (n) => {
+        keep.forEach((l, i) => { l.castShadow = i < n; });
         renderer.compile(scene, camera);
-        samplers = 0; linked = true;
+        let samplers = 0, linked = true;
         for (const m of materials) {
           const prog = renderer.properties.get(m).currentProgram;
           if (!prog) continue;
-          const n = programSamplerCount(gl, prog.program);
-          if (n === null) linked = false;
-          else samplers = Math.max(samplers, n);
+          const c = programSamplerCount(gl, prog.program);
+          if (c === null) linked = false;
+          else samplers = Math.max(samplers, c);
         }
-        if (linked && samplers <= maxSamplers) break;
-        const casting = order.filter((l) => l.castShadow);
-        if (!casting.length) break;
-        // over by k samplers: k lights (one shadow map each); a failed link: half of them
-        const k = linked ? samplers - maxSamplers : Math.ceil(casting.length / 2);
-        for (const l of casting.slice(0, k)) { l.castShadow = false; droppedLights.push(l); }
+        return { linked, samplers };
+      };
+      let n = keep.length, r = check(n), why = '';
+      if (!(r.linked && r.samplers <= maxSamplers)) {
+        // A real GPU over its limit fails the link (ANGLE: "sampler count exceeds
+        // MAX_TEXTURE_IMAGE_UNITS"), so the failed program cannot be counted. Count the programs
+        // without shadow maps instead: each casting light adds one sampler to them, so
+        // maxSamplers - that count lights fit. Then verify, and drop one more per pass while a
+        // program still fails (varyings: one vec4 per shadowed light, 15 guaranteed).
+        const base = check(0);
+        if (!base.linked) {
+          n = 0; r = base;
+          why = 'a program does not link even without shadow maps';
+        } else {
+          n = Math.max(0, Math.min(keep.length, maxSamplers - base.samplers));
+          r = n === 0 ? base : check(n);
+          while (n > 0 && !(r.linked && r.samplers <= maxSamplers)) r = check(--n);
+          why = r.linked ? `with more, a program needs more than the renderer's ${maxSamplers} texture units` : 'a program does not link';
+          if (r.linked && n < maxSamplers - base.samplers) why += ' or does not link (varyings?)';
+        }
       }
+      const droppedLights = keep.slice(n);
       const dropped = droppedLights.map((l) => l.name || l.type);
-      if (dropped.length) {
-        console.warn(`clothfit: shadow maps: ${dropped.length} of ${lights.length} lights cast no shadow (${dropped.join(', ')}): with them a program needs more than the renderer's ${maxSamplers} texture units${linked ? '' : ', or did not link'} (docs/web.md "Real GPUs")`);
-      }
-      this.shadowBudget = { key, maxSamplers, samplers, linked, dropped, droppedLights };
+      if (dropped.length) console.warn(`clothfit: shadow maps: ${dropped.length} of ${keep.length} lights cast no shadow (${dropped.join(', ')}): ${why} (docs/web.md "Real GPUs")`);
+      this.shadowBudget = { key, maxSamplers, samplers: r.samplers, linked: r.linked, dropped, droppedLights };
       return this.shadowBudget;
     },
     apply(renderer) {

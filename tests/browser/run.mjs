@@ -363,7 +363,10 @@ for (const s of scenes) {
 // shadowed lights and the twill lobe's view-band maps (at anisotropy 1, so that the image compares without the
 // anisotropic-filter residual of bounds.json): its program needs 17 samplers (SwiftShader
 // allows 32; WebGL2 guarantees 16, and Apple GPUs have exactly 16). The case at samplerLimit 16
-// must come out at <= 16 with the program linked, by taking the shadow from the weakest panel(s)
+// runs on a context that fails to link any program over 16 samplers, as ANGLE does at its limit
+// (web/test/browser-test.js makeRenderer): the budget must find how many shadows fit without
+// counting the failed program, and come out at <= 16 with the program linked, by taking the
+// shadow from the weakest panel(s)
 // (samplersMax, droppedExactly: checked below); its twin without a limit must keep every shadow
 // (droppedExactly 0) and, since SwiftShader has 32 units, matches the C++ preview (which shadows
 // every light) as the other card cases do. The limited case differs from the C++ preview by the

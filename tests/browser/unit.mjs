@@ -832,4 +832,31 @@ if (args.clothfit) {
     check(() => assert.ok(added.length >= 3), `${who}: routing lines present`);
   }
 }
+// ---- s23: real GPUs (docs/web.md "Real GPUs"): float filtering and sampler counting ----------
+{
+  const { floatTexturesFilterable, programSamplerCount, weaveMapsFromExr } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+  const fakeRenderer = (has) => ({ extensions: { has: (n) => (n === 'OES_texture_float_linear' ? has : true) } });
+  check(() => assert.equal(floatTexturesFilterable(fakeRenderer(true)), true), 'float filterable: the renderer says yes');
+  check(() => assert.equal(floatTexturesFilterable(fakeRenderer(false)), false), 'float filterable: the renderer says no');
+  check(() => assert.equal(floatTexturesFilterable(undefined), true), 'float filterable without a renderer in node: 32-bit, as before');
+  const buf = fs.readFileSync(path.join(repo, 'tests', 'browser', 'maps', 'canvas.weave.exr'));
+  const types = (m) => [m.weightsTexture.type, m.kdTexture.type, m.anisotropyTexture().type];
+  check(() => assert.ok(types(weaveMapsFromExr(buf, { field: {}, renderer: fakeRenderer(false) })).every((t) => t === THREE.HalfFloatType)), 'weave maps: half floats on a context without OES_texture_float_linear');
+  check(() => assert.ok(types(weaveMapsFromExr(buf, { field: {}, renderer: fakeRenderer(true) })).every((t) => t === THREE.FloatType)), 'weave maps: 32-bit floats on a context with it');
+  check(() => assert.ok(types(weaveMapsFromExr(buf, { field: {}, renderer: fakeRenderer(false), halfFloat: false })).every((t) => t === THREE.FloatType)), 'weave maps: halfFloat false forces 32-bit');
+  const n = 4, R = new Float32Array(n * n).fill(2), big = new Float32Array(n * n).fill(1e6);
+  const lm = { width: n, height: n, channels: { R, G: R, B: big }, attributes: { 'clothfit:uv_box': '0 0 1 1' } };
+  const half = lightMapTextureFromExr(lm, { renderer: fakeRenderer(false) });
+  check(() => assert.ok(half.type === THREE.HalfFloatType && THREE.DataUtils.fromHalfFloat(half.image.data[0]) === 2 && THREE.DataUtils.fromHalfFloat(half.image.data[2]) === 65504), 'light map: half floats, values above 65504 clamped to it');
+  check(() => assert.equal(lightMapTextureFromExr(lm, { renderer: fakeRenderer(true) }).type, THREE.FloatType), 'light map: 32-bit floats on a context with the extension');
+  // programSamplerCount on a fake context: samplers of every WebGL2 type counted with their array
+  // size, other uniforms not, a failed link null.
+  const GL = { LINK_STATUS: 0x8b82, ACTIVE_UNIFORMS: 0x8b86 };
+  const fakeGl = (linked, uniforms) => ({ ...GL, getProgramParameter: (p, k) => (k === GL.LINK_STATUS ? linked : uniforms.length), getActiveUniform: (p, i) => uniforms[i] });
+  const u = (type, size = 1) => ({ type, size });
+  const samplerTypes = [0x8b5e, 0x8b5f, 0x8b60, 0x8b62, 0x8dc1, 0x8dc4, 0x8dc5, 0x8dca, 0x8dcb, 0x8dcc, 0x8dcf, 0x8dd2, 0x8dd3, 0x8dd4, 0x8dd7];
+  check(() => assert.equal(programSamplerCount(fakeGl(true, samplerTypes.map((t) => u(t))), {}), 15), 'every WebGL2 sampler type counted');
+  check(() => assert.equal(programSamplerCount(fakeGl(true, [u(0x8b5e, 4), u(0x8b51), u(0x8b5c), u(0x1406, 9)]), {}), 4), 'a sampler array counts its size; vec3, mat4, float do not count');
+  check(() => assert.equal(programSamplerCount(fakeGl(false, [u(0x8b5e)]), {}), null), 'a failed link: null');
+}
 console.log(`unit: ${checks} checks passed`);

@@ -47,6 +47,25 @@ async function run() {
     }
     const r = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true, powerPreference: 'high-performance' });
     const g = r.getContext();
+    // s23: a GPU with `linkLimit` texture units (cases with c.samplerLimit): as ANGLE does at
+    // its MAX_TEXTURE_IMAGE_UNITS, a program with more active samplers fails to link
+    // (LINK_STATUS false), so web/clothfit.js's shadow budget meets the failure a real 16-unit
+    // GPU gives, not a linked program it can count. SwiftShader itself allows 32.
+    const linkStatus = g.getProgramParameter.bind(g);
+    const samplerTypes = new Set(['SAMPLER_2D', 'SAMPLER_3D', 'SAMPLER_CUBE', 'SAMPLER_2D_SHADOW', 'SAMPLER_2D_ARRAY', 'SAMPLER_2D_ARRAY_SHADOW',
+      'SAMPLER_CUBE_SHADOW', 'INT_SAMPLER_2D', 'INT_SAMPLER_3D', 'INT_SAMPLER_CUBE', 'INT_SAMPLER_2D_ARRAY', 'UNSIGNED_INT_SAMPLER_2D',
+      'UNSIGNED_INT_SAMPLER_3D', 'UNSIGNED_INT_SAMPLER_CUBE', 'UNSIGNED_INT_SAMPLER_2D_ARRAY'].map((k) => g[k]));
+    g.getProgramParameter = (prog, pname) => {
+      const v = linkStatus(prog, pname);
+      if (pname !== g.LINK_STATUS || !v || emulated.linkLimit === null) return v;
+      let n = 0;
+      for (let i = 0, k = linkStatus(prog, g.ACTIVE_UNIFORMS); i < k; ++i) {
+        const u = g.getActiveUniform(prog, i);
+        if (u && samplerTypes.has(u.type)) n += u.size;
+      }
+      if (n > emulated.linkLimit) { emulated.failures++; return false; }
+      return v;
+    };
     // A shader that does not compile is reported through /log (three.js would only console.error).
     r.debug.onShaderError = (gg, program, vs, fs) => {
       log(`shader error: ${gg.getProgramInfoLog(program)}\n${gg.getShaderInfoLog(fs)}\n${gg.getShaderInfoLog(vs)}`.slice(0, 4000));
@@ -54,6 +73,7 @@ async function run() {
     log(`WebGL${hideFloatLinear ? ' (OES_texture_float_linear hidden)' : ''}: ${g.getParameter(g.VERSION)} / ${g.getParameter(g.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? g.RENDERER)}; OES_texture_float_linear: ${r.extensions.has('OES_texture_float_linear')}; max anisotropy: ${r.capabilities.getMaxAnisotropy()}`);
     return { renderer: r, gl: g };
   };
+  const emulated = { linkLimit: null, failures: 0 };  // see makeRenderer
   const main = makeRenderer(document.getElementById('c'), false);
   let noFloatLinear = null;
   const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
@@ -99,9 +119,11 @@ async function run() {
     // s23: a case with c.samplerLimit checks the card's shadow budget at that many texture units
     // (WebGL2's minimum is 16; SwiftShader has 32): web/clothfit.js fitShadowBudget.
     sc.samplerLimit = c.samplerLimit ?? null;
+    emulated.linkLimit = c.samplerLimit ?? null;
+    emulated.failures = 0;
     sc.apply(renderer);
     const budget = sc.shadowBudget;
-    if (c.samplerLimit) log(`${c.name}: shadow budget ${budget ? `${budget.samplers} of ${budget.maxSamplers} samplers, linked ${budget.linked}, no shadow from: ${budget.dropped.join(', ') || 'none'}` : 'none (no shadows)'}`);
+    if (c.samplerLimit) log(`${c.name}: shadow budget ${budget ? `${budget.samplers} of ${budget.maxSamplers} samplers, linked ${budget.linked}, no shadow from: ${budget.dropped.join(', ') || 'none'}` : 'none (no shadows)'}; emulated link failures (programs over ${c.samplerLimit} samplers) while fitting: ${emulated.failures}`);
     renderer.setSize(sc.width, sc.height, false);
     renderer.render(sc.scene, sc.camera);
     const W = sc.width, H = sc.height;
