@@ -112,15 +112,15 @@ async function run() {
       const { uvBox, width } = lightMap.userData.clothfit;
       log(`${c.name}: light map ${width}x${width}, uv box ${uvBox.join(' ')}, ${lightMap.type === THREE.HalfFloatType ? 'half' : '32-bit'} float${c.lightMapMutation ? `, MUTATED: ${c.lightMapMutation}` : ''}`);
     }
+    sc.samplerLimit = c.samplerLimit ?? null;  // before setMaterial, whose budget check uses it
+    emulated.linkLimit = c.samplerLimit ?? null;
+    emulated.failures = 0;
     sc.setMaterial(material);
     // Shadow cases (run.mjs SHADOW_CASES, session 13): three.js shadow maps with the case's
     // settings; a case without them leaves the scene as loaded (no shadows).
     if (c.shadows || sc.shadows) sc.setShadows(c.shadows ?? null);
     // s23: a case with c.samplerLimit checks the card's shadow budget at that many texture units
     // (WebGL2's minimum is 16; SwiftShader has 32): web/clothfit.js fitShadowBudget.
-    sc.samplerLimit = c.samplerLimit ?? null;
-    emulated.linkLimit = c.samplerLimit ?? null;
-    emulated.failures = 0;
     sc.apply(renderer);
     const budget = sc.shadowBudget;
     if (c.samplerLimit) log(`${c.name}: shadow budget ${budget ? `${budget.samplers} of ${budget.maxSamplers} samplers, linked ${budget.linked}, no shadow from: ${budget.dropped.join(', ') || 'none'}` : 'none (no shadows)'}; emulated link failures (programs over ${c.samplerLimit} samplers) while fitting: ${emulated.failures}`);
