@@ -4,7 +4,8 @@
 // docs/sun.md; default: the preset's fit.env_sun when it names a mode (a preset fitted with
 // `--env-sun panels` is drawn with its panels, as `clothfit evaluate` draws it), else the card's
 // environment.sun, else auto), shot (=1: POST the first finished frame as PNG to /shot, for
-// web/tools/screenshot.mjs), shadows (1 | 0 | a JSON object of shadow settings; session 13).
+// web/tools/screenshot.mjs), shadows (1 | 0 | a JSON object of shadow settings; session 13),
+// units (N: keep the shadow maps within N texture units, as on such a GPU; session 23).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { loadSceneCard, fetchClothfitPreset } from './clothfit.js';
@@ -35,6 +36,9 @@ async function main() {
   const sq = q.get('shadows');
   const shadows = sq === null ? undefined : sq === '1' || sq === 'true' ? true : sq === '0' || sq === 'false' ? false : JSON.parse(sq);
   const sc = await loadSceneCard(cardUrl, { renderer, shadows });
+  // units=N: budget the shadow maps as on a GPU with N texture units (docs/web.md "Real GPUs";
+  // the budget only: this GPU still links what it can)
+  if (q.has('units')) sc.samplerLimit = Math.max(1, Math.floor(Number(q.get('units')))) || null;
   sc.apply(renderer);
   renderer.setSize(Math.max(sc.width, 512), Math.max(sc.width, 512) * sc.height / sc.width);
   sc.camera.aspect = sc.width / sc.height;
@@ -52,7 +56,7 @@ async function main() {
     material = m;
     sc.setMaterial(m);
     const p = m.userData.clothfit;
-    info.textContent = `${sc.card.description ?? ''}\nmodel ${p.model}${p.cloth ? ` (${p.cloth.variant}${p.cloth.subsurface ? ', subsurface' : ''})` : ''}: ${JSON.stringify(p.parameters)}\n` +
+    infoBase.textContent = `${sc.card.description ?? ''}\nmodel ${p.model}${p.cloth ? ` (${p.cloth.variant}${p.cloth.subsurface ? ', subsurface' : ''})` : ''}: ${JSON.stringify(p.parameters)}\n` +
       // a far-field yarn lobe is summarised (its IBL table is thousands of numbers)
       (p.woven ? `woven options ${JSON.stringify({ ...p.woven, yarn_lobe: undefined })} (ibl ${m.ibl ?? 'split'}${m.ibl === 'fis' ? `, ${m.fisTaps} + ${m.fisDiffuseTaps} taps` : ''})\n` : '') +
       (m.weaveMaps ? `weave maps ${m.weaveMaps.size} x ${m.weaveMaps.size}, uv_repeats ${m.weaveMaps.uvRepeats}, anisotropy ${m.weaveMaps.anisotropy}${m.viewBands ? `, ${m.viewBands} view bands blended by NoV (cosines ${m.weaveMaps.viewCosines.map((c) => c.toFixed(3)).join(' ')})` : ''}\n` : '') +
@@ -60,6 +64,15 @@ async function main() {
         ? `${m.yarnLobe.model}, ${m.yarnLobe.threads.map((t) => t.offsets.length).join(' + ')} tangents`
         : `${m.yarnLobe.groups.length} yarn groups x ${m.yarnLobe.nodes} nodes`}, IBL table ${m.yarnLobe.ibl.n_theta} x ${m.yarnLobe.ibl.n_phi}\n` : '') +
       `tone mapping ${sc.card.tone_mapping ?? 'ACESFilmic'}, exposure ${sc.exposure}, three.js r${THREE.REVISION}`;
+    showShadowBudget();
+  };
+  // session 23: the shadow maps kept within this GPU's texture units (web/clothfit.js
+  // fitShadowBudget, run by setMaterial and setEnvironment): say which lights lost theirs.
+  const infoBase = document.createElement('span'), shadowLine = document.createElement('span');
+  info.replaceChildren(infoBase, shadowLine);
+  const showShadowBudget = () => {
+    const b = sc.shadowBudget;
+    shadowLine.textContent = b?.dropped.length ? `\nshadows: no shadow from ${b.dropped.join(', ')} (this GPU: ${b.maxSamplers} texture units; docs/web.md "Real GPUs")` : '';
   };
   // renderer: the weave maps' texture.anisotropy (the preset's weave_maps.anisotropy) is clamped
   // to renderer.capabilities.getMaxAnisotropy(), with a console.info when it is.
@@ -83,6 +96,7 @@ async function main() {
     else await sc.setEnvironment(v, { intensity: sc.card.environment?.intensity ?? 1, sun });
     if (sc.sun) console.info(`viewer: environment ${sc.sun.summary}`);
     sc.panels.forEach((p, k) => console.info(`viewer: environment panel ${k + 1}: ${p.summary}`));
+    showShadowBudget();
   };
   if ((q.get('env') ?? 'card') !== 'card' || sun !== cardSun) await setEnv(q.get('env') ?? 'card');
 
