@@ -24,10 +24,20 @@ function halfToFloat(h) {
   return s * (1 + m / 1024) * 2 ** (e - 15);
 }
 
+// Limits (session 23), as the C++ readers' (render/scene/input_limits.h): the decoded image (width
+// x height x channels x 4 bytes of Float32Array) is checked against kMaxImageBytes BEFORE anything
+// is allocated, and a ZIP block inflates into a buffer of its expected size + 1, so a forged
+// block (a "zip bomb") can neither allocate more nor pass as the right length.
+export const EXR_MAX_DECODED_BYTES = 512 * 1024 * 1024;
+const MAX_CHANNELS = 64;  // kMaxChannels of the C++ reader
+// Names read from the file, in error messages: quoted, control and non-ASCII characters escaped,
+// cut to 64 characters (never the untrusted bytes themselves).
+const quote = (s) => JSON.stringify(String(s).slice(0, 64)).replace(/[^\x20-\x7e]/g, (c) => `\\u${c.charCodeAt(0).toString(16).padStart(4, '0')}`);
+
 // ZIP / ZIPS block: inflate, undo the delta predictor, de-interleave (OpenEXR ImfZip.cpp layout).
 function unzipBlock(bytes, expected) {
-  const t = unzlibSync(bytes);
-  if (t.length !== expected) throw new Error(`ZIP block inflates to ${t.length} bytes, expected ${expected}`);
+  const t = unzlibSync(bytes, { out: new Uint8Array(expected + 1) });
+  if (t.length !== expected) throw new Error(`ZIP block inflates to ${t.length > expected ? `more than ${expected}` : t.length} bytes, expected ${expected}`);
   for (let i = 1; i < t.length; ++i) t[i] = (t[i - 1] + t[i] - 128) & 0xff;
   const out = new Uint8Array(t.length);
   const half = (t.length + 1) >> 1;
@@ -64,24 +74,29 @@ export function parseExr(buffer, name = 'EXR') {
     const an = cstr();
     if (an === '') break;
     const type = cstr();
+    if (off + 4 > u8.length) fail('truncated header');
     const size = dv.getInt32(off, true);
     off += 4;
     const end = off + size;
-    if (size < 0 || end > u8.length) fail(`attribute ${an}: bad size`);
+    if (size < 0 || end > u8.length) fail(`attribute ${quote(an)}: bad size`);
     if (type === 'chlist') {
       channels = [];
       while (off < end && u8[off] !== 0) {
         const cn = cstr();
+        if (off + 16 > end) fail(`channel ${quote(cn)}: truncated channel list`);
         const pt = dv.getInt32(off, true);
         const xs = dv.getInt32(off + 8, true), ys = dv.getInt32(off + 12, true);
         off += 16;
-        if (xs !== 1 || ys !== 1) fail(`channel ${cn}: subsampled channels are not supported`);
-        if (!(pt in PIXEL_TYPES)) fail(`channel ${cn}: unknown pixel type ${pt}`);
+        if (xs !== 1 || ys !== 1) fail(`channel ${quote(cn)}: subsampled channels are not supported`);
+        if (!(pt in PIXEL_TYPES)) fail(`channel ${quote(cn)}: unknown pixel type ${pt}`);
+        if (channels.length >= MAX_CHANNELS) fail(`more than ${MAX_CHANNELS} channels`);
         channels.push({ name: cn, type: PIXEL_TYPES[pt] });
       }
     } else if (type === 'compression') {
+      if (size < 1) fail('attribute compression: bad size');
       compression = COMPRESSION[u8[off]] ?? `code ${u8[off]}`;
     } else if (type === 'box2i') {
+      if (size < 16) fail(`attribute ${quote(an)}: bad size`);
       const b = [0, 4, 8, 12].map((k) => dv.getInt32(off + k, true));
       attributes[an] = b;
       if (an === 'dataWindow') dataWindow = b;
@@ -100,10 +115,13 @@ export function parseExr(buffer, name = 'EXR') {
   if (!dataWindow) fail('no dataWindow');
   const linesPerBlock = { NONE: 1, ZIPS: 1, ZIP: 16 }[compression];
   if (!linesPerBlock) fail(`compression ${compression} is not supported (NONE, ZIPS, ZIP)`);
-  for (const c of channels) if (c.type === 'UINT') fail(`channel ${c.name}: UINT is not supported`);
+  for (const c of channels) if (c.type === 'UINT') fail(`channel ${quote(c.name)}: UINT is not supported`);
+  if (new Set(channels.map((c) => c.name)).size !== channels.length) fail('a channel name appears twice');
   const [x0, y0, x1, y1] = dataWindow;
   const width = x1 - x0 + 1, height = y1 - y0 + 1;
   if (!(width > 0 && height > 0)) fail('empty data window');
+  const decoded = width * height * channels.length * 4;  // exact in double up to 2^53
+  if (decoded > EXR_MAX_DECODED_BYTES) fail(`data window ${width} x ${height} with ${channels.length} channels decodes to ${decoded} bytes, over the limit of ${EXR_MAX_DECODED_BYTES} (render/scene/input_limits.h kMaxImageBytes)`);
   const out = {};
   for (const c of channels) out[c.name] = new Float32Array(width * height);
   const bytesPerLine = channels.reduce((s, c) => s + (c.type === 'HALF' ? 2 : 4) * width, 0);

@@ -859,4 +859,46 @@ if (args.clothfit) {
   check(() => assert.equal(programSamplerCount(fakeGl(true, [u(0x8b5e, 4), u(0x8b51), u(0x8b5c), u(0x1406, 9)]), {}), 4), 'a sampler array counts its size; vec3, mat4, float do not count');
   check(() => assert.equal(programSamplerCount(fakeGl(false, [u(0x8b5e)]), {}), null), 'a failed link: null');
 }
+// ---- s23: web/exr.js on hostile files (validate before allocating; no echo of file bytes) -------
+{
+  const { parseExr, EXR_MAX_DECODED_BYTES } = await import(pathToFileURL(path.join(repo, 'web', 'exr.js')).href);
+  const zlib = await import('node:zlib');
+  // A scanline EXR built by hand (OpenEXR file layout): header attributes, offset table, blocks.
+  const exr = ({ width, height, channels = ['R'], compression = 0, blocks = null, names = channels }) => {
+    const parts = [];
+    const u32 = (v) => { const b = Buffer.alloc(4); b.writeUInt32LE(v >>> 0); return b; };
+    const i32 = (v) => { const b = Buffer.alloc(4); b.writeInt32LE(v); return b; };
+    const attr = (name, type, data) => parts.push(Buffer.from(`${name}\0${type}\0`, 'latin1'), i32(data.length), data);
+    parts.push(u32(20000630), u32(2));
+    attr('channels', 'chlist', Buffer.concat([...names.map((n) => Buffer.concat([Buffer.from(`${n}\0`, 'latin1'), i32(2), Buffer.alloc(4), i32(1), i32(1)])), Buffer.from([0])]));
+    attr('compression', 'compression', Buffer.from([compression]));
+    attr('dataWindow', 'box2i', Buffer.concat([i32(0), i32(0), i32(width - 1), i32(height - 1)]));
+    parts.push(Buffer.from([0]));
+    const head = Buffer.concat(parts);
+    const bl = blocks ?? [];
+    let at = head.length + 8 * bl.length;
+    const table = [], data = [];
+    for (const [y, bytes] of bl) {
+      const o = Buffer.alloc(8); o.writeBigUInt64LE(BigInt(at)); table.push(o);
+      data.push(i32(y), i32(bytes.length), bytes); at += 8 + bytes.length;
+    }
+    return new Uint8Array(Buffer.concat([head, ...table, ...data]));
+  };
+  const ok = parseExr(exr({ width: 2, height: 1, blocks: [[0, Buffer.from(new Float32Array([1.5, 2]).buffer)]] }), 'ok.exr');
+  check(() => assert.deepEqual([...ok.channels.R], [1.5, 2]), 'hand-built EXR reads back');
+  // a data window of 2^30 x 2^30: refused before any Float32Array is made, naming the file and the limit
+  check(() => assert.throws(() => parseExr(exr({ width: 2 ** 30, height: 2 ** 30 }), 'huge.exr'), (e) => /^huge\.exr: data window 1073741824 x 1073741824 with 1 channels decodes to \d+ bytes, over the limit of 536870912/.test(e.message)), 'huge data window refused before allocating');
+  check(() => assert.equal(EXR_MAX_DECODED_BYTES, 512 * 1024 * 1024), 'the C++ kMaxImageBytes');
+  // a ZIPS block that inflates to 1 MB where one 4-pixel FLOAT line (16 bytes) is expected
+  const bomb = zlib.deflateSync(Buffer.alloc(1 << 20));
+  check(() => assert.throws(() => parseExr(exr({ width: 4, height: 1, compression: 2, blocks: [[0, bomb]] }), 'bomb.exr'), /ZIP block inflates to more than 16 bytes, expected 16/), 'oversized ZIP block refused');
+  check(() => assert.throws(() => parseExr(exr({ width: 4, height: 1, compression: 2, blocks: [[0, zlib.deflateSync(Buffer.alloc(8))]] }), 'short.exr'), /ZIP block inflates to 8 bytes, expected 16/), 'short ZIP block refused');
+  // a channel name with control and bidi characters: quoted and escaped in the message, never echoed
+  const evil = 'x\u001b[31m\u202e';
+  let msg = '';
+  try { parseExr(exr({ width: 1, height: 1, names: [evil], channels: [evil], compression: 9 }), 'evil.exr'); } catch (e) { msg = e.message; }
+  try { parseExr(exr({ width: 1, height: 1, names: [evil, evil] }), 'evil.exr'); } catch (e) { msg += ` | ${e.message}`; }
+  check(() => assert.ok(msg.includes('a channel name appears twice') && !/[\u0000-\u001f\u007f-\uffff]/.test(msg)), `no raw control bytes in the messages (${JSON.stringify(msg)})`);
+  check(() => assert.throws(() => parseExr(exr({ width: 1, height: 1 }).subarray(0, 26), 'cut.exr'), /cut\.exr: truncated header/), 'truncated header named');
+}
 console.log(`unit: ${checks} checks passed`);
