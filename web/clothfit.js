@@ -2244,6 +2244,43 @@ export function weaveMapUrl(file, presetUrl, options = {}) {
   return new URL(file, base).href;
 }
 
+// Bounded downloads (session 23): the byte limits of the C++ readers (render/scene/input_limits.h:
+// kMaxJsonFileBytes 16 MiB for cards and presets, kMaxImageFileBytes 512 MiB for images). A
+// response whose Content-Length says more is refused before its body is read; otherwise the body
+// is read in chunks and the download stops as soon as it passes the limit, so a hostile or
+// mistaken URL cannot make the page buffer gigabytes before a parser sees them.
+export const FETCH_LIMITS = Object.freeze({ json: 16 * 1024 * 1024, image: 512 * 1024 * 1024 });
+export async function fetchBounded(url, maxBytes, what = 'file') {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
+  const declared = Number(r.headers?.get?.('content-length') ?? NaN);
+  if (Number.isFinite(declared) && declared > maxBytes) {
+    r.body?.cancel?.();
+    throw new Error(`${url}: ${what} of ${declared} bytes, over the limit of ${maxBytes}`);
+  }
+  if (!r.body?.getReader) {
+    const b = new Uint8Array(await r.arrayBuffer());
+    if (b.byteLength > maxBytes) throw new Error(`${url}: ${what} over the limit of ${maxBytes} bytes`);
+    return b;
+  }
+  const reader = r.body.getReader(), chunks = [];
+  let total = 0;
+  for (;;) {
+    const { done, value } = await reader.read();
+    if (done) break;
+    total += value.byteLength;
+    if (total > maxBytes) {
+      reader.cancel();
+      throw new Error(`${url}: ${what} over the limit of ${maxBytes} bytes (stopped reading at ${total})`);
+    }
+    chunks.push(value);
+  }
+  const out = new Uint8Array(total);
+  let o = 0;
+  for (const c of chunks) { out.set(c, o); o += c.byteLength; }
+  return out;
+}
+
 /** Fetches and parses the weave maps a preset's "weave_maps" field names (or null if none). */
 export async function fetchWeaveMaps(preset, presetUrl, options = {}) {
   const field = preset?.weave_maps;
@@ -2252,10 +2289,14 @@ export async function fetchWeaveMaps(preset, presetUrl, options = {}) {
   if (typeof field !== 'object' || (!hasUri && typeof field.file !== 'string')) throw new Error('weave_maps: expected an object with a string "uri" or "file"');
   if (field.glint_file !== undefined || field.glint_uri !== undefined) throw new Error('weave_maps.glint_file: glint maps are not drawn by web/ (fit with --weave-maps auto or indicator)');
   const url = hasUri ? weaveMapUriUrl(field.uri, presetUrl) : weaveMapUrl(field.file, presetUrl, options);
-  const r = await fetch(url);
-  if (!r.ok) throw new Error(`weave_maps.${hasUri ? 'uri' : 'file'}: ${url}: HTTP ${r.status}`);
+  let bytes;
+  try {
+    bytes = await fetchBounded(url, FETCH_LIMITS.image, 'weave maps');
+  } catch (e) {
+    throw new Error(`weave_maps.${hasUri ? 'uri' : 'file'}: ${e.message}`);
+  }
   const maxAnisotropy = options.maxAnisotropy ?? options.renderer?.capabilities?.getMaxAnisotropy?.() ?? Infinity;
-  return weaveMapsFromExr(await r.arrayBuffer(), { field, name: hasUri ? field.uri : field.file, halfFloat: options.halfFloat, renderer: options.renderer, maxAnisotropy });
+  return weaveMapsFromExr(bytes, { field, name: hasUri ? field.uri : field.file, halfFloat: options.halfFloat, renderer: options.renderer, maxAnisotropy });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -2346,9 +2387,7 @@ export function applyLightMap(material, exrData, meta = {}) {
 
 /** Fetches a light-map EXR (url) and returns its texture (lightMapTextureFromExr). */
 export async function fetchLightMap(url, meta = {}) {
-  const r = await fetch(url);
-  if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
-  return lightMapTextureFromExr(await r.arrayBuffer(), { name: String(url), ...meta });
+  return lightMapTextureFromExr(await fetchBounded(url, FETCH_LIMITS.image, 'light map'), { name: String(url), ...meta });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -2583,9 +2622,7 @@ function fromThreejsJson(j) {
 // options.resolveWeaveMapPath(file, presetUrl): where the preset's weave-map file is fetched
 // from (default weaveMapUrl: relative to the preset, an absolute path by its base name).
 export async function fetchClothfitPreset(url, options = {}) {
-  const r = await fetch(url);
-  if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
-  const text = await r.text();
+  const text = new TextDecoder().decode(await fetchBounded(url, FETCH_LIMITS.json, 'preset'));
   let j;
   try {
     j = JSON.parse(text);
@@ -2825,9 +2862,12 @@ const lightPower = (l) => l.intensity * (0.2126 * l.color.r + 0.7152 * l.color.g
  */
 export async function loadSceneCard(url, options = {}) {
   const cardUrl = new URL(url, document.baseURI).href;
-  const r = await fetch(cardUrl);
-  if (!r.ok) throw new Error(`${cardUrl}: HTTP ${r.status}`);
-  const card = await r.json();
+  let card;
+  try {
+    card = JSON.parse(new TextDecoder().decode(await fetchBounded(cardUrl, FETCH_LIMITS.json, 'scene card')));
+  } catch (e) {
+    throw new Error(e instanceof SyntaxError ? `${cardUrl}: not JSON (${e.message.slice(0, 120)})` : e.message);
+  }
   if (card.version !== 1) throw new Error(`${cardUrl}: version must be 1`);
   const width = card.width ?? 256, height = card.height ?? 256;
   const gltfUrl = options.resolvePath ? options.resolvePath(card.gltf, cardUrl) : resolveRelative(card.gltf, cardUrl);

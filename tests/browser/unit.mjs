@@ -901,4 +901,15 @@ if (args.clothfit) {
   check(() => assert.ok(msg.includes('a channel name appears twice') && !/[\u0000-\u001f\u007f-\uffff]/.test(msg)), `no raw control bytes in the messages (${JSON.stringify(msg)})`);
   check(() => assert.throws(() => parseExr(exr({ width: 1, height: 1 }).subarray(0, 26), 'cut.exr'), /cut\.exr: truncated header/), 'truncated header named');
 }
+// ---- s23: bounded downloads (web/clothfit.js fetchBounded; data: URLs, which node's fetch reads) --
+{
+  const { fetchBounded, FETCH_LIMITS } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+  const url = `data:application/octet-stream;base64,${Buffer.alloc(300, 1).toString('base64')}`;
+  const got = await fetchBounded(url, 300, 'test file');
+  check(() => assert.ok(got instanceof Uint8Array && got.length === 300 && got[299] === 1), 'fetchBounded: a body at the limit is read whole');
+  let err = '';
+  try { await fetchBounded(url, 299, 'test file'); } catch (e) { err = e.message; }
+  check(() => assert.match(err, /test file (of 300 bytes, )?over the limit of 299/), `fetchBounded: one byte over the limit is refused (${err.slice(-80)})`);
+  check(() => assert.ok(FETCH_LIMITS.json === 16 << 20 && FETCH_LIMITS.image === 512 << 20), 'the C++ kMaxJsonFileBytes and kMaxImageFileBytes');
+}
 console.log(`unit: ${checks} checks passed`);
