@@ -2658,21 +2658,45 @@ export function environmentUrl(path, cardUrl, options = {}) {
 }
 
 const envCache = new Map();
-const pmremCache = new WeakMap();  // renderer -> Map(url -> PMREM render target)
+const pmremCache = new WeakMap();  // renderer -> Map(key -> Promise<{target, source}>)
+
+// The renderer's PMREM cache. A WebGL context loss (mobile browsers drop the context of a page in
+// the background) loses the PMREMs' pixels: three.js restores the textures it uploaded itself,
+// but not the contents of render targets, so after 'webglcontextrestored' the environment
+// lighting was black (measured, session 23: the woven drape's mean 8-bit RGB 58/117/87 ->
+// 25/59/40). The cache keeps each PMREM's source texture, and on restore rebuilds every PMREM
+// into its own target, so scene.environment stays valid. three.js's own restore listener is
+// registered in the WebGLRenderer constructor, hence runs first.
+function pmremCacheOf(renderer) {
+  let m = pmremCache.get(renderer);
+  if (!m) {
+    m = new Map();
+    pmremCache.set(renderer, m);
+    renderer.domElement?.addEventListener?.('webglcontextrestored', () => {
+      for (const entry of m.values()) {
+        entry.then(({ target, source }) => {
+          const gen = new THREE.PMREMGenerator(renderer);
+          gen.fromEquirectangular(source, target);
+          gen.dispose();
+        });
+      }
+    });
+  }
+  return m;
+}
+
+function buildPmrem(renderer, source) {
+  const gen = new THREE.PMREMGenerator(renderer);
+  const target = gen.fromEquirectangular(source);
+  gen.dispose();
+  return { target, source };
+}
 
 // One PMREM per renderer and map (PMREMGenerator.fromEquirectangular), shared by every card.
 async function pmremFor(renderer, url) {
-  if (!pmremCache.has(renderer)) pmremCache.set(renderer, new Map());
-  const m = pmremCache.get(renderer);
-  if (!m.has(url)) {
-    m.set(url, loadEquirect(url).then((eq) => {
-      const gen = new THREE.PMREMGenerator(renderer);
-      const target = gen.fromEquirectangular(eq);
-      gen.dispose();
-      return target;
-    }));
-  }
-  return m.get(url);
+  const m = pmremCacheOf(renderer);
+  if (!m.has(url)) m.set(url, loadEquirect(url).then((eq) => buildPmrem(renderer, eq)));
+  return (await m.get(url)).target;
 }
 
 // The environment's sun (web/sun.js, docs/sun.md): detected once per map on the texture's own
@@ -2693,7 +2717,7 @@ async function sunSplitFor(url, mode = 'auto') {
       });
       if (!split.data) return { split, sunFree: null };
       const sunFree = eq.clone();
-      sunFree.source = new THREE.Source({ data: split.data, width, height });
+      sunFree.source = new THREE.TextureSource({ data: split.data, width, height });  // r187 renamed Source (a deprecation warning)
       sunFree.needsUpdate = true;
       return { split, sunFree };
     }));
@@ -2702,14 +2726,9 @@ async function sunSplitFor(url, mode = 'auto') {
 }
 
 async function pmremForTexture(renderer, key, texture) {
-  if (!pmremCache.has(renderer)) pmremCache.set(renderer, new Map());
-  const m = pmremCache.get(renderer);
-  if (!m.has(key)) {
-    const gen = new THREE.PMREMGenerator(renderer);
-    m.set(key, Promise.resolve(gen.fromEquirectangular(texture)));
-    gen.dispose();
-  }
-  return m.get(key);
+  const m = pmremCacheOf(renderer);
+  if (!m.has(key)) m.set(key, Promise.resolve(buildPmrem(renderer, texture)));
+  return (await m.get(key)).target;
 }
 
 async function loadEquirect(url) {

@@ -382,6 +382,22 @@ for (const s of scenes) {
       samplerLimit: limit, budgetCheck: { samplersMax: limit ?? 32, droppedExactly: dropped } });
   }
 }
+// s23: a WebGL context loss and restore before the frame (web/test/browser-test.js, on its own
+// renderer): the drape card as it is (shadow maps, light map) with woven's GGX lobes, and the
+// sphere under blender-city with its sun split off (the sun-free map's PMREM). Before session 23
+// the environment's PMREMs came back black: woven drape mean RGB 58/117/87 -> 25/59/40.
+const CONTEXT_RESTORE = [['drape', 'studio-card', 'woven'], ['sphere', `${HIGH}-rot60-sun`, 'woven-lobe-canvas']];
+for (const [s, env, m] of CONTEXT_RESTORE) {
+  const name = `${s}/${env}-context-restored/${m}`;
+  if (args.only && !name.includes(args.only)) continue;
+  const card = path.join(work, `${s}-${env}.card.json`);  // written above, whatever --only says
+  if (!fs.existsSync(card) || !MATERIALS[m]) { console.error(`${name}: no card ${card} or material ${m}`); process.exit(1); }
+  const cardJson = JSON.parse(fs.readFileSync(card, 'utf8'));
+  const png = path.join(work, `${s}-${env}-context-restored-${m}.png`);
+  cases.push({ name, card, preset: path.join(work, `${m}.json`), png, contextRestore: true,
+    ...(cardJson.visibility?.shadows ? { shadows: true } : {}),
+    ...(cardJson.visibility?.light_map ? { lightMap: png.replace(/\.png$/, '.lm.exr') } : {}) });
+}
 // s23: a GPU without OES_texture_float_linear (iOS Safari, many Android GPUs): the page draws
 // these cases with a second renderer whose context hides the extension (web/test/browser-test.js
 // makeRenderer), so web/clothfit.js must upload the weave maps and the light map as half floats

@@ -75,7 +75,7 @@ async function run() {
   };
   const emulated = { linkLimit: null, failures: 0 };  // see makeRenderer
   const main = makeRenderer(document.getElementById('c'), false);
-  let noFloatLinear = null;
+  let noFloatLinear = null, restoring = null;
   const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
   const cards = new Map();
   let previous = null;  // the last case's material and light map, disposed after the next case
@@ -86,8 +86,13 @@ async function run() {
       document.body.appendChild(cv);
       noFloatLinear = makeRenderer(cv, true);
     }
-    const { renderer, gl } = c.noFloatLinear ? noFloatLinear : main;
-    const cardKey = `${c.noFloatLinear ? 'nfl:' : ''}${c.card}`;
+    if (c.contextRestore && !restoring) {  // s23: its own renderer, so the other cases never see a restored context
+      const cv = document.createElement('canvas');
+      document.body.appendChild(cv);
+      restoring = makeRenderer(cv, false);
+    }
+    const { renderer, gl } = c.noFloatLinear ? noFloatLinear : c.contextRestore ? restoring : main;
+    const cardKey = `${c.noFloatLinear ? 'nfl:' : c.contextRestore ? 'ctx:' : ''}${c.card}`;
     let sc = cards.get(cardKey);
     if (!sc) {
       sc = await loadSceneCard(fsUrl(c.card), { renderer, resolvePath: (p, base) => {
@@ -125,6 +130,23 @@ async function run() {
     const budget = sc.shadowBudget;
     if (c.samplerLimit) log(`${c.name}: shadow budget ${budget ? `${budget.samplers} of ${budget.maxSamplers} samplers, linked ${budget.linked}, no shadow from: ${budget.dropped.join(', ') || 'none'}` : 'none (no shadows)'}; emulated link failures (programs over ${c.samplerLimit} samplers) while fitting: ${emulated.failures}`);
     renderer.setSize(sc.width, sc.height, false);
+    if (c.contextRestore) {
+      // s23: a WebGL context loss and restore (WEBGL_lose_context; what a mobile browser does to a
+      // page in the background) after a first frame; the frame compared is drawn after the
+      // restore. three.js re-uploads its own textures but not render targets' contents: before
+      // session 23 the environment's PMREMs (web/clothfit.js pmremCacheOf) came back black.
+      renderer.render(sc.scene, sc.camera);
+      const ext = gl.getExtension('WEBGL_lose_context');
+      const canvas = renderer.domElement;
+      const lost = new Promise((r) => canvas.addEventListener('webglcontextlost', (e) => { e.preventDefault(); r(); }, { once: true }));
+      const restored = new Promise((r) => canvas.addEventListener('webglcontextrestored', () => r(), { once: true }));
+      ext.loseContext();
+      await lost;
+      await new Promise((r) => setTimeout(r, 0));  // Chromium reads defaultPrevented after the event: restore one task later
+      ext.restoreContext();
+      await restored;
+      log(`${c.name}: context lost and restored (isContextLost ${gl.isContextLost()})`);
+    }
     renderer.render(sc.scene, sc.camera);
     const W = sc.width, H = sc.height;
     const px = new Uint8Array(W * H * 4);
