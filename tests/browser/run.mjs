@@ -25,8 +25,11 @@
 // drape and sphere x 3 materials under studio with three.js shadow maps against
 // `render-preview --shadows` (the */studio-shadows/* cases), plus (s13-lm) 13 cases on the drape
 // with the card's baked light map (env "studio-lightmap*", below), plus (s13) the drape card as it
-// is, with its visibility block (shadows and light map: env "studio-card"). The other cases
-// drop the card's visibility block, so they compare the shading alone. The page posts
+// is, with its visibility block (shadows and light map: env "studio-card"), plus (s23, real
+// GPUs; docs/web.md "Real GPUs") 3 cases on a context without OES_texture_float_linear, 2 with
+// the shadow maps budgeted to 32 and to 16 texture units, and 2 drawn after a WebGL context loss
+// and restore. The other cases drop the card's visibility block, so they compare the shading
+// alone. The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
 // Metric: 8-bit sRGB (tone-mapped as the card says), over the fabric pixels the browser draws,
