@@ -45,7 +45,7 @@ import path from 'node:path';
 import zlib from 'node:zlib';
 import { fileURLToPath } from 'node:url';
 import { startServer } from '../../web/serve.mjs';
-import { killChromiumOnExit, stopChromium } from '../../web/tools/chromium.mjs';
+import { spawnHeadlessChromium, stopChromium } from '../../web/tools/chromium.mjs';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const repo = path.resolve(here, '..', '..');
@@ -498,13 +498,7 @@ const port = server.address().port;
 const pageUrl = `http://127.0.0.1:${port}/fs${repo}/web/test/browser-test.html?plan=/fs${path.join(work, 'plan.json')}`;
 const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'clothfit-chromium-'));
 const browserT0 = Date.now();
-const browser = spawn(chromium, [
-  '--headless=new', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--no-sandbox',
-  '--disable-gpu-sandbox', '--no-first-run', '--no-default-browser-check', '--disable-extensions',
-  '--disable-background-networking', '--mute-audio', '--log-level=3', `--user-data-dir=${profile}`,
-  '--window-size=512,512', pageUrl,
-], { stdio: ['ignore', 'ignore', 'pipe'], detached: true });  // own group: web/tools/chromium.mjs
-killChromiumOnExit(browser, profile);
+const browser = spawnHeadlessChromium(chromium, pageUrl, profile);
 let browserErr = '';
 browser.stderr.on('data', (d) => { browserErr += d; });
 const timer = setTimeout(() => finish('timeout'), timeoutS * 1000);

@@ -7,7 +7,21 @@
 // Signals go to the group (-pid) only while it may still be ours: from the moment the group is
 // seen empty (or the main process has exited and the group is empty), nothing is sent, so a
 // process group id reused by the system is never signalled.
+import { spawn } from 'node:child_process';
 import fs from 'node:fs';
+
+// Starts headless Chromium on `url` with SwiftShader WebGL2 (the flags of the browser test and
+// the GPU audit), in its own process group, stderr piped; killChromiumOnExit is armed.
+export function spawnHeadlessChromium(chromium, url, profile, { windowSize = '512,512' } = {}) {
+  const browser = spawn(chromium, [
+    '--headless=new', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--no-sandbox',
+    '--disable-gpu-sandbox', '--no-first-run', '--no-default-browser-check', '--disable-extensions',
+    '--disable-background-networking', '--mute-audio', '--log-level=3', `--user-data-dir=${profile}`,
+    `--window-size=${windowSize}`, url,
+  ], { stdio: ['ignore', 'ignore', 'pipe'], detached: true });  // own group: see above
+  killChromiumOnExit(browser, profile);
+  return browser;
+}
 
 const sleep = (ms) => new Promise((r) => { setTimeout(r, ms); });
 

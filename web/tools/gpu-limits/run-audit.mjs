@@ -31,13 +31,12 @@
 //
 // Needs: chromium, web/node_modules (scripts/install-deps), the HDRIs studio, pmndrs-hall and
 // blender-city in $CLOTHFIT_DATA/hdri or ~/.cache/clothfit/hdri (make data); exits 77 without them.
-import { spawn } from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { startServer } from '../../serve.mjs';
-import { killChromiumOnExit, stopChromium } from '../chromium.mjs';
+import { spawnHeadlessChromium, stopChromium } from '../chromium.mjs';
 import { detail, table } from './report.mjs';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
@@ -144,13 +143,7 @@ const server = await startServer({
 const port = server.address().port;
 const pageUrl = `http://127.0.0.1:${port}/fs${here}/audit.html?plan=/fs${path.join(work, 'plan.json')}`;
 const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'clothfit-chromium-'));
-const browser = spawn(chromium, [
-  '--headless=new', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--no-sandbox',
-  '--disable-gpu-sandbox', '--no-first-run', '--no-default-browser-check', '--disable-extensions',
-  '--disable-background-networking', '--mute-audio', '--log-level=3', `--user-data-dir=${profile}`,
-  '--window-size=512,512', pageUrl,
-], { stdio: ['ignore', 'ignore', 'pipe'], detached: true });  // own group: web/tools/chromium.mjs
-killChromiumOnExit(browser, profile);
+const browser = spawnHeadlessChromium(chromium, pageUrl, profile);
 let err = '';
 browser.stderr.on('data', (d) => { err += d; });
 const timer = setTimeout(() => finish('timeout'), timeoutS * 1000);
