@@ -2400,15 +2400,37 @@ const SIDES = { front: THREE.FrontSide, back: THREE.BackSide, double: THREE.Doub
 
 const MODELS = new Map();
 
+// Each model's `ranges`: the values a preset may give per parameter, inclusive, as the C++ reader
+// checks them (render/scene/material.cpp PresetRange: the table's range, except that roughness
+// may be given below the engine clamp, down to 0; `clothfit models --json` "preset_range", which
+// tests/browser/unit.mjs compares with these). A parameter's size is its default's (number or
+// [r, g, b]).
+const UNIT = Object.freeze([0, 1]);
+
 export function registerClothfitModel(name, model) {
   MODELS.set(name, model);
 }
 
 export function clothfitModels() { return [...MODELS.keys()]; }
 
+/**
+ * A registered model's parameter table: [{name, size, default, preset_range: [lo, hi]}] in the
+ * preset's order of defaults, the values loadClothfitPreset accepts (compare `clothfit models
+ * --json`). null for an unknown model.
+ */
+export function clothfitModelParameters(name) {
+  const m = MODELS.get(name);
+  if (!m) return null;
+  return Object.entries(m.defaults).map(([k, d]) => ({
+    name: k, size: Array.isArray(d) ? d.length : 1, default: Array.isArray(d) ? [...d] : d,
+    preset_range: [...(m.ranges?.[k] ?? [-Infinity, Infinity])],
+  }));
+}
+
 registerClothfitModel('standard', {
   engine: 'three.js r187 MeshStandardMaterial',
   defaults: { base_color: [1, 1, 1], roughness: 1, metalness: 0 },
+  ranges: { base_color: UNIT, roughness: UNIT, metalness: UNIT },
   make: (p) => new THREE.MeshStandardMaterial({
     color: linear(p.base_color), roughness: p.roughness, metalness: p.metalness }),
 });
@@ -2416,6 +2438,7 @@ registerClothfitModel('standard', {
 registerClothfitModel('physical-sheen', {
   engine: 'three.js r187 MeshPhysicalMaterial (sheen)',
   defaults: { base_color: [1, 1, 1], roughness: 1, metalness: 0, sheen_color: [0, 0, 0], sheen_roughness: 1 },
+  ranges: { base_color: UNIT, roughness: UNIT, metalness: UNIT, sheen_color: UNIT, sheen_roughness: UNIT },
   // sheen_color is three.js sheenColor x sheen: sheen = 1 keeps USE_SHEEN on.
   make: (p) => new THREE.MeshPhysicalMaterial({
     color: linear(p.base_color), roughness: p.roughness, metalness: p.metalness,
@@ -2437,6 +2460,11 @@ registerClothfitModel('physical-aniso', {
     base_color: [1, 1, 1], roughness: 1, metalness: 0, sheen_color: [0, 0, 0], sheen_roughness: 1,
     anisotropy_strength: 0, anisotropy_rotation: 0, specular_intensity: 1, specular_color: [1, 1, 1],
   },
+  ranges: {
+    base_color: UNIT, roughness: UNIT, metalness: UNIT, sheen_color: UNIT, sheen_roughness: UNIT,
+    anisotropy_strength: UNIT, anisotropy_rotation: [-Math.PI, Math.PI], specular_intensity: UNIT,
+    specular_color: [0, 25],
+  },
   make: (p) => new THREE.MeshPhysicalMaterial({
     color: linear(p.base_color), roughness: p.roughness, metalness: p.metalness,
     sheen: 1, sheenColor: linear(p.sheen_color), sheenRoughness: p.sheen_roughness,
@@ -2456,6 +2484,7 @@ registerClothfitModel('physical-aniso', {
 registerClothfitModel('gltf-sheen', {
   engine: 'glTF 2.0 + KHR_materials_sheen (drawn by three.js r187 as MeshPhysicalMaterial)',
   defaults: { base_color: [1, 1, 1], roughness: 1, metallic: 0, sheen_color: [0, 0, 0], sheen_roughness: 0 },
+  ranges: { base_color: UNIT, roughness: UNIT, metallic: UNIT, sheen_color: UNIT, sheen_roughness: UNIT },
   make: (p) => new THREE.MeshPhysicalMaterial({
     color: linear(p.base_color), roughness: p.roughness, metalness: p.metallic,
     sheen: 1, sheenColor: linear(p.sheen_color), sheenRoughness: p.sheen_roughness }),
@@ -2464,6 +2493,7 @@ registerClothfitModel('gltf-sheen', {
 registerClothfitModel('cloth', {
   engine: 'clothfit MeshClothMaterial (Filament cloth / seed)',
   defaults: { base_color: [1, 1, 1], sheen_color: [1, 1, 1], roughness: 1, subsurface_color: [0, 0, 0] },
+  ranges: { base_color: UNIT, sheen_color: UNIT, roughness: UNIT, subsurface_color: UNIT },
   make: (p, preset) => {
     const c = preset.cloth ?? {};
     return new MeshClothMaterial({
@@ -2480,6 +2510,11 @@ registerClothfitModel('cloth', {
 registerClothfitModel('woven', {
   engine: 'clothfit MeshWovenMaterial (brdf/woven.h; weave maps as GPU textures)',
   defaults: WOVEN_DEFAULTS,
+  ranges: {
+    base_color: UNIT, specular_color: UNIT, roughness: UNIT, anisotropy: UNIT, twist: [-90, 90],
+    warp_share: UNIT, specular_f0: UNIT, forward_scattering: [0, 8], sheen_color: UNIT,
+    sheen_roughness: UNIT, diffuse_roughness: UNIT,
+  },
   // the preset's own parameters, before any default (loadClothfitPreset)
   checkParameters: (given) => {
     if ('diffuse_roughness' in given) {
@@ -2568,12 +2603,14 @@ export function loadClothfitPreset(json, options = {}) {
   if (preset?.schema !== 'clothfit.preset') throw new Error('loadClothfitPreset: schema is not "clothfit.preset"');
   if (preset.version !== 1) throw new Error(`loadClothfitPreset: version ${preset.version} not supported (1)`);
   const model = MODELS.get(preset.model);
-  if (!model) throw new Error(`loadClothfitPreset: unknown model '${preset.model}' (known: ${clothfitModels().join(', ')})`);
+  if (!model) throw new Error(`loadClothfitPreset: model: unknown ${typeof preset.model === 'string' ? ylKeyShown(preset.model) : typeof preset.model} (known: ${clothfitModels().join(', ')})`);
   const given = preset.parameters ?? {};
+  if (given === null || typeof given !== 'object' || Array.isArray(given)) throw new Error('loadClothfitPreset: parameters: expected an object');
   for (const k of Object.keys(given)) {
-    if (!(k in model.defaults)) throw new Error(`loadClothfitPreset: parameters.${k}: unknown for model '${preset.model}' (valid: ${Object.keys(model.defaults).join(', ')})`);
+    if (!Object.hasOwn(model.defaults, k)) throw new Error(`loadClothfitPreset: parameters.${ylKeyShown(k)}: unknown for model '${preset.model}' (valid: ${Object.keys(model.defaults).join(', ')})`);
   }
   if (preset.woven !== undefined && preset.model !== 'woven') throw new Error('loadClothfitPreset: woven: only allowed with model "woven"');
+  checkPresetParameters(model, given);
   model.checkParameters?.(given);
   const p = { ...model.defaults, ...given };
   if (preset.weave_maps !== undefined && preset.weave_maps !== null) {
@@ -2592,6 +2629,29 @@ export function loadClothfitPreset(json, options = {}) {
   m.name = preset.name ?? preset.provenance?.fabric ?? preset.model;
   m.userData.clothfit = preset;
   return m;
+}
+
+// Every given parameter: a finite number, or an array of 3 for a colour, each within the model's
+// `ranges` (messages as the C++ reader's: `parameters.roughness: value 7 outside [0, 1]`).
+function checkPresetParameters(model, given) {
+  const fail = (f, msg) => { throw new Error(`loadClothfitPreset: ${f}: ${msg}`); };
+  const number = (x, f) => {
+    if (typeof x !== 'number') fail(f, `expected a number, got ${x === null ? 'null' : Array.isArray(x) ? 'array' : typeof x}`);
+    if (!Number.isFinite(x)) fail(f, 'not finite');
+    return x;
+  };
+  for (const [k, v] of Object.entries(given)) {
+    const f = `parameters.${k}`;
+    const size = Array.isArray(model.defaults[k]) ? model.defaults[k].length : 1;
+    const [lo, hi] = model.ranges?.[k] ?? [-Infinity, Infinity];
+    const inRange = (x, fc) => { if (x < lo || x > hi) fail(fc, `value ${x} outside [${lo}, ${hi}]`); };
+    if (size === 1) {
+      inRange(number(v, f), f);
+    } else {
+      if (!Array.isArray(v) || v.length !== size) fail(f, `expected an array of ${size} numbers`);
+      v.forEach((x, c) => inRange(number(x, `${f}[${c}]`), `${f}[${c}]`));
+    }
+  }
 }
 
 // `clothfit convert --to threejs` output: three.js MaterialLoader JSON (MeshPhysicalMaterial, read

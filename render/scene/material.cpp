@@ -64,6 +64,13 @@ std::string EngineOf(ModelKind m) {
   return "?";
 }
 
+std::pair<double, double> PresetRange(const ParamInfo& p) {
+  // Colours and metalness must be in range; roughness values may be given below the engine
+  // clamp (the engine clamps them), but not below 0.
+  const bool is_roughness = p.name.find("roughness") != std::string_view::npos;
+  return {is_roughness ? 0.0 : p.lower, p.upper};
+}
+
 int MaterialPreset::Offset(const std::string& name) const {
   int off = 0;
   for (const ParamInfo& p : ParameterTable(model)) {
@@ -367,14 +374,11 @@ void ParseParameter(const std::string& name, const json& value, const std::strin
     for (size_t c = 0; c < value.size(); ++c)
       v.push_back(Number(value[c], where, f + "[" + std::to_string(c) + "]"));
   }
-  // Colours and metalness must be in range; roughness values may be given below the
-  // engine clamp (the engine clamps them), but not outside [0, 1].
-  const bool is_roughness = name.find("roughness") != std::string::npos;
-  const double lo = is_roughness ? 0.0 : info->lower;
+  const auto [lo, hi] = PresetRange(*info);
   for (size_t c = 0; c < v.size(); ++c) {
-    if (v[c] < lo || v[c] > info->upper) {
+    if (v[c] < lo || v[c] > hi) {
       std::ostringstream os;
-      os << "value " << v[c] << " outside [" << lo << ", " << info->upper << "]";
+      os << "value " << v[c] << " outside [" << lo << ", " << hi << "]";
       Fail(where, info->size == 1 ? f : f + "[" + std::to_string(c) + "]", os.str());
     }
     p->values[size_t(off) + c] = v[c];

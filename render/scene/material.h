@@ -34,6 +34,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "brdf/cloth.h"
@@ -54,6 +55,11 @@ std::string ToString(ModelKind m);
 ModelKind ParseModelKind(const std::string& s);  // throws std::invalid_argument
 std::span<const ParamInfo> ParameterTable(ModelKind m);
 std::string EngineOf(ModelKind m);
+// The values a preset may give for a parameter: the table's range, except that roughness
+// parameters (name containing "roughness") may go below the engine clamp down to 0 (the engine
+// clamps them). ParsePreset checks this; `clothfit models --json` writes it as "preset_range"
+// and web/clothfit.js checks the same (tests/browser/unit.mjs compares the two).
+std::pair<double, double> PresetRange(const ParamInfo& p);
 
 struct MaterialPreset {
   ModelKind model = ModelKind::kCloth;

@@ -502,6 +502,57 @@ if (args.clothfit) {
   assert.ok(seen >= 2, `expected three.js JSON for both materials in ${out}: ${files.join(', ')}`);
 }
 
+// Session 24: the preset's parameter values, checked as the C++ reader checks them. Every model
+// of `clothfit models --json` is registered in web/ with the same names, sizes, defaults and
+// preset ranges (render/scene/material.cpp PresetRange); each bound is accepted and a step past
+// it refused, naming the field; wrong types and sizes are refused too.
+{
+  const { clothfitModels, clothfitModelParameters } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+  const pre = (model, parameters) => ({ schema: 'clothfit.preset', version: 1, model, parameters });
+  const fieldRe = (f) => new RegExp(`parameters\\.${f.replace(/[[\]]/g, '\\$&')}: `);
+  if (args.clothfit) {
+    const r = spawnSync(args.clothfit, ['models', '--json'], { encoding: 'utf8' });
+    assert.equal(r.status, 0, `clothfit models --json: ${r.stderr}`);
+    const table = JSON.parse(r.stdout);
+    check(() => assert.equal(table.schema, 'clothfit.models'), 'models --json schema');
+    for (const [model, { parameters }] of Object.entries(table.models)) {
+      check(() => assert.ok(clothfitModels().includes(model), model), `web registers ${model}`);
+      const web = clothfitModelParameters(model);
+      check(() => assert.deepEqual(web.map((q) => q.name), parameters.map((q) => q.name), model), `${model}: parameter names`);
+      for (const q of parameters) {
+        const w = web.find((x) => x.name === q.name);
+        check(() => assert.equal(w.size, q.size, `${model}.${q.name}`), `${model}.${q.name} size`);
+        check(() => assert.deepEqual(w.default, q.default, `${model}.${q.name}`), `${model}.${q.name} default`);
+        const [lo, hi] = q.preset_range;
+        check(() => assert.ok(Math.abs(w.preset_range[0] - lo) <= 1e-12 * Math.max(1, Math.abs(lo)) && Math.abs(w.preset_range[1] - hi) <= 1e-12 * Math.max(1, Math.abs(hi)), `${model}.${q.name}: web ${w.preset_range}, C++ ${q.preset_range}`), `${model}.${q.name} preset range`);
+        // behaviour at the bounds (every component for a colour)
+        const val = (x) => (q.size === 1 ? x : Array(q.size).fill(x));
+        const eps = (x) => Math.max(1e-9, 1e-6 * Math.abs(x));
+        check(() => { loadClothfitPreset(pre(model, { [q.name]: val(lo) })); loadClothfitPreset(pre(model, { [q.name]: val(hi) })); }, `${model}.${q.name} bounds accepted`);
+        const f = q.size === 1 ? q.name : `${q.name}[0]`;
+        check(() => assert.throws(() => loadClothfitPreset(pre(model, { [q.name]: val(lo - eps(lo)) })), fieldRe(f)), `${model}.${q.name} below refused`);
+        check(() => assert.throws(() => loadClothfitPreset(pre(model, { [q.name]: val(hi + eps(hi)) })), fieldRe(f)), `${model}.${q.name} above refused`);
+      }
+    }
+  }
+  // the case that was accepted before: a roughness of 7 (three.js clamps it silently)
+  check(() => assert.throws(() => loadClothfitPreset(pre('standard', { roughness: 7 })), /parameters\.roughness: value 7 outside \[0, 1\]/), 'standard roughness 7 refused');
+  check(() => assert.throws(() => loadClothfitPreset(pre('woven', { twist: -91 })), /parameters\.twist: value -91 outside \[-90, 90\]/), 'woven twist -91 refused');
+  check(() => assert.throws(() => loadClothfitPreset(pre('woven', { base_color: [0.5, 1.5, 0.5] })), /parameters\.base_color\[1\]: value 1\.5 outside/), 'colour component refused');
+  check(() => assert.throws(() => loadClothfitPreset(pre('cloth', { base_color: [0.5, 0.5] })), /parameters\.base_color: expected an array of 3 numbers/), 'short colour refused');
+  check(() => assert.throws(() => loadClothfitPreset(pre('cloth', { roughness: '0.5' })), /parameters\.roughness: expected a number, got string/), 'string refused');
+  check(() => assert.throws(() => loadClothfitPreset(pre('cloth', { roughness: [0.5] })), /parameters\.roughness: expected a number, got array/), 'array for a scalar refused');
+  check(() => assert.throws(() => loadClothfitPreset(pre('physical-aniso', { specular_color: [1, NaN, 1] })), /parameters\.specular_color\[1\]: not finite/), 'NaN refused');
+  check(() => assert.throws(() => loadClothfitPreset(pre('standard', [0.5])), /parameters: expected an object/), 'parameters array refused');
+  // names inherited from Object.prototype are unknown parameters, and untrusted names and models
+  // reach the message quoted and escaped
+  check(() => assert.throws(() => loadClothfitPreset(pre('standard', { toString: 1 })), /parameters\.toString: unknown for model/), 'toString is unknown');
+  check(() => assert.throws(() => loadClothfitPreset(JSON.parse('{"schema": "clothfit.preset", "version": 1, "model": "standard", "parameters": {"__proto__": {"roughness": 7}}}')), /parameters\.__proto__: unknown/), '__proto__ is unknown');
+  check(() => assert.throws(() => loadClothfitPreset(pre('standard', { 'a<b>\n': 1 })), (e) => /parameters\."a\\u003cb\\u003e\\n": unknown/.test(e.message) && !/[<>\n]/.test(e.message)), 'unknown name escaped');
+  check(() => assert.throws(() => loadClothfitPreset(pre('<img src=x>', {})), (e) => /model: unknown "\\u003cimg src=x\\u003e"/.test(e.message) && !/[<>]/.test(e.message)), 'unknown model escaped');
+  check(() => assert.equal(loadClothfitPreset(pre('physical-aniso', { specular_color: [25, 0, 3] })).specularColor.r, 25), 'specular_color up to 25 accepted');
+}
+
 // ---- weave maps (web/exr.js, weaveMapsFromExr; the C++ side is render/preview/weave_maps.*) ----
 {
   const { parseExr } = await import(pathToFileURL(path.join(repo, 'web', 'exr.js')).href);
