@@ -130,9 +130,11 @@ TEST(ConvertRegression, DeepItemFailsAloneAndTheBatchCompletes) {
   const fit::ConvertReport rep = fit::RunConvert(fit::ExpandInputs({(d / "in").string()}), o);
   EXPECT_EQ(rep.failed, 2);
   EXPECT_EQ(rep.converted, 1);
-  for (const auto& i : rep.items)
-    if (i.status == "failed")
+  for (const auto& i : rep.items) {
+    if (i.status == "failed") {
       EXPECT_NE(i.reason.find("nested deeper"), std::string::npos) << i.reason;
+    }
+  }
   EXPECT_NO_THROW((void)fit::ReportJson(rep, o).dump());
   fs::remove_all(d);
 }

@@ -48,7 +48,7 @@ io::Image BatchedReference(const std::vector<float>& truth, const std::vector<fl
     for (size_t c = 0; c < 3; ++c) {
       double sum_a = 0.0, sum_b = 0.0;
       for (int k = 0; k < K; ++k) {
-        const double v = truth[p * 3 + c] + sb * n01(rng);
+        const double v = double(truth[p * 3 + c]) + sb * n01(rng);
         (k < kA ? sum_a : sum_b) += v;
       }
       px[c] = float((sum_a + sum_b) / K);

@@ -101,7 +101,8 @@ void ExpectDiscRecovered(const Vec3d& centre, double rotation, double intensity,
   ASSERT_EQ(free_px.size(), px.size());
   double rim = 0.0;
   for (size_t t = 0; t < px.size(); t += 3) {
-    const double y = 0.2126 * free_px[t] + 0.7152 * free_px[t + 1] + 0.0722 * free_px[t + 2];
+    const double y = 0.2126 * double(free_px[t]) + 0.7152 * double(free_px[t + 1]) +
+                     0.0722 * double(free_px[t + 2]);
     EXPECT_LE(y, 10.0 * (0.2126 * kSky[0] + 0.7152 * kSky[1] + 0.0722 * kSky[2]) + 1e-6);
     rim += y - (0.2126 * kSky[0] + 0.7152 * kSky[1] + 0.0722 * kSky[2]);
   }
@@ -470,7 +471,9 @@ TEST(S10Sun, InstalledMapsConserveEnergy) {
                                            std::sin(kPi / 2 - kPi * (j + 1) / H));
       for (int i = 0; i < W; ++i) {
         const size_t t = (size_t(j) * size_t(W) + size_t(i)) * 3;
-        p_free += (0.2126 * free_px[t] + 0.7152 * free_px[t + 1] + 0.0722 * free_px[t + 2]) * dw;
+        p_free += (0.2126 * double(free_px[t]) + 0.7152 * double(free_px[t + 1]) +
+                   0.0722 * double(free_px[t + 2])) *
+                  dw;
       }
     }
     const double e_lum = 0.2126 * s.irradiance[0] + 0.7152 * s.irradiance[1] + 0.0722 * s.irradiance[2];

@@ -147,8 +147,10 @@ TEST(S10Velvet, TiltedTablesMatchAMeshWhoseNormalsAreTilted) {
       auto& t = m.tangents[k];
       const std::array<float, 3> n0 = n, t0 = {t[0], t[1], t[2]};
       for (int c = 0; c < 3; ++c) {
-        n[size_t(c)] = float(std::cos(th) * n0[size_t(c)] + std::sin(th) * t0[size_t(c)]);
-        t[size_t(c)] = float(-std::sin(th) * n0[size_t(c)] + std::cos(th) * t0[size_t(c)]);
+        n[size_t(c)] =
+            float(std::cos(th) * double(n0[size_t(c)]) + std::sin(th) * double(t0[size_t(c)]));
+        t[size_t(c)] =
+            float(-std::sin(th) * double(n0[size_t(c)]) + std::cos(th) * double(t0[size_t(c)]));
       }
     }
   const Environment env = Environment::ProceduralSky(1.0, 0.3, 128);
@@ -162,12 +164,14 @@ TEST(S10Velvet, TiltedTablesMatchAMeshWhoseNormalsAreTilted) {
   double worst_nov = 0.0, sum_rel = 0.0;
   size_t n = 0;
   for (size_t i = 0; i < ct->pixels.size(); ++i) {
-    const double nov_s = std::cos(th) * ct->NoV[i] + std::sin(th) * ct->tangent_v[i * 2];
+    const double nov_s =
+        std::cos(th) * double(ct->NoV[i]) + std::sin(th) * double(ct->tangent_v[i * 2]);
     // near the silhouette the routes part most; where n_s.v < 0 the mesh route flips n_s
-    if (cr->NoV[i] < 0.2 || nov_s < 0.2) continue;
-    worst_nov = std::max(worst_nov, std::abs(nov_s - cr->NoV[i]));
+    if (double(cr->NoV[i]) < 0.2 || nov_s < 0.2) continue;
+    worst_nov = std::max(worst_nov, std::abs(nov_s - double(cr->NoV[i])));
     for (size_t k = i * 99; k < (i + 1) * 99; ++k) {  // K = 33 nodes x 3
-      sum_rel += std::abs(ct->sheen_tilt_radiance[k] - cr->radiance[k]) / (cr->radiance[k] + 1e-3);
+      sum_rel += double(std::abs(ct->sheen_tilt_radiance[k] - cr->radiance[k])) /
+                 (double(cr->radiance[k]) + 1e-3);
       ++n;
     }
   }
@@ -177,7 +181,8 @@ TEST(S10Velvet, TiltedTablesMatchAMeshWhoseNormalsAreTilted) {
   // ... and differs from the untilted table (the check is not vacuous).
   double diff = 0.0;
   for (size_t k = 0; k < ct->radiance.size(); ++k)
-    diff += std::abs(ct->sheen_tilt_radiance[k] - ct->radiance[k]) / (ct->radiance[k] + 1e-3);
+    diff += double(std::abs(ct->sheen_tilt_radiance[k] - ct->radiance[k])) /
+            (double(ct->radiance[k]) + 1e-3);
   EXPECT_GT(diff / double(ct->radiance.size()), 0.03);
 }
 

@@ -237,7 +237,7 @@ TEST(S11YarnTable, NodesWrapAndIblSummary) {
   ASSERT_EQ(taps.size(), D);
   double sw[2] = {0, 0};
   for (const auto& tp : taps) sw[0] += tp.weight[0], sw[1] += tp.weight[1];
-  EXPECT_NEAR(sw[0], e[0], 1e-5 * e[0]);
+  EXPECT_NEAR(sw[0], double(e[0]), 1e-5 * double(e[0]));
   EXPECT_NEAR(sw[1], 0.3 * kPi, 0.01 * 0.3 * kPi);
   EXPECT_NEAR(taps[size_t(3 * 16 + 4)].dir.x, t.Direction(3, 4).x, 1e-12);
   EXPECT_EQ(taps[size_t(3 * 16 + 4)].roughness, rows[3]);

@@ -362,7 +362,9 @@ TEST(S12YarnLobe, ConvertSamplesTheLobe) {
     const woven::Lobes<double> lb = woven::PrepareLobes(wp);
     const double sh = std::min(woven::SheenScaling(wp, lb, lut::DefaultDfg(), NoV),
                                woven::SheenScaling(wp, lb, lut::DefaultDfg(), NoL));
-    if (t[0] + t[1] > 0.0) EXPECT_LT(sh, 1.0);  // the sheen's scaling is exercised
+    if (t[0] + t[1] > 0.0) {
+      EXPECT_LT(sh, 1.0);  // the sheen's scaling is exercised
+    }
     const double ks[3] = {0.2, 0.1, 0.05};
     for (int c = 0; c < 3; ++c) {
       const double want = b.value[i][c] + ks[c] * (2.0 * 0.3 * p.woven.tint_warp[c] * t[0] +

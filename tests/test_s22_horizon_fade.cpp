@@ -86,7 +86,9 @@ TEST(S22HorizonFade, EndsMonotoneAndContinuous) {
     const HorizonClip c = ClipDiscAtHorizon(NoL, s);
     const double e = c.visible * c.NoL;
     ASSERT_GE(c.visible, prev_v) << NoL;
-    if (c.visible > 0.0) ASSERT_GE(c.NoL, 0.0) << NoL;
+    if (c.visible > 0.0) {
+      ASSERT_GE(c.NoL, 0.0) << NoL;
+    }
     if (k > 0) worst_step = std::max(worst_step, std::abs(e - prev_e));
     prev_v = c.visible;
     prev_e = e;

@@ -372,8 +372,12 @@ TEST(S9Visibility, UvBakedMapIsThePerPointTermsAtTexelCentres) {
         const auto& c = m.uvs[m.indices[f + 2]];
         const double area = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
         if (!(std::abs(area) > 0.0)) continue;
-        const double b0 = ((b[0] - u) * (c[1] - v) - (c[0] - u) * (b[1] - v)) / area;
-        const double b1 = ((c[0] - u) * (a[1] - v) - (a[0] - u) * (c[1] - v)) / area;
+        const double b0 =
+            ((double(b[0]) - u) * (double(c[1]) - v) - (double(c[0]) - u) * (double(b[1]) - v)) /
+            area;
+        const double b1 =
+            ((double(c[0]) - u) * (double(a[1]) - v) - (double(a[0]) - u) * (double(c[1]) - v)) /
+            area;
         const double b2 = 1.0 - b0 - b1;
         if (b0 < -1e-9 || b1 < -1e-9 || b2 < -1e-9) continue;
         auto P = [&](int k) {
@@ -406,7 +410,8 @@ TEST(S9Visibility, UvBakedMapIsThePerPointTermsAtTexelCentres) {
   const auto c0 = centre(10, 27), c1 = centre(11, 27);
   EXPECT_NEAR(map.Sample(c0[0], c0[1]).ao, map.ao[27 * 32 + 10], 1e-6);
   EXPECT_NEAR(map.Sample(0.5 * (c0[0] + c1[0]), c0[1]).indirect_over_pi.r,
-              0.5 * (map.indirect[(27 * 32 + 10) * 3] + map.indirect[(27 * 32 + 11) * 3]), 1e-6);
+              0.5 * double(map.indirect[(27 * 32 + 10) * 3] + map.indirect[(27 * 32 + 11) * 3]),
+              1e-6);
   // (3) the cache with the texture against the per-pixel cache.
   PreviewOptions px;
   px.model = ModelKind::kStandard;

@@ -318,7 +318,8 @@ TEST(WeaveBake, ReliefNormalsFollowTheYarnGeometry) {
     for (int i = 0; i < 16; ++i) {
       const float* nv = &r.maps.normal_levels[0][size_t((j * 16 + i) * 3)];
       EXPECT_GT(nv[2], 0.f);
-      const double len = std::sqrt(double(nv[0]) * nv[0] + double(nv[1]) * nv[1] + double(nv[2]) * nv[2]);
+      const double len = std::sqrt(double(nv[0]) * double(nv[0]) + double(nv[1]) * double(nv[1]) +
+                                   double(nv[2]) * double(nv[2]));
       EXPECT_LE(len, 1.0 + 1e-6);
       tilt += 1.0 - double(nv[2]) / len;
       // On a warp yarn (along +u = +x) the normal turns about the yarn: the cross-section
@@ -326,8 +327,9 @@ TEST(WeaveBake, ReliefNormalsFollowTheYarnGeometry) {
       // line (across = 0) the y component vanishes.
       const IrawanPoint p = irawan->Locate({(i + 0.5) / (16 * R), (j + 0.5) / (16 * R)});
       if (irawan->pattern().yarns[size_t(p.yarn)].type == YarnType::kWarp &&
-          std::abs(p.v) > 0.8)  // near the yarn's edge: clearly tilted across the yarn
+          std::abs(p.v) > 0.8) {  // near the yarn's edge: clearly tilted across the yarn
         EXPECT_GT(std::abs(double(nv[1])), std::abs(double(nv[0]))) << i << "," << j;
+      }
     }
   EXPECT_GT(tilt / 256, 0.01);  // the relief is not flat
   EXPECT_TRUE(std::isfinite(r.error_mapped));
@@ -526,9 +528,10 @@ TEST(S14ViewBands, BakedBandsAreRatioMapsWhoseYarnContrastGrowsTowardsGrazing) {
     double mean[C] = {0, 0, 0, 0, 0}, var = 0.0;
     const size_t n = l0.size() / C;
     for (size_t t = 0; t < n; ++t)
-      for (int c = 0; c < C; ++c) mean[c] += l0[t * C + size_t(c)] / double(n);
+      for (int c = 0; c < C; ++c) mean[c] += double(l0[t * C + size_t(c)]) / double(n);
     for (int c = 0; c < C; ++c) EXPECT_NEAR(mean[c], 1.0, 1e-5);
-    for (size_t t = 0; t < n; ++t) var += (l0[t * C] - 1.0) * (l0[t * C] - 1.0) / double(n);
+    for (size_t t = 0; t < n; ++t)
+      var += (double(l0[t * C]) - 1.0) * (double(l0[t * C]) - 1.0) / double(n);
     spread.push_back(std::sqrt(var));  // the warp weight's standard deviation
   }
   EXPECT_LT(spread[0], spread[1]);
