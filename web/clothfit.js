@@ -2794,9 +2794,49 @@ async function pmremForTexture(renderer, key, texture) {
 async function loadEquirect(url) {
   if (!envCache.has(url)) {
     const loader = /\.hdr$/i.test(url) ? new HDRLoader() : new EXRLoader();
-    envCache.set(url, loader.loadAsync(url).then((t) => { t.mapping = THREE.EquirectangularReflectionMapping; return t; }));
+    envCache.set(url, loader.loadAsync(url).then((t) => {
+      t.mapping = THREE.EquirectangularReflectionMapping;
+      const st = clampEnvironmentTexels(t);
+      if (st.negative || st.nonfinite) {
+        console.warn(`clothfit: ${url}: ${t.image.width}x${t.image.height} environment map has ${st.negative} texels with negative values (most negative ${st.mostNegative}) and ${st.nonfinite} texels with NaN/Inf values; those channels were set to 0`);
+      }
+      return t;
+    }));
   }
   return envCache.get(url);
+}
+
+/**
+ * An environment map's colour channels as the C++ reader keeps them (render/scene/environment.cpp
+ * Environment::FromImage): a negative or non-finite value of R, G or B is set to 0 (alpha as it
+ * is), in place, on the texture's own data (THREE.FloatType: Float32Array; THREE.HalfFloatType, as
+ * EXRLoader and HDRLoader give by default: Uint16Array of IEEE half floats). Some published HDRIs
+ * carry negative texels (pmndrs-hall: 1909, down to -9.06); three.js would prefilter them as
+ * they are, the reference renderer and the C++ preview as 0 (session 24: up to 1.4 / 255 mean on
+ * the drape). Returns {negative, nonfinite, mostNegative} counts of texels, as the C++ warning.
+ */
+export function clampEnvironmentTexels(texture) {
+  const { data, width, height } = texture.image;
+  const n = width * height, ch = data.length / n;
+  if (!Number.isInteger(ch) || ch < 1) throw new Error(`environment map: ${data.length} values for ${width}x${height} texels`);
+  const half = data instanceof Uint16Array;
+  if (!half && !(data instanceof Float32Array)) return { negative: 0, nonfinite: 0, mostNegative: 0 };  // 8-bit: never negative
+  let negative = 0, nonfinite = 0, mostNegative = 0;
+  for (let p = 0; p < n; ++p) {
+    let neg = false, bad = false;
+    for (let c = 0; c < Math.min(ch, 3); ++c) {
+      const i = p * ch + c, v = data[i];
+      if (half) {
+        if ((v & 0x7c00) === 0x7c00) { bad = true; data[i] = 0; }
+        else if ((v & 0x8000) && (v & 0x7fff)) { neg = true; mostNegative = Math.min(mostNegative, THREE.DataUtils.fromHalfFloat(v)); data[i] = 0; }
+      } else if (!Number.isFinite(v)) { bad = true; data[i] = 0; }
+      else if (v < 0) { neg = true; mostNegative = Math.min(mostNegative, v); data[i] = 0; }
+    }
+    negative += neg ? 1 : 0;
+    nonfinite += bad ? 1 : 0;
+  }
+  if (negative || nonfinite) texture.needsUpdate = true;
+  return { negative, nonfinite, mostNegative };
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -3172,15 +3212,24 @@ export async function loadSceneCard(url, options = {}) {
         } else {
           n = Math.max(0, Math.min(keep.length, maxSamplers - base.samplers));
           r = n === 0 ? base : check(n);
-          while (n > 0 && !(r.linked && r.samplers <= maxSamplers)) r = check(--n);
-          why = r.linked ? `with more, a program needs more than the renderer's ${maxSamplers} texture units` : 'a program does not link';
-          if (r.linked && n < maxSamplers - base.samplers) why += ' or does not link (varyings?)';
+          let linkFailures = 0;
+          while (n > 0 && !(r.linked && r.samplers <= maxSamplers)) {
+            if (!r.linked) ++linkFailures;
+            r = check(--n);
+          }
+          // why the first lights dropped went: the texture units (counted), and for any more a
+          // failed link whose cause WebGL does not say (varyings: one vec4 per shadowed light)
+          const units = n < keep.length && keep.length > maxSamplers - base.samplers;
+          why = !r.linked ? 'a program does not link'
+            : [units ? `with more, a program needs more than the renderer's ${maxSamplers} texture units` : '',
+              linkFailures ? `with ${linkFailures} more, a program within the texture units fails to link (varyings? one vector per shadowed light; WebGL2 guarantees 15)` : '']
+              .filter(Boolean).join('; ');
         }
       }
       const droppedLights = keep.slice(n);
       const dropped = droppedLights.map((l) => l.name || l.type);
       if (dropped.length) console.warn(`clothfit: shadow maps: ${dropped.length} of ${keep.length} lights cast no shadow (${dropped.join(', ')}): ${why} (docs/web.md "Real GPUs")`);
-      this.shadowBudget = { key, maxSamplers, samplers: r.samplers, linked: r.linked, dropped, droppedLights };
+      this.shadowBudget = { key, maxSamplers, samplers: r.samplers, linked: r.linked, dropped, droppedLights, why };
       return this.shadowBudget;
     },
     apply(renderer) {

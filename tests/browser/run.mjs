@@ -28,7 +28,9 @@
 // is, with its visibility block (shadows and light map: env "studio-card"), plus (s23, real
 // GPUs; docs/web.md "Real GPUs") 3 cases on a context without OES_texture_float_linear, 2 with
 // the shadow maps budgeted to 32 and to 16 texture units, and 2 drawn after a WebGL context loss
-// and restore. The other cases drop the card's visibility block, so they compare the shading
+// and restore, plus (s24) 2 on the drape card under pmndrs-hall's 8 panels, one on a page
+// limited to WebGL2's 15 varying vectors, and 3 under environment maps with negative texels
+// (pmndrs-sky, pmndrs-hall). The other cases drop the card's visibility block, so they compare the shading
 // alone. The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -68,7 +70,7 @@ function skip(why) { console.log(`SKIP: ${why}`); process.exit(77); }
 if (!chromium) skip('no chromium (scripts/install-deps installs the Debian package)');
 if (!fs.existsSync(path.join(repo, 'web', 'node_modules', 'three', 'package.json'))) skip('web/node_modules missing (scripts/install-deps runs npm ci in web/)');
 const HIGH = 'blender-city';
-for (const e of ['studio', HIGH]) {
+for (const e of ['studio', HIGH, 'pmndrs-hall', 'pmndrs-sky']) {
   if (!fs.existsSync(path.join(hdriDir, `${e}.exr`))) skip(`${hdriDir}/${e}.exr missing (make data / scripts/fetch-data)`);
 }
 if (!fs.existsSync(clothfit)) { console.error(`no ${clothfit}`); process.exit(1); }
@@ -384,6 +386,43 @@ for (const s of scenes) {
     cases.push({ name, card, preset: path.join(work, `${m}.json`), png, shadows: true, lightMap: png.replace(/\.png$/, '.lm.exr'),
       samplerLimit: limit, budgetCheck: { samplersMax: limit ?? 32, droppedExactly: dropped } });
   }
+}
+// s24: the same budget at WebGL2's 15 varying vectors, which SwiftShader (31) cannot show and
+// WebGL cannot query. three.js gives each shadowed light one vec4 varying, so physical-aniso with
+// its maps on the drape card under pmndrs-hall split into 8 panels (3 card lights + 8 panels, all
+// shadowed, and the light map) reads 17 packed varying vectors (session 23's audit). The case at
+// varyingLimit 15 runs on a context that fails to link any program whose fragment shader reads more
+// (web/test/browser-test.js, counted by web/tools/gpu-limits/glsl-count.js): the budget sees only
+// the failed link (the samplers are within the 32 units) and must drop exactly the 2 weakest
+// panels' shadows. Its twin without a limit keeps all 11 and compares with the C++ preview as the
+// other card cases do; the limited case differs by the 2 dropped shadows (bounds.json).
+{
+  const s = 'drape', variant = 'hall-card-panels', m = 'physical-aniso-maps';
+  const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
+  const cardPath = path.join(work, `${s}-${variant}.card.json`);
+  fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf),
+    environment: { ...card.environment, path: 'pmndrs-hall', intensity: 1, rotation_y_degrees: 0, sun: 'panels' } }, null, 1));
+  for (const [suffix, limit, dropped] of [['', null, 0], ['-15varyings', 15, 2]]) {
+    const name = `${s}/${variant}${suffix}/${m}`;
+    if (args.only && !name.includes(args.only)) continue;
+    const png = path.join(work, `${s}-${variant}${suffix}-${m}.png`);
+    cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png, shadows: true, lightMap: png.replace(/\.png$/, '.lm.exr'),
+      varyingLimit: limit, budgetCheck: { samplersMax: 32, droppedExactly: dropped } });
+  }
+}
+// s24: environment maps with negative texels. Many published HDRIs carry them (every pmndrs map
+// installed here; pmndrs-sky down to -3336, pmndrs-hall -9.06). The C++ reader sets them to 0
+// (render/scene/environment.cpp), and so does web/ since session 24 (clampEnvironmentTexels);
+// before, three.js prefiltered them as they are. Measured without the clamp: 2.37 / 5, 2.60 / 5
+// and 0.99 / 2 (with it: 0.00 / 0, 0.00 / 0, 0.08 / 1).
+const NEGATIVE_TEXELS = [['sphere', 'pmndrs-sky', 'standard-grey'], ['sphere', 'pmndrs-sky', 'woven-lobe-canvas'], ['sphere', 'pmndrs-hall', 'physical-aniso-maps']];
+for (const [s, env, m] of NEGATIVE_TEXELS) {
+  const name = `${s}/${env}/${m}`;
+  if (args.only && !name.includes(args.only)) continue;
+  const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
+  const cardPath = path.join(work, `${s}-${env}.card.json`);
+  fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf), environment: { ...card.environment, path: env } }, null, 1));
+  cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png: path.join(work, `${s}-${env}-${m}.png`) });
 }
 // s23: a WebGL context loss and restore before the frame (web/test/browser-test.js, on its own
 // renderer): the drape card as it is (shadow maps, light map) with woven's GGX lobes, and the

@@ -553,6 +553,26 @@ if (args.clothfit) {
   check(() => assert.equal(loadClothfitPreset(pre('physical-aniso', { specular_color: [25, 0, 3] })).specularColor.r, 25), 'specular_color up to 25 accepted');
 }
 
+// Session 24: environment texels as the C++ reader keeps them (render/scene/environment.cpp):
+// negative or non-finite R, G, B set to 0, alpha untouched, for 32-bit and half-float data; the
+// counts are texels, as the C++ warning's.
+{
+  const { clampEnvironmentTexels } = await import(pathToFileURL(path.join(repo, 'web', 'clothfit.js')).href);
+  const H = THREE.DataUtils.toHalfFloat;
+  const f = new Float32Array([1, -2, 3, -1, /**/ NaN, 0.5, -0.25, 1, /**/ 0, 0, 0, 1, /**/ Infinity, 2, 2, 1]);
+  const tf = new THREE.DataTexture(f, 2, 2, THREE.RGBAFormat, THREE.FloatType);
+  const sf = clampEnvironmentTexels(tf);
+  check(() => assert.deepEqual([sf.negative, sf.nonfinite, sf.mostNegative], [2, 2, -2]), 'float: counts (a texel with NaN and a negative counts in both)');
+  check(() => assert.deepEqual([...f], [1, 0, 3, -1, 0, 0.5, 0, 1, 0, 0, 0, 1, 0, 2, 2, 1]), 'float: values (alpha kept)');
+  const h = new Uint16Array([H(1), H(-9.0625), H(3), H(1), /**/ 0x7e00, H(0.5), 0x8000, H(1), /**/ H(-3336), H(0), H(0), H(-1), /**/ 0xfc00, H(2), H(2), H(1)]);
+  const th = new THREE.DataTexture(h, 2, 2, THREE.RGBAFormat, THREE.HalfFloatType);
+  const sh = clampEnvironmentTexels(th);
+  check(() => assert.deepEqual([sh.negative, sh.nonfinite, sh.mostNegative], [2, 2, -3336]), 'half: counts (-0 is not negative)');
+  check(() => assert.deepEqual([...h].map((x) => THREE.DataUtils.fromHalfFloat(x)), [1, 0, 3, 1, 0, 0.5, -0, 1, 0, 0, 0, -1, 0, 2, 2, 1]), 'half: values (alpha kept)');
+  const clean = new Float32Array([0, 1, 2]);
+  check(() => assert.deepEqual(clampEnvironmentTexels(new THREE.DataTexture(clean, 1, 1, THREE.RGBFormat, THREE.FloatType)), { negative: 0, nonfinite: 0, mostNegative: 0 }), 'clean map untouched');
+}
+
 // ---- weave maps (web/exr.js, weaveMapsFromExr; the C++ side is render/preview/weave_maps.*) ----
 {
   const { parseExr } = await import(pathToFileURL(path.join(repo, 'web', 'exr.js')).href);

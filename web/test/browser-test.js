@@ -5,6 +5,7 @@
 // Paths in the plan and the cards are file-system paths, served by the test server under /fs.
 import * as THREE from 'three';
 import { loadSceneCard, fetchClothfitPreset, fetchLightMap, applyLightMap } from '../clothfit.js';
+import { varyings } from '../tools/gpu-limits/glsl-count.js';
 
 const post = (path, body) => fetch(path, { method: 'POST', body });
 const log = (msg) => post('/log', String(msg));
@@ -55,15 +56,32 @@ async function run() {
     const samplerTypes = new Set(['SAMPLER_2D', 'SAMPLER_3D', 'SAMPLER_CUBE', 'SAMPLER_2D_SHADOW', 'SAMPLER_2D_ARRAY', 'SAMPLER_2D_ARRAY_SHADOW',
       'SAMPLER_CUBE_SHADOW', 'INT_SAMPLER_2D', 'INT_SAMPLER_3D', 'INT_SAMPLER_CUBE', 'INT_SAMPLER_2D_ARRAY', 'UNSIGNED_INT_SAMPLER_2D',
       'UNSIGNED_INT_SAMPLER_3D', 'UNSIGNED_INT_SAMPLER_CUBE', 'UNSIGNED_INT_SAMPLER_2D_ARRAY'].map((k) => g[k]));
+    // s24: a GPU with `varyingLimit` varying vectors (cases with c.varyingLimit; WebGL2 guarantees
+    // 15, SwiftShader allows 31): a program whose fragment shader reads more, packed by the rule
+    // of GLSL ES 1.00 Appendix A.7 (web/tools/gpu-limits/glsl-count.js, session 23's audit),
+    // fails to link. WebGL has no query for a program's varyings, so web/clothfit.js's budget
+    // only sees the failed link.
+    const fragmentSource = (prog) => {
+      for (const sh of g.getAttachedShaders(prog) ?? []) if (g.getShaderParameter(sh, g.SHADER_TYPE) === g.FRAGMENT_SHADER) return g.getShaderSource(sh);
+      return null;
+    };
     g.getProgramParameter = (prog, pname) => {
       const v = linkStatus(prog, pname);
-      if (pname !== g.LINK_STATUS || !v || emulated.linkLimit === null) return v;
-      let n = 0;
-      for (let i = 0, k = linkStatus(prog, g.ACTIVE_UNIFORMS); i < k; ++i) {
-        const u = g.getActiveUniform(prog, i);
-        if (u && samplerTypes.has(u.type)) n += u.size;
+      if (pname !== g.LINK_STATUS || !v || (emulated.linkLimit === null && emulated.varyingLimit === null)) return v;
+      if (emulated.linkLimit !== null) {
+        let n = 0;
+        for (let i = 0, k = linkStatus(prog, g.ACTIVE_UNIFORMS); i < k; ++i) {
+          const u = g.getActiveUniform(prog, i);
+          if (u && samplerTypes.has(u.type)) n += u.size;
+        }
+        if (n > emulated.linkLimit) { emulated.failures++; return false; }
       }
-      if (n > emulated.linkLimit) { emulated.failures++; return false; }
+      if (emulated.varyingLimit !== null) {
+        const src = fragmentSource(prog);
+        const n = src === null ? 0 : varyings(src).packedVectors;
+        emulated.maxVaryings = Math.max(emulated.maxVaryings, n);
+        if (n > emulated.varyingLimit) { emulated.failures++; return false; }
+      }
       return v;
     };
     // A shader that does not compile is reported through /log (three.js would only console.error).
@@ -73,7 +91,7 @@ async function run() {
     log(`WebGL${hideFloatLinear ? ' (OES_texture_float_linear hidden)' : ''}: ${g.getParameter(g.VERSION)} / ${g.getParameter(g.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? g.RENDERER)}; OES_texture_float_linear: ${r.extensions.has('OES_texture_float_linear')}; max anisotropy: ${r.capabilities.getMaxAnisotropy()}`);
     return { renderer: r, gl: g };
   };
-  const emulated = { linkLimit: null, failures: 0 };  // see makeRenderer
+  const emulated = { linkLimit: null, varyingLimit: null, failures: 0, maxVaryings: 0 };  // see makeRenderer
   const main = makeRenderer(document.getElementById('c'), false);
   let noFloatLinear = null, restoring = null;
   const resolvePath = (p, base) => (p.startsWith('/') ? fsUrl(p) : new URL(p, base).href);
@@ -119,7 +137,9 @@ async function run() {
     }
     sc.samplerLimit = c.samplerLimit ?? null;  // before setMaterial, whose budget check uses it
     emulated.linkLimit = c.samplerLimit ?? null;
+    emulated.varyingLimit = c.varyingLimit ?? null;
     emulated.failures = 0;
+    emulated.maxVaryings = 0;
     sc.setMaterial(material);
     // Shadow cases (run.mjs SHADOW_CASES, session 13): three.js shadow maps with the case's
     // settings; a case without them leaves the scene as loaded (no shadows).
@@ -128,6 +148,7 @@ async function run() {
     // (WebGL2's minimum is 16; SwiftShader has 32): web/clothfit.js fitShadowBudget.
     sc.apply(renderer);
     const budget = sc.shadowBudget;
+    if (c.varyingLimit) log(`${c.name}: shadow budget ${budget ? `${budget.samplers} of ${budget.maxSamplers} samplers, linked ${budget.linked}, no shadow from: ${budget.dropped.join(', ') || 'none'}` : 'none (no shadows)'}; emulated link failures (programs over ${c.varyingLimit} varying vectors) while fitting: ${emulated.failures}, most varyings seen ${emulated.maxVaryings}`);
     if (c.samplerLimit) log(`${c.name}: shadow budget ${budget ? `${budget.samplers} of ${budget.maxSamplers} samplers, linked ${budget.linked}, no shadow from: ${budget.dropped.join(', ') || 'none'}` : 'none (no shadows)'}; emulated link failures (programs over ${c.samplerLimit} samplers) while fitting: ${emulated.failures}`);
     renderer.setSize(sc.width, sc.height, false);
     if (c.contextRestore) {
