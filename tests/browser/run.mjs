@@ -31,7 +31,8 @@
 // the shadow maps budgeted to 32 and to 16 texture units, and 2 drawn after a WebGL context loss
 // and restore, plus (s24) 2 on the drape card under pmndrs-hall's 8 panels, one on a page
 // limited to WebGL2's 15 varying vectors, and 3 under environment maps with negative texels
-// (pmndrs-sky, pmndrs-hall). The other cases drop the card's visibility block, so they compare the shading
+// (pmndrs-sky, pmndrs-hall), and 8 with the other tone mappings and exposures. The other cases
+// drop the card's visibility block, so they compare the shading
 // alone. The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
 //
@@ -417,6 +418,22 @@ for (const s of scenes) {
 // before, three.js prefiltered them as they are. Measured without the clamp: 2.37 / 5, 2.60 / 5
 // and 0.99 / 2 (with it: 0.00 / 0, 0.00 / 0, 0.08 / 1).
 const NEGATIVE_TEXELS = [['sphere', 'pmndrs-sky', 'standard-grey'], ['sphere', 'pmndrs-sky', 'woven-lobe-canvas'], ['sphere', 'pmndrs-hall', 'physical-aniso-maps']];
+// s24: the card's display transform: every tone mapping three.js r187 has (the other cases use
+// the cards' ACESFilmic at exposure 1), at exposure 1 and two at 2.2, on the sphere
+// (render/scene/tonemap.cpp against three.js's tonemapping_pars_fragment; measured s24: all
+// 0.00 / 0, also with woven-lobe-canvas on every one).
+for (const [tm, ex, mats] of [['Linear', 1], ['Reinhard', 1], ['Cineon', 1], ['AgX', 1], ['Neutral', 1], ['ACESFilmic', 2.2], ['AgX', 2.2, ['standard-grey', 'woven-lobe-canvas']]]) {
+  for (const m of mats ?? ['standard-grey']) {
+    const s = 'sphere', env = `studio-${tm}-x${ex}`;
+    const name = `${s}/${env}/${m}`;
+    if (args.only && !name.includes(args.only)) continue;
+    const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
+    const cardPath = path.join(work, `${s}-${env}.card.json`);
+    delete card.visibility;
+    fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf), tone_mapping: tm, exposure: ex }, null, 1));
+    cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png: path.join(work, `${s}-${env}-${m}.png`) });
+  }
+}
 // --all-envs (not in make test; 78 cases, about 2.5 min): the sphere under every installed map
 // (the HDRI cache: 8 blender, 18 pmndrs) with standard-grey, woven-lobe-canvas and
 // physical-aniso-maps. Session 24: all 78 meet the acceptance; without the negative-texel clamp
