@@ -31,7 +31,8 @@
 // the shadow maps budgeted to 32 and to 16 texture units, and 2 drawn after a WebGL context loss
 // and restore, plus (s24) 2 on the drape card under pmndrs-hall's 8 panels, one on a page
 // limited to WebGL2's 15 varying vectors, and 3 under environment maps with negative texels
-// (pmndrs-sky, pmndrs-hall), and 8 with the other tone mappings and exposures. The other cases
+// (pmndrs-sky, pmndrs-hall), 8 with the other tone mappings and exposures, and 2 frames that are
+// not square. The other cases
 // drop the card's visibility block, so they compare the shading
 // alone. The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
@@ -431,6 +432,19 @@ for (const [tm, ex, mats] of [['Linear', 1], ['Reinhard', 1], ['Cineon', 1], ['A
     const cardPath = path.join(work, `${s}-${env}.card.json`);
     delete card.visibility;
     fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf), tone_mapping: tm, exposure: ex }, null, 1));
+    cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png: path.join(work, `${s}-${env}-${m}.png`) });
+  }
+}
+// s24: frames that are not square (every card is 256 x 256): the camera's aspect and the
+// pixel grid (measured s24: 0.00-0.01 / 0 for both shapes on sphere and drape).
+{
+  for (const [s, w, h] of [['sphere', 320, 192], ['drape', 160, 288]]) {
+    const m = 'standard-grey', env = `studio-${w}x${h}`, name = `${s}/${env}/${m}`;
+    if (args.only && !name.includes(args.only)) continue;
+    const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
+    const cardPath = path.join(work, `${s}-${env}.card.json`);
+    delete card.visibility;
+    fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf), width: w, height: h }, null, 1));
     cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png: path.join(work, `${s}-${env}-${m}.png`) });
   }
 }
