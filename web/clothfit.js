@@ -2854,11 +2854,13 @@ export function clampEnvironmentTexels(texture) {
 //     radius      PCF disk radius in texels (three.js default 1)
 //     bias        added to the normalised depth (negative: fewer self-shadowing artefacts)
 //     normalBias  world metres along the vertex normal
+//     texelBias   directional lights: the depth bias is at least this many shadow-map texels of
+//                 world depth (default 8; 0 = the normalised bias alone, as before session 24)
 //     fit         'fabric' (default): each shadow camera frames the fabric meshes' bounding box
 //                 (as receivers) and reaches back to the scene's box towards the light (casters),
 //                 which is exact for the fabric: anything that can shadow it lies in that
 //                 volume; the floor outside it is unshadowed. 'scene': frames the whole scene.
-export const SHADOW_DEFAULTS = Object.freeze({ type: 'basic', mapSize: 2048, radius: 1, bias: -0.001, normalBias: 0, fit: 'fabric' });
+export const SHADOW_DEFAULTS = Object.freeze({ type: 'basic', mapSize: 2048, radius: 1, bias: -0.001, normalBias: 0, texelBias: 8, fit: 'fabric' });
 const SHADOW_TYPES = { basic: THREE.BasicShadowMap, pcf: THREE.PCFShadowMap, vsm: THREE.VSMShadowMap };
 
 export function shadowOptions(spec, where = 'shadows') {
@@ -2867,7 +2869,7 @@ export function shadowOptions(spec, where = 'shadows') {
   if (typeof spec !== 'object' || Array.isArray(spec)) throw new Error(`${where}: expected true, false or an object {${Object.keys(SHADOW_DEFAULTS).join(', ')}}`);
   const out = { ...SHADOW_DEFAULTS };
   for (const [k, v] of Object.entries(spec)) {
-    if (!(k in SHADOW_DEFAULTS)) throw new Error(`${where}.${k}: unknown field (fields: ${Object.keys(SHADOW_DEFAULTS).join(', ')})`);
+    if (!Object.hasOwn(SHADOW_DEFAULTS, k)) throw new Error(`${where}.${ylKeyShown(k)}: unknown field (fields: ${Object.keys(SHADOW_DEFAULTS).join(', ')})`);
     const num = (lo, hi) => {
       if (typeof v !== 'number' || !Number.isFinite(v) || v < lo || v > hi) throw new Error(`${where}.${k}: expected a number in [${lo}, ${hi}], got ${JSON.stringify(v)}`);
       return v;
@@ -2884,6 +2886,7 @@ export function shadowOptions(spec, where = 'shadows') {
       out.mapSize = v;
     } else if (k === 'radius') out.radius = num(0, 64);
     else if (k === 'bias') out.bias = num(-1, 1);
+    else if (k === 'texelBias') out.texelBias = num(0, 64);
     else out.normalBias = num(-1, 1);
   }
   return out;
@@ -2893,7 +2896,7 @@ const boxCorners = (b) => [0, 1, 2, 3, 4, 5, 6, 7].map((i) => new THREE.Vector3(
 
 // Points the shadow camera of `light` at its target and fits its frustum: receivers = the box
 // whose shadows are wanted, casters = the scene's box (everything that can occlude them).
-export function fitShadowCamera(light, receivers, casters, mapSize) {
+export function fitShadowCamera(light, receivers, casters, mapSize, texelBias = 0) {
   const shadow = light.shadow, cam = shadow.camera;
   const margin = 1.02;
   light.updateMatrixWorld(true);
@@ -2926,6 +2929,12 @@ export function fitShadowCamera(light, receivers, casters, mapSize) {
     const pad = 0.01 * (d1 - d0) + 1e-3;
     cam.near = d0 - pad; cam.far = d1 + pad;
     cam.updateProjectionMatrix();
+    // texelBias (session 24): at least texelBias texels of world depth. The normalised bias is a
+    // fraction of this camera's depth range, which varies with the light's direction across the
+    // scene box (1.1 m for an overhead sun on the drape, 3.5 m for its fill light), so -0.001
+    // alone left acne on the fabric under a strong high sun. A texel-scaled bias holds slopes up
+    // to atan(texelBias) (83 degrees at 8) whatever the scene's size.
+    if (texelBias > 0) shadow.bias = Math.min(shadow.bias, -texelBias * (2 * half / mapSize) / (cam.far - cam.near));
   } else if (light.isSpotLight) {
     // The cone, narrowed to the receivers' box when it is smaller (shadow.focus scales the cone
     // angle into the camera's fov in SpotLightShadow.updateMatrices).
@@ -3143,7 +3152,7 @@ export async function loadSceneCard(url, options = {}) {
         sh.radius = o.radius;
         sh.bias = o.bias;
         sh.normalBias = o.normalBias;
-        fitShadowCamera(obj, receivers, casters, o.mapSize);
+        fitShadowCamera(obj, receivers, casters, o.mapSize, o.texelBias);
         sh.needsUpdate = true;
       });
       // the lights fitShadowBudget took the shadow from stay without it (checked again there)

@@ -31,8 +31,8 @@
 // the shadow maps budgeted to 32 and to 16 texture units, and 2 drawn after a WebGL context loss
 // and restore, plus (s24) 2 on the drape card under pmndrs-hall's 8 panels, one on a page
 // limited to WebGL2's 15 varying vectors, and 3 under environment maps with negative texels
-// (pmndrs-sky, pmndrs-hall), 8 with the other tone mappings and exposures, and 2 frames that are
-// not square. The other cases
+// (pmndrs-sky, pmndrs-hall), 8 with the other tone mappings and exposures, 2 frames that are
+// not square, and 2 drape cards with shadows under a strong high sun. The other cases
 // drop the card's visibility block, so they compare the shading
 // alone. The page posts
 // each frame to a server on 127.0.0.1 (ephemeral port) that lives at most --timeout seconds.
@@ -73,7 +73,7 @@ function skip(why) { console.log(`SKIP: ${why}`); process.exit(77); }
 if (!chromium) skip('no chromium (scripts/install-deps installs the Debian package)');
 if (!fs.existsSync(path.join(repo, 'web', 'node_modules', 'three', 'package.json'))) skip('web/node_modules missing (scripts/install-deps runs npm ci in web/)');
 const HIGH = 'blender-city';
-for (const e of ['studio', HIGH, 'pmndrs-hall', 'pmndrs-sky']) {
+for (const e of ['studio', HIGH, 'pmndrs-hall', 'pmndrs-sky', 'pmndrs-bridge', 'pmndrs-esplanade']) {
   if (!fs.existsSync(path.join(hdriDir, `${e}.exr`))) skip(`${hdriDir}/${e}.exr missing (make data / scripts/fetch-data)`);
 }
 if (!fs.existsSync(clothfit)) { console.error(`no ${clothfit}`); process.exit(1); }
@@ -412,6 +412,21 @@ for (const s of scenes) {
     cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png, shadows: true, lightMap: png.replace(/\.png$/, '.lm.exr'),
       varyingLimit: limit, budgetCheck: { samplersMax: 32, droppedExactly: dropped } });
   }
+}
+// s24: a strong high sun with shadows. The drape card under pmndrs-bridge and pmndrs-esplanade
+// (sun: 'panels': the sun, at 83 degrees of elevation on esplanade, and up to 6 panels, all
+// shadowed, with the light map). The sun's shadow camera spans only 1.1 m of depth, so the
+// normalised bias -0.001 was 1.1 mm of world depth, less than the fabric's slope across a
+// texel: acne over the cloth (0.31 / 4 and 0.51 / 10). SHADOW_DEFAULTS.texelBias 8 (at least 8
+// texels of depth, web/clothfit.js fitShadowCamera) brings them to the other card cases' level.
+for (const e of ['pmndrs-bridge', 'pmndrs-esplanade']) {
+  const s = 'drape', m = 'standard-grey', variant = `${e.replace('pmndrs-', '')}-card-panels`, name = `${s}/${variant}/${m}`;
+  if (args.only && !name.includes(args.only)) continue;
+  const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
+  const cardPath = path.join(work, `${s}-${variant}.card.json`);
+  fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf), environment: { ...card.environment, path: e, sun: 'panels' } }, null, 1));
+  const png = path.join(work, `${s}-${variant}-${m}.png`);
+  cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png, shadows: true, lightMap: png.replace(/\.png$/, '.lm.exr') });
 }
 // s24: environment maps with negative texels. Many published HDRIs carry them (every pmndrs map
 // installed here; pmndrs-sky down to -3336, pmndrs-hall -9.06). The C++ reader sets them to 0

@@ -852,6 +852,23 @@ if (args.clothfit) {
   check(() => assert.ok(dir.shadow.camera.right - dir.shadow.camera.left < 2), 'directional: the frustum frames the receivers, not the floor');
   const view = dir.shadow.camera.matrixWorldInverse;
   check(() => assert.ok(corners(casters).every((p) => -p.clone().applyMatrix4(view).z >= dir.shadow.camera.near)), 'directional: casters behind the near plane');
+  // s24 texelBias: the depth bias is at least texelBias texels of world depth (normalised by this
+  // camera's depth range); the normalised bias stays when it is the larger; 0 = unchanged
+  {
+    const cam = dir.shadow.camera, texel = (cam.right - cam.left) / 2048, range = cam.far - cam.near;
+    dir.shadow.bias = -0.001;
+    fitShadowCamera(dir, receivers, casters, 2048, 8);
+    check(() => assert.ok(Math.abs(dir.shadow.bias * range + 8 * texel) < 1e-12 * range && dir.shadow.bias < -0.001), `directional: texelBias 8 -> ${(-dir.shadow.bias * range * 1000).toFixed(3)} mm = 8 texels`);
+    dir.shadow.bias = -0.5;
+    fitShadowCamera(dir, receivers, casters, 2048, 8);
+    check(() => assert.equal(dir.shadow.bias, -0.5), 'directional: a larger normalised bias is kept');
+    dir.shadow.bias = -0.001;
+    fitShadowCamera(dir, receivers, casters, 2048, 0);
+    check(() => assert.equal(dir.shadow.bias, -0.001), 'directional: texelBias 0 leaves the bias');
+    check(() => assert.deepEqual(shadowOptions({ texelBias: 0 }), { ...SHADOW_DEFAULTS, texelBias: 0 }), 'texelBias option');
+    check(() => assert.throws(() => shadowOptions({ texelBias: -1 }), /shadows\.texelBias: expected a number in \[0, 64\]/), 'texelBias range');
+    check(() => assert.throws(() => shadowOptions({ toString: 1 }), /shadows\.toString: unknown field/), 'shadow option names from Object.prototype are unknown');
+  }
   const spot = new THREE.SpotLight(0xffffff, 1, 0, 0.5);
   spot.position.set(-1.2, 2, 1.4); spot.add(spot.target); spot.target.position.set(0, 0, -1);
   spot.lookAt(0, 0.3, 0); spot.updateMatrixWorld(true);
