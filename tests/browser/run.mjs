@@ -478,6 +478,7 @@ for (const [s, env, m] of NEGATIVE_TEXELS) {
   if (args.only && !name.includes(args.only)) continue;
   const card = JSON.parse(fs.readFileSync(path.join(sceneDir, `${s}.json`), 'utf8'));
   const cardPath = path.join(work, `${s}-${env}.card.json`);
+  delete card.visibility;  // the shading alone, as the other cases without "card" in the name
   fs.writeFileSync(cardPath, JSON.stringify({ ...card, gltf: path.join(sceneDir, card.gltf), environment: { ...card.environment, path: env } }, null, 1));
   cases.push({ name, card: cardPath, preset: path.join(work, `${m}.json`), png: path.join(work, `${s}-${env}-${m}.png`) });
 }
