@@ -602,7 +602,11 @@ function yarnLobeIblOptions(ibl, f, fail, obj, int) {
 // JSON-quoted and cut to 40 characters (no control character, quote or markup reaches the
 // message unescaped).
 function ylKeyShown(k) {
-  return /^[A-Za-z0-9_]{1,40}$/.test(k) ? k : JSON.stringify(k.slice(0, 40)).replace(/[<>&]/g, (c) => `\\u${c.charCodeAt(0).toString(16).padStart(4, '0')}`);
+  if (/^[A-Za-z0-9_]{1,40}$/.test(k)) return k;
+  // markup, DEL and the C1 controls, the line / paragraph separators and the bidirectional
+  // overrides as \u escapes (JSON.stringify escapes only the C0 controls and quotes)
+  const q = JSON.stringify(k.slice(0, 40)).replace(/[<>&\u007f-\u009f\u2028\u2029\u202a-\u202e\u2066-\u2069]/g, (c) => `\\u${c.charCodeAt(0).toString(16).padStart(4, '0')}`);
+  return k.length > 40 ? `${q}...` : q;
 }
 
 const ylSmoothStep01 = (x) => { const c = clamp01(x); return c * c * (3 - 2 * c); };
@@ -2604,8 +2608,8 @@ export function loadClothfitPreset(json, options = {}) {
   if (preset.version !== 1) throw new Error(`loadClothfitPreset: version ${preset.version} not supported (1)`);
   const model = MODELS.get(preset.model);
   if (!model) throw new Error(`loadClothfitPreset: model: unknown ${typeof preset.model === 'string' ? ylKeyShown(preset.model) : typeof preset.model} (known: ${clothfitModels().join(', ')})`);
-  const given = preset.parameters ?? {};
-  if (given === null || typeof given !== 'object' || Array.isArray(given)) throw new Error('loadClothfitPreset: parameters: expected an object');
+  const given = preset.parameters;  // required, as the C++ reader has it
+  if (given === null || typeof given !== 'object' || Array.isArray(given)) throw new Error('loadClothfitPreset: parameters: missing or not an object');
   for (const k of Object.keys(given)) {
     if (!Object.hasOwn(model.defaults, k)) throw new Error(`loadClothfitPreset: parameters.${ylKeyShown(k)}: unknown for model '${preset.model}' (valid: ${Object.keys(model.defaults).join(', ')})`);
   }
@@ -2649,7 +2653,7 @@ function checkPresetParameters(model, given) {
       inRange(number(v, f), f);
     } else {
       if (!Array.isArray(v) || v.length !== size) fail(f, `expected an array of ${size} numbers`);
-      v.forEach((x, c) => inRange(number(x, `${f}[${c}]`), `${f}[${c}]`));
+      for (let c = 0; c < size; ++c) inRange(number(v[c], `${f}[${c}]`), `${f}[${c}]`);  // holes too
     }
   }
 }
@@ -2819,12 +2823,13 @@ export function clampEnvironmentTexels(texture) {
   const { data, width, height } = texture.image;
   const n = width * height, ch = data.length / n;
   if (!Number.isInteger(ch) || ch < 1) throw new Error(`environment map: ${data.length} values for ${width}x${height} texels`);
-  const half = data instanceof Uint16Array;
-  if (!half && !(data instanceof Float32Array)) return { negative: 0, nonfinite: 0, mostNegative: 0 };  // 8-bit: never negative
+  const half = data instanceof Uint16Array && texture.type === THREE.HalfFloatType;
+  if (!half && !(data instanceof Float32Array)) return { negative: 0, nonfinite: 0, mostNegative: 0 };  // integer data: never negative or non-finite
+  const colour = ch >= 3 ? 3 : 1;  // as the C++ reader: one or two channels, the first is grey
   let negative = 0, nonfinite = 0, mostNegative = 0;
   for (let p = 0; p < n; ++p) {
     let neg = false, bad = false;
-    for (let c = 0; c < Math.min(ch, 3); ++c) {
+    for (let c = 0; c < colour; ++c) {
       const i = p * ch + c, v = data[i];
       if (half) {
         if ((v & 0x7c00) === 0x7c00) { bad = true; data[i] = 0; }
@@ -2855,7 +2860,8 @@ export function clampEnvironmentTexels(texture) {
 //     bias        added to the normalised depth (negative: fewer self-shadowing artefacts)
 //     normalBias  world metres along the vertex normal
 //     texelBias   directional lights: the depth bias is at least this many shadow-map texels of
-//                 world depth (default 8; 0 = the normalised bias alone, as before session 24)
+//                 world depth (default 8; 0 = the normalised bias alone, as before session 24),
+//                 so on them `bias` is a floor, not the value used, unless texelBias is 0
 //     fit         'fabric' (default): each shadow camera frames the fabric meshes' bounding box
 //                 (as receivers) and reaches back to the scene's box towards the light (casters),
 //                 which is exact for the fabric: anything that can shadow it lies in that
@@ -3162,8 +3168,8 @@ export async function loadSceneCard(url, options = {}) {
     // Shadows over the renderer's sampler limit: see programSamplerCount above. maxSamplers:
     // this.samplerLimit ?? renderer.capabilities.maxTextures (MAX_TEXTURE_IMAGE_UNITS). Compiles
     // (renderer.compile) only when the materials, the shadow-casting lights or the limit changed.
-    // Returns this.shadowBudget: {maxSamplers, samplers (the most any program uses), dropped
-    // (light names), droppedLights, linked}.
+    // Returns this.shadowBudget: {key (what was checked), maxSamplers, samplers (the most any
+    // program uses), dropped (light names), droppedLights, linked, why (the warning's reason)}.
     samplerLimit: null,
     shadowBudget: null,
     fitShadowBudget(renderer) {
@@ -3208,6 +3214,7 @@ export async function loadSceneCard(url, options = {}) {
         return { linked, samplers };
       };
       let n = keep.length, r = check(n), why = '';
+      const first = r;  // keep.length lights casting: failed (or over the limit) when the branch below runs
       if (!(r.linked && r.samplers <= maxSamplers)) {
         // A real GPU over its limit fails the link (ANGLE: "sampler count exceeds
         // MAX_TEXTURE_IMAGE_UNITS"), so the failed program cannot be counted. Count the programs
@@ -3220,8 +3227,9 @@ export async function loadSceneCard(url, options = {}) {
           why = 'a program does not link even without shadow maps';
         } else {
           n = Math.max(0, Math.min(keep.length, maxSamplers - base.samplers));
-          r = n === 0 ? base : check(n);
           let linkFailures = 0;
+          if (n > 0 && n === keep.length) { if (!first.linked) ++linkFailures; r = check(--n); }  // checked already: one fewer
+          else r = n === 0 ? base : check(n);
           while (n > 0 && !(r.linked && r.samplers <= maxSamplers)) {
             if (!r.linked) ++linkFailures;
             r = check(--n);
@@ -3232,7 +3240,7 @@ export async function loadSceneCard(url, options = {}) {
           why = !r.linked ? 'a program does not link'
             : [units ? `with more, a program needs more than the renderer's ${maxSamplers} texture units` : '',
               linkFailures ? `with ${linkFailures} more, a program within the texture units fails to link (varyings? one vector per shadowed light; WebGL2 guarantees 15)` : '']
-              .filter(Boolean).join('; ');
+              .filter(Boolean).join('; ') || `with more, a program goes over the renderer's ${maxSamplers} texture units`;
         }
       }
       const droppedLights = keep.slice(n);

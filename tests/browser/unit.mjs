@@ -543,7 +543,13 @@ if (args.clothfit) {
   check(() => assert.throws(() => loadClothfitPreset(pre('cloth', { roughness: '0.5' })), /parameters\.roughness: expected a number, got string/), 'string refused');
   check(() => assert.throws(() => loadClothfitPreset(pre('cloth', { roughness: [0.5] })), /parameters\.roughness: expected a number, got array/), 'array for a scalar refused');
   check(() => assert.throws(() => loadClothfitPreset(pre('physical-aniso', { specular_color: [1, NaN, 1] })), /parameters\.specular_color\[1\]: not finite/), 'NaN refused');
-  check(() => assert.throws(() => loadClothfitPreset(pre('standard', [0.5])), /parameters: expected an object/), 'parameters array refused');
+  check(() => assert.throws(() => loadClothfitPreset(pre('standard', [0.5])), /parameters: missing or not an object/), 'parameters array refused');
+  check(() => assert.throws(() => loadClothfitPreset({ schema: 'clothfit.preset', version: 1, model: 'standard' }), /parameters: missing or not an object/), 'parameters missing refused (as the C++ reader)');
+  check(() => assert.throws(() => loadClothfitPreset(pre('standard', null)), /parameters: missing or not an object/), 'parameters null refused');
+  // eslint-disable-next-line no-sparse-arrays
+  check(() => assert.throws(() => loadClothfitPreset(pre('standard', { base_color: [0.5, , 0.5] })), /parameters\.base_color\[1\]: expected a number, got undefined/), 'a hole in a colour refused');
+  check(() => assert.throws(() => loadClothfitPreset(pre('standard', { ['x'.repeat(50) + '\u2028\u202e']: 1 })), (e) => /"x{40}"\.\.\.: unknown/.test(e.message)), 'a long name cut, marked');
+  check(() => assert.throws(() => loadClothfitPreset(pre('standard', { 'a\u2028b\u202ec\u007f': 1 })), (e) => e.message.includes('"a\\u2028b\\u202ec\\u007f"') && !/[\u2028\u202e\u007f]/.test(e.message)), 'separators, bidi overrides and DEL escaped');
   // names inherited from Object.prototype are unknown parameters, and untrusted names and models
   // reach the message quoted and escaped
   check(() => assert.throws(() => loadClothfitPreset(pre('standard', { toString: 1 })), /parameters\.toString: unknown for model/), 'toString is unknown');

@@ -230,7 +230,7 @@ async function run() {
         out[W * H * 4 + y * W + x] = mk[(src + x) * 4] > 127 ? 255 : 0;
       }
     }
-    await post(`/result?name=${encodeURIComponent(c.name)}&w=${W}&h=${H}&ms=${(performance.now() - t0).toFixed(0)}&msFrame=${encodeURIComponent(msFrame)}${budget ? `&samplers=${budget.samplers}&maxSamplers=${budget.maxSamplers}&linked=${budget.linked}&dropped=${encodeURIComponent(budget.dropped.join(','))}` : ''}`, out);
+    await post(`/result?name=${encodeURIComponent(c.name)}&w=${W}&h=${H}&ms=${(performance.now() - t0).toFixed(0)}&msFrame=${encodeURIComponent(msFrame)}${budget ? `&samplers=${budget.samplers}&maxSamplers=${budget.maxSamplers}&linked=${budget.linked}&dropped=${encodeURIComponent(budget.dropped.join(','))}&why=${encodeURIComponent(budget.why ?? '')}` : ''}`, out);
   }
   await post('/done', 'ok');
 }
