@@ -241,7 +241,7 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
   cmd->add_option("--scenes", a.scenes,
                   "comma-separated scene cards, one per reference (with --fabric: instead of the "
                   "canonical cards, e.g. under another environment)");
-  cmd->add_option("--model", a.model, "cloth | standard | physical-sheen | gltf-sheen");
+  cmd->add_option("--model", a.model, "cloth | standard | physical-sheen | gltf-sheen | woven | physical-aniso");
   cmd->add_option("--space", a.space, "residual space: display (default) | linear | log");
   cmd->add_option("--lock", a.lock, "comma-separated parameters to hold at their defaults");
   cmd->add_option("--level", a.level,
@@ -920,6 +920,10 @@ void CheckSubsurfaceAgainstPlain(const std::vector<fit::SceneInput>& inputs,
 
 // `clothfit fit` after parsing: returns the exit status (throws on bad input).
 int RunFit(const FitArgs& a, const Globals& g) {
+  // Where the results go, before any work: --images is created (as it always was, now first,
+  // so `--images out/x --out out/x.json` still makes out/), --out's directory must exist.
+  if (!a.images.empty()) fs::create_directories(a.images);
+  io::RequireOutputDirectory(a.out);
   std::unique_ptr<tbb::global_control> limit;
   if (a.threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,

@@ -45,6 +45,8 @@ void AddLutCommand(CLI::App& app, const Globals& g, int& exit_code) {
       ->check(CLI::Range(2, 4096));
   cmd->callback([args, &g, &exit_code]() {
     try {
+      io::RequireOutputDirectory(args->out);  // both, before any table is computed
+      if (!args->sheen_out.empty()) io::RequireOutputDirectory(args->sheen_out);
       lut::Settings s{args->size, args->order, args->azimuth};
       ProgressBar bar("lut dfg", g.quiet);
       const Table2D dfg = lut::ComputeDfg(s, [&](int d, int t) { bar.Update(d, t); });

@@ -96,7 +96,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--material", args->material, "material preset (JSON, docs/preset-format.md)")
       ->required();
   cmd->add_option("--model", args->model,
-                  "expected model (cloth|standard|physical-sheen|gltf-sheen); an error if the "
+                  "expected model (cloth|standard|physical-sheen|gltf-sheen|woven|physical-aniso); an "
+                  "error if the "
                   "preset is another model");
   cmd->add_option("--out", args->out, "output: .png (tone-mapped, sRGB) or .exr (linear)")
       ->required();
@@ -139,6 +140,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--exact-ibl-seed", args->exact_ibl_seed, "seed of --exact-ibl's directions (default 1)");
   cmd->callback([args, &g, &exit_code]() {
     try {
+      io::RequireOutputDirectory(args->out);  // before the PMREM and the cache build
       const std::string ext = std::filesystem::path(args->out).extension().string();
       if (ext != ".png" && ext != ".exr") {
         std::fprintf(stderr, "clothfit render-preview: error: --out: '%s' must end in .png or .exr\n",

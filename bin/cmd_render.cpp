@@ -14,6 +14,7 @@
 #include "bin/commands.h"
 #include "bin/progress.h"
 #include "render/scene/environment.h"
+#include "render/scene/image_io.h"
 #include "render/reference/fabric.h"
 #include "render/reference/path_tracer.h"
 #include "render/scene/scene.h"
@@ -113,6 +114,7 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "comma-separated AOVs: normal,position,uv,tangent,depth,all");
   cmd->callback([args, &g, &exit_code]() {
     try {
+      io::RequireOutputDirectory(args->out);  // before minutes of rendering
       render::RenderSettings st;
       st.spp = args->spp;
       st.seed = args->seed;

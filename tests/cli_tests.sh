@@ -58,6 +58,10 @@ PY
     "$BIN" lut --size 1 --out "$TMP/x.exr" 2>/dev/null && fail "--size 1 accepted"
     err=$("$BIN" --quiet lut --size 8 --out /nonexistent/dir/x.exr 2>&1) && fail "bad --out accepted"
     grep -q "/nonexistent/dir" <<< "$err" || fail "error does not name the path: $err"
+    # --sheen-out's directory too, before the DFG table is computed and written (session 25)
+    err=$("$BIN" --quiet lut --size 8 --out "$TMP/d.exr" --sheen-out /nonexistent/dir/s.exr 2>&1) && fail "bad --sheen-out accepted"
+    grep -q "s.exr: output directory /nonexistent/dir does not exist" <<< "$err" || fail "--sheen-out directory: $err"
+    [ ! -e "$TMP/d.exr" ] || fail "lut wrote --out although --sheen-out's directory is missing"
     "$BIN" no-such-command 2>/dev/null && fail "unknown subcommand accepted"
     err=$("$BIN" --quiet bench reference --fabric /nonexistent/f.json 2>&1) && fail "bench reference: missing fabric accepted"
     grep -q "/nonexistent/f.json" <<< "$err" || fail "bench reference error does not name the file: $err"
@@ -124,6 +128,24 @@ PY
     grep -q "none.exr" <<< "$out" || fail "batch job error does not name the file: $out"
     err=$("$BIN" --quiet fit --model standard 2>&1) && fail "fit without --out accepted"
     grep -q -- "--out is required" <<< "$err" || fail "missing --out not named: $err"
+    # A missing --out directory is an error before any work (session 25): here before the
+    # missing reference is even looked at; render-reference and render-preview before the scene.
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$(dirname "$0")/../datasets/scenes/sphere.json" \
+      --out "$TMP/nodir/f.json" 2>&1) && fail "fit into a missing directory accepted"
+    grep -q "f.json: output directory .*nodir does not exist" <<< "$err" || fail "fit --out directory: $err"
+    ! grep -q "none.exr" <<< "$err" || fail "fit read the references before checking --out: $err"
+    # ... but --images is created first, as it always was, so --images D/x --out D/x.json works
+    err=$("$BIN" --quiet fit --references "$TMP/none.exr" --scenes "$(dirname "$0")/../datasets/scenes/sphere.json" \
+      --images "$TMP/new/imgs" --out "$TMP/new/f.json" 2>&1) && fail "missing reference accepted"
+    grep -q "none.exr" <<< "$err" || fail "fit --images D/x --out D/x.json: $err"
+    [ -d "$TMP/new/imgs" ] || fail "--images not created"
+    err=$("$BIN" --quiet render-reference --scene "$(dirname "$0")/../datasets/scenes/sphere.json" --fabric "$TMP/nofabric.json" \
+      --spp 4 --out "$TMP/nodir/r.exr" 2>&1) && fail "render-reference into a missing directory accepted"
+    grep -q "r.exr: output directory .*nodir does not exist" <<< "$err" || fail "render-reference --out directory: $err"
+    err=$("$BIN" --quiet render-preview --scene "$TMP/nocard.json" --material "$TMP/ok.json" \
+      --out "$TMP/nodir/p.png" 2>&1) && fail "render-preview into a missing directory accepted"
+    grep -q "p.png: output directory .*nodir does not exist" <<< "$err" || fail "render-preview --out directory: $err"
+    [ ! -e "$TMP/nodir" ] || fail "a missing --out directory was created"
     # --yarn-lobe farfield (session 11 measurement): woven only, with --exact-ibl and an irawan
     # --fabric; refused before any reference is read, nothing written.
     D="$(dirname "$0")/../datasets"

@@ -484,10 +484,7 @@ void WriteExr(const std::string& path, const Image& image) {
       image.pixels.size() != size_t(image.width) * image.height * image.channels()) {
     throw IoError(path + ": refusing to write an image with inconsistent size");
   }
-  const fs::path parent = fs::path(path).parent_path();
-  if (!parent.empty() && !fs::is_directory(parent)) {
-    throw IoError(path + ": output directory " + parent.string() + " does not exist");
-  }
+  RequireOutputDirectory(path);
   UseExrThreads();
   const std::string tmp = TempPathFor(path);
   // The header OpenImageIO wrote before session 16: FLOAT channels, ZIP (16 scanlines, zlib
@@ -630,9 +627,7 @@ Table2D ImageToTable(const Image& img) {
 void WritePng8(const std::string& path, int width, int height, const std::vector<float>& rgb) {
   if (width <= 0 || height <= 0 || rgb.size() != size_t(width) * size_t(height) * 3)
     throw IoError(path + ": refusing to write a PNG with inconsistent size");
-  const fs::path parent = fs::path(path).parent_path();
-  if (!parent.empty() && !fs::is_directory(parent))
-    throw IoError(path + ": output directory " + parent.string() + " does not exist");
+  RequireOutputDirectory(path);
   const std::string png = EncodePng8AsString(width, height, rgb, path);
   const std::string tmp = TempPathFor(path);
   WriteBytes(path, tmp, png);
@@ -647,7 +642,14 @@ std::vector<unsigned char> EncodePng8(int width, int height, const std::vector<f
   return std::vector<unsigned char>(png.begin(), png.end());
 }
 
+void RequireOutputDirectory(const std::string& path) {
+  const fs::path parent = fs::path(path).parent_path();
+  if (!parent.empty() && !fs::is_directory(parent))
+    throw IoError(path + ": output directory " + parent.string() + " does not exist");
+}
+
 void WriteTextAtomic(const std::string& path, const std::string& text) {
+  RequireOutputDirectory(path);
   const std::string tmp = TempPathFor(path);
   {
     std::ofstream f(tmp, std::ios::binary);

@@ -88,4 +88,10 @@ ReferenceHalves ReferenceHalvesFromImage(const Image& image, const std::string& 
 // Writes text atomically (temporary file + rename). Throws IoError naming the file.
 void WriteTextAtomic(const std::string& path, const std::string& text);
 
+// Throws IoError "<path>: output directory <dir> does not exist" unless the directory `path`
+// would be written into exists (a bare file name: the working directory). The writers above
+// call it; commands that work for seconds or minutes before they write call it first, so a
+// mistyped --out fails before the work and not after it.
+void RequireOutputDirectory(const std::string& path);
+
 }  // namespace clothfit::io
