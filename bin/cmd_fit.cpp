@@ -28,6 +28,7 @@
 #include "fit/yarn_farfield.h"
 #include "render/reference/fabric.h"
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 #include "render/reference/path_tracer.h"
 #include "render/preview/preview.h"
 #include "render/preview/weave_maps.h"
@@ -458,7 +459,33 @@ int ParseFixedLevel(const std::string& level) {
 // The files to fit: scene cards, references and second-seed references (may be empty).
 struct FitFiles {
   std::vector<std::string> refs, refs2, scenes;
+  // --fabric with --references: the first reference that clothfit did not render from that
+  // fabric (ForeignReference below), "" when every one was; always "" without --references
+  // (the fit renders them itself).
+  std::string foreign;
 };
+
+// Whether a reference was rendered by clothfit from this fabric: its EXR names the fabric, by
+// `clothfit:fabric_name` (render-reference) or by the file stem of `clothfit:fabric` (the
+// reference cache, render-references), equal to the fabric's name or file stem. Returns ""
+// when it does, else why not (for the log). Another renderer's images carry neither.
+std::string ForeignReference(const std::string& ref, const std::string& fabric_path) {
+  const render::Fabric fabric = render::LoadFabric(fabric_path);
+  const std::string stem = fs::path(fabric_path).stem().string();
+  const io::Image img = io::ReadImage(ref);
+  auto get = [&](const char* k) {
+    const auto it = img.metadata.find(k);
+    return it == img.metadata.end() ? std::string() : it->second;
+  };
+  const std::string name = get("clothfit:fabric_name");
+  const std::string from = fs::path(get("clothfit:fabric")).stem().string();
+  for (const std::string& n : {name, from})
+    if (!n.empty() && (n == fabric.name || n == stem)) return "";
+  if (name.empty() && from.empty()) return ref + " has no clothfit:fabric metadata";
+  return ref + " was rendered from fabric '" +
+         limits::EscapeForMessage(name.empty() ? from : name, 80) + "', not '" +
+         limits::EscapeForMessage(fabric.name, 80) + "'";
+}
 
 // --fabric: references rendered (or reused) on the canonical scenes; --fabric --scenes S,...:
 // rendered (or reused) on those cards instead (e.g. the canonical cards under another
@@ -498,6 +525,10 @@ FitFiles ResolveFitFiles(const FitArgs& a, const Globals& g) {
       throw std::invalid_argument("--references and --scenes need the same number (>= 1) of files");
     if (!f.refs2.empty() && f.refs2.size() != f.refs.size())
       throw std::invalid_argument("--references2 needs one file per reference");
+    // Only where it decides something: woven's automatic yarn lobe (MakeFitOptions).
+    if (!a.fabric.empty() && a.model == "woven" && a.yarn_lobe == "auto")
+      for (size_t i = 0; i < f.refs.size() && f.foreign.empty(); ++i)
+        f.foreign = ForeignReference(f.refs[i], a.fabric);
   }
   return f;
 }
@@ -531,7 +562,8 @@ fit::YarnLobeSettings YarnLobeSettingsOf(const FitArgs& a) {
 }
 
 // Everything but the level (which needs the loaded scenes when it is auto).
-fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& start) {
+fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& start,
+                               const FitFiles& files) {
   fit::FitOptions o;
   o.start = start;
   o.locked = SplitList(a.lock);
@@ -582,8 +614,12 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
         a.fis_diffuse_taps >= 0 ? a.fis_diffuse_taps : woven::kDefaultFisDiffuseTaps;
   }
   // Woven's yarn lobes (session 12): "auto" is the fabric's far-field lobe in the preset when
-  // the fabric has yarns (irawan) or is a microcylinder fabric of one hue (sadeghi, session 19)
-  // and nothing asks for what the lobe cannot do.
+  // the fabric has yarns (irawan) or is a microcylinder fabric of one hue (sadeghi, session 19),
+  // nothing asks for what the lobe cannot do, and (session 25) the references are clothfit's
+  // own renders of that fabric: another renderer's yarns need not scatter as our model of the
+  // fabric does, so on its images woven keeps its GGX lobes and fits their shape
+  // (fit/woven_fit.h, the lobe-shape stage; docs/fitting.md "Woven's lobe shape on another
+  // renderer's yarns").
   std::string lobe = a.yarn_lobe;
   const bool lobe_compatible = a.sheen_tilt == 0.0 &&
                                (a.woven_ibl == "auto" || a.woven_ibl == "split");
@@ -593,7 +629,18 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
       const std::string m = render::LoadFabric(a.fabric).model;
       has_lobe = m == "irawan" || (m == "sadeghi" && fit::MicrocylinderRefusal(a.fabric).empty());
     }
-    lobe = has_lobe ? "preset" : "none";
+    if (has_lobe && !files.foreign.empty()) {
+      // With the weave maps (an irawan fabric) the warp/weft balance is held where the maps
+      // were baked (the start preset's warp_share): measured, a free share runs to 0 or 1 on
+      // such references and switches off the texels of one yarn (docs/fitting.md).
+      const bool maps = a.weave_maps != "none" && render::LoadFabric(a.fabric).model == "irawan";
+      if (maps && std::find(o.locked.begin(), o.locked.end(), "warp_share") == o.locked.end())
+        o.locked.push_back("warp_share");
+      std::printf("fit: yarn lobe: woven's GGX lobes, shape fitted%s, not the fabric's far-field "
+                  "lobe: %s (--yarn-lobe preset forces it)\n",
+                  maps ? ", warp_share held with the weave maps" : "", files.foreign.c_str());
+    }
+    lobe = has_lobe && files.foreign.empty() ? "preset" : "none";
   }
   if (lobe == "preset") {  // docs/fitting.md "The far-field yarn lobe"
     if (o.start.model != render::ModelKind::kWoven)
@@ -931,7 +978,7 @@ int RunFit(const FitArgs& a, const Globals& g) {
   const int fixed_level = ParseFixedLevel(a.level);
   const double weave_period = a.fabric.empty() ? 0.0 : render::LoadFabric(a.fabric).weave_period_uv;
   const FitFiles files = ResolveFitFiles(a, g);
-  fit::FitOptions o = MakeFitOptions(a, StartPreset(a));
+  fit::FitOptions o = MakeFitOptions(a, StartPreset(a), files);
   // woven: one start (roughness 0.6) unless --starts asks for more: measured, the second
   // start (0.9) changed no fabric's block RMSE beyond 0.0002 (docs/fitting.md, "Fit speed").
   // Since session 13 the cloth-basin start runs besides it (fit/woven_fit.h; --no-cloth-basin).

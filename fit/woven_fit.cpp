@@ -165,6 +165,18 @@ FitOptions DiffuseStageOptions(const FitOptions& options, const render::Material
   return d;
 }
 
+FitOptions LobeShapeStageOptions(const FitOptions& options, const render::MaterialPreset& from,
+                                 bool with_share) {
+  FitOptions s = options;
+  s.start = from;
+  s.init_from_reference = false;
+  s.start_roughness = {0.0};  // unused without init_from_reference: one start
+  s.locked = Union(options.locked, {"twist", "forward_scattering", "sheen_color",
+                                    "sheen_roughness", "diffuse_roughness"});
+  if (!with_share) s.locked = Union(s.locked, {"warp_share", "specular_f0"});
+  return s;
+}
+
 FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions& options,
                          const PreparedScenes* given) {
   if (options.start.model != render::ModelKind::kWoven)
@@ -192,6 +204,18 @@ FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions
     FitResult rough = FitImages(inputs, DiffuseStageOptions(options, best.preset), prepared);
     rough.candidates = {CandidateOf("rough-diffuse", rough)};
     TakeBetter(std::move(rough), best);
+  }
+  if (best.usable && !Has(options.locked, "anisotropy")) {
+    // The lobe-shape stage (session 25, woven_fit.h): the GGX yarn lobes' anisotropy free,
+    // first with the roughness and colours, then also with warp_share and f0.
+    FitResult shape =
+        FitImages(inputs, LobeShapeStageOptions(options, best.preset, false), prepared);
+    shape.candidates = {CandidateOf("lobe-shape", shape)};
+    TakeBetter(std::move(shape), best);
+    FitResult share =
+        FitImages(inputs, LobeShapeStageOptions(options, best.preset, true), prepared);
+    share.candidates = {CandidateOf("lobe-shape+share", share)};
+    TakeBetter(std::move(share), best);
   }
   if (own) {  // a caller's preparation is the caller's to count
     best.setup_seconds += PreparedSeconds(*own);

@@ -76,6 +76,22 @@ FitOptions FromClothBasin(const FitOptions& options, const render::MaterialPrese
 // sessions 7-18).
 FitOptions DiffuseStageOptions(const FitOptions& options, const render::MaterialPreset& from);
 
+// The lobe-shape stage (session 25; docs/fitting.md "Woven's lobe shape on another renderer's
+// yarns"). The stages above hold the GGX yarn lobes' anisotropy at the start preset's value
+// (the woven default 0.7, from the BRDF-space fits to our Irawan fabrics). On references whose
+// yarns scatter otherwise (measured: real-yarn Blender Cycles renders with a Principled BSDF)
+// that value is wrong and three.js's physical-aniso, whose anisotropy is free, fits them 1.6x
+// better. So after them FitWovenImages fits twice more, each time from the best result so far,
+// keeping a result when its RMSE is lower: (a) "lobe-shape", anisotropy free with roughness,
+// base_color and specular_color (8 free); (b) "lobe-shape+share", the same with warp_share and
+// specular_f0 (10, the Jacobian's width). Sheen, diffuse roughness, twist and forward
+// scattering are held. (Measured on real-yarn Cycles references: (b) alone stops at a worse
+// point, block RMSE 0.0130 against (a)'s 0.0086.) Skipped when anisotropy is locked: by the caller, or by a fabric's yarn lobe
+// (--yarn-lobe preset, which replaces the GGX lobes).
+// with_share: stage (b), else (a).
+FitOptions LobeShapeStageOptions(const FitOptions& options, const render::MaterialPreset& from,
+                                 bool with_share);
+
 // The per-model defaults every image fit shares (clothfit fit, bench fit): metalness /
 // metallic locked for the three.js and glTF baselines (fabrics are dielectric); physical-aniso
 // (docs/fitting.md, "The honest baseline"): metalness, anisotropy_rotation (the maps carry the
