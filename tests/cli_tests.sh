@@ -99,6 +99,48 @@ PY
     grep -q "c.exr" <<< "$err" || fail "size mismatch error does not name the file: $err"
     "$BIN" compare "$TMP/a.exr" "$TMP/missing.exr" 2>/dev/null && fail "missing file accepted"
     ;;
+  foreignlobe)
+    # Session 25: woven's automatic yarn lobe is the fabric's far-field lobe only on clothfit's
+    # own renders of that fabric (EXR metadata); on another renderer's image (here: the same
+    # render with its clothfit:fabric* metadata erased) the GGX lobes with their shape fitted and,
+    # with the weave maps, warp_share held. --yarn-lobe preset still forces the fabric's lobe.
+    D="$(dirname "$0")/../datasets"
+    "$BIN" --quiet render-reference --scene "$D/scenes/sphere.json" --fabric "$D/fabrics/canvas.json" \
+      --spp 4 --out "$TMP/own.exr" || fail "render-reference canvas"
+    "$BIN" --quiet render-reference --scene "$D/scenes/sphere.json" --fabric "$D/fabrics/twill.json" \
+      --spp 4 --out "$TMP/twill.exr" || fail "render-reference twill"
+    oiiotool "$TMP/own.exr" --eraseattrib "clothfit:fabric.*" -o "$TMP/foreign.exr" || fail "oiiotool --eraseattrib"
+    fitw() {  # fitw NAME REFERENCE [options]: a woven fit of canvas on the sphere; exit 0 or 3
+      local name=$1 ref=$2; shift 2
+      "$BIN" --quiet fit --model woven --fabric "$D/fabrics/canvas.json" --references "$ref" \
+        --scenes "$D/scenes/sphere.json" --stride 4 --max-iterations 10 --out "$TMP/$name.json" "$@" > "$TMP/$name.log" 2>&1
+      local st=$?
+      [ $st = 0 ] || [ $st = 3 ] || fail "fit $name exited $st: $(cat "$TMP/$name.log")"
+    }
+    fitw own "$TMP/own.exr"
+    grep -q "yarn lobe: the far-field lobe of" "$TMP/own.log" || fail "own render: not the fabric's lobe: $(cat "$TMP/own.log")"
+    fitw foreign "$TMP/foreign.exr"
+    grep -q "yarn lobe: woven's GGX lobes, shape fitted, warp_share held with the weave maps, not the fabric's far-field lobe: .*foreign.exr has no clothfit:fabric metadata" "$TMP/foreign.log" \
+      || fail "foreign render: $(cat "$TMP/foreign.log")"
+    ! grep -q "far-field lobe of" "$TMP/foreign.log" || fail "foreign render drew the fabric's lobe"
+    python3 - "$TMP/own.json" "$TMP/foreign.json" <<'PY' || fail "presets"
+import json, sys
+own, foreign = (json.load(open(p)) for p in sys.argv[1:])
+assert "yarn_lobe" in own["woven"], own["woven"].keys()
+assert "anisotropy" in own["fit"]["locked"], own["fit"]["locked"]
+assert not any(p["path"].startswith("lobe-shape") for p in own["fit"]["woven_paths"])
+assert "yarn_lobe" not in foreign["woven"], foreign["woven"].keys()
+assert "warp_share" in foreign["fit"]["locked"] and "anisotropy" not in foreign["fit"]["locked"]
+assert foreign["parameters"]["warp_share"] == 0.5, foreign["parameters"]["warp_share"]
+paths = [p["path"] for p in foreign["fit"]["woven_paths"]]
+assert paths[-2:] == ["lobe-shape", "lobe-shape+share"], paths
+assert "weave_maps" in foreign
+PY
+    fitw forced "$TMP/foreign.exr" --yarn-lobe preset
+    grep -q "yarn lobe: the far-field lobe of" "$TMP/forced.log" || fail "--yarn-lobe preset: $(cat "$TMP/forced.log")"
+    fitw other "$TMP/twill.exr"
+    grep -q "twill.exr was rendered from fabric 'twill', not 'canvas'" "$TMP/other.log" || fail "another fabric's render: $(cat "$TMP/other.log")"
+    ;;
   fitbad)
     printf '{"schema":"clothfit.preset","version":1,"model":"cloth","parameters":{"roughness":2}}' > "$TMP/m.json"
     err=$("$BIN" render-preview --scene "$(dirname "$0")/../datasets/scenes/sphere.json" --material "$TMP/m.json" --out "$TMP/p.png" 2>&1) \
