@@ -76,8 +76,12 @@ assert f.get("light_map_albedo_pass") is True, f.get("light_map_albedo_pass")
 names = [p["path"] for p in f["woven_paths"]]
 assert names[0] == "first pass: two-stage" and "first pass: cloth-basin" in names, names
 assert "albedo pass: two-stage" in names, names
-# session 18: each pass ends with the rough-diffuse stage
-assert names[-1] == "albedo pass: rough-diffuse" and "first pass: rough-diffuse" in names, names
+# session 18: each pass has the rough-diffuse stage; session 25: then the two lobe-shape stages
+# (this fit has no --fabric, so woven's GGX lobes with their anisotropy free)
+assert "albedo pass: rough-diffuse" in names and "first pass: rough-diffuse" in names, names
+assert names[-3:] == ["albedo pass: rough-diffuse", "albedo pass: lobe-shape",
+                      "albedo pass: lobe-shape+share"], names
+assert "first pass: lobe-shape+share" in names, names
 assert all(n.startswith(("first pass: ", "albedo pass: ")) for n in names), names
 PY
 # Session 21: the fit's recorded errors are the preset's as drawn: after the albedo pass, fit.rmse
