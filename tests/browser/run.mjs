@@ -16,10 +16,11 @@
 //   anything); reported in the table, never checked. The C++ previews then run after the browser.
 //   A light-map case reports "with (without)": the same material timed without its light map too.
 //
-// Cases: each canonical scene (datasets/scenes/*.json) x 42 materials (6 + 3 woven + 2 physical-aniso
+// Cases: each canonical scene (datasets/scenes/*.json) x 43 materials (6 + 3 woven + 2 physical-aniso
 // + 4 with weave maps + 4 woven with FIS IBL + 3 with weave maps at anisotropy 16 + 3 woven with
 // bent-normal IBL + 5 woven with the far-field yarn lobe + 4 with view-dependent weave maps + 4 woven
-// with the rough diffuse, s18 + 4 woven with the microcylinder lobe, s19) x 2 environments
+// with the rough diffuse, s18 + 4 woven with the microcylinder lobe, s19 + 1 woven at the broad
+// lobe shape fitted on another renderer's yarns, s25) x 2 environments
 // ({the card's studio map}, {blender-city, a sun-lit map, rotated 60 degrees}), plus (s10-sun)
 // 15 of the materials under blender-city with its sun split off as a directional light, plus
 // (s21-panels) 8 under the studio map with its softboxes split off as lights, plus (s13-web)
@@ -244,6 +245,10 @@ Object.assign(MATERIALS, {
   'woven-linen-rough': preset('woven', { base_color: [0.11, 0.25, 0.30], specular_color: [0, 0, 0], sheen_color: [0.03, 0, 0], sheen_roughness: 0.9, diffuse_roughness: 0.65 }),
   'woven-maps-canvas-rough': withParams('woven-maps-canvas', { diffuse_roughness: 0.3 }),
   'woven-rough-fis-diffuse': withParams('woven-fis-diffuse', { diffuse_roughness: 0.65 }),
+  // s25: the lobe shape the fit now reaches on another renderer's yarns (docs/fitting.md "Woven's
+  // lobe shape on another renderer's yarns"): anisotropy at 0 and roughness at 1, warp_share held
+  // at 0.5 with the maps. The earlier woven cases all had anisotropy 0.7-0.9, roughness <= 0.68.
+  'woven-maps-broad': withParams('woven-maps-canvas', { roughness: 1.0, anisotropy: 0.0, warp_share: 0.5, specular_f0: 0.02 }),
 });
 const sceneDir = path.join(repo, 'datasets', 'scenes');
 const scenes = fs.readdirSync(sceneDir).filter((f) => f.endsWith('.json')).map((f) => f.replace(/\.json$/, '')).sort();
