@@ -21,7 +21,7 @@ std::vector<float> ToDisplayImage(const std::vector<float>& linear, render::Tone
                                   double exposure) {
   std::vector<float> out(linear.size());
   for (size_t i = 0; i + 2 < linear.size(); i += 3) {
-    const Rgb<double> c(linear[i], linear[i + 1], linear[i + 2]);
+    const Rgb<double> c{double(linear[i]), double(linear[i + 1]), double(linear[i + 2])};
     const Rgb<double> d = render::ToDisplay(c, op, exposure);
     for (int k = 0; k < 3; ++k) out[i + size_t(k)] = float(d[k]);
   }

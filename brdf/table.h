@@ -43,8 +43,8 @@ struct Table2D {
     const int i1 = i0 + 1 < width ? i0 + 1 : i0;
     const int j1 = j0 + 1 < height ? j0 + 1 : j0;
     const T one = Const<T>(1.0);
-    const T a = Const<T>(at(i0, j0, c)) * (one - fu) + Const<T>(at(i1, j0, c)) * fu;
-    const T b = Const<T>(at(i0, j1, c)) * (one - fu) + Const<T>(at(i1, j1, c)) * fu;
+    const T a = Const<T>(double(at(i0, j0, c))) * (one - fu) + Const<T>(double(at(i1, j0, c))) * fu;
+    const T b = Const<T>(double(at(i0, j1, c))) * (one - fu) + Const<T>(double(at(i1, j1, c))) * fu;
     return a * (one - fv) + b * fv;
   }
 

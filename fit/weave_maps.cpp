@@ -292,8 +292,8 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
       std::vector<Pair> local;  // relief: the basis in the texel's normal-mapped frame
       if (o.relief) {
         local = pairs;
-        const render::Vec3d n = Normalize(render::Vec3d(normals[t * 3], normals[t * 3 + 1],
-                                                        normals[t * 3 + 2]));
+        const render::Vec3d n = Normalize(render::Vec3d(
+            double(normals[t * 3]), double(normals[t * 3 + 1]), double(normals[t * 3 + 2])));
         for (Pair& q : local) Basis(wp, n, &q);
       }
       const std::vector<Pair>& pairs_t = o.relief ? local : pairs;
@@ -328,7 +328,8 @@ WeaveBakeResult BakeWeaveMaps(const render::IrawanBsdf& source,
     if (o.relief) {
       std::vector<Pair> local = pairs;
       const render::Vec3d n = Normalize(
-          render::Vec3d(normals_copy[t * 3], normals_copy[t * 3 + 1], normals_copy[t * 3 + 2]));
+          render::Vec3d(double(normals_copy[t * 3]), double(normals_copy[t * 3 + 1]),
+                        double(normals_copy[t * 3 + 2])));
       for (Pair& q : local) Basis(wp, n, &q);
       em += SquaredError(local, targets[t], xs[t]);
     } else {

@@ -23,8 +23,6 @@ namespace clothfit::fit {
 
 namespace {
 
-constexpr double kDegToRad = kPi / 180.0;
-
 uint64_t Mix(uint64_t z) { return render::Mix64(z); }  // SplitMix64 finaliser
 uint64_t Bits(double x) {
   uint64_t b;

@@ -449,7 +449,7 @@ void MeasureMipDifference(const render::WeaveMaps& maps, const std::string& what
     const std::vector<float>& lv = maps.levels[size_t(level)];
     const size_t n = size_t(side) * size_t(side);
     for (size_t t = 0; t < n; ++t) {
-      const double wa = lv[t * C], wb = lv[t * C + 1];
+      const double wa = double(lv[t * C]), wb = double(lv[t * C + 1]);
       const double sp = wa + wb > 0.0 ? std::abs(wa - wb) / (wa + wb) : 0.0;
       const double px = wa >= wb ? sp : 0.0, py = wa >= wb ? 0.0 : sp;  // preview: s dir
       double dx = 2.0 * gpu[t * 3] / 255.0 - 1.0, dy = 2.0 * gpu[t * 3 + 1] / 255.0 - 1.0;

@@ -74,10 +74,10 @@ Plane3 ReadRgba(const std::string& path) {
   p.rgb.resize(np * 3);
   p.alpha.resize(np);
   for (size_t i = 0; i < np; ++i) {
-    p.rgb[i * 3 + 0] = img.pixels[i * nc + size_t(r)];
-    p.rgb[i * 3 + 1] = img.pixels[i * nc + size_t(g)];
-    p.rgb[i * 3 + 2] = img.pixels[i * nc + size_t(b)];
-    p.alpha[i] = img.pixels[i * nc + size_t(a)];
+    p.rgb[i * 3 + 0] = double(img.pixels[i * nc + size_t(r)]);
+    p.rgb[i * 3 + 1] = double(img.pixels[i * nc + size_t(g)]);
+    p.rgb[i * 3 + 2] = double(img.pixels[i * nc + size_t(b)]);
+    p.alpha[i] = double(img.pixels[i * nc + size_t(a)]);
   }
   return p;
 }

@@ -289,8 +289,9 @@ TEST(Fit, FittedParametersDoNotDriftWithWeaveScale) {
     const auto frame = RenderPreviewFrame(s, &env, m);
     std::vector<double> d;
     for (size_t i = 0; i < frame.size(); i += 3) {
-      const Rgb<double> c = render::ToDisplay(Rgb<double>(frame[i], frame[i + 1], frame[i + 2]),
-                                              render::ToneMapping::kAcesFilmic, 1.0);
+      const Rgb<double> c = render::ToDisplay(
+          Rgb<double>(double(frame[i]), double(frame[i + 1]), double(frame[i + 2])),
+          render::ToneMapping::kAcesFilmic, 1.0);
       d.insert(d.end(), {c[0], c[1], c[2]});
     }
     return d;

@@ -91,7 +91,8 @@ TEST(EmbreeRegression, FarOriginIsACountedMissNotAnAbort) {
   EXPECT_FALSE(es.Intersect({0, 0, 3}, {0, 0, 0}).valid);
   EXPECT_TRUE(es.Occluded({-9.3e18, 0, 0}, {1, 0, 0}, 0.0, 1.0));
   EXPECT_EQ(es.invalid_rays(), 4);
-  EXPECT_TRUE(render::EmbreeScene::RayValid({1e6, 0, 0}, {1, 0, 0}, 0.0, INFINITY));
+  EXPECT_TRUE(render::EmbreeScene::RayValid({1e6, 0, 0}, {1, 0, 0}, 0.0,
+                                            std::numeric_limits<double>::infinity()));
 }
 
 // ---- Defect 6: image readers allocate from the header ------------------------------------

@@ -203,7 +203,7 @@ Rgb<double> SolidAngleMean(const std::vector<float>& rgb, int w, int h, double s
         std::sin((0.5 - double(j) / h) * kPi) - std::sin((0.5 - double(j + 1) / h) * kPi);
     for (int i = 0; i < w; ++i) {
       const size_t p = (size_t(j) * size_t(w) + size_t(i)) * 3;
-      sum += Rgb<double>(rgb[p], rgb[p + 1], rgb[p + 2]) * weight;
+      sum += Rgb<double>(double(rgb[p]), double(rgb[p + 1]), double(rgb[p + 2])) * weight;
       wsum += weight;
     }
   }
@@ -288,7 +288,7 @@ TEST(IblPrefilter, GgxRoughnessOneIsAsBlurryAsTheIrradiance) {
   for (int j = 0; j < top.height; ++j) {
     for (int i = 0; i < top.width; ++i) {
       const Vec3<double> m = Environment::UvToDirection((i + 0.5) / 8, 1.0 - (j + 0.5) / 4);
-      const double a = top.rgb[(size_t(j) * 8 + size_t(i)) * 3];
+      const double a = double(top.rgb[(size_t(j) * 8 + size_t(i)) * 3]);
       const double b = IrradianceOverPi(sh, RotY(m, 0.7)).r;
       max_err = std::max(max_err, std::abs(a - b));
       peak = std::max(peak, b);

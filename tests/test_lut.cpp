@@ -76,7 +76,7 @@ TEST_F(LutVsQuadrature, TexelCentresAreAtIPlusHalfOverN) {
   // is distinguishably NOT the integral at the texel corner i/N or at (i + 1)/N (the
   // suspected one-texel offset of Filament's row mapping).
   const int i = 2, j = 4;  // NoV = 0.156, r = 0.28: DG varies fast here
-  const double stored = dfg_->at(i, j, 2);
+  const double stored = double(dfg_->at(i, j, 2));
   const double at_centre = QuadCloth(Table2D::Centre(i, 16), Table2D::Centre(j, 16));
   const double at_corner = QuadCloth(i / 16.0, j / 16.0);
   const double at_next_row = QuadCloth(Table2D::Centre(i, 16), (j + 1.5) / 16.0);

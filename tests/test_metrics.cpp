@@ -141,7 +141,8 @@ TEST(MetricsCiede2000, ImageMeanAndP95OverCountedPixels) {
   for (size_t i = 0; i < 20; ++i) {
     const float v = 0.2f + 0.01f * float(i);
     test.rgb[3 * i] = test.rgb[3 * i + 1] = test.rgb[3 * i + 2] = v;
-    de.push_back(Ciede2000(LinearSrgbToLab(0.2f, 0.2f, 0.2f), LinearSrgbToLab(v, v, v)));
+    de.push_back(Ciede2000(LinearSrgbToLab(double(0.2f), double(0.2f), double(0.2f)),
+                           LinearSrgbToLab(double(v), double(v), double(v))));
   }
   const Ciede2000Result r = Ciede2000(ref, test);
   double mean = 0;
@@ -151,7 +152,8 @@ TEST(MetricsCiede2000, ImageMeanAndP95OverCountedPixels) {
   EXPECT_NEAR(r.p95, de[18] + 0.05 * (de[19] - de[18]), 1e-9);
   EXPECT_EQ(r.counts.counted, 20);
   EXPECT_NEAR(r.map.values[7],
-              Ciede2000(LinearSrgbToLab(0.2, 0.2, 0.2), LinearSrgbToLab(0.27f, 0.27f, 0.27f)),
+              Ciede2000(LinearSrgbToLab(0.2, 0.2, 0.2),
+                        LinearSrgbToLab(double(0.27f), double(0.27f), double(0.27f))),
               1e-5);
 }
 
@@ -427,8 +429,8 @@ TEST(MetricsHdrFlip, ExplicitRangeIsUsedEvenWhenAutomaticWouldWork) {
   EXPECT_EQ(r.exposures, 2);
   // At exposure 0 HDR-FLIP is LDR-FLIP of the tone-mapped linear images.
   RgbImage tr = ref, tt = AddOffset(ref, 0.3f);
-  for (float& v : tr.rgb) v = float(HdrFlipToneMap(v));
-  for (float& v : tt.rgb) v = float(HdrFlipToneMap(v));
+  for (float& v : tr.rgb) v = float(HdrFlipToneMap(double(v)));
+  for (float& v : tt.rgb) v = float(HdrFlipToneMap(double(v)));
   const Map ldr = flip_detail::FlipMapLinear(tr, tt, 67.0);
   for (size_t i = 0; i < ldr.values.size(); ++i) EXPECT_FLOAT_EQ(r.map.values[i], ldr.values[i]);
   EXPECT_EQ(HdrFlip(ref, ref, o).value, 0.0);
@@ -565,7 +567,8 @@ TEST(MetricsCompare, ChannelLayoutsAndDisplayTransform) {
   const RgbImage d =
       ToDisplay(Uniform(1, 1, 0.18f, 0.18f, 0.18f), render::ToneMapping::kAcesFilmic, 1.0);
   const Rgb<double> expect =
-      render::ToDisplay(Rgb<double>(0.18f, 0.18f, 0.18f), render::ToneMapping::kAcesFilmic, 1.0);
+      render::ToDisplay(Rgb<double>(double(0.18f), double(0.18f), double(0.18f)),
+                        render::ToneMapping::kAcesFilmic, 1.0);
   EXPECT_NEAR(d.rgb[0], expect.r, 1e-6);
 }
 

@@ -49,7 +49,7 @@ std::pair<double, double> HalfSpreadSums(const io::ReferenceHalves& h, const Ren
   const double K = h.batches, kA = h.half_batches, kB = K - kA;
   double d2 = 0.0, pred = 0.0;
   for (size_t i = 0; i < r.rgb.size(); ++i) {
-    const double se = r.std_error[i];
+    const double se = double(r.std_error[i]);
     d2 += std::pow(double(h.a[i]) - double(h.b[i]), 2);
     pred += K * se * se * (1.0 / kA + 1.0 / kB);
   }
@@ -90,7 +90,8 @@ std::pair<double, double> CheckHalves(const RenderResult& r, int expect_k, const
   const double K = h.batches, kA = h.half_batches, kB = K - kA;
   size_t violations = 0, noisy = 0;
   for (size_t i = 0; i < r.rgb.size(); ++i) {
-    const double a = h.a[i], b = h.b[i], m = r.rgb[i], se = r.std_error[i];
+    const double a = double(h.a[i]), b = double(h.b[i]), m = double(r.rgb[i]),
+                 se = double(r.std_error[i]);
     // The halves average to the mean (b is defined so; a must be finite and its own value).
     EXPECT_NEAR((kA * a + kB * b) / K, m, 1e-5 * (std::abs(m) + 1e-3));
     // The algebraic bound (float rounding of the stored values allowed for).

@@ -262,7 +262,8 @@ std::vector<Rgb<double>> Frame(const Scene& s, const Environment& env, PreviewOp
   EvaluatePreview(*cache, x.data(), out);
   if (summary) *summary = cache->sun_summary;
   std::vector<float> full = ComposeFrame(*cache, out);
-  for (size_t i = 0; i < full.size(); i += 3) out.push_back({full[i], full[i + 1], full[i + 2]});
+  for (size_t i = 0; i < full.size(); i += 3)
+    out.push_back({double(full[i]), double(full[i + 1]), double(full[i + 2])});
   return out;
 }
 

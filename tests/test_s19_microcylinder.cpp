@@ -230,7 +230,8 @@ TEST(S19Microcylinder, FinerWiGridForNarrowLobes) {
   const size_t D = 4 * 8;
   double err_sub = 0.0, err_one = 0.0;
   for (size_t o = 0; o < D; ++o) {  // the surface lobe's albedo (k = 0) per wo bin
-    const double a_fine = fine.ibl[o * 5], a_sub = m.lobe.ibl.ibl[o * 5], a_one = one.ibl[o * 5];
+    const double a_fine = double(fine.ibl[o * 5]), a_sub = double(m.lobe.ibl.ibl[o * 5]),
+                 a_one = double(one.ibl[o * 5]);
     err_sub = std::max(err_sub, std::abs(a_sub - a_fine) / std::max(a_fine, 1e-3));
     err_one = std::max(err_one, std::abs(a_one - a_fine) / std::max(a_fine, 1e-3));
   }

@@ -370,7 +370,7 @@ TEST(S9Visibility, UvBakedMapIsThePerPointTermsAtTexelCentres) {
         const auto& a = m.uvs[m.indices[f]];
         const auto& b = m.uvs[m.indices[f + 1]];
         const auto& c = m.uvs[m.indices[f + 2]];
-        const double area = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        const double area = double((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]));
         if (!(std::abs(area) > 0.0)) continue;
         const double b0 =
             ((double(b[0]) - u) * (double(c[1]) - v) - (double(c[0]) - u) * (double(b[1]) - v)) /
@@ -382,11 +382,11 @@ TEST(S9Visibility, UvBakedMapIsThePerPointTermsAtTexelCentres) {
         if (b0 < -1e-9 || b1 < -1e-9 || b2 < -1e-9) continue;
         auto P = [&](int k) {
           const auto& q = m.positions[m.indices[f + size_t(k)]];
-          return Vec3d(q[0], q[1], q[2]);
+          return Vec3d(double(q[0]), double(q[1]), double(q[2]));
         };
         auto Nn = [&](int k) {
           const auto& q = m.normals[m.indices[f + size_t(k)]];
-          return Vec3d(q[0], q[1], q[2]);
+          return Vec3d(double(q[0]), double(q[1]), double(q[2]));
         };
         const Vec3d p = P(0) * b0 + P(1) * b1 + P(2) * b2;
         const Vec3d n = Normalize(Nn(0) * b0 + Nn(1) * b1 + Nn(2) * b2);

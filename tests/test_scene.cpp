@@ -25,7 +25,7 @@ using V3 = std::array<double, 3>;
 
 double Dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 double Len(const V3& a) { return std::sqrt(Dot(a, a)); }
-V3 D(const std::array<float, 3>& a) { return {a[0], a[1], a[2]}; }
+V3 D(const std::array<float, 3>& a) { return {double(a[0]), double(a[1]), double(a[2])}; }
 V3 Normalized(const V3& a) { return {a[0] / Len(a), a[1] / Len(a), a[2] / Len(a)}; }
 V3 Sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 V3 Cross(const V3& a, const V3& b) {
@@ -137,7 +137,7 @@ void ExpectWellFormed(const Mesh& m) {
   for (uint32_t i : m.indices) ASSERT_LT(i, n) << m.name;
   for (size_t i = 0; i < n; ++i) {
     const V3 nn = D(m.normals[i]);
-    const V3 t{m.tangents[i][0], m.tangents[i][1], m.tangents[i][2]};
+    const V3 t{double(m.tangents[i][0]), double(m.tangents[i][1]), double(m.tangents[i][2])};
     ASSERT_NEAR(Len(nn), 1.0, 1e-5) << m.name << " vertex " << i;
     ASSERT_NEAR(Len(t), 1.0, 1e-5) << m.name << " vertex " << i;
     ASSERT_NEAR(Dot(nn, t), 0.0, 1e-4) << m.name << " vertex " << i;
@@ -210,7 +210,8 @@ TEST(SceneCanonical, SphereAsGenerated) {
   // Tangents run along +u (eastwards) with the bitangent cross(n, t) w towards the north pole
   // (decreasing glTF v), at a vertex on the equator.
   const size_t k = 16 * 65 + 10;
-  const V3 b = Cross(D(m.normals[k]), {m.tangents[k][0], m.tangents[k][1], m.tangents[k][2]});
+  const V3 b = Cross(D(m.normals[k]), {double(m.tangents[k][0]), double(m.tangents[k][1]),
+                                              double(m.tangents[k][2])});
   EXPECT_GT(b[1] * double(m.tangents[k][3]), 0.99);
 
   EXPECT_NEAR(s.camera.position[0], 0.0, 1e-6);
@@ -495,8 +496,8 @@ TEST(SceneGeometry, MissingTangentsAreGeneratedAsTheGeneratorDoes) {
     ExpectWellFormed(a);
     size_t same = 0;
     for (size_t i = 0; i < a.tangents.size(); ++i) {
-      const V3 ta{a.tangents[i][0], a.tangents[i][1], a.tangents[i][2]};
-      const V3 tb{b.tangents[i][0], b.tangents[i][1], b.tangents[i][2]};
+      const V3 ta{double(a.tangents[i][0]), double(a.tangents[i][1]), double(a.tangents[i][2])};
+      const V3 tb{double(b.tangents[i][0]), double(b.tangents[i][1]), double(b.tangents[i][2])};
       if (Dot(ta, tb) > 0.999 && a.tangents[i][3] == b.tangents[i][3]) ++same;
     }
     EXPECT_EQ(same, a.tangents.size()) << a.name;
@@ -886,8 +887,9 @@ TEST(SceneVisibility, BlockIsReadAndBadFieldsAreNamed) {
   };
   int k = 0;
   for (const auto& [v, field] : bad) {
+    const Json& block = v;  // a named reference: clang 14 cannot capture a structured binding
     const std::string path = dir.Write("bad" + std::to_string(k++) + ".json",
-                                       Card("x.gltf", [&](Json& c) { c["visibility"] = v; }).dump());
+                                       Card("x.gltf", [&](Json& c) { c["visibility"] = block; }).dump());
     try {
       LoadSceneCard(path);
       ADD_FAILURE() << "accepted " << v.dump();

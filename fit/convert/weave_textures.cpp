@@ -87,7 +87,7 @@ WeaveTextures BakePhysicalAnisoTextures(const render::MaterialPreset& p,
   const double rot = p.values[size_t(p.Offset("anisotropy_rotation"))];
   std::vector<double> s(n);
   for (size_t t = 0; t < n; ++t) {
-    const double wa = l0[t * C], wb = l0[t * C + 1];
+    const double wa = double(l0[t * C]), wb = double(l0[t * C + 1]);
     s[t] = wa + wb > 0.0 ? std::abs(wa - wb) / (wa + wb) : 0.0;
     w.strength_max = std::max(w.strength_max, s[t]);
   }

@@ -93,7 +93,8 @@ Ciede2000Result Ciede2000(const RgbImage& ref, const RgbImage& test, const Map* 
     const float* a = &ref.rgb[3 * i];
     const float* b = &test.rgb[3 * i];
     const double de =
-        Ciede2000(LinearSrgbToLab(a[0], a[1], a[2]), LinearSrgbToLab(b[0], b[1], b[2]));
+        Ciede2000(LinearSrgbToLab(double(a[0]), double(a[1]), double(a[2])),
+                  LinearSrgbToLab(double(b[0]), double(b[1]), double(b[2])));
     res.map.values[i] = float(de);
     if (cov.counted[i]) pooled.push_back(de);
   }

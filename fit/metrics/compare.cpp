@@ -52,8 +52,10 @@ CompareResult Compare(const RgbImage& ref, const RgbImage& test, const CompareOp
   res.ciede2000_p95 = de.p95;
   // The displayed colour as linear light: sRGB-decode the display values.
   RgbImage ref_dl = ref_d, test_dl = test_d;
-  for (float& v : ref_dl.rgb) v = std::isfinite(v) ? float(flip_detail::SrgbToLinear(v)) : v;
-  for (float& v : test_dl.rgb) v = std::isfinite(v) ? float(flip_detail::SrgbToLinear(v)) : v;
+  for (float& v : ref_dl.rgb)
+    v = std::isfinite(v) ? float(flip_detail::SrgbToLinear(double(v))) : v;
+  for (float& v : test_dl.rgb)
+    v = std::isfinite(v) ? float(flip_detail::SrgbToLinear(double(v))) : v;
   Ciede2000Result ded = Ciede2000(ref_dl, test_dl, mask);
   res.ciede2000_display_mean = ded.value;
   res.ciede2000_display_p95 = ded.p95;

@@ -250,7 +250,8 @@ RgbImage ToDisplay(const RgbImage& linear, render::ToneMapping op, double exposu
       o[0] = o[1] = o[2] = nan;
       continue;
     }
-    const Rgb<double> d = render::ToDisplay(Rgb<double>(p[0], p[1], p[2]), op, exposure);
+    const Rgb<double> d =
+        render::ToDisplay(Rgb<double>(double(p[0]), double(p[1]), double(p[2])), op, exposure);
     for (int c = 0; c < 3; ++c) o[c] = float(d[c]);
   }
   return out;

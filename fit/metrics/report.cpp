@@ -155,7 +155,8 @@ std::string DisplayPng(const metrics::RgbImage& linear, render::ToneMapping op, 
       rgb[3 * i + 2] = 1.0f;
       continue;
     }
-    const Rgb<double> d = render::ToDisplay(Rgb<double>(p[0], p[1], p[2]), op, exposure);
+    const Rgb<double> d =
+        render::ToDisplay(Rgb<double>(double(p[0]), double(p[1]), double(p[2])), op, exposure);
     for (int k = 0; k < 3; ++k) rgb[3 * i + size_t(k)] = float(d[k]);
   }
   return Base64(io::EncodePng8(linear.width, linear.height, rgb, what));
@@ -718,7 +719,7 @@ WeaveMapPictures WeaveMapThumbnails(const io::Image& img, const std::string& fil
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x)
         for (size_t k = 0; k < 3; ++k) {
-          const double v = texel(x, y)[chans[colour ? k : 0]];
+          const double v = double(texel(x, y)[chans[colour ? k : 0]]);
           double d = 0.0;
           if (std::isfinite(v))
             d = colour ? (p.scale > 0.0 ? 0.5 + 0.5 * (v - 1.0) / p.scale : 0.5)

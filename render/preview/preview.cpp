@@ -294,13 +294,15 @@ Rgb<double> ShadeNonFabric(const PixelContext& x, const PreviewCache& c, const P
                            const Rgb<double>& Ed, double spec_occlusion = 1.0) {
   const double NoV = hit.NoV;
   standard::Params<double> sp;
-  sp.base_color = {hit.mesh->base_color[0], hit.mesh->base_color[1], hit.mesh->base_color[2]};
+  sp.base_color = {double(hit.mesh->base_color[0]), double(hit.mesh->base_color[1]),
+                     double(hit.mesh->base_color[2])};
   Rgb<double> out(0, 0, 0);
   for (const PreviewLightSample& q : ls) {
     if (q.NoL <= 0.f) continue;
     const Cosines<double> cs{NoV, double(q.NoL), double(q.NoH), double(q.LoH)};
     const Rgb<double> f = standard::EvalDirect(sp, {}, cs, *c.dfg);
-    out += f * Rgb<double>(q.irradiance[0], q.irradiance[1], q.irradiance[2]);
+    out += f * Rgb<double>(double(q.irradiance[0]), double(q.irradiance[1]),
+                             double(q.irradiance[2]));
   }
   if (x.env) {
     const IblWeights<double> w = standard::EvalIbl(sp, {}, NoV, *c.dfg);
@@ -481,7 +483,7 @@ bool BackFacing(const Mesh& m, int tri, const Vec3d& d) {
   const uint32_t* idx = &m.indices[size_t(tri) * 3];
   auto p = [&](int k) {
     const auto& q = m.positions[idx[k]];
-    return Vec3d(q[0], q[1], q[2]);
+    return Vec3d(double(q[0]), double(q[1]), double(q[2]));
   };
   const Vec3d p0 = p(0);
   return Dot(Cross(p(1) - p0, p(2) - p0), d) > 0.0;
@@ -542,7 +544,9 @@ void BuildRow(const PixelContext& x, int y, PreviewCache* c, std::vector<PixelDa
       // hit. (Visibility, position for the lights and the other attributes stay exact.)
       const Mesh& m = x.scene.meshes[size_t(h.mesh)];
       const uint32_t* idx = &m.indices[size_t(h.triangle) * 3];
-      auto v3 = [](const std::array<float, 3>& q) { return Vec3d(q[0], q[1], q[2]); };
+      auto v3 = [](const std::array<float, 3>& q) {
+        return Vec3d(double(q[0]), double(q[1]), double(q[2]));
+      };
       const std::array<Vec3d, 3> P{v3(m.positions[idx[0]]), v3(m.positions[idx[1]]),
                                    v3(m.positions[idx[2]])};
       double b[3];

@@ -595,7 +595,9 @@ double ThreejsGeometryRoughness(const Scene& scene, int mesh, int triangle, int 
                                 int subpixel_bits) {
   const Mesh& m = scene.meshes[size_t(mesh)];
   const uint32_t* idx = &m.indices[size_t(triangle) * 3];
-  auto v3 = [](const std::array<float, 3>& a) { return V3(a[0], a[1], a[2]); };
+  auto v3 = [](const std::array<float, 3>& a) {
+    return V3(double(a[0]), double(a[1]), double(a[2]));
+  };
   const std::array<V3, 3> P{v3(m.positions[idx[0]]), v3(m.positions[idx[1]]),
                             v3(m.positions[idx[2]])};
   const V3 N0 = v3(m.normals[idx[0]]), N1 = v3(m.normals[idx[1]]), N2 = v3(m.normals[idx[2]]);

@@ -66,7 +66,8 @@ Rgb<double> BounceRadiance(const Scene& scene, const std::vector<Light>& lights,
                            const IrradianceOverPiFn& env, const RadianceFn& env_radiance,
                            const Mesh& mesh, const Vec3d& q, const Vec3d& nq, Pcg32& rng,
                            int depth, double eps, Rgb<double>* unit = nullptr) {
-  Rgb<double> kd(mesh.base_color[0], mesh.base_color[1], mesh.base_color[2]);
+  Rgb<double> kd(double(mesh.base_color[0]), double(mesh.base_color[1]),
+                 double(mesh.base_color[2]));
   if (mesh.is_fabric && o.fabric_albedo[0] >= 0.0 && o.fabric_albedo[1] >= 0.0 &&
       o.fabric_albedo[2] >= 0.0)
     kd = Rgb<double>(o.fabric_albedo[0], o.fabric_albedo[1], o.fabric_albedo[2]);
@@ -295,7 +296,9 @@ UvVisibilityMap BakeUvVisibility(const Scene& scene, const EmbreeScene& bvh,
   map.ao.assign(texels, 1.f);
   map.indirect.assign(texels * 3, 0.f);
   if (o.indirect && o.bounces == 1) map.indirect_unit.assign(texels * 3, 0.f);
-  auto v3 = [](const std::array<float, 3>& q) { return Vec3d(q[0], q[1], q[2]); };
+  auto v3 = [](const std::array<float, 3>& q) {
+    return Vec3d(double(q[0]), double(q[1]), double(q[2]));
+  };
   tbb::parallel_for(0, N, [&](int j) {
     for (int i = 0; i < N; ++i) {
       const size_t t = size_t(j) * size_t(N) + size_t(i);

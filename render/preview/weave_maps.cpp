@@ -131,7 +131,7 @@ WeaveMaps WeaveMaps::FromLevel0(int size, double uv_repeats, std::vector<float> 
   for (int ch = 0; ch < kChannels; ++ch) {
     double mean = 0.0;
     for (size_t t = 0; t < n; ++t) {
-      const double x = level0[t * kChannels + size_t(ch)];
+      const double x = double(level0[t * kChannels + size_t(ch)]);
       if (!std::isfinite(x) || x < 0.0)
         throw std::invalid_argument(std::string("weave maps: channel ") + kChannelNames[size_t(ch)] +
                                     " has a negative or non-finite texel");
@@ -151,7 +151,8 @@ WeaveMaps WeaveMaps::FromLevel0(int size, double uv_repeats, std::vector<float> 
   BuildBoxMips<kChannels>(size, &m.levels);
   std::vector<float> an(n * 3);
   for (size_t t = 0; t < n; ++t) {
-    const double wa = m.levels[0][t * kChannels], wb = m.levels[0][t * kChannels + 1];
+    const double wa = double(m.levels[0][t * kChannels]);
+    const double wb = double(m.levels[0][t * kChannels + 1]);
     const bool warp = wa >= wb;
     an[t * 3] = warp ? 1.f : 0.5f;
     an[t * 3 + 1] = warp ? 0.5f : 1.f;
@@ -706,8 +707,8 @@ std::array<double, 4> UvDerivatives(const Scene& scene, const Hit& hit, double p
   std::array<std::array<double, 2>, 3> uv;
   for (int k = 0; k < 3; ++k) {
     const uint32_t vi = m.indices[t3 + size_t(k)];
-    for (int c = 0; c < 3; ++c) p[size_t(k)][size_t(c)] = m.positions[vi][size_t(c)];
-    for (int c = 0; c < 2; ++c) uv[size_t(k)][size_t(c)] = m.uvs[vi][size_t(c)];
+    for (int c = 0; c < 3; ++c) p[size_t(k)][size_t(c)] = double(m.positions[vi][size_t(c)]);
+    for (int c = 0; c < 2; ++c) uv[size_t(k)][size_t(c)] = double(m.uvs[vi][size_t(c)]);
   }
   auto sub = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
     return std::array<double, 3>{a[0] - b[0], a[1] - b[1], a[2] - b[2]};

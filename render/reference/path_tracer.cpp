@@ -231,7 +231,7 @@ struct PathTracer::Impl {
         lamberts.emplace_back(nullptr);
       } else {
         lamberts.emplace_back(std::make_unique<LambertBsdf>(
-            Rgbd(m.base_color[0], m.base_color[1], m.base_color[2])));
+            Rgbd(double(m.base_color[0]), double(m.base_color[1]), double(m.base_color[2]))));
       }
     }
   }

@@ -103,12 +103,12 @@ Hit EmbreeScene::Intersect(const std::array<double, 3>& org, const std::array<do
   Hit h;
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return h;
   h.valid = true;
-  h.t = rh.ray.tfar;
+  h.t = double(rh.ray.tfar);
   h.mesh = int(rh.hit.geomID);
   h.triangle = int(rh.hit.primID);
-  h.b1 = rh.hit.u;
-  h.b2 = rh.hit.v;
-  const double nx = rh.hit.Ng_x, ny = rh.hit.Ng_y, nz = rh.hit.Ng_z;
+  h.b1 = double(rh.hit.u);
+  h.b2 = double(rh.hit.v);
+  const double nx = double(rh.hit.Ng_x), ny = double(rh.hit.Ng_y), nz = double(rh.hit.Ng_z);
   const double len = std::sqrt(nx * nx + ny * ny + nz * nz);
   if (len > 0.0) h.ng = {nx / len, ny / len, nz / len};
   return h;

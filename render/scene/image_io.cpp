@@ -705,8 +705,8 @@ ReferenceHalves ReferenceHalvesFromImage(const Image& image, const std::string& 
   const double K = h.batches, kA = h.half_batches;
   for (size_t p = 0; p < np; ++p)
     for (size_t c = 0; c < 3; ++c) {
-      const double m = image.pixels[p * nc + size_t(mean[c])];
-      const double a = image.pixels[p * nc + size_t(half[c])];
+      const double m = double(image.pixels[p * nc + size_t(mean[c])]);
+      const double a = double(image.pixels[p * nc + size_t(half[c])]);
       h.a[p * 3 + c] = float(a);
       h.b[p * 3 + c] = float((K * m - kA * a) / (K - kA));
     }

@@ -76,7 +76,7 @@ V3 AnyOrthogonal(const V3& n) {
 std::array<float, 3> ToFloat(const V3& a) {
   return {static_cast<float>(a[0]), static_cast<float>(a[1]), static_cast<float>(a[2])};
 }
-V3 ToDouble(const std::array<float, 3>& a) { return {a[0], a[1], a[2]}; }
+V3 ToDouble(const std::array<float, 3>& a) { return {double(a[0]), double(a[1]), double(a[2])}; }
 
 // Column-major 4x4 affine transform (glTF's layout).
 struct Mat4 {
@@ -646,7 +646,8 @@ void ReadNormals(const PrimitiveInput& in, Mesh* mesh, std::vector<std::string>&
     mesh->normals.resize(n);
     size_t repaired = 0;
     for (size_t i = 0; i < n; ++i) {
-      const V3 v = Scale(TransformVector(cof, {nrm[3 * i], nrm[3 * i + 1], nrm[3 * i + 2]}), sign);
+      const V3 n_in{double(nrm[3 * i]), double(nrm[3 * i + 1]), double(nrm[3 * i + 2])};
+      const V3 v = Scale(TransformVector(cof, n_in), sign);
       if (Length(v) > 1e-20 && Finite(v)) {
         mesh->normals[i] = ToFloat(NormalizeOr(v, {0, 1, 0}));
       } else {
@@ -700,7 +701,8 @@ void ReadTangents(const PrimitiveInput& in, Mesh* mesh, std::vector<std::string>
     mesh->tangents.resize(n);
     for (size_t i = 0; i < n; ++i) {
       const V3 nn = ToDouble(mesh->normals[i]);
-      V3 t = TransformVector(in.world, {tan[4 * i], tan[4 * i + 1], tan[4 * i + 2]});
+      V3 t = TransformVector(in.world,
+                             {double(tan[4 * i]), double(tan[4 * i + 1]), double(tan[4 * i + 2])});
       t = Sub(t, Scale(nn, Dot(nn, t)));
       if (Length(t) > 1e-12 && Finite(t)) {
         t = NormalizeOr(t, AnyOrthogonal(nn));
@@ -762,7 +764,8 @@ Mesh BuildMesh(const GltfContext& g, const SceneCard& card, int mesh_index, int 
 
   mesh.positions.resize(n);
   for (size_t i = 0; i < n; ++i) {
-    const V3 p = TransformPoint(world, {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]});
+    const V3 p =
+        TransformPoint(world, {double(pos[3 * i]), double(pos[3 * i + 1]), double(pos[3 * i + 2])});
     CheckWorldPoint(g.file, where + ": POSITION[" + std::to_string(i) + "]", p);
     mesh.positions[i] = ToFloat(p);
   }
