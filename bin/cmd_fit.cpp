@@ -172,6 +172,7 @@ std::string CachedReference(const std::string& scene_path, const std::string& fa
   render::WriteRenderExr(tmp, r,
                          {{"clothfit:scene", scene_path},
                           {"clothfit:fabric", fabric_path},
+                          {"clothfit:fabric_name", fabric.name},
                           {"clothfit:spp", std::to_string(spp)},
                           {"clothfit:seed", std::to_string(seed)},
                           {"clothfit:target_error", std::to_string(target_error)},
@@ -459,10 +460,7 @@ int ParseFixedLevel(const std::string& level) {
 // The files to fit: scene cards, references and second-seed references (may be empty).
 struct FitFiles {
   std::vector<std::string> refs, refs2, scenes;
-  // --fabric with --references: the first reference that clothfit did not render from that
-  // fabric (ForeignReference below), "" when every one was; always "" without --references
-  // (the fit renders them itself).
-  std::string foreign;
+  bool given = false;  // --references (else the fit rendered them from --fabric)
 };
 
 // Whether a reference was rendered by clothfit from this fabric: its EXR names the fabric, by
@@ -525,10 +523,7 @@ FitFiles ResolveFitFiles(const FitArgs& a, const Globals& g) {
       throw std::invalid_argument("--references and --scenes need the same number (>= 1) of files");
     if (!f.refs2.empty() && f.refs2.size() != f.refs.size())
       throw std::invalid_argument("--references2 needs one file per reference");
-    // Only where it decides something: woven's automatic yarn lobe (MakeFitOptions).
-    if (!a.fabric.empty() && a.model == "woven" && a.yarn_lobe == "auto")
-      for (size_t i = 0; i < f.refs.size() && f.foreign.empty(); ++i)
-        f.foreign = ForeignReference(f.refs[i], a.fabric);
+    f.given = true;
   }
   return f;
 }
@@ -620,6 +615,19 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   // fabric does, so on its images woven keeps its GGX lobes and fits their shape
   // (fit/woven_fit.h, the lobe-shape stage; docs/fitting.md "Woven's lobe shape on another
   // renderer's yarns").
+  // The first reference that clothfit did not render from --fabric (ForeignReference), "" when
+  // every one was or the fit rendered them itself; read only where it decides something, after
+  // the option checks above.
+  std::optional<std::string> foreign_memo;
+  const auto foreign = [&]() -> const std::string& {
+    if (!foreign_memo) {
+      foreign_memo = std::string();
+      if (!a.fabric.empty() && files.given)
+        for (size_t i = 0; i < files.refs.size() && foreign_memo->empty(); ++i)
+          *foreign_memo = ForeignReference(files.refs[i], a.fabric);
+    }
+    return *foreign_memo;
+  };
   std::string lobe = a.yarn_lobe;
   const bool lobe_compatible = a.sheen_tilt == 0.0 &&
                                (a.woven_ibl == "auto" || a.woven_ibl == "split");
@@ -629,18 +637,22 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
       const std::string m = render::LoadFabric(a.fabric).model;
       has_lobe = m == "irawan" || (m == "sadeghi" && fit::MicrocylinderRefusal(a.fabric).empty());
     }
-    if (has_lobe && !files.foreign.empty()) {
-      // With the weave maps (an irawan fabric) the warp/weft balance is held where the maps
-      // were baked (the start preset's warp_share): measured, a free share runs to 0 or 1 on
-      // such references and switches off the texels of one yarn (docs/fitting.md).
-      const bool maps = a.weave_maps != "none" && render::LoadFabric(a.fabric).model == "irawan";
-      if (maps && std::find(o.locked.begin(), o.locked.end(), "warp_share") == o.locked.end())
-        o.locked.push_back("warp_share");
-      std::printf("fit: yarn lobe: woven's GGX lobes, shape fitted%s, not the fabric's far-field "
-                  "lobe: %s (--yarn-lobe preset forces it)\n",
-                  maps ? ", warp_share held with the weave maps" : "", files.foreign.c_str());
-    }
-    lobe = has_lobe && files.foreign.empty() ? "preset" : "none";
+    if (has_lobe && !foreign().empty())
+      std::printf("fit: yarn lobe: woven's GGX lobes, shape fitted, not the fabric's far-field "
+                  "lobe: %s (--yarn-lobe preset forces it)\n", foreign().c_str());
+    lobe = has_lobe && foreign().empty() ? "preset" : "none";
+  }
+  // Another renderer's references with the GGX lobes and an irawan fabric's weave maps (whatever
+  // chose those lobes): the warp/weft balance is held where the maps were baked (the start
+  // preset's warp_share). Measured, a free share runs to 0 or 1 on such references and switches
+  // off the texels of one yarn (docs/fitting.md "Woven's lobe shape on another renderer's yarns").
+  if (o.start.model == render::ModelKind::kWoven && lobe == "none" && a.weave_maps != "none" &&
+      !a.fabric.empty() && files.given && render::LoadFabric(a.fabric).model == "irawan" &&
+      !foreign().empty()) {
+    if (std::find(o.locked.begin(), o.locked.end(), "warp_share") == o.locked.end())
+      o.locked.push_back("warp_share");
+    std::printf("fit: warp_share held at %g with the weave maps: %s\n",
+                o.start.values[size_t(o.start.Offset("warp_share"))], foreign().c_str());
   }
   if (lobe == "preset") {  // docs/fitting.md "The far-field yarn lobe"
     if (o.start.model != render::ModelKind::kWoven)
@@ -965,12 +977,21 @@ void CheckSubsurfaceAgainstPlain(const std::vector<fit::SceneInput>& inputs,
                 "--subsurface for the better fit\n", res.rmse, p.rmse);
 }
 
+// Whether `path` is `dir` or lies below it (lexically, after making both absolute).
+bool IsWithin(const fs::path& path, const fs::path& dir) {
+  if (dir.empty()) return true;  // the working directory exists
+  const fs::path rel =
+      fs::absolute(path).lexically_normal().lexically_relative(fs::absolute(dir).lexically_normal());
+  return !rel.empty() && *rel.begin() != "..";
+}
+
 // `clothfit fit` after parsing: returns the exit status (throws on bad input).
 int RunFit(const FitArgs& a, const Globals& g) {
-  // Where the results go, before any work: --images is created (as it always was, now first,
-  // so `--images out/x --out out/x.json` still makes out/), --out's directory must exist.
-  if (!a.images.empty()) fs::create_directories(a.images);
-  io::RequireOutputDirectory(a.out);
+  // Where the results go, before any work: --out's directory must exist, unless --images (created
+  // when the images are written, before the preset) is that directory or lies below it, as in
+  // `--images out/x --out out/x.json`.
+  if (a.images.empty() || !IsWithin(a.images, fs::path(a.out).parent_path()))
+    io::RequireOutputDirectory(a.out);
   std::unique_ptr<tbb::global_control> limit;
   if (a.threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,

@@ -141,6 +141,7 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->callback([args, &g, &exit_code]() {
     try {
       io::RequireOutputDirectory(args->out);  // before the PMREM and the cache build
+      if (!args->light_map_out.empty()) io::RequireOutputDirectory(args->light_map_out);
       const std::string ext = std::filesystem::path(args->out).extension().string();
       if (ext != ".png" && ext != ".exr") {
         std::fprintf(stderr, "clothfit render-preview: error: --out: '%s' must end in .png or .exr\n",
