@@ -467,8 +467,9 @@ struct FitFiles {
 // `clothfit:fabric_name` (render-reference) or by the file stem of `clothfit:fabric` (the
 // reference cache, render-references), equal to the fabric's name or file stem. Returns ""
 // when it does, else why not (for the log). Another renderer's images carry neither.
-std::string ForeignReference(const std::string& ref, const std::string& fabric_path) {
-  const render::Fabric fabric = render::LoadFabric(fabric_path);
+// `fabric_name`: the fabric's own name (render::Fabric::name), loaded once by the caller.
+std::string ForeignReference(const std::string& ref, const std::string& fabric_path,
+                             const std::string& fabric_name) {
   const std::string stem = fs::path(fabric_path).stem().string();
   const io::Image img = io::ReadImage(ref);
   auto get = [&](const char* k) {
@@ -478,11 +479,11 @@ std::string ForeignReference(const std::string& ref, const std::string& fabric_p
   const std::string name = get("clothfit:fabric_name");
   const std::string from = fs::path(get("clothfit:fabric")).stem().string();
   for (const std::string& n : {name, from})
-    if (!n.empty() && (n == fabric.name || n == stem)) return "";
+    if (!n.empty() && (n == fabric_name || n == stem)) return "";
   if (name.empty() && from.empty()) return ref + " has no clothfit:fabric metadata";
   return ref + " was rendered from fabric '" +
          limits::EscapeForMessage(name.empty() ? from : name, 80) + "', not '" +
-         limits::EscapeForMessage(fabric.name, 80) + "'";
+         limits::EscapeForMessage(fabric_name, 80) + "'";
 }
 
 // --fabric: references rendered (or reused) on the canonical scenes; --fabric --scenes S,...:
@@ -618,13 +619,19 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   // The first reference that clothfit did not render from --fabric (ForeignReference), "" when
   // every one was or the fit rendered them itself; read only where it decides something, after
   // the option checks above.
+  // The fabric is loaded at most once here (an Irawan BSDF estimates its normalisation when built).
+  std::optional<render::Fabric> fabric_memo;
+  const auto fabric = [&]() -> const render::Fabric& {
+    if (!fabric_memo) fabric_memo = render::LoadFabric(a.fabric);
+    return *fabric_memo;
+  };
   std::optional<std::string> foreign_memo;
   const auto foreign = [&]() -> const std::string& {
     if (!foreign_memo) {
       foreign_memo = std::string();
       if (!a.fabric.empty() && files.given)
         for (size_t i = 0; i < files.refs.size() && foreign_memo->empty(); ++i)
-          *foreign_memo = ForeignReference(files.refs[i], a.fabric);
+          *foreign_memo = ForeignReference(files.refs[i], a.fabric, fabric().name);
     }
     return *foreign_memo;
   };
@@ -634,7 +641,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   if (lobe == "auto") {
     bool has_lobe = false;
     if (o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && lobe_compatible) {
-      const std::string m = render::LoadFabric(a.fabric).model;
+      const std::string m = fabric().model;
       has_lobe = m == "irawan" || (m == "sadeghi" && fit::MicrocylinderRefusal(a.fabric).empty());
     }
     if (has_lobe && !foreign().empty())
@@ -647,7 +654,7 @@ fit::FitOptions MakeFitOptions(const FitArgs& a, const render::MaterialPreset& s
   // preset's warp_share). Measured, a free share runs to 0 or 1 on such references and switches
   // off the texels of one yarn (docs/fitting.md "Woven's lobe shape on another renderer's yarns").
   if (o.start.model == render::ModelKind::kWoven && lobe == "none" && a.weave_maps != "none" &&
-      !a.fabric.empty() && files.given && render::LoadFabric(a.fabric).model == "irawan" &&
+      !a.fabric.empty() && files.given && fabric().model == "irawan" &&
       !foreign().empty()) {
     if (std::find(o.locked.begin(), o.locked.end(), "warp_share") == o.locked.end())
       o.locked.push_back("warp_share");
