@@ -254,7 +254,7 @@ struct BenchFitArgs {
 };
 
 // `bench fit --models all|m1,m2`: each model fitted at the defaults of `clothfit fit --fabric`
-// (card resolution, auto level and stride, two starts) on the cached references; seconds,
+// (card resolution, auto level and stride, the default starts) on the cached references; seconds,
 // iterations and the common error side by side.
 void RunBenchModels(const BenchFitArgs& a, bool quiet) {
   const char* env_root = std::getenv("CLOTHFIT_DATASETS");

@@ -306,7 +306,7 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "uv_metres_per_unit, or UV units (0.05uv)");
   cmd->add_option("--max-iterations", a.max_iterations, "solver iterations per start (default 50)")
       ->check(CLI::Range(1, 100000));
-  cmd->add_option("--starts", a.starts, "comma-separated start roughness values (default 0.6,0.9; woven 0.6)");
+  cmd->add_option("--starts", a.starts, "comma-separated start roughness values (default 0.6,0.9,0.3; woven 0.6,0.3)");
   cmd->add_flag("--no-cloth-basin", a.no_cloth_basin,
                 "woven: skip the cloth-basin start (yarn lobes off, broad sheen; default on "
                 "unless --start)");
@@ -1007,11 +1007,14 @@ int RunFit(const FitArgs& a, const Globals& g) {
   const double weave_period = a.fabric.empty() ? 0.0 : render::LoadFabric(a.fabric).weave_period_uv;
   const FitFiles files = ResolveFitFiles(a, g);
   fit::FitOptions o = MakeFitOptions(a, StartPreset(a), files);
-  // woven: one start (roughness 0.6) unless --starts asks for more: measured, the second
-  // start (0.9) changed no fabric's block RMSE beyond 0.0002 (docs/fitting.md, "Fit speed").
-  // Since session 13 the cloth-basin start runs besides it (fit/woven_fit.h; --no-cloth-basin).
+  // woven: starts 0.6 and 0.3 unless --starts says otherwise: measured, a 0.9 start changed
+  // no fabric's block RMSE beyond 0.0002 (docs/fitting.md, "Fit speed"), and 0.3 (session 26)
+  // finds the glossy basin 0.6 misses on other renderers' references (docs/fitting.md "A
+  // start for glossy references"). With the fabric's far-field lobe the roughness is locked
+  // and the two starts are one. Since session 13 the cloth-basin start runs besides them
+  // (fit/woven_fit.h; --no-cloth-basin).
   if (o.start.model == render::ModelKind::kWoven && a.starts.empty() && a.start_values.empty())
-    o.start_roughness = {0.6};
+    o.start_roughness = {0.6, 0.3};
   if (o.start.model == render::ModelKind::kWoven && !a.fabric.empty() && a.weave_maps != "none") {
     const std::string maps = (fs::path(a.out).parent_path() /
                               (fs::path(a.out).stem().string() + ".weave.exr")).string();

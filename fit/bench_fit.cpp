@@ -128,7 +128,7 @@ std::vector<ModelRow> RunModelBench(const std::string& fabric,
     FitResult r;
     try {
       if (m == render::ModelKind::kWoven) {
-        o.start_roughness = {0.6};  // the `clothfit fit` default for woven
+        o.start_roughness = {0.6, 0.3};  // the `clothfit fit` default for woven
         if (!fabric_path.empty()) {
           const std::filesystem::path maps = std::filesystem::temp_directory_path() /
                                              ("clothfit-bench-" + fabric + ".weave.exr");

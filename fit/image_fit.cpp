@@ -1204,8 +1204,11 @@ FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions&
 
   const Rgb<double> ref_colour = StartColour(*inputs[0].reference);
   double best_start_rmse = std::numeric_limits<double>::infinity();
+  std::vector<ParamBlocks> started;  // the start points run so far (identical ones run once)
   for (double r0 : opt.start_roughness) {
     ParamBlocks blocks = StartBlocks(table, opt, r0, ref_colour);
+    if (std::find(started.begin(), started.end(), blocks) != started.end()) continue;
+    started.push_back(blocks);
     const ceres::Solver::Summary summary = SolveStart(data, table, sizes, opt, blocks);
     ++best.starts;
     best.iterations += int(summary.iterations.size());

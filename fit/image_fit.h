@@ -87,7 +87,12 @@ struct FitOptions {
   int level = 2;                  // block size 2^level (see AutoLevel)
   int pixel_stride = 0;           // evaluate every stride-th pixel per block axis (speed);
                                   // 0 = auto: max(1, block / 4), i.e. at most 4 x 4 per block
-  std::vector<double> start_roughness = {0.6, 0.9};  // multi-start values (bench fit: knee)
+  // Multi-start values (roughness; sheen_roughness too where the model has one). 0.3 since
+  // session 26: from 0.6 and 0.9 every baseline missed the basin of a glossy reference
+  // (Cycles Principled at roughness 0.1 and 0.25: block RMSE 6-9x the 0.3 start's;
+  // docs/fitting.md "A start for glossy references"). Starts that give the same parameter
+  // blocks (roughness locked, or no init_from_reference) run once.
+  std::vector<double> start_roughness = {0.6, 0.9, 0.3};
   int max_iterations = 50;        // per start
   double min_coverage = 0.5;      // a block is kept when sum(w) / B^2 >= this (docs/references.md)
   double function_tolerance = 1e-7;
@@ -190,7 +195,10 @@ struct FitResult {
   double rmse = 0.0;          // over all blocks of all scenes, fit space, unweighted
   std::string solver_report;  // Ceres BriefReport of the winning start
   // woven (fit/woven_fit.h FitWovenImages): each path's RMSE, iterations and fit seconds (setup
-  // excluded), in the order run: "two-stage", "cloth-basin", "cloth-basin+two-stage". With a
+  // excluded), in the order run: "two-stage", "cloth-basin", "cloth-basin+two-stage", then
+  // "rough-diffuse", "lobe-shape", "lobe-shape+share"; with several free start roughness
+  // values (session 26) "two-stage (roughness R)" per start, each followed by its own later
+  // stages, and the cloth basin's after them. With a
   // card's light map (FitWithLightMapAlbedo's two passes) the first pass's paths are prefixed
   // "first pass: " and the second's "albedo pass: " (session 15).
   struct Candidate {

@@ -13,7 +13,8 @@
 //      optimum with the sheen at a small value).
 // Parameters the caller locks stay locked in both stages. Each stage carries 6 derivative
 // slots with colour packing (fit/image_fit.h); both use one PrepareScenes (caches, blocks);
-// stage 1 multi-starts over options.start_roughness (clothfit fit: one, 0.6). Then the
+// both stages run from each of options.start_roughness (clothfit fit: 0.6 and 0.3; one
+// run when the roughness is locked) and the best is kept. Then the
 // cloth-basin start below (session 13) runs the stages again from cloth's basin.
 //
 // Weave maps (fit/weave_maps.h): AttachWeaveMaps bakes them for an Irawan fabric BEFORE the

@@ -74,7 +74,10 @@ import json, sys
 f = json.load(open(sys.argv[1]))["fit"]
 assert f.get("light_map_albedo_pass") is True, f.get("light_map_albedo_pass")
 names = [p["path"] for p in f["woven_paths"]]
-assert names[0] == "first pass: two-stage" and "first pass: cloth-basin" in names, names
+# session 26: the two-stage path once per free start roughness (0.6 first), then a second round
+assert names[0] == "first pass: two-stage (roughness 0.6)" and "first pass: cloth-basin" in names, names
+assert "first pass: two-stage (roughness 0.3)" in names, names
+assert "first pass: second round: two-stage" in names, names
 assert "albedo pass: two-stage" in names, names
 # session 18: each pass has the rough-diffuse stage; session 25: then the two lobe-shape stages
 # (this fit has no --fabric, so woven's GGX lobes with their anisotropy free)
