@@ -91,7 +91,8 @@ struct FitOptions {
   // session 26: from 0.6 and 0.9 every baseline missed the basin of a glossy reference
   // (Cycles Principled at roughness 0.1 and 0.25: block RMSE 6-9x the 0.3 start's;
   // docs/fitting.md "A start for glossy references"). Starts that give the same parameter
-  // blocks (roughness locked, or no init_from_reference) run once.
+  // blocks run once: no init_from_reference, or every parameter r0 sets (roughness, and
+  // sheen_roughness where the model has one) locked.
   std::vector<double> start_roughness = {0.6, 0.9, 0.3};
   int max_iterations = 50;        // per start
   double min_coverage = 0.5;      // a block is kept when sum(w) / B^2 >= this (docs/references.md)
@@ -197,8 +198,8 @@ struct FitResult {
   // woven (fit/woven_fit.h FitWovenImages): each path's RMSE, iterations and fit seconds (setup
   // excluded), in the order run: "two-stage", "cloth-basin", "cloth-basin+two-stage", then
   // "rough-diffuse", "lobe-shape", "lobe-shape+share"; with several free start roughness
-  // values (session 26) "two-stage (roughness R)" per start, each followed by its own later
-  // stages, and the cloth basin's after them. With a
+  // values (session 26) each branch's paths prefixed "start R: " (R = 0.6, 0.3) and "cloth
+  // basin: ", then the second round's "second round: ". With a
   // card's light map (FitWithLightMapAlbedo's two passes) the first pass's paths are prefixed
   // "first pass: " and the second's "albedo pass: " (session 15).
   struct Candidate {

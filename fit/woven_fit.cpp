@@ -240,23 +240,33 @@ FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions
     }
     best = finish(std::move(best));
   } else {
+    // Each branch's paths are named after it: "start R: two-stage", "start R: rough-diffuse",
+    // ..., "cloth basin: ...", then "second round: ...".
+    auto prefixed = [](FitResult r, const std::string& prefix) {
+      for (FitResult::Candidate& c : r.candidates) c.name = prefix + c.name;
+      return r;
+    };
     best.usable = false;
+    best.message = "no start converged to a usable solution";
     double best_two_stage = std::numeric_limits<double>::infinity();
+    std::vector<double> seen;
     for (const double r0 : options.start_roughness) {
+      if (std::find(seen.begin(), seen.end(), r0) != seen.end()) continue;  // --starts 0.6,0.6
+      seen.push_back(r0);
       FitOptions one = options;
       one.start_roughness = {r0};
       FitResult r = FitTwoStages(inputs, one, prepared);
-      char name[48];
-      std::snprintf(name, sizeof name, "two-stage (roughness %.2g)", r0);
-      r.candidates = {CandidateOf(name, r)};
+      r.candidates = {CandidateOf("two-stage", r)};
       if (r.usable) best_two_stage = std::min(best_two_stage, r.rmse);
-      TakeBetter(finish(std::move(r)), best);
+      char prefix[32];
+      std::snprintf(prefix, sizeof prefix, "start %.2g: ", r0);
+      TakeBetter(prefixed(finish(std::move(r)), prefix), best);
     }
     if (UsesClothBasinStart(options)) {
       FitResult basin = cloth_basin();
       if (basin.usable && basin.rmse <= kClothBasinContinueRatio * best_two_stage)
         from_basin(basin);
-      TakeBetter(finish(std::move(basin)), best);
+      TakeBetter(prefixed(finish(std::move(basin)), "cloth basin: "), best);
     }
     if (best.usable) {
       // A second round of the whole pipeline from the best result (session 26): the later

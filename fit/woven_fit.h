@@ -13,9 +13,13 @@
 //      optimum with the sheen at a small value).
 // Parameters the caller locks stay locked in both stages. Each stage carries 6 derivative
 // slots with colour packing (fit/image_fit.h); both use one PrepareScenes (caches, blocks);
-// both stages run from each of options.start_roughness (clothfit fit: 0.6 and 0.3; one
-// run when the roughness is locked) and the best is kept. Then the
-// cloth-basin start below (session 13) runs the stages again from cloth's basin.
+// stage 1 multi-starts over options.start_roughness when the roughness is locked or the start
+// is explicit (then the starts are one start). Then the cloth-basin start below (session 13)
+// runs the stages again from cloth's basin, and the rough-diffuse and lobe-shape stages run
+// from the best. With several free start values (clothfit fit: 0.6 and 0.3; session 26) each
+// start, and the cloth basin, runs that whole pipeline on its own, the best is kept, and the
+// pipeline runs once more from it ("second round"); docs/fitting.md "A start for glossy
+// references".
 //
 // Weave maps (fit/weave_maps.h): AttachWeaveMaps bakes them for an Irawan fabric BEFORE the
 // stages, writes the EXR and names it in the start preset's "weave_maps" field; FitImages

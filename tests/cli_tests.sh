@@ -136,7 +136,7 @@ assert "warp_share" in foreign["fit"]["locked"] and "anisotropy" not in foreign[
 assert foreign["parameters"]["warp_share"] == 0.5, foreign["parameters"]["warp_share"]
 paths = [p["path"] for p in foreign["fit"]["woven_paths"]]
 assert paths[-2:] == ["second round: lobe-shape", "second round: lobe-shape+share"], paths
-assert "two-stage (roughness 0.3)" in paths, paths  # session 26: the glossy start
+assert "start 0.3: two-stage" in paths, paths  # session 26: the glossy start
 assert "weave_maps" in foreign
 PY
     fitw forced "$TMP/foreign.exr" --yarn-lobe preset

