@@ -83,7 +83,8 @@ assert "first pass: second round: two-stage" in names, names
 assert "albedo pass: two-stage" in names, names
 # session 18: each pass has the rough-diffuse stage; session 25: then the two lobe-shape stages
 # (this fit has no --fabric, so woven's GGX lobes with their anisotropy free)
-assert "albedo pass: rough-diffuse" in names and "first pass: start 0.6: rough-diffuse" in names, names
+assert "albedo pass: rough-diffuse" in names and "first pass: second round: rough-diffuse" in names, names
+assert "first pass: start 0.6: rough-diffuse" not in names, names  # branches: lobe shape only
 assert names[-3:] == ["albedo pass: rough-diffuse", "albedo pass: lobe-shape",
                       "albedo pass: lobe-shape+share"], names
 assert "first pass: second round: lobe-shape+share" in names, names
