@@ -50,9 +50,13 @@ TEST(S26GlossyStarts, DefaultStartsIncludeAGlossyOne) {
 }
 
 // A glossy dielectric (roughness 0.1, as the Cycles Principled reference of docs/fitting.md):
-// the default starts reach it; the session-25 starts stop in the broad basin.
+// the default starts reach it; the session-25 starts stop in the broad basin (gltf-sheen at
+// roughness 0.84, the others at 1.0).
 TEST(S26GlossyStarts, GlossyReferenceIsRecoveredByTheDefaultStarts) {
-  for (const ModelKind m : {ModelKind::kStandard, ModelKind::kPhysicalSheen}) {
+  // Not physical-aniso: its anisotropy starts at 0.5 (ApplyModelDefaults) and on this isotropic
+  // truth stops at strength 0.38, roughness 0.088, rmse 0.021 (from 0.6 and 0.9: 0.59 and
+  // 0.031); docs/fitting.md "A start for glossy references".
+  for (const ModelKind m : {ModelKind::kStandard, ModelKind::kPhysicalSheen, ModelKind::kGltfSheen}) {
     const Glossy g(m, {{"base_color", {0.5, 0.15, 0.1}}, {"roughness", {0.1}}});
     FitOptions o = g.Options();
     const FitResult r = FitImages(g.Inputs(), o);
