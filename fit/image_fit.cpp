@@ -1219,12 +1219,14 @@ FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions&
   for (double r0 : opt.start_roughness) points.push_back(StartBlocks(table, opt, r0, ref_colour));
   // physical-aniso (session 26): its strength starts at 0.5 (ApplyModelDefaults), and from
   // there an isotropic reference can stop anisotropic (a glossy synthetic truth at strength 0:
-  // 0.38, RMSE 0.021). One more start, the first start point at strength 0.05, reaches the
-  // isotropic basin (docs/fitting.md "A start for glossy references").
+  // 0.38, RMSE 0.021). One more start, the lowest start roughness at strength 0.05, reaches
+  // the isotropic basin (docs/fitting.md "A start for glossy references").
   const int strength_block = BlockIndex(table, "anisotropy_strength");
   if (opt.start.model == render::ModelKind::kPhysicalAniso && strength_block >= 0 &&
       opt.init_from_reference && !IsLocked(opt, "anisotropy_strength") && !points.empty()) {
-    ParamBlocks iso = StartBlocks(table, opt, opt.start_roughness.back(), ref_colour);
+    const double r_iso =
+        *std::min_element(opt.start_roughness.begin(), opt.start_roughness.end());
+    ParamBlocks iso = StartBlocks(table, opt, r_iso, ref_colour);
     iso[size_t(strength_block)][0] = 0.05;
     points.push_back(iso);
   }

@@ -92,7 +92,8 @@ struct FitOptions {
   // (Cycles Principled at roughness 0.1 and 0.25: block RMSE 6-9x the 0.3 start's;
   // docs/fitting.md "A start for glossy references"). Starts that give the same parameter
   // blocks run once: no init_from_reference, or every parameter r0 sets (roughness, and
-  // sheen_roughness where the model has one) locked.
+  // sheen_roughness where the model has one) locked. physical-aniso adds one start: the
+  // lowest of these values with its anisotropy strength at 0.05 (FitImages).
   std::vector<double> start_roughness = {0.6, 0.9, 0.3};
   int max_iterations = 50;        // per start
   double min_coverage = 0.5;      // a block is kept when sum(w) / B^2 >= this (docs/references.md)

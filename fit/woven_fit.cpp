@@ -242,8 +242,8 @@ FitResult FitWovenImages(const std::vector<SceneInput>& inputs, const FitOptions
     }
     best = finish(std::move(best));
   } else {
-    // Each branch's paths are named after it: "start R: two-stage", "start R: rough-diffuse",
-    // ..., "cloth basin: ...", then "second round: ...".
+    // Each branch's paths are named after it: "start R: two-stage", "start R: lobe-shape",
+    // ..., "cloth basin: ...", then "second round: ..." (with its rough-diffuse stage).
     auto prefixed = [](FitResult r, const std::string& prefix) {
       for (FitResult::Candidate& c : r.candidates) c.name = prefix + c.name;
       return r;

@@ -17,9 +17,9 @@
 // is explicit (then the starts are one start). Then the cloth-basin start below (session 13)
 // runs the stages again from cloth's basin, and the rough-diffuse and lobe-shape stages run
 // from the best. With several free start values (clothfit fit: 0.6 and 0.3; session 26) each
-// start, and the cloth basin, runs that whole pipeline on its own, the best is kept, and the
-// pipeline runs once more from it ("second round"); docs/fitting.md "A start for glossy
-// references".
+// start, and the cloth basin, runs that pipeline on its own without the rough-diffuse stage,
+// the best is kept, and the whole pipeline runs once more from it ("second round");
+// docs/fitting.md "A start for glossy references".
 //
 // Weave maps (fit/weave_maps.h): AttachWeaveMaps bakes them for an Irawan fabric BEFORE the
 // stages, writes the EXR and names it in the start preset's "weave_maps" field; FitImages

@@ -65,7 +65,7 @@ TEST(S26GlossyStarts, GlossyReferenceIsRecoveredByTheDefaultStarts) {
     EXPECT_NEAR(g.Roughness(r), 0.1, 0.01) << render::ToString(m);
     EXPECT_LT(r.rmse, 1e-3) << render::ToString(m);
 
-    o.start_roughness = {0.6, 0.9};  // session 25's default
+    o.start_roughness = {0.6, 0.9};  // session 25's default (physical-aniso: plus its iso start)
     const FitResult old = FitImages(g.Inputs(), o);
     ASSERT_TRUE(old.usable) << old.message;
     std::printf("%s, glossy truth 0.1: default starts roughness %.4f rmse %.6f; 0.6,0.9: "
@@ -88,8 +88,23 @@ TEST(S26GlossyStarts, IdenticalStartPointsRunOnce) {
   EXPECT_EQ(free.starts, 3);
 }
 
-// Woven: the whole pipeline from each start roughness (clothfit fit's 0.6 and 0.3), then once
-// more from the best, the best kept; a glossy isotropic yarn lobe (roughness 0.12, anisotropy 0) is recovered. From 0.6
+// physical-aniso's near-isotropic start runs only with the strength free and the start from
+// the reference: 3 + 1 starts; strength locked: 3; explicit start values: 1.
+TEST(S26GlossyStarts, PhysicalAnisoIsotropicStartIsGated) {
+  const Glossy g(ModelKind::kPhysicalAniso, {{"roughness", {0.3}}});
+  FitOptions o = g.Options();
+  o.max_iterations = 3;  // the start count is the point, not the answer
+  EXPECT_EQ(FitImages(g.Inputs(), o).starts, 4);
+  FitOptions locked = o;
+  locked.locked.push_back("anisotropy_strength");
+  EXPECT_EQ(FitImages(g.Inputs(), locked).starts, 3);
+  FitOptions given = o;
+  given.init_from_reference = false;
+  EXPECT_EQ(FitImages(g.Inputs(), given).starts, 1);
+}
+
+// Woven: the pipeline from each start roughness (clothfit fit's 0.6 and 0.3; without the
+// rough-diffuse stage), then the whole pipeline once more from the best, the best kept; a glossy isotropic yarn lobe (roughness 0.12, anisotropy 0) is recovered. From 0.6
 // alone the pipeline stops at roughness 0.53 (rmse 0.032 against 0.0003).
 TEST(S26GlossyStarts, WovenRunsEveryStartThroughThePipeline) {
   const Glossy g(ModelKind::kWoven, {{"base_color", {0.2, 0.25, 0.5}},
