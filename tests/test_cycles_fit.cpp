@@ -46,6 +46,25 @@ const std::string kSource = CLOTHFIT_TEST_SOURCE_DIR;
 
 bool HaveBlenderForFit() { return std::system("command -v blender >/dev/null 2>&1") == 0; }
 
+// Renders `card` with scripts/cycles-reference at size x size, one thread, seed 1, max depth 8;
+// `material` is "--fabric 'F'" or "--principled ...". *exr = the image, written in `dir`.
+void RenderCycles(const std::string& card, const std::string& material, int spp, int size,
+                  const fs::path& dir, std::string* exr) {
+  *exr = (dir / "cycles.exr").string();
+  const std::string cmd = "'" + kSource + "/scripts/cycles-reference' --scene '" + card + "' " +
+                          material + " --spp " + std::to_string(spp) +
+                          " --max-depth 8 --threads 1 --seed 1 --width " + std::to_string(size) +
+                          " --height " + std::to_string(size) + " --out '" + *exr + "' >'" +
+                          (dir / "log").string() + "' 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd << " (see " << dir << "/log)";
+}
+
+// The environment a scene card names (its map must be installed).
+render::Environment CardEnvironment(const render::Scene& scene) {
+  const render::EnvironmentSpec& e = *scene.card.environment;
+  return render::Environment::Load(e.path, e.intensity, e.rotation_y, {});
+}
+
 TEST(CyclesFit, LambertSphereAlbedoWithinTwoPercentPerChannel) {
   if (!HaveBlenderForFit()) GTEST_SKIP() << "blender not installed (Debian 'blender')";
   const std::string card = kSource + "/datasets/scenes/sphere.json";
@@ -55,18 +74,13 @@ TEST(CyclesFit, LambertSphereAlbedoWithinTwoPercentPerChannel) {
   const int size = 32;
   const fs::path dir = fs::temp_directory_path() / ("clothfit_cycles_fit_" + std::to_string(::getpid()));
   fs::create_directories(dir);
-  const std::string exr = (dir / "lambert.exr").string();
-  const std::string cmd = "'" + kSource + "/scripts/cycles-reference' --scene '" + card +
-                          "' --fabric '" + kSource + "/datasets/materials/lambert.json'" +
-                          " --spp 128 --max-depth 8 --threads 1 --seed 1 --width " +
-                          std::to_string(size) + " --height " + std::to_string(size) +
-                          " --out '" + exr + "' >'" + (dir / "log").string() + "' 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd << " (see " << dir << "/log)";
+  std::string exr;
+  ASSERT_NO_FATAL_FAILURE(RenderCycles(
+      card, "--fabric '" + kSource + "/datasets/materials/lambert.json'", 128, size, dir, &exr));
 
   const Reference ref = ReadReference(exr, ReferenceOptions{});
   scene.card.width = scene.card.height = size;
-  const render::EnvironmentSpec& e = *scene.card.environment;
-  const render::Environment env = render::Environment::Load(e.path, e.intensity, e.rotation_y, {});
+  const render::Environment env = CardEnvironment(scene);
 
   FitOptions o;
   o.start = render::DefaultPreset(render::ModelKind::kCloth);
@@ -135,8 +149,7 @@ void RealYarnFit(const std::string& card, int size, int repeats, const fs::path&
     partial += w > 0.f && w < 0.999f;
   }
   *gappy = double(partial) / double(std::max<size_t>(covered, 1));
-  const render::EnvironmentSpec& e = *scene.card.environment;
-  const render::Environment env = render::Environment::Load(e.path, e.intensity, e.rotation_y, {});
+  const render::Environment env = CardEnvironment(scene);
   const std::vector<SceneInput> inputs = {{&scene, &env, &ref, nullptr, card}};
   FitOptions o;
   o.start = render::DefaultPreset(render::ModelKind::kCloth);
@@ -199,17 +212,13 @@ TEST(CyclesFit, GlossySwatchRoughnessIsFoundByTheDefaultStarts) {
   const int size = 256;  // at 64 and 128 px even the old starts find the glossy basin
   const fs::path dir = fs::temp_directory_path() / ("clothfit_cycles_glossy_" + std::to_string(::getpid()));
   fs::create_directories(dir);
-  const std::string exr = (dir / "glossy.exr").string();
-  const std::string cmd = "'" + kSource + "/scripts/cycles-reference' --scene '" + card +
-                          "' --principled base_color=0.5:0.15:0.1,roughness=0.1,specular=0.5,"
-                          "sheen=0.1 --spp 64 --max-depth 8 --threads 1 --seed 1 --width " +
-                          std::to_string(size) + " --height " + std::to_string(size) +
-                          " --out '" + exr + "' >'" + (dir / "log").string() + "' 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd << " (see " << dir << "/log)";
+  std::string exr;
+  ASSERT_NO_FATAL_FAILURE(RenderCycles(
+      card, "--principled base_color=0.5:0.15:0.1,roughness=0.1,specular=0.5,sheen=0.1", 64, size,
+      dir, &exr));
   const Reference ref = ReadReference(exr, ReferenceOptions{});
   scene.card.width = scene.card.height = size;
-  const render::EnvironmentSpec& e = *scene.card.environment;
-  const render::Environment env = render::Environment::Load(e.path, e.intensity, e.rotation_y, {});
+  const render::Environment env = CardEnvironment(scene);
   FitOptions o;
   o.start = render::DefaultPreset(render::ModelKind::kStandard);
   ApplyModelDefaults(&o);  // metalness locked, as clothfit fit
