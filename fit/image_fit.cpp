@@ -1214,9 +1214,12 @@ FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions&
 
   const Rgb<double> ref_colour = StartColour(*inputs[0].reference);
   double best_start_rmse = std::numeric_limits<double>::infinity();
-  std::vector<ParamBlocks> started;  // the start points run so far (identical ones run once)
-  std::vector<ParamBlocks> points;
-  for (double r0 : opt.start_roughness) points.push_back(StartBlocks(table, opt, r0, ref_colour));
+  std::vector<ParamBlocks> points;  // the start points, each once (identical ones run once)
+  const auto add = [&points](ParamBlocks blocks) {
+    if (std::find(points.begin(), points.end(), blocks) == points.end())
+      points.push_back(std::move(blocks));
+  };
+  for (double r0 : opt.start_roughness) add(StartBlocks(table, opt, r0, ref_colour));
   // physical-aniso (session 26): its strength starts at 0.5 (ApplyModelDefaults), and from
   // there an isotropic reference can stop anisotropic (a glossy synthetic truth at strength 0:
   // 0.38, RMSE 0.021). One more start, the lowest start roughness at strength 0.05, reaches
@@ -1228,11 +1231,9 @@ FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions&
         *std::min_element(opt.start_roughness.begin(), opt.start_roughness.end());
     ParamBlocks iso = StartBlocks(table, opt, r_iso, ref_colour);
     iso[size_t(strength_block)][0] = 0.05;
-    points.push_back(iso);
+    add(std::move(iso));
   }
   for (ParamBlocks& blocks : points) {
-    if (std::find(started.begin(), started.end(), blocks) != started.end()) continue;
-    started.push_back(blocks);
     const ceres::Solver::Summary summary = SolveStart(data, table, sizes, opt, blocks);
     ++best.starts;
     best.iterations += int(summary.iterations.size());
