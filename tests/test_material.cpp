@@ -102,6 +102,37 @@ TEST(Material, ErrorsNameTheFileAndTheField) {
   }
 }
 
+// s27: a misspelt top-level field was kept as an unknown key and the material drawn without it
+// (a user's "weave_map" lost the weave maps). Near misses of a known field are refused, naming
+// the field they resemble; other unknown keys are still carried through (forward compatibility).
+TEST(Material, MisspeltTopLevelFieldIsRefusedUnknownOnesAreKept) {
+  const std::string head = R"({"schema":"clothfit.preset","version":1,)";
+  const struct {
+    const char* text;
+    const char* expect;
+  } cases[] = {
+      {R"("model":"woven","weave_map":{"uri":"x.exr"},"parameters":{}})",
+       "weave_map: unknown field; did you mean 'weave_maps'?"},
+      {R"("model":"woven","Woven":{},"parameters":{}})", "Woven: unknown field; did you mean 'woven'?"},
+      {R"("model":"cloth","parameters":{},"paramters":{"roughness":0.3}})",
+       "paramters: unknown field; did you mean 'parameters'?"},
+      {R"("model":"cloth","parameters":{},"provenence":{}})", "did you mean 'provenance'?"},
+      {R"("model":"cloth","parameters":{},"Fit":{}})", "did you mean 'fit'?"},
+  };
+  for (const auto& c : cases) {
+    const std::string e = ErrorOf(head + c.text);
+    EXPECT_NE(e.find(c.expect), std::string::npos) << c.text << " -> " << e;
+    EXPECT_NE(e.find("clothfit_mat_"), std::string::npos) << e;  // names the file
+  }
+  // Far from every known field: kept and written back, as before.
+  const std::string path = WriteTemp("fwd.json",
+      head + R"("model":"cloth","parameters":{},"future_block":{"a":1},"side":"double","name":"n"})");
+  const MaterialPreset p = ReadPreset(path);
+  EXPECT_EQ(p.extra.at("future_block")["a"], 1);
+  EXPECT_EQ(p.extra.at("side"), "double");
+  fs::remove(path);
+}
+
 TEST(Material, NonFiniteValuesAreNeverWritten) {
   MaterialPreset p = DefaultPreset(ModelKind::kCloth);
   p.values[6] = std::nan("");

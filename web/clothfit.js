@@ -2608,6 +2608,7 @@ export function loadClothfitPreset(json, options = {}) {
   if (preset.version !== 1) throw new Error(`loadClothfitPreset: version ${preset.version} not supported (1)`);
   const model = MODELS.get(preset.model);
   if (!model) throw new Error(`loadClothfitPreset: model: unknown ${typeof preset.model === 'string' ? ylKeyShown(preset.model) : typeof preset.model} (known: ${clothfitModels().join(', ')})`);
+  checkPresetTopLevelKeys(preset);
   const given = preset.parameters;  // required, as the C++ reader has it
   if (given === null || typeof given !== 'object' || Array.isArray(given)) throw new Error('loadClothfitPreset: parameters: missing or not an object');
   for (const k of Object.keys(given)) {
@@ -2633,6 +2634,39 @@ export function loadClothfitPreset(json, options = {}) {
   m.name = preset.name ?? preset.provenance?.fabric ?? preset.model;
   m.userData.clothfit = preset;
   return m;
+}
+
+// Top-level keys (session 27, as render/scene/material.cpp ParsePreset): a key that is a case
+// variant of a known one, or one edit from it (two for names of 8 or more characters), is a typo
+// ("weave_map", "Woven") and refused: kept, it would draw the material without what it meant.
+// Any other unknown key is left alone (a newer writer's field).
+const PRESET_TOP_LEVEL_KEYS = ['schema', 'version', 'model', 'engine', 'cloth', 'woven', 'conventions',
+  'parameters', 'fit', 'provenance', 'weave_maps', 'convert', 'maps', 'side', 'name'];
+function presetKeyDistance(a, b) {
+  if (a.length > 64 || b.length > 64) return 1000;
+  a = a.toLowerCase(); b = b.toLowerCase();
+  let row = Array.from({ length: b.length + 1 }, (_, j) => j);
+  for (let i = 1; i <= a.length; ++i) {
+    let diag = row[0];
+    row[0] = i;
+    for (let j = 1; j <= b.length; ++j) {
+      const up = row[j];
+      row[j] = Math.min(row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] === b[j - 1] ? 0 : 1));
+      diag = up;
+    }
+  }
+  return row[b.length];
+}
+function checkPresetTopLevelKeys(preset) {
+  for (const k of Object.keys(preset)) {
+    if (PRESET_TOP_LEVEL_KEYS.includes(k)) continue;
+    for (const known of PRESET_TOP_LEVEL_KEYS) {
+      const limit = known.length >= 8 ? 2 : known.length >= 4 ? 1 : 0;
+      if (presetKeyDistance(k, known) <= limit) {
+        throw new Error(`loadClothfitPreset: ${ylKeyShown(k)}: unknown field; did you mean '${known}'? (a misspelt field would be ignored and the material drawn without it)`);
+      }
+    }
+  }
 }
 
 // Every given parameter: a finite number, or an array of 3 for a colour, each within the model's

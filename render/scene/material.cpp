@@ -1,9 +1,12 @@
 #include "render/scene/material.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <vector>
 
 #include "brdf/gltf_sheen.h"
 #include "brdf/physical_aniso.h"
@@ -102,6 +105,35 @@ namespace {
 [[noreturn]] void Fail(const std::string& where, const std::string& field, const std::string& msg) {
   // Field names can hold untrusted keys ("parameters.<key>"): escaped, never raw.
   throw MaterialError(where + ": " + limits::EscapeForMessage(field, 200) + ": " + msg);
+}
+
+// Edit distance (insertions, deletions, substitutions) between two short ASCII keys,
+// case-folded; keys longer than 64 bytes are never near misses (returns a large value).
+size_t KeyDistance(const std::string& a, const std::string& b) {
+  if (a.size() > 64 || b.size() > 64) return 1000;
+  const auto low = [](char c) { return char(std::tolower(static_cast<unsigned char>(c))); };
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diag = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (low(a[i - 1]) == low(b[j - 1]) ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+// An unknown top-level key that is a case variant of `known` or one edit from it (two for keys
+// of 8 bytes or more) is taken for a typo and refused, naming the key it resembles.
+void CheckNotNearMiss(const std::string& key, const std::string& known, const std::string& where) {
+  const size_t d = KeyDistance(key, known);
+  const size_t limit = known.size() >= 8 ? 2 : known.size() >= 4 ? 1 : 0;
+  if (d <= limit)
+    Fail(where, key, "unknown field; did you mean '" + known + "'? (a misspelt field would be "
+                     "ignored and the material drawn without it)");
 }
 
 double Number(const json& v, const std::string& where, const std::string& field) {
@@ -425,13 +457,25 @@ MaterialPreset ParsePreset(const json& j, const std::string& where) {
   for (auto it = j["parameters"].begin(); it != j["parameters"].end(); ++it) {
     ParseParameter(it.key(), *it, where, &p);
   }
-  // Keys this build does not interpret are kept and written back (PresetToJson).
-  static const char* kKnown[] = {"schema", "version", "model", "engine", "cloth", "woven",
-                                 "conventions", "parameters"};
+  // Keys this build does not interpret are kept and written back (PresetToJson): the ones other
+  // parts of clothfit and web/clothfit.js read (kCarried), and any other key, so that a preset
+  // written by a newer build survives a round trip through this one. A key that is almost a
+  // known one ("weave_map", "Woven", "paramters") is refused instead: silently kept, it would
+  // draw the material without what the author meant (the weave maps, the woven options).
+  static const char* kInterpreted[] = {"schema", "version", "model", "engine", "cloth", "woven",
+                                       "conventions", "parameters"};
+  static const char* kCarried[] = {"fit", "provenance", "weave_maps", "convert", "maps",
+                                   "side", "name"};
   for (auto it = j.begin(); it != j.end(); ++it) {
     bool known = false;
-    for (const char* k : kKnown) known = known || it.key() == k;
-    if (!known) p.extra[it.key()] = *it;
+    for (const char* k : kInterpreted) known = known || it.key() == k;
+    if (known) continue;
+    for (const char* k : kCarried) known = known || it.key() == k;
+    if (!known) {
+      for (const char* k : kInterpreted) CheckNotNearMiss(it.key(), k, where);
+      for (const char* k : kCarried) CheckNotNearMiss(it.key(), k, where);
+    }
+    p.extra[it.key()] = *it;
   }
   return p;
 }

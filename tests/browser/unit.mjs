@@ -557,6 +557,11 @@ if (args.clothfit) {
   check(() => assert.throws(() => loadClothfitPreset(pre('standard', { 'a<b>\n': 1 })), (e) => /parameters\."a\\u003cb\\u003e\\n": unknown/.test(e.message) && !/[<>\n]/.test(e.message)), 'unknown name escaped');
   check(() => assert.throws(() => loadClothfitPreset(pre('<img src=x>', {})), (e) => /model: unknown "\\u003cimg src=x\\u003e"/.test(e.message) && !/[<>]/.test(e.message)), 'unknown model escaped');
   check(() => assert.equal(loadClothfitPreset(pre('physical-aniso', { specular_color: [25, 0, 3] })).specularColor.r, 25), 'specular_color up to 25 accepted');
+  // session 27: a misspelt top-level field is refused (as the C++ reader), an unknown one kept
+  check(() => assert.throws(() => loadClothfitPreset({ ...pre('woven', {}), weave_map: { file: 'x.exr' } }), /weave_map: unknown field; did you mean 'weave_maps'\?/), 'weave_map refused');
+  check(() => assert.throws(() => loadClothfitPreset({ ...pre('woven', {}), Woven: {} }), /Woven: unknown field; did you mean 'woven'\?/), 'Woven refused');
+  check(() => assert.throws(() => loadClothfitPreset({ ...pre('cloth', {}), paramters: {} }), /did you mean 'parameters'\?/), 'paramters refused');
+  check(() => assert.equal(loadClothfitPreset({ ...pre('cloth', {}), future_block: { a: 1 } }).userData.clothfit.future_block.a, 1), 'an unknown field far from every known one is kept');
 }
 
 // Session 24: environment texels as the C++ reader keeps them (render/scene/environment.cpp):
