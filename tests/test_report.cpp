@@ -306,6 +306,42 @@ TEST_F(ReportTest, NonFiniteInputsAreReportedNotPropagated) {
       std::regex_search(std::regex_replace(TerminalTable(reps), std::regex("NaN/Inf"), ""), bad));
 }
 
+// Session 27: presets fitted to the user's own references (no provenance.fabric) are grouped by
+// those references, named from the words their file stems share, whatever the presets' own file
+// names; another set of references with the same name is another fabric, not an error.
+TEST_F(ReportTest, OwnReferencesAreGroupedByTheirReferences) {
+  const std::vector<std::string> presets = MakeFit();
+  const auto strip = [&](const std::string& path, const std::string& out,
+                         const std::vector<std::string>& refs) {
+    nlohmann::json j = nlohmann::json::parse(std::ifstream(path));
+    j.erase("provenance");
+    for (size_t i = 0; i < refs.size(); ++i) j["fit"]["scenes"][i]["reference"] = refs[i];
+    const std::string o = (dir_ / out).string();
+    std::ofstream(o) << j.dump();
+    return o;
+  };
+  // Stems glos_sphere_s1 / glos_swatch_s1 share the word "glos".
+  fs::create_directories(dir_ / "a");
+  fs::create_directories(dir_ / "b");
+  std::vector<std::string> ra, rb;
+  for (int i = 0; i < 2; ++i) {
+    const std::string stem = i == 0 ? "glos_sphere_s1.exr" : "glos_swatch_s1.exr";
+    fs::copy_file(refs_[size_t(i)], dir_ / "a" / stem);
+    fs::copy_file(refs2_[size_t(i)], dir_ / "b" / stem);
+    ra.push_back((dir_ / "a" / stem).string());
+    rb.push_back((dir_ / "b" / stem).string());
+  }
+  const std::vector<FabricSpec> specs = FabricsFromPresets(
+      {strip(presets[0], "woven.json", ra), strip(presets[1], "physical-sheen.json", ra),
+       strip(presets[1], "other.json", rb)});
+  ASSERT_EQ(specs.size(), 2u);
+  EXPECT_EQ(specs[0].name, "glos");
+  EXPECT_EQ(specs[0].models.size(), 2u);  // one page, both models
+  EXPECT_EQ(specs[1].name, "glos-2");     // the same name, other references
+  EXPECT_EQ(specs[1].models.size(), 1u);
+  EXPECT_EQ(specs[1].scenes[0].reference, rb[0]);
+}
+
 TEST_F(ReportTest, BadInputsNameTheFile) {
   const std::vector<std::string> presets = MakeFit();
   // Missing preset.

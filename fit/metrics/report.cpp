@@ -562,6 +562,37 @@ SceneSpec ParseFitScene(const nlohmann::json& s, const std::string& where, const
   return sp;
 }
 
+// The name of a fit made from the user's own references (no provenance.fabric): the leading
+// words their file stems share, words split at '_', '-' and '.' (glos_sphere_s1.exr and
+// glos_swatch_s1.exr -> "glos"); the first reference's stem when they share none. Presets
+// fitted to the same references then share a page whatever their own file names (before
+// session 27 the name was the preset's file stem, so DIR/woven.json and DIR/standard.json made
+// two one-model pages).
+std::string NameOfReferences(const std::vector<SceneSpec>& scenes) {
+  const auto words = [](const std::string& stem) {
+    std::vector<std::string> w(1);
+    for (char c : stem) {
+      if (c == '_' || c == '-' || c == '.') w.emplace_back();
+      else w.back() += c;
+    }
+    return w;
+  };
+  const std::string first = fs::path(scenes.at(0).reference).stem().string();
+  std::vector<std::string> common = words(first);
+  for (const SceneSpec& s : scenes) {
+    const std::vector<std::string> w = words(fs::path(s.reference).stem().string());
+    size_t k = 0;
+    while (k < common.size() && k < w.size() && common[k] == w[k]) ++k;
+    common.resize(k);
+  }
+  std::string name;
+  for (const std::string& w : common) {
+    if (w.empty()) break;
+    name += (name.empty() ? "" : "_") + w;
+  }
+  return name.empty() ? (first.empty() ? std::string("references") : first) : name;
+}
+
 // One fit preset: the model it holds, the scenes it was fitted on and the fabric it belongs to.
 struct FitPreset {
   ModelSpec model;
@@ -587,11 +618,12 @@ FitPreset ReadFitPreset(const std::string& path) {
     const std::string where = path + ": fit.scenes[" + std::to_string(i) + "]";
     p.scenes.push_back(ParseFitScene(scenes[i], where, path, m.previews));
   }
-  p.fabric_name = fs::path(path).stem().string();
   if (j.contains("provenance") && j.at("provenance").is_object() &&
       j.at("provenance").contains("fabric") && j.at("provenance").at("fabric").is_string()) {
     p.fabric_path = j.at("provenance").at("fabric").get<std::string>();
     p.fabric_name = fs::path(p.fabric_path).stem().string();
+  } else {
+    p.fabric_name = NameOfReferences(p.scenes);
   }
   return p;
 }
@@ -603,6 +635,24 @@ void AddToFabric(std::vector<FabricSpec>& fabrics,
   const std::string& path = p.model.preset_path;
   const std::string& fabric_name = p.fabric_name;
   const std::vector<SceneSpec>& specs = p.scenes;
+  const auto same_scenes = [&](const FabricSpec& f) {
+    bool same = f.scenes.size() == specs.size();
+    for (size_t i = 0; same && i < specs.size(); ++i)
+      same = f.scenes[i].name == specs[i].name && f.scenes[i].reference == specs[i].reference;
+    return same;
+  };
+  if (p.fabric_path.empty()) {
+    // Named from its references: another set of references that happens to give the same
+    // name is another fabric ("glos", "glos-2"), not an error.
+    std::string name = fabric_name;
+    for (int k = 2;; ++k) {
+      const auto f = std::find_if(fabrics.begin(), fabrics.end(),
+                                  [&](const FabricSpec& fs_) { return fs_.name == name; });
+      if (f == fabrics.end() || (f->fabric_path.empty() && same_scenes(*f))) break;
+      name = fabric_name + "-" + std::to_string(k);
+    }
+    p.fabric_name = name;
+  }
   auto it = std::find_if(fabrics.begin(), fabrics.end(),
                          [&](const FabricSpec& fs_) { return fs_.name == fabric_name; });
   if (it == fabrics.end()) {
@@ -614,10 +664,7 @@ void AddToFabric(std::vector<FabricSpec>& fabrics,
     first_preset_of[fabric_name] = path;
     it = fabrics.end() - 1;
   } else {
-    bool same = it->scenes.size() == specs.size();
-    for (size_t i = 0; same && i < specs.size(); ++i)
-      same = it->scenes[i].name == specs[i].name && it->scenes[i].reference == specs[i].reference;
-    if (!same)
+    if (!same_scenes(*it))
       throw ReportError(path + ": its scenes or references differ from " +
                         first_preset_of[fabric_name] + " (same fabric \"" + fabric_name + "\")");
     for (const ModelSpec& other : it->models)
