@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <limits>
 #include <regex>
 #include <set>
@@ -249,6 +250,23 @@ TEST_F(ReportTest, HtmlContainsEveryImageAndNumber) {
   const std::string table = TerminalTable(all);
   EXPECT_NE(table.find("noise floor"), std::string::npos);
   EXPECT_NE(table.find(FormatNumber(rep.model_means[1].rmse_display, 4)), std::string::npos);
+  // Every line the same length whatever the names (session 27: a 24-character fabric name
+  // pushed its numbers out of their columns).
+  std::vector<FabricReport> long_name = all;
+  long_name[0].spec.name = "a_fabric_with_a_long_name";
+  for (const auto& [t, name] : {std::pair{table, all[0].spec.name},
+                                 std::pair{TerminalTable(long_name), long_name[0].spec.name}}) {
+    std::istringstream lines(t);
+    std::string line, first;
+    std::getline(lines, first);
+    int rows = 0;
+    while (std::getline(lines, line))
+      if (line.rfind(name + " ", 0) == 0) {
+        EXPECT_EQ(line.size(), first.size()) << t;
+        ++rows;
+      }
+    EXPECT_EQ(rows, 3) << t;  // noise floor and two models
+  }
 
   // Written atomically to a directory.
   const std::string index_path = WriteReport(all, (dir_ / "out").string());

@@ -1511,7 +1511,14 @@ std::string ReportCsv(const std::vector<FabricReport>& reports) {
 std::string TerminalTable(const std::vector<FabricReport>& reports) {
   std::ostringstream s;
   char buf[256];
-  std::snprintf(buf, sizeof buf, "%-10s %-15s", "fabric", "model");
+  // Column widths from the names shown (at least the headers' old 10 / 15, at most 60: longer
+  // names widen the table instead of pushing the numbers out of their columns).
+  int fw = 10, mw = 15;
+  for (const FabricReport& r : reports) {
+    fw = std::max(fw, int(std::min<size_t>(r.spec.name.size(), 60)));
+    for (const ModelSpec& m : r.spec.models) mw = std::max(mw, int(std::min<size_t>(m.model.size(), 60)));
+  }
+  std::snprintf(buf, sizeof buf, "%-*s %-*s", fw, "fabric", mw, "model");
   s << buf;
   for (const Column& c : Columns()) {
     std::snprintf(buf, sizeof buf, " %8s", c.short_title);
@@ -1519,7 +1526,7 @@ std::string TerminalTable(const std::vector<FabricReport>& reports) {
   }
   s << "\n";
   auto row = [&](const std::string& fabric, const std::string& model, const Numbers& n) {
-    std::snprintf(buf, sizeof buf, "%-10s %-15s", fabric.c_str(), model.c_str());
+    std::snprintf(buf, sizeof buf, "%-*s %-*s", fw, fabric.c_str(), mw, model.c_str());
     s << buf;
     if (!n.ok) {
       s << " " << Na(n) << "\n";
