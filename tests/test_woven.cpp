@@ -710,6 +710,13 @@ TEST(WovenFabric, ErrorsNameTheFileAndField) {
                     "field 'preset': unknown Sadeghi fabric 'tweed' (valid: linen_plain");
   ExpectFabricError(head + R"("model": "irawan", "preset": "no_such_weave", "uv_repeats": 4})",
                     "no_such_weave.weave: cannot open");
+  // Session 27: where it looked, and how to point elsewhere (a fabric copied out of datasets/).
+  ExpectFabricError(head + R"("model": "irawan", "preset": "no_such_weave", "uv_repeats": 4})",
+                    "names ../weaves/no_such_weave.weave next to the fabric file's directory; copy "
+                    "that file along, or give 'weave_file' with its path");
+  ExpectFabricError(head + R"("model": "irawan", "preset": "x", "weave_file": "nope.weave", )"
+                           R"("uv_repeats": 4})",
+                    "'weave_file' is relative to the fabric file's directory");
   ExpectFabricError(head + R"("model": "irawan", "preset": "x", "uv_repeats": 4, "colour": 1})",
                     "unknown field 'colour'");
   ExpectFabricError(R"({"format": "clothfit-fabric", "version": 2})", "field 'version'");

@@ -154,7 +154,16 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
       WeavePattern pattern = LoadWeave(weave.lexically_normal().string());
       f.bsdf = std::make_unique<IrawanBsdf>(std::move(pattern), f.uv_repeats, f.uv_repeats);
     } catch (const WeavePatternError& e) {
-      Fail(path, std::string("field 'preset'/'weave_file': ") + e.what());
+      // A fabric copied out of datasets/fabrics/ loses its ../weaves/ neighbour: say where the
+      // file was looked for and how to point at it.
+      const std::string hint =
+          j.contains("weave_file")
+              ? " ('weave_file' is relative to the fabric file's directory)"
+              : " ('preset' \"" + f.preset + "\" names ../weaves/" + f.preset +
+                    ".weave next to the fabric file's directory; copy that file along, or give "
+                    "'weave_file' with its path)";
+      Fail(path, std::string("field 'preset'/'weave_file': ") + e.what() +
+                     (std::filesystem::exists(weave) ? std::string() : hint));
     }
   } else if (f.model == "sadeghi") {
     if (j.contains("weave_file")) Fail(path, "field 'weave_file' applies to model 'irawan' only");
