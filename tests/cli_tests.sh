@@ -98,6 +98,36 @@ PY
     err=$("$BIN" compare "$TMP/a.exr" "$TMP/c.exr" 2>&1) && fail "size mismatch accepted"
     grep -q "c.exr" <<< "$err" || fail "size mismatch error does not name the file: $err"
     "$BIN" compare "$TMP/a.exr" "$TMP/missing.exr" 2>/dev/null && fail "missing file accepted"
+    # Session 27: a reference on a transparent film (alpha 0, RGB 0 around the object, as
+    # Cycles renders it) has median luminance 0, so HDR-FLIP's automatic range is not finite.
+    # Every other metric is printed; HDR-FLIP is reported unavailable with the reason and the
+    # --hdr-range hint, in the text and in --json (hdr_flip_unavailable); exit status 0.
+    oiiotool --create 32x32 4 --fill:color=0.5,0.3,0.2,1 8x8+12+12 -d float -o "$TMP/film.exr" || fail "oiiotool film"
+    oiiotool --create 32x32 4 --fill:color=0.45,0.3,0.25,1 8x8+12+12 -d float -o "$TMP/film2.exr" || fail "oiiotool film2"
+    out=$("$BIN" compare "$TMP/film.exr" "$TMP/film2.exr" --maps "$TMP/maps" 2>"$TMP/err") \
+      || fail "transparent-film reference: exit $?: $out $(cat "$TMP/err")"
+    grep -q "^  flip  *0\.[0-9]" <<< "$out" || fail "transparent-film reference: no FLIP: $out"
+    grep -q "^  ciede2000_display_p95  *[0-9]" <<< "$out" || fail "transparent-film reference: no CIEDE2000: $out"
+    grep -q "^  hdr_flip  *unavailable  .*median luminance .* is 0.*--hdr-range cstart,cstop" <<< "$out" \
+      || fail "transparent-film reference: HDR-FLIP not reported unavailable with the hint: $out"
+    grep -q "warning: HDR-FLIP unavailable: .*--hdr-range" "$TMP/err" || fail "no stderr warning: $(cat "$TMP/err")"
+    [ -s "$TMP/maps/flip.exr" ] && [ ! -e "$TMP/maps/hdr_flip.exr" ] || fail "maps: $(ls "$TMP/maps")"
+    out=$("$BIN" --quiet compare "$TMP/film.exr" "$TMP/film2.exr" --json 2>/dev/null) || fail "--json on a transparent film exited $?"
+    python3 -c '
+import json, sys
+j = json.loads(sys.argv[1])
+assert j["hdr_flip"] is None and j["hdr_flip_range"] is None, j
+assert "--hdr-range" in j["hdr_flip_unavailable"], j["hdr_flip_unavailable"]
+for k in ("rmse_linear", "psnr_display", "ssim", "flip", "ciede2000_mean"):
+    assert isinstance(j[k], float), (k, j[k])
+' "$out" || fail "--json on a transparent film: $out"
+    out=$("$BIN" --quiet compare "$TMP/film.exr" "$TMP/film2.exr" --json --hdr-range -3,2) || fail "--hdr-range exited $?"
+    python3 -c '
+import json, sys
+j = json.loads(sys.argv[1])
+assert isinstance(j["hdr_flip"], float) and j["hdr_flip_unavailable"] is None, j
+assert j["hdr_flip_range"]["automatic"] is False, j
+' "$out" || fail "--hdr-range on a transparent film: $out"
     ;;
   foreignlobe)
     # Session 25: woven's automatic yarn lobe is the fabric's far-field lobe only on clothfit's
