@@ -363,6 +363,44 @@ PY
       || fail "preset-maps on a woven preset failed"
     grep -q '"model": "woven"' "$TMP/wvo/w.maps.preset.json" || fail "preset-maps did not write the woven preset"
     ;;
+  cyclesref)
+    # Session 27: scripts/cycles-reference checks its arguments and files before Blender starts:
+    # one-line errors naming the file, never a Python traceback; --principled tolerates spaces;
+    # --help shows the defaults and names no Blender version.
+    SRC="$(cd "$(dirname "$0")/.." && pwd)"
+    CR="$SRC/scripts/cycles-reference"
+    help=$(COLUMNS=200 "$CR" --help) || fail "cycles-reference --help exited $?"
+    grep -q -- "--spp SPP *samples per pixel (default: 64)" <<< "$help" || fail "--spp default not shown: $help"
+    grep -q -- "--seed SEED *Cycles seed (default: 1)" <<< "$help" || fail "--seed default not shown: $help"
+    grep -q "run inside Debian's blender" <<< "$help" || fail "--help does not name Debian's blender: $help"
+    grep -q "3\.4\.1" <<< "$help" && fail "--help names a Blender version: $help"
+    err=$(cd "$SRC" && scripts/cycles-reference --scene datasets/scenes/sphere.json --fabric lambert.json \
+            --spp 16 --out "$TMP/x.exr" 2>&1) && fail "missing --fabric accepted"
+    [ "$(wc -l <<< "$err")" -eq 1 ] && grep -q "^cycles-reference: error: lambert.json: no such file (--fabric)$" <<< "$err" \
+      || fail "missing --fabric: $err"
+    err=$("$CR" --scene "$TMP/none.json" --fabric "$SRC/datasets/materials/lambert.json" --out "$TMP/x.exr" 2>&1) \
+      && fail "missing --scene accepted"
+    grep -q "^cycles-reference: error: .*none.json: no such file (--scene)$" <<< "$err" || fail "missing --scene: $err"
+    printf '{"gltf": ' > "$TMP/bad.json"
+    err=$("$CR" --scene "$TMP/bad.json" --fabric "$SRC/datasets/materials/lambert.json" --out "$TMP/x.exr" 2>&1) \
+      && fail "broken card accepted"
+    grep -q "^cycles-reference: error: .*bad.json: not valid JSON (--scene)" <<< "$err" || fail "broken card: $err"
+    err=$("$CR" --scene "$SRC/datasets/scenes/swatch.json" --principled "base_color=0.35:0.05:0.1, roughness=x" \
+            --out "$TMP/x.exr" 2>&1) && fail "--principled roughness=x accepted"
+    grep -q "^cycles-reference: error: --principled: roughness: 'x' is not a number$" <<< "$err" || fail "roughness=x: $err"
+    err=$("$CR" --scene "$SRC/datasets/scenes/swatch.json" --principled "base_color=0.35:0.05:0.1" \
+            --out "$TMP/nodir/x.exr" 2>&1) && fail "missing --out directory accepted"
+    grep -q "x.exr: output directory .*nodir does not exist (--out)$" <<< "$err" || fail "--out directory: $err"
+    ! grep -q "Traceback" <<< "$err" || fail "traceback: $err"
+    if command -v "${BLENDER:-blender}" >/dev/null 2>&1; then
+      # the list as the docs print it, a space after each comma
+      out=$("$CR" --scene "$SRC/datasets/scenes/swatch.json" --principled "base_color=0.35:0.05:0.1, roughness=0.9 , sheen = 1" \
+              --spp 1 --width 8 --height 8 --out "$TMP/p.exr" 2>&1) || fail "--principled with spaces: $(tail -3 <<< "$out")"
+      [ -s "$TMP/p.exr" ] || fail "--principled with spaces wrote no image"
+    else
+      echo "note: blender not installed: the --principled render with spaces was not run"
+    fi
+    ;;
   shards)
     # render-references --shard: two shards into one cache directory produce exactly the
     # cache entries of one unsharded run (each entry once, same pixels), adaptive included.
