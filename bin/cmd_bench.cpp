@@ -400,6 +400,7 @@ struct BenchArgs {
   std::string catalogue;
   int count = 200;
   int jobs = 0;
+  bool quiet = false;  // -q/--quiet given after `bench` (the global flag is read too)
   BenchReferenceArgs reference;  // `bench reference` (bin/cmd_bench_reference.cpp)
 };
 
@@ -408,6 +409,10 @@ void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
   cmd->add_option("what", a.what, "what to benchmark: brdf | preview | fit | convert | reference")
       ->required()
       ->check(CLI::IsMember({"brdf", "preview", "fit", "convert", "reference"}));
+  // bench passes the options it does not know to Google Benchmark (allow_extras below), so it
+  // does not fall through to the global options: it takes -q/--quiet itself.
+  cmd->fallthrough(false);
+  cmd->add_flag("-q,--quiet", a.quiet, "no progress output on stderr (as the global -q)");
   cmd->add_option("--catalogue", a.catalogue,
                   "`bench convert`: catalogue directory (default: generate one in a temporary "
                   "directory with datasets/catalogue/generate.py)");
@@ -513,11 +518,12 @@ int RunRegisteredBenchmarks(CLI::App* cmd) {
 
 // `clothfit bench` after parsing: returns the exit status.
 int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
+  const bool quiet = g.quiet || a.quiet;
   (void)lut::DefaultDfg();  // tables are built once, outside the timed loops
   (void)lut::DefaultSheenAlbedo();
   if (a.what == "convert") {
     try {
-      return RunBenchConvert(a.catalogue, a.count, a.jobs, g.quiet);
+      return RunBenchConvert(a.catalogue, a.count, a.jobs, quiet);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "clothfit bench convert: error: %s\n", e.what());
       return 1;
@@ -528,7 +534,7 @@ int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
     r.scene = a.scene;
     if (cmd->count("--spp")) r.spp = a.fit.spp;  // else 64
     try {
-      return RunBenchReference(r, g.quiet);
+      return RunBenchReference(r, quiet);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "clothfit bench reference: error: %s\n", e.what());
       return 1;
@@ -537,9 +543,9 @@ int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
   if (a.what == "fit") {
     try {
       if (!a.fit.models.empty())
-        RunBenchModels(a.fit, g.quiet);
+        RunBenchModels(a.fit, quiet);
       else
-        RunBenchFit(a.fit, g.quiet);
+        RunBenchFit(a.fit, quiet);
       return 0;
     } catch (const std::exception& e) {
       std::fprintf(stderr, "clothfit bench fit: error: %s\n", e.what());
@@ -550,7 +556,7 @@ int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
     RegisterBrdfBenchmarks();
   } else {
     try {
-      BuildPreviewSets(a.scene, g.quiet);
+      BuildPreviewSets(a.scene, quiet);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "clothfit bench preview: error: %s\n", e.what());
       return 1;

@@ -88,6 +88,9 @@ PY
             --benchmark_min_time=0.01 2>&1) || fail "bench preview exited non-zero: $out"
     grep -q "woven direct+ibl, sheen on/double" <<< "$out" || fail "no woven preview benchmark in: $out"
     grep -q "microcylinder lobe (velvet)/double" <<< "$out" || fail "no microcylinder preview benchmark in: $out"
+    # -q/--quiet after `bench` (its other unknown options go to Google Benchmark)
+    "$BIN" bench brdf -q --benchmark_filter='cloth/filament/double' --benchmark_min_time=0.01 >/dev/null 2>&1 \
+      || fail "bench brdf -q refused"
     ;;
   compare)
     "$BIN" --quiet lut --size 16 --out "$TMP/a.exr" >/dev/null || fail "lut a"
@@ -362,6 +365,40 @@ PY
     "$BIN" --quiet convert "$TMP/wv" --to preset-maps --out "$TMP/wvo" >/dev/null \
       || fail "preset-maps on a woven preset failed"
     grep -q '"model": "woven"' "$TMP/wvo/w.maps.preset.json" || fail "preset-maps did not write the woven preset"
+    ;;
+  globalopts)
+    # Session 27: the global options work after the subcommand too (CLI11 fallthrough), and a
+    # mistyped subcommand is named (escaped, cut) with the valid ones and the closest match.
+    D="$(dirname "$0")/../datasets"
+    "$BIN" --quiet lut --size 8 --out "$TMP/a.exr" || fail "-q before the subcommand"
+    "$BIN" lut -q --size 8 --out "$TMP/b.exr" || fail "-q after the subcommand"
+    "$BIN" lut --size 8 --out "$TMP/c.exr" --quiet || fail "--quiet at the end"
+    err=$("$BIN" render-preview --scene "$D/scenes/sphere.json" --material "$D/../docs/presets/canvas-demo-cloth.json" \
+            --out "$TMP/p.exr" -q 2>&1 >/dev/null) || fail "render-preview -q: $err"
+    [ -z "$err" ] || fail "render-preview ... -q still wrote to stderr: $err"
+    err=$("$BIN" fit -q --model standard 2>&1) && fail "fit without --out accepted"
+    grep -q -- "--out is required" <<< "$err" || fail "fit -q was not taken as the global option: $err"
+    err=$("$BIN" lut -q --size 8 --out "$TMP/d.exr" --frobnicate 2>&1) && fail "unknown flag accepted"
+    grep -q "not expected: --frobnicate" <<< "$err" || fail "unknown flag: $err"
+    err=$("$BIN" previwe 2>&1) && fail "mistyped subcommand accepted"
+    grep -q "^clothfit: error: unknown subcommand 'previwe' (did you mean 'render-preview'?)$" <<< "$err" \
+      || fail "mistyped subcommand: $err"
+    grep -q "^valid subcommands: .*render-preview, fit, compare" <<< "$err" || fail "valid subcommands not listed: $err"
+    err=$("$BIN" -q fitt 2>&1) && fail "fitt accepted"
+    grep -q "unknown subcommand 'fitt' (did you mean 'fit'?)" <<< "$err" || fail "fitt: $err"
+    err=$("$BIN" zzzzzz 2>&1) && fail "zzzzzz accepted"
+    grep -q "unknown subcommand 'zzzzzz'$" <<< "$err" || fail "no suggestion expected for zzzzzz: $err"
+    # Untrusted bytes are escaped (\xNN) and long words cut.
+    err=$("$BIN" $'pre\x1b[2Jview\xff' 2>&1) && fail "escape bytes accepted as a subcommand"
+    grep -qF "unknown subcommand 'pre\x1B[2Jview\xFF'" <<< "$err" || fail "not escaped: $err"
+    LC_ALL=C grep -q $'\x1b' <<< "$err" && fail "raw ESC byte echoed: $err"
+    err=$("$BIN" "$(printf 'x%.0s' $(seq 1 500))" 2>&1) && fail "long word accepted"
+    line=$(head -1 <<< "$err")
+    [ ${#line} -lt 120 ] && grep -q "xxx\.\.\.'" <<< "$line" || fail "long word not cut: $line"
+    err=$("$BIN" lut --size 8 --out "$TMP/e.exr" $'--\x1b[31m' 2>&1) && fail "escape bytes accepted as an option"
+    LC_ALL=C grep -q $'\x1b' <<< "$err" && fail "raw ESC byte echoed in a usage error: $err"
+    err=$("$BIN" 2>&1) && fail "no subcommand accepted"
+    grep -q "A subcommand is required" <<< "$err" || fail "no subcommand: $err"
     ;;
   cyclesref)
     # Session 27: scripts/cycles-reference checks its arguments and files before Blender starts:
