@@ -23,6 +23,7 @@
 #include "render/reference/fabric.h"
 #include "render/preview/preview.h"
 #include "render/preview/weave_maps.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
 namespace {
@@ -503,7 +504,8 @@ void RegisterPreviewBenchmarks() {
   }
 }
 
-// Runs the registered benchmarks with the command's extra arguments; returns the exit status.
+// Runs the registered benchmarks with the command's extra arguments; returns the exit status
+// (1 when no benchmark matches --benchmark_filter: nothing timed is not a result).
 int RunRegisteredBenchmarks(CLI::App* cmd) {
   std::vector<std::string> extras = cmd->remaining();
   std::vector<char*> argv{const_cast<char*>("clothfit-bench")};
@@ -511,8 +513,13 @@ int RunRegisteredBenchmarks(CLI::App* cmd) {
   int argc = int(argv.size());
   benchmark::Initialize(&argc, argv.data());
   if (benchmark::ReportUnrecognizedArguments(argc, argv.data())) return 1;
-  benchmark::RunSpecifiedBenchmarks();
+  const size_t ran = benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
+  if (ran == 0) {
+    std::fprintf(stderr, "clothfit bench: error: no benchmark was run (--benchmark_filter "
+                         "matches none; --benchmark_list_tests lists them)\n");
+    return 1;
+  }
   return 0;
 }
 
@@ -521,12 +528,17 @@ int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
   const bool quiet = g.quiet || a.quiet;
   (void)lut::DefaultDfg();  // tables are built once, outside the timed loops
   (void)lut::DefaultSheenAlbedo();
+  // Errors name the file or flag; user paths in them are escaped.
+  auto fail = [&a](const std::exception& e) {
+    std::fprintf(stderr, "clothfit bench %s: error: %s\n", a.what.c_str(),
+                 limits::EscapeForMessage(e.what(), 2000).c_str());
+    return 1;
+  };
   if (a.what == "convert") {
     try {
       return RunBenchConvert(a.catalogue, a.count, a.jobs, quiet);
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit bench convert: error: %s\n", e.what());
-      return 1;
+      return fail(e);
     }
   }
   if (a.what == "reference") {
@@ -536,8 +548,7 @@ int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
     try {
       return RunBenchReference(r, quiet);
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit bench reference: error: %s\n", e.what());
-      return 1;
+      return fail(e);
     }
   }
   if (a.what == "fit") {
@@ -548,8 +559,7 @@ int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
         RunBenchFit(a.fit, quiet);
       return 0;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit bench fit: error: %s\n", e.what());
-      return 1;
+      return fail(e);
     }
   }
   if (a.what == "brdf") {
@@ -558,8 +568,7 @@ int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
     try {
       BuildPreviewSets(a.scene, quiet);
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit bench preview: error: %s\n", e.what());
-      return 1;
+      return fail(e);
     }
     RegisterPreviewBenchmarks();
   }

@@ -91,6 +91,18 @@ PY
     # -q/--quiet after `bench` (its other unknown options go to Google Benchmark)
     "$BIN" bench brdf -q --benchmark_filter='cloth/filament/double' --benchmark_min_time=0.01 >/dev/null 2>&1 \
       || fail "bench brdf -q refused"
+    # Nothing to time is an error: a filter matching no benchmark, a missing or empty catalogue.
+    err=$("$BIN" bench brdf --benchmark_filter=no-such-benchmark 2>&1) && fail "bench with no matching benchmark exited 0"
+    grep -q "clothfit bench: error: no benchmark was run" <<< "$err" || fail "no matching benchmark: $err"
+    err=$("$BIN" --quiet bench convert --catalogue "$TMP/nonexistent" 2>&1) && fail "bench convert: missing catalogue accepted"
+    grep -q "error: .*/nonexistent: --catalogue: no such directory" <<< "$err" || fail "missing catalogue: $err"
+    grep -q "materials/s" <<< "$err" && fail "missing catalogue printed a table: $err"
+    mkdir -p "$TMP/emptycat/gltf"
+    err=$("$BIN" --quiet bench convert --catalogue "$TMP/emptycat" 2>&1) && fail "bench convert: empty catalogue accepted"
+    grep -q "emptycat: --catalogue: found no materials" <<< "$err" || fail "empty catalogue: $err"
+    touch "$TMP/afile"
+    err=$("$BIN" --quiet bench convert --catalogue "$TMP/afile" 2>&1) && fail "bench convert: a file as catalogue accepted"
+    grep -q "afile: --catalogue: not a directory" <<< "$err" || fail "file as catalogue: $err"
     ;;
   compare)
     "$BIN" --quiet lut --size 16 --out "$TMP/a.exr" >/dev/null || fail "lut a"
