@@ -58,14 +58,21 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "input files (.json preset/fabric/SurfaceMaterial/TextureStack, .gltf, .glb, "
                   ".binary MERL), directories (searched recursively) or manifests (.txt)")
       ->required();
+  // Every option with a default shows it in --help (CLI11's "=value" after the type).
   cmd->add_option("--to", *to, "comma-separated targets: preset, threejs, gltf, filament, preset-maps (the source "
-                  "preset with its weave maps copied next to it; docs/convert.md)");
+                  "preset with its weave maps copied next to it; docs/convert.md)")
+      ->capture_default_str();
   cmd->add_option("--out", *out, "output directory (created)")->required();
-  cmd->add_option("-j,--jobs", *jobs, "worker threads (0: all cores)")->check(CLI::Range(0, 1024));
+  // --threads: the name fit and render-* use; -j/--jobs kept.
+  cmd->add_option("-j,--jobs,--threads", *jobs, "worker threads (0: all cores)")
+      ->check(CLI::Range(0, 1024))
+      ->capture_default_str();
   cmd->add_option("--shard", *shard,
-                  "i/N: convert only the i-th of N deterministic parts (0-based)");
+                  "i/N: convert only the i-th of N deterministic parts (0-based; 0/1: all)")
+      ->capture_default_str();
   cmd->add_option("--cloth-variant", *variant, "cloth target: filament or seed-threejs")
-      ->check(CLI::IsMember({"filament", "seed-threejs"}));
+      ->check(CLI::IsMember({"filament", "seed-threejs"}))
+      ->capture_default_str();
   cmd->add_flag("--allow-outside-paths", *allow_outside,
                 "let map and buffer paths inside input files point outside the input directory "
                 "(refused by default; docs/reliability.md)");

@@ -103,6 +103,23 @@ PY
     touch "$TMP/afile"
     err=$("$BIN" --quiet bench convert --catalogue "$TMP/afile" 2>&1) && fail "bench convert: a file as catalogue accepted"
     grep -q "afile: --catalogue: not a directory" <<< "$err" || fail "file as catalogue: $err"
+    # -j/--jobs/--threads is one option for every bench kind: bench reference's renderers too
+    D="$(dirname "$0")/../datasets"
+    for flag in -j --jobs --threads; do
+      out=$("$BIN" --quiet bench reference --fabric "$D/fabrics/canvas.json" --width 16 --spp 16 \
+              --target-error 0.5 $flag 1 2>&1) || fail "bench reference $flag 1: $out"
+      grep -q "^bench reference: .*, 1 threads$" <<< "$out" || fail "bench reference $flag 1 did not use 1 thread: $out"
+    done
+    # Every option with a default shows it in --help.
+    help=$("$BIN" bench --help) || fail "bench --help"
+    for want in "--count INT=200" "-j,--jobs,--threads INT:INT in \[0 - 1024\]=0" "--widths TEXT=64,128,256,512" \
+                "--strides TEXT=0,1" "--starts TEXT=1,2,3" "--spp INT:INT in \[16 - 65536\]=64" \
+                "--csv TEXT=out/bench-fit.csv" "--png TEXT=out/bench-fit.png" "--scene TEXT=.*/sphere.json" \
+                "--fabric TEXT=.*/lambert.json" "--max-depth INT:INT in \[1 - 64\]=8" "--seed UINT=1" \
+                "--width INT=0" "--target-error FLOAT:FLOAT in \[0.0001 - 1\]=0.02" \
+                "--cycles-script TEXT=.*cycles-reference"; do
+      grep -q -- "$want" <<< "$help" || fail "bench --help lacks '$want': $help"
+    done
     ;;
   compare)
     "$BIN" --quiet lut --size 16 --out "$TMP/a.exr" >/dev/null || fail "lut a"
@@ -362,6 +379,15 @@ PY
     grep -q "| converted | 0 |" <<< "$out" || fail "resume converted again: $out"
     printf '%s\n' "presets/preset_0000.json" "# a comment" "gltf" > "$TMP/cat/manifest.txt"
     "$BIN" --quiet convert "$TMP/cat/manifest.txt" --out "$TMP/m" --shard 1/2 >/dev/null || fail "manifest + shard"
+    # --threads: the name fit and render-* use, an alias of -j/--jobs (session 27)
+    "$BIN" --quiet convert "$TMP/cat/manifest.txt" --out "$TMP/m2" --threads 1 >/dev/null || fail "convert --threads"
+    "$BIN" convert "$TMP/cat/manifest.txt" --out "$TMP/m3" --threads 2000 2>/dev/null && fail "--threads 2000 accepted"
+    # Every option with a default shows it in --help (session 27: --to's was missing).
+    help=$("$BIN" convert --help) || fail "convert --help"
+    for want in "--to TEXT=preset" "-j,--jobs,--threads INT:INT in \[0 - 1024\]=0" "--shard TEXT=0/1" \
+                "--cloth-variant TEXT:{filament,seed-threejs}=filament"; do
+      grep -q -- "$want" <<< "$help" || fail "convert --help lacks '$want': $help"
+    done
     "$BIN" convert "$TMP/cat" --out "$TMP/x" --to obj 2>/dev/null && fail "unknown target accepted"
     "$BIN" convert "$TMP/cat" --out "$TMP/x" --shard 2/2 2>/dev/null && fail "bad shard accepted"
     "$BIN" convert "$TMP/nothing" --out "$TMP/x" 2>/dev/null && fail "missing input accepted"
