@@ -88,6 +88,10 @@ PY
             --benchmark_min_time=0.01 2>&1) || fail "bench preview exited non-zero: $out"
     grep -q "woven direct+ibl, sheen on/double" <<< "$out" || fail "no woven preview benchmark in: $out"
     grep -q "microcylinder lobe (velvet)/double" <<< "$out" || fail "no microcylinder preview benchmark in: $out"
+    # Session 27: Debian's libbenchmark (built without NDEBUG) warns "Library was built as
+    # DEBUG"; a context line just above it says that concerns the library, not clothfit's code.
+    grep -q "^clothfit: built Release (NDEBUG); a DEBUG warning below is about the system libbenchmark" <<< "$out" \
+      || fail "no clothfit build line in the benchmark context: $out"
     # -q/--quiet after `bench` (its other unknown options go to Google Benchmark)
     "$BIN" bench brdf -q --benchmark_filter='cloth/filament/double' --benchmark_min_time=0.01 >/dev/null 2>&1 \
       || fail "bench brdf -q refused"
