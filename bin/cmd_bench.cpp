@@ -3,6 +3,7 @@
 // Extra arguments go to Google Benchmark (e.g. clothfit bench brdf --benchmark_format=json).
 #include <benchmark/benchmark.h>
 #include <ceres/jet.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <array>
@@ -23,6 +24,7 @@
 #include "render/reference/fabric.h"
 #include "render/preview/preview.h"
 #include "render/preview/weave_maps.h"
+#include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
 namespace {
@@ -399,50 +401,78 @@ struct BenchArgs {
   BenchFitArgs fit;
   std::string catalogue;
   int count = 200;
-  int jobs = 0;
+  int jobs = 0;         // -j/--jobs/--threads, every bench kind (0: all cores)
+  bool quiet = false;   // -q/--quiet given after `bench` (the global flag is read too)
   BenchReferenceArgs reference;  // `bench reference` (bin/cmd_bench_reference.cpp)
 };
 
+// Every option with a default shows it in --help: CLI11's "=value" after the type, or the
+// help text where the default depends on the bench kind.
 void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
   BenchFitArgs& fa = a.fit;
   cmd->add_option("what", a.what, "what to benchmark: brdf | preview | fit | convert | reference")
       ->required()
       ->check(CLI::IsMember({"brdf", "preview", "fit", "convert", "reference"}));
+  // bench passes the options it does not know to Google Benchmark (allow_extras below), so it
+  // does not fall through to the global options: it takes -q/--quiet itself.
+  cmd->fallthrough(false);
+  cmd->add_flag("-q,--quiet", a.quiet, "no progress output on stderr (as the global -q)");
   cmd->add_option("--catalogue", a.catalogue,
                   "`bench convert`: catalogue directory (default: generate one in a temporary "
                   "directory with datasets/catalogue/generate.py)");
   cmd->add_option("--count", a.count,
-                  "`bench convert`: materials per input format when generating");
-  cmd->add_option("-j,--jobs", a.jobs, "`bench convert`: worker threads (0: all cores)");
+                  "`bench convert`: materials per input format when generating")
+      ->capture_default_str();
+  // --threads: the name fit and render-* use; -j/--jobs kept (bench reference's --threads
+  // before session 27 is this option now).
+  cmd->add_option("-j,--jobs,--threads", a.jobs,
+                  "worker threads of every bench kind: bench convert's conversions, bench "
+                  "reference's two renderers, bench fit's and bench preview's TBB work (0: all "
+                  "cores)")
+      ->check(CLI::Range(0, 1024))
+      ->capture_default_str();
   cmd->add_option("--fabrics", fa.fabrics,
                   "`bench fit`: comma-separated fabric names (default canvas,twill; with "
                   "--models canvas,twill,velvet)");
-  cmd->add_option("--widths", fa.widths, "`bench fit`: fit resolutions (image widths, px)");
-  cmd->add_option("--strides", fa.strides, "`bench fit`: pixel strides (0 = auto)");
-  cmd->add_option("--starts", fa.starts, "`bench fit`: multi-start counts (1-3)");
-  cmd->add_option("--spp", fa.spp, "`bench fit`: reference samples per pixel (cached)")
-      ->check(CLI::Range(16, 65536));
+  cmd->add_option("--widths", fa.widths, "`bench fit`: fit resolutions (image widths, px)")
+      ->capture_default_str();
+  cmd->add_option("--strides", fa.strides, "`bench fit`: pixel strides (0 = auto)")
+      ->capture_default_str();
+  cmd->add_option("--starts", fa.starts, "`bench fit`: multi-start counts (1-3)")
+      ->capture_default_str();
+  cmd->add_option("--spp", fa.spp,
+                  "`bench fit`: reference samples per pixel (cached); `bench reference`: samples "
+                  "per pixel of both renderers")
+      ->check(CLI::Range(16, 65536))
+      ->capture_default_str();
   cmd->add_option("--models", fa.models,
                   "`bench fit`: all | comma-separated models: each at the fit defaults, "
                   "seconds and error side by side (instead of the settings sweep)");
-  cmd->add_option("--csv", fa.csv, "`bench fit`: output CSV");
-  cmd->add_option("--png", fa.png, "`bench fit`: output plot (error vs time)");
-  cmd->add_option("--scene", a.scene, "scene card for `bench preview` and `bench reference`");
+  cmd->add_option("--csv", fa.csv, "`bench fit`: output CSV")->capture_default_str();
+  cmd->add_option("--png", fa.png, "`bench fit`: output plot (error vs time)")
+      ->capture_default_str();
+  cmd->add_option("--scene", a.scene, "scene card for `bench preview` and `bench reference`")
+      ->capture_default_str();
   BenchReferenceArgs& ra = a.reference;
   ra.fabric = std::string(CLOTHFIT_SOURCE_DATASETS) + "/materials/lambert.json";
   ra.cycles_script = std::string(CLOTHFIT_SOURCE_DATASETS) + "/../scripts/cycles-reference";
   cmd->add_option("--fabric", ra.fabric,
                   "`bench reference`: fabric or simple material (lambert/ggx_conductor: vs Cycles; "
-                  "woven: time to --target-error)");
+                  "woven: time to --target-error)")
+      ->capture_default_str();
   cmd->add_option("--max-depth", ra.max_depth, "`bench reference`: maximum path depth")
-      ->check(CLI::Range(1, 64));
-  cmd->add_option("--seed", ra.seed, "`bench reference`: seed (both renderers)");
-  cmd->add_option("--width", ra.width, "`bench reference`: image width (0: the card's)");
-  cmd->add_option("--threads", ra.threads, "`bench reference`: threads for both renderers (0: all)");
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  cmd->add_option("--seed", ra.seed, "`bench reference`: seed (both renderers)")
+      ->capture_default_str();
+  cmd->add_option("--width", ra.width, "`bench reference`: image width (0: the card's)")
+      ->capture_default_str();
   cmd->add_option("--target-error", ra.target_error,
                   "`bench reference`, woven: mean standard error / mean value to reach")
-      ->check(CLI::Range(1e-4, 1.0));
-  cmd->add_option("--cycles-script", ra.cycles_script, "`bench reference`: scripts/cycles-reference");
+      ->check(CLI::Range(1e-4, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--cycles-script", ra.cycles_script, "`bench reference`: scripts/cycles-reference")
+      ->capture_default_str();
   cmd->allow_extras();
 }
 
@@ -498,7 +528,8 @@ void RegisterPreviewBenchmarks() {
   }
 }
 
-// Runs the registered benchmarks with the command's extra arguments; returns the exit status.
+// Runs the registered benchmarks with the command's extra arguments; returns the exit status
+// (1 when no benchmark matches --benchmark_filter: nothing timed is not a result).
 int RunRegisteredBenchmarks(CLI::App* cmd) {
   std::vector<std::string> extras = cmd->remaining();
   std::vector<char*> argv{const_cast<char*>("clothfit-bench")};
@@ -506,54 +537,80 @@ int RunRegisteredBenchmarks(CLI::App* cmd) {
   int argc = int(argv.size());
   benchmark::Initialize(&argc, argv.data());
   if (benchmark::ReportUnrecognizedArguments(argc, argv.data())) return 1;
-  benchmark::RunSpecifiedBenchmarks();
+  // Debian's libbenchmark is built without NDEBUG, so its context block ends with "***WARNING***
+  // Library was built as DEBUG. Timings may be affected." No flag or context entry turns that
+  // line off (it is compiled into BenchmarkReporter::PrintBasicContext). This context entry,
+  // printed just above it, says what it concerns: the timed loops are clothfit code compiled
+  // into this binary (inline benchmark::State iteration included), with clothfit's flags.
+#ifdef NDEBUG
+  benchmark::AddCustomContext(
+      "clothfit", "built Release (NDEBUG); a DEBUG warning below is about the system "
+                  "libbenchmark's own build, not the timed clothfit code");
+#else
+  benchmark::AddCustomContext("clothfit", "built without NDEBUG (not Release): timings are not "
+                                          "representative");
+#endif
+  const size_t ran = benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
+  if (ran == 0) {
+    std::fprintf(stderr, "clothfit bench: error: no benchmark was run (--benchmark_filter "
+                         "matches none; --benchmark_list_tests lists them)\n");
+    return 1;
+  }
   return 0;
 }
 
 // `clothfit bench` after parsing: returns the exit status.
 int RunBench(CLI::App* cmd, const BenchArgs& a, const Globals& g) {
+  const bool quiet = g.quiet || a.quiet;
+  std::unique_ptr<tbb::global_control> limit;  // -j/--jobs/--threads for every kind
+  if (a.jobs > 0)
+    limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                  size_t(a.jobs));
   (void)lut::DefaultDfg();  // tables are built once, outside the timed loops
   (void)lut::DefaultSheenAlbedo();
+  // Errors name the file or flag; user paths in them are escaped.
+  auto fail = [&a](const std::exception& e) {
+    std::fprintf(stderr, "clothfit bench %s: error: %s\n", a.what.c_str(),
+                 limits::EscapeForMessage(e.what(), 2000).c_str());
+    return 1;
+  };
   if (a.what == "convert") {
     try {
-      return RunBenchConvert(a.catalogue, a.count, a.jobs, g.quiet);
+      return RunBenchConvert(a.catalogue, a.count, a.jobs, quiet);
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit bench convert: error: %s\n", e.what());
-      return 1;
+      return fail(e);
     }
   }
   if (a.what == "reference") {
     BenchReferenceArgs r = a.reference;
     r.scene = a.scene;
-    if (cmd->count("--spp")) r.spp = a.fit.spp;  // else 64
+    if (cmd->count("--spp")) r.spp = a.fit.spp;  // else BenchReferenceArgs' (64, as bench fit's)
+    r.threads = a.jobs;
     try {
-      return RunBenchReference(r, g.quiet);
+      return RunBenchReference(r, quiet);
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit bench reference: error: %s\n", e.what());
-      return 1;
+      return fail(e);
     }
   }
   if (a.what == "fit") {
     try {
       if (!a.fit.models.empty())
-        RunBenchModels(a.fit, g.quiet);
+        RunBenchModels(a.fit, quiet);
       else
-        RunBenchFit(a.fit, g.quiet);
+        RunBenchFit(a.fit, quiet);
       return 0;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit bench fit: error: %s\n", e.what());
-      return 1;
+      return fail(e);
     }
   }
   if (a.what == "brdf") {
     RegisterBrdfBenchmarks();
   } else {
     try {
-      BuildPreviewSets(a.scene, g.quiet);
+      BuildPreviewSets(a.scene, quiet);
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "clothfit bench preview: error: %s\n", e.what());
-      return 1;
+      return fail(e);
     }
     RegisterPreviewBenchmarks();
   }

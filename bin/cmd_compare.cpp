@@ -49,6 +49,12 @@ nlohmann::json JsonNum(double v) {
   return v > 0 ? "inf" : "-inf";
 }
 
+// Why HDR-FLIP is missing, with what to do about it (text, JSON and the stderr warning).
+std::string HdrFlipUnavailable(const metrics::CompareResult& r) {
+  return r.hdr_flip_unavailable + "; give --hdr-range cstart,cstop (stops; the same range for "
+         "every test image of this reference; docs/metrics.md)";
+}
+
 std::string Table(const metrics::CompareResult& r, const metrics::CompareOptions& o) {
   std::ostringstream s;
   s << "size " << r.width << "x" << r.height << ", pixels counted " << r.counts.counted
@@ -57,9 +63,9 @@ std::string Table(const metrics::CompareResult& r, const metrics::CompareOptions
   s << "display: " << render::ToneMappingName(o.tone_mapping) << ", exposure " << Num(o.exposure)
     << ", sRGB\n";
   auto row = [&](const char* name, const std::string& value, const std::string& note) {
-    char buf[256];
-    std::snprintf(buf, sizeof buf, "  %-22s %14s  %s\n", name, value.c_str(), note.c_str());
-    s << buf;
+    char buf[128];  // the note is appended whole (it may be long)
+    std::snprintf(buf, sizeof buf, "  %-22s %14s  ", name, value.c_str());
+    s << buf << note << "\n";
   };
   row("rmse_linear", Num(r.rmse_linear), "");
   row("psnr_linear [dB]", Num(r.psnr_linear), "peak " + Num(o.linear_peak));
@@ -69,10 +75,13 @@ std::string Table(const metrics::CompareResult& r, const metrics::CompareOptions
       r.ssim_used_border_pixels ? "image < 11 px: border windows pooled"
                                 : "11x11 Gaussian, sigma 1.5, L = 1");
   row("flip", Num(r.flip), "LDR-FLIP of display, ppd " + Num(o.ppd));
-  row("hdr_flip", Num(r.hdr_flip),
-      std::string(r.hdr_range_automatic ? "automatic" : "explicit") + " range [" +
-          Num(r.hdr_range.start) + ", " + Num(r.hdr_range.stop) + "], " +
-          std::to_string(r.hdr_exposures) + " exposures");
+  if (r.hdr_flip_unavailable.empty())
+    row("hdr_flip", Num(r.hdr_flip),
+        std::string(r.hdr_range_automatic ? "automatic" : "explicit") + " range [" +
+            Num(r.hdr_range.start) + ", " + Num(r.hdr_range.stop) + "], " +
+            std::to_string(r.hdr_exposures) + " exposures");
+  else
+    row("hdr_flip", "unavailable", HdrFlipUnavailable(r));
   row("ciede2000_mean", Num(r.ciede2000_mean), "Lab of linear values");
   row("ciede2000_p95", Num(r.ciede2000_p95), "");
   row("ciede2000_display_mean", Num(r.ciede2000_display_mean), "Lab of displayed colour");
@@ -103,11 +112,16 @@ nlohmann::json Json(const metrics::CompareResult& r, const metrics::CompareOptio
   j["ssim_used_border_pixels"] = r.ssim_used_border_pixels;
   j["flip"] = JsonNum(r.flip);
   j["ppd"] = o.ppd;
-  j["hdr_flip"] = JsonNum(r.hdr_flip);
-  j["hdr_flip_range"] = {{"start", r.hdr_range.start},
-                         {"stop", r.hdr_range.stop},
-                         {"automatic", r.hdr_range_automatic},
-                         {"exposures", r.hdr_exposures}};
+  // HDR-FLIP unavailable: hdr_flip and hdr_flip_range are null and hdr_flip_unavailable
+  // says why (null when it was computed).
+  const bool hdr = r.hdr_flip_unavailable.empty();
+  j["hdr_flip"] = hdr ? JsonNum(r.hdr_flip) : nlohmann::json(nullptr);
+  j["hdr_flip_range"] = hdr ? nlohmann::json{{"start", r.hdr_range.start},
+                                             {"stop", r.hdr_range.stop},
+                                             {"automatic", r.hdr_range_automatic},
+                                             {"exposures", r.hdr_exposures}}
+                            : nlohmann::json(nullptr);
+  j["hdr_flip_unavailable"] = hdr ? nlohmann::json(nullptr) : nlohmann::json(HdrFlipUnavailable(r));
   j["ciede2000_mean"] = JsonNum(r.ciede2000_mean);
   j["ciede2000_p95"] = JsonNum(r.ciede2000_p95);
   j["ciede2000_display_mean"] = JsonNum(r.ciede2000_display_mean);
@@ -228,6 +242,11 @@ void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code) {
           std::fprintf(stderr, "clothfit compare: wrote %zu maps to %s\n", r.maps.size(),
                        args->maps_dir.c_str());
       }
+      // HDR-FLIP unavailable: the other metrics are printed and the exit status stays 0
+      // (docs/metrics.md); a warning on stderr says so in both output forms.
+      if (!r.hdr_flip_unavailable.empty())
+        std::fprintf(stderr, "clothfit compare: warning: HDR-FLIP unavailable: %s\n",
+                     HdrFlipUnavailable(r).c_str());
       if (args->json) {
         std::printf("%s\n", limits::DumpJson(Json(r, o, args->reference, args->test, args->mask)).c_str());
       } else {

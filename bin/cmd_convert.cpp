@@ -58,14 +58,21 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "input files (.json preset/fabric/SurfaceMaterial/TextureStack, .gltf, .glb, "
                   ".binary MERL), directories (searched recursively) or manifests (.txt)")
       ->required();
+  // Every option with a default shows it in --help (CLI11's "=value" after the type).
   cmd->add_option("--to", *to, "comma-separated targets: preset, threejs, gltf, filament, preset-maps (the source "
-                  "preset with its weave maps copied next to it; docs/convert.md)");
+                  "preset with its weave maps copied next to it; docs/convert.md)")
+      ->capture_default_str();
   cmd->add_option("--out", *out, "output directory (created)")->required();
-  cmd->add_option("-j,--jobs", *jobs, "worker threads (0: all cores)")->check(CLI::Range(0, 1024));
+  // --threads: the name fit and render-* use; -j/--jobs kept.
+  cmd->add_option("-j,--jobs,--threads", *jobs, "worker threads (0: all cores)")
+      ->check(CLI::Range(0, 1024))
+      ->capture_default_str();
   cmd->add_option("--shard", *shard,
-                  "i/N: convert only the i-th of N deterministic parts (0-based)");
+                  "i/N: convert only the i-th of N deterministic parts (0-based; 0/1: all)")
+      ->capture_default_str();
   cmd->add_option("--cloth-variant", *variant, "cloth target: filament or seed-threejs")
-      ->check(CLI::IsMember({"filament", "seed-threejs"}));
+      ->check(CLI::IsMember({"filament", "seed-threejs"}))
+      ->capture_default_str();
   cmd->add_flag("--allow-outside-paths", *allow_outside,
                 "let map and buffer paths inside input files point outside the input directory "
                 "(refused by default; docs/reliability.md)");
@@ -112,6 +119,13 @@ int RunBenchConvert(const std::string& catalogue_in, int count, int jobs, bool q
   std::string catalogue = catalogue_in;
   const fs::path tmp =
       fs::temp_directory_path() / ("clothfit-bench-convert-" + std::to_string(::getpid()));
+  struct RemoveOnExit {  // the generated catalogue and the outputs, on every way out
+    fs::path dir;
+    ~RemoveOnExit() {
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+    }
+  } remove_tmp{tmp};
   if (catalogue.empty()) {
     catalogue = (tmp / "catalogue").string();
     const std::string cmd = "python3 '" + CatalogueScript() + "' --out '" + catalogue +
@@ -121,14 +135,40 @@ int RunBenchConvert(const std::string& catalogue_in, int count, int jobs, bool q
                    cmd.c_str());
       return 1;
     }
+  } else {
+    std::error_code ec;
+    const fs::file_status st = fs::status(catalogue, ec);
+    if (!fs::exists(st))
+      throw std::runtime_error(catalogue + ": --catalogue: no such directory");
+    if (!fs::is_directory(st))
+      throw std::runtime_error(catalogue + ": --catalogue: not a directory");
   }
   struct Part {
     const char* label;
     std::vector<std::string> dirs;
+    std::vector<fit::InputFile> inputs;
   };
-  const Part parts[] = {{"scalar (preset, glTF, SurfaceMaterial)", {"presets", "gltf", "seed"}},
-                        {"mapped (TextureStack with maps)", {"stacks"}},
-                        {"measured (MERL) and woven", {"merl", "fabrics"}}};
+  // The catalogue's layout (datasets/catalogue/generate.py): one subdirectory per input format.
+  Part parts[] = {{"scalar (preset, glTF, SurfaceMaterial)", {"presets", "gltf", "seed"}, {}},
+                  {"mapped (TextureStack with maps)", {"stacks"}, {}},
+                  {"measured (MERL) and woven", {"merl", "fabrics"}, {}}};
+  size_t materials = 0;
+  std::string searched;
+  for (Part& p : parts) {
+    std::vector<std::string> args;
+    for (const std::string& d : p.dirs) {
+      searched += (searched.empty() ? "" : ", ") + d;
+      if (fs::is_directory(fs::path(catalogue) / d))
+        args.push_back((fs::path(catalogue) / d).string());
+    }
+    if (!args.empty()) p.inputs = fit::ExpandInputs(args);
+    materials += p.inputs.size();
+  }
+  // Nothing to time is an error, not an empty table.
+  if (materials == 0)
+    throw std::runtime_error(catalogue + ": --catalogue: found no materials (looked for input "
+                             "files in its subdirectories " + searched +
+                             ", the layout datasets/catalogue/generate.py writes)");
   std::vector<double> errors;
   // Wall-clock rate, and CPU time per material (all threads) with the rate two fully available
   // cores would give: the machine is shared, so the wall clock alone understates it.
@@ -139,18 +179,14 @@ int RunBenchConvert(const std::string& catalogue_in, int count, int jobs, bool q
   int status = 0;
   int k = 0;
   for (const Part& p : parts) {
-    std::vector<std::string> args;
-    for (const std::string& d : p.dirs)
-      if (fs::is_directory(fs::path(catalogue) / d))
-        args.push_back((fs::path(catalogue) / d).string());
-    if (args.empty()) continue;
+    if (p.inputs.empty()) continue;
     fit::ConvertOptions o;
     o.targets = {"preset"};
     o.jobs = jobs;
     o.out_dir = (tmp / ("out" + std::to_string(k++))).string();
     fs::remove_all(o.out_dir);
     const std::clock_t c0 = std::clock();
-    const fit::ConvertReport rep = fit::RunConvert(fit::ExpandInputs(args), o);
+    const fit::ConvertReport rep = fit::RunConvert(p.inputs, o);
     const double cpu = double(std::clock() - c0) / CLOCKS_PER_SEC;
     std::vector<double> e;
     for (const auto& i : rep.items)
@@ -170,8 +206,6 @@ int RunBenchConvert(const std::string& catalogue_in, int count, int jobs, bool q
   if (!errors.empty())
     std::printf("median BRDF-space fit error over all %zu materials: %.4f (cube-root units)\n",
                 errors.size(), errors[errors.size() / 2]);
-  std::error_code ec;
-  fs::remove_all(tmp, ec);
   return status;
 }
 

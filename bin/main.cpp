@@ -1,14 +1,92 @@
 // clothfit: the command line. Thin: parse, validate, call one library function, turn
 // errors into a non-zero exit status with a message naming the file or flag.
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <vector>
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
 
 #include "bin/commands.h"
 #include "render/scene/input_limits.h"
+
+namespace {
+
+// Optimal string alignment distance: insertions, deletions, substitutions and swaps of two
+// adjacent characters each cost 1 ("previwe" -> "preview" is 1).
+size_t EditDistance(std::string_view a, std::string_view b) {
+  std::vector<std::vector<size_t>> d(a.size() + 1, std::vector<size_t>(b.size() + 1));
+  for (size_t i = 0; i <= a.size(); ++i) d[i][0] = i;
+  for (size_t j = 0; j <= b.size(); ++j) d[0][j] = j;
+  for (size_t i = 1; i <= a.size(); ++i)
+    for (size_t j = 1; j <= b.size(); ++j) {
+      d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1,
+                          d[i - 1][j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1])
+        d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
+    }
+  return d[a.size()][b.size()];
+}
+
+// The subcommand closest to `typed`, compared with each name and with each of its endings after
+// a '-' ("previwe" finds render-preview through "preview"); empty when none is within
+// max(1, length / 3) edits (more would suggest unrelated names).
+std::string ClosestSubcommand(const std::string& typed, const std::vector<std::string>& names) {
+  if (typed.size() > 64) return {};  // (also bounds the quadratic distance table)
+  std::string best;
+  size_t best_distance = std::max<size_t>(1, typed.size() / 3) + 1;
+  for (const std::string& name : names) {
+    for (size_t start = 0; start != std::string::npos;) {
+      const size_t distance = EditDistance(typed, std::string_view(name).substr(start));
+      if (distance < best_distance) {
+        best_distance = distance;
+        best = name;
+      }
+      const size_t dash = name.find('-', start);
+      start = dash == std::string::npos ? dash : dash + 1;
+    }
+  }
+  return best;
+}
+
+// CLI11's usage messages echo the user's arguments: each line goes through EscapeForMessage
+// (control and invalid bytes as \xNN, cut at 300 bytes), then the help hint.
+std::string UsageMessage(const CLI::App*, const CLI::Error& e) {
+  std::istringstream lines(e.what());
+  std::string out;
+  for (std::string line; std::getline(lines, line);)
+    out += clothfit::limits::EscapeForMessage(line, 300) + "\n";
+  return out + "Run with --help for more information.\n";
+}
+
+// After a usage error with no subcommand parsed: "unknown subcommand 'X'" for the first word
+// that is not an option (the global options take no values, so it is the one given where the
+// subcommand belongs), with the closest name and the valid ones; false when there is none
+// (no word at all: CLI11's "A subcommand is required" stands).
+bool ReportUnknownSubcommand(CLI::App& app) {
+  if (!app.get_subcommands().empty()) return false;
+  const std::vector<std::string> rest = app.remaining();
+  const auto word = std::find_if(rest.begin(), rest.end(),
+                                 [](const std::string& w) { return !w.empty() && w[0] != '-'; });
+  if (word == rest.end()) return false;
+  std::vector<std::string> names;
+  for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; }))
+    names.push_back(sub->get_name());
+  std::string valid;
+  for (const std::string& n : names) valid += (valid.empty() ? "" : ", ") + n;
+  const std::string closest = ClosestSubcommand(*word, names);
+  const std::string hint = closest.empty() ? "" : " (did you mean '" + closest + "'?)";
+  std::fprintf(stderr, "clothfit: error: unknown subcommand '%s'%s\nvalid subcommands: %s\n",
+               clothfit::limits::EscapeForMessage(*word, 64).c_str(), hint.c_str(), valid.c_str());
+  return true;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
 #if defined(__GLIBC__)
@@ -27,8 +105,16 @@ int main(int argc, char** argv) {
   CLI::App app{"clothfit: fit real-time cloth materials to ray-traced references"};
   app.set_version_flag("--version", "clothfit 0.1.0");
   app.require_subcommand(1);
+  app.failure_message(UsageMessage);
+  // Global options are accepted after the subcommand too ("clothfit fit -q ..."): an option a
+  // subcommand does not define falls through to this app. Subcommands inherit the setting
+  // when added; none defines -q or --quiet itself (a subcommand's own option would win).
+  // `bench` is the exception: its unknown options go to Google Benchmark, so it takes
+  // -q/--quiet itself (bin/cmd_bench.cpp).
+  app.fallthrough();
   clothfit::cli::Globals globals;
-  app.add_flag("-q,--quiet", globals.quiet, "no progress output on stderr");
+  app.add_flag("-q,--quiet", globals.quiet,
+               "no progress output on stderr (before or after the subcommand)");
 
   int exit_code = 0;
   clothfit::cli::AddLutCommand(app, globals, exit_code);
@@ -49,6 +135,7 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     // Usage errors print the message and exit 1 (help and --version: 0).
+    if (e.get_exit_code() != 0 && ReportUnknownSubcommand(app)) return 1;
     return app.exit(e) == 0 ? 0 : 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "clothfit: error: %s\n", 

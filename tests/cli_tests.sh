@@ -88,6 +88,42 @@ PY
             --benchmark_min_time=0.01 2>&1) || fail "bench preview exited non-zero: $out"
     grep -q "woven direct+ibl, sheen on/double" <<< "$out" || fail "no woven preview benchmark in: $out"
     grep -q "microcylinder lobe (velvet)/double" <<< "$out" || fail "no microcylinder preview benchmark in: $out"
+    # Session 27: Debian's libbenchmark (built without NDEBUG) warns "Library was built as
+    # DEBUG"; a context line just above it says that concerns the library, not clothfit's code.
+    grep -q "^clothfit: built Release (NDEBUG); a DEBUG warning below is about the system libbenchmark" <<< "$out" \
+      || fail "no clothfit build line in the benchmark context: $out"
+    # -q/--quiet after `bench` (its other unknown options go to Google Benchmark)
+    "$BIN" bench brdf -q --benchmark_filter='cloth/filament/double' --benchmark_min_time=0.01 >/dev/null 2>&1 \
+      || fail "bench brdf -q refused"
+    # Nothing to time is an error: a filter matching no benchmark, a missing or empty catalogue.
+    err=$("$BIN" bench brdf --benchmark_filter=no-such-benchmark 2>&1) && fail "bench with no matching benchmark exited 0"
+    grep -q "clothfit bench: error: no benchmark was run" <<< "$err" || fail "no matching benchmark: $err"
+    err=$("$BIN" --quiet bench convert --catalogue "$TMP/nonexistent" 2>&1) && fail "bench convert: missing catalogue accepted"
+    grep -q "error: .*/nonexistent: --catalogue: no such directory" <<< "$err" || fail "missing catalogue: $err"
+    grep -q "materials/s" <<< "$err" && fail "missing catalogue printed a table: $err"
+    mkdir -p "$TMP/emptycat/gltf"
+    err=$("$BIN" --quiet bench convert --catalogue "$TMP/emptycat" 2>&1) && fail "bench convert: empty catalogue accepted"
+    grep -q "emptycat: --catalogue: found no materials" <<< "$err" || fail "empty catalogue: $err"
+    touch "$TMP/afile"
+    err=$("$BIN" --quiet bench convert --catalogue "$TMP/afile" 2>&1) && fail "bench convert: a file as catalogue accepted"
+    grep -q "afile: --catalogue: not a directory" <<< "$err" || fail "file as catalogue: $err"
+    # -j/--jobs/--threads is one option for every bench kind: bench reference's renderers too
+    D="$(dirname "$0")/../datasets"
+    for flag in -j --jobs --threads; do
+      out=$("$BIN" --quiet bench reference --fabric "$D/fabrics/canvas.json" --width 16 --spp 16 \
+              --target-error 0.5 $flag 1 2>&1) || fail "bench reference $flag 1: $out"
+      grep -q "^bench reference: .*, 1 threads$" <<< "$out" || fail "bench reference $flag 1 did not use 1 thread: $out"
+    done
+    # Every option with a default shows it in --help.
+    help=$("$BIN" bench --help) || fail "bench --help"
+    for want in "--count INT=200" "-j,--jobs,--threads INT:INT in \[0 - 1024\]=0" "--widths TEXT=64,128,256,512" \
+                "--strides TEXT=0,1" "--starts TEXT=1,2,3" "--spp INT:INT in \[16 - 65536\]=64" \
+                "--csv TEXT=out/bench-fit.csv" "--png TEXT=out/bench-fit.png" "--scene TEXT=.*/sphere.json" \
+                "--fabric TEXT=.*/lambert.json" "--max-depth INT:INT in \[1 - 64\]=8" "--seed UINT=1" \
+                "--width INT=0" "--target-error FLOAT:FLOAT in \[0.0001 - 1\]=0.02" \
+                "--cycles-script TEXT=.*cycles-reference"; do
+      grep -q -- "$want" <<< "$help" || fail "bench --help lacks '$want': $help"
+    done
     ;;
   compare)
     "$BIN" --quiet lut --size 16 --out "$TMP/a.exr" >/dev/null || fail "lut a"
@@ -98,6 +134,36 @@ PY
     err=$("$BIN" compare "$TMP/a.exr" "$TMP/c.exr" 2>&1) && fail "size mismatch accepted"
     grep -q "c.exr" <<< "$err" || fail "size mismatch error does not name the file: $err"
     "$BIN" compare "$TMP/a.exr" "$TMP/missing.exr" 2>/dev/null && fail "missing file accepted"
+    # Session 27: a reference on a transparent film (alpha 0, RGB 0 around the object, as
+    # Cycles renders it) has median luminance 0, so HDR-FLIP's automatic range is not finite.
+    # Every other metric is printed; HDR-FLIP is reported unavailable with the reason and the
+    # --hdr-range hint, in the text and in --json (hdr_flip_unavailable); exit status 0.
+    oiiotool --create 32x32 4 --fill:color=0.5,0.3,0.2,1 8x8+12+12 -d float -o "$TMP/film.exr" || fail "oiiotool film"
+    oiiotool --create 32x32 4 --fill:color=0.45,0.3,0.25,1 8x8+12+12 -d float -o "$TMP/film2.exr" || fail "oiiotool film2"
+    out=$("$BIN" compare "$TMP/film.exr" "$TMP/film2.exr" --maps "$TMP/maps" 2>"$TMP/err") \
+      || fail "transparent-film reference: exit $?: $out $(cat "$TMP/err")"
+    grep -q "^  flip  *0\.[0-9]" <<< "$out" || fail "transparent-film reference: no FLIP: $out"
+    grep -q "^  ciede2000_display_p95  *[0-9]" <<< "$out" || fail "transparent-film reference: no CIEDE2000: $out"
+    grep -q "^  hdr_flip  *unavailable  .*median luminance .* is 0.*--hdr-range cstart,cstop" <<< "$out" \
+      || fail "transparent-film reference: HDR-FLIP not reported unavailable with the hint: $out"
+    grep -q "warning: HDR-FLIP unavailable: .*--hdr-range" "$TMP/err" || fail "no stderr warning: $(cat "$TMP/err")"
+    [ -s "$TMP/maps/flip.exr" ] && [ ! -e "$TMP/maps/hdr_flip.exr" ] || fail "maps: $(ls "$TMP/maps")"
+    out=$("$BIN" --quiet compare "$TMP/film.exr" "$TMP/film2.exr" --json 2>/dev/null) || fail "--json on a transparent film exited $?"
+    python3 -c '
+import json, sys
+j = json.loads(sys.argv[1])
+assert j["hdr_flip"] is None and j["hdr_flip_range"] is None, j
+assert "--hdr-range" in j["hdr_flip_unavailable"], j["hdr_flip_unavailable"]
+for k in ("rmse_linear", "psnr_display", "ssim", "flip", "ciede2000_mean"):
+    assert isinstance(j[k], float), (k, j[k])
+' "$out" || fail "--json on a transparent film: $out"
+    out=$("$BIN" --quiet compare "$TMP/film.exr" "$TMP/film2.exr" --json --hdr-range -3,2) || fail "--hdr-range exited $?"
+    python3 -c '
+import json, sys
+j = json.loads(sys.argv[1])
+assert isinstance(j["hdr_flip"], float) and j["hdr_flip_unavailable"] is None, j
+assert j["hdr_flip_range"]["automatic"] is False, j
+' "$out" || fail "--hdr-range on a transparent film: $out"
     ;;
   foreignlobe)
     # Session 25: woven's automatic yarn lobe is the fabric's far-field lobe only on clothfit's
@@ -317,6 +383,15 @@ PY
     grep -q "| converted | 0 |" <<< "$out" || fail "resume converted again: $out"
     printf '%s\n' "presets/preset_0000.json" "# a comment" "gltf" > "$TMP/cat/manifest.txt"
     "$BIN" --quiet convert "$TMP/cat/manifest.txt" --out "$TMP/m" --shard 1/2 >/dev/null || fail "manifest + shard"
+    # --threads: the name fit and render-* use, an alias of -j/--jobs (session 27)
+    "$BIN" --quiet convert "$TMP/cat/manifest.txt" --out "$TMP/m2" --threads 1 >/dev/null || fail "convert --threads"
+    "$BIN" convert "$TMP/cat/manifest.txt" --out "$TMP/m3" --threads 2000 2>/dev/null && fail "--threads 2000 accepted"
+    # Every option with a default shows it in --help (session 27: --to's was missing).
+    help=$("$BIN" convert --help) || fail "convert --help"
+    for want in "--to TEXT=preset" "-j,--jobs,--threads INT:INT in \[0 - 1024\]=0" "--shard TEXT=0/1" \
+                "--cloth-variant TEXT:{filament,seed-threejs}=filament"; do
+      grep -q -- "$want" <<< "$help" || fail "convert --help lacks '$want': $help"
+    done
     "$BIN" convert "$TMP/cat" --out "$TMP/x" --to obj 2>/dev/null && fail "unknown target accepted"
     "$BIN" convert "$TMP/cat" --out "$TMP/x" --shard 2/2 2>/dev/null && fail "bad shard accepted"
     "$BIN" convert "$TMP/nothing" --out "$TMP/x" 2>/dev/null && fail "missing input accepted"
@@ -332,6 +407,78 @@ PY
     "$BIN" --quiet convert "$TMP/wv" --to preset-maps --out "$TMP/wvo" >/dev/null \
       || fail "preset-maps on a woven preset failed"
     grep -q '"model": "woven"' "$TMP/wvo/w.maps.preset.json" || fail "preset-maps did not write the woven preset"
+    ;;
+  globalopts)
+    # Session 27: the global options work after the subcommand too (CLI11 fallthrough), and a
+    # mistyped subcommand is named (escaped, cut) with the valid ones and the closest match.
+    D="$(dirname "$0")/../datasets"
+    "$BIN" --quiet lut --size 8 --out "$TMP/a.exr" || fail "-q before the subcommand"
+    "$BIN" lut -q --size 8 --out "$TMP/b.exr" || fail "-q after the subcommand"
+    "$BIN" lut --size 8 --out "$TMP/c.exr" --quiet || fail "--quiet at the end"
+    err=$("$BIN" render-preview --scene "$D/scenes/sphere.json" --material "$D/../docs/presets/canvas-demo-cloth.json" \
+            --out "$TMP/p.exr" -q 2>&1 >/dev/null) || fail "render-preview -q: $err"
+    [ -z "$err" ] || fail "render-preview ... -q still wrote to stderr: $err"
+    err=$("$BIN" fit -q --model standard 2>&1) && fail "fit without --out accepted"
+    grep -q -- "--out is required" <<< "$err" || fail "fit -q was not taken as the global option: $err"
+    err=$("$BIN" lut -q --size 8 --out "$TMP/d.exr" --frobnicate 2>&1) && fail "unknown flag accepted"
+    grep -q "not expected: --frobnicate" <<< "$err" || fail "unknown flag: $err"
+    err=$("$BIN" previwe 2>&1) && fail "mistyped subcommand accepted"
+    grep -q "^clothfit: error: unknown subcommand 'previwe' (did you mean 'render-preview'?)$" <<< "$err" \
+      || fail "mistyped subcommand: $err"
+    grep -q "^valid subcommands: .*render-preview, fit, compare" <<< "$err" || fail "valid subcommands not listed: $err"
+    err=$("$BIN" -q fitt 2>&1) && fail "fitt accepted"
+    grep -q "unknown subcommand 'fitt' (did you mean 'fit'?)" <<< "$err" || fail "fitt: $err"
+    err=$("$BIN" zzzzzz 2>&1) && fail "zzzzzz accepted"
+    grep -q "unknown subcommand 'zzzzzz'$" <<< "$err" || fail "no suggestion expected for zzzzzz: $err"
+    # Untrusted bytes are escaped (\xNN) and long words cut.
+    err=$("$BIN" $'pre\x1b[2Jview\xff' 2>&1) && fail "escape bytes accepted as a subcommand"
+    grep -qF "unknown subcommand 'pre\x1B[2Jview\xFF'" <<< "$err" || fail "not escaped: $err"
+    LC_ALL=C grep -q $'\x1b' <<< "$err" && fail "raw ESC byte echoed: $err"
+    err=$("$BIN" "$(printf 'x%.0s' $(seq 1 500))" 2>&1) && fail "long word accepted"
+    line=$(head -1 <<< "$err")
+    [ ${#line} -lt 120 ] && grep -q "xxx\.\.\.'" <<< "$line" || fail "long word not cut: $line"
+    err=$("$BIN" lut --size 8 --out "$TMP/e.exr" $'--\x1b[31m' 2>&1) && fail "escape bytes accepted as an option"
+    LC_ALL=C grep -q $'\x1b' <<< "$err" && fail "raw ESC byte echoed in a usage error: $err"
+    err=$("$BIN" 2>&1) && fail "no subcommand accepted"
+    grep -q "A subcommand is required" <<< "$err" || fail "no subcommand: $err"
+    ;;
+  cyclesref)
+    # Session 27: scripts/cycles-reference checks its arguments and files before Blender starts:
+    # one-line errors naming the file, never a Python traceback; --principled tolerates spaces;
+    # --help shows the defaults and names no Blender version.
+    SRC="$(cd "$(dirname "$0")/.." && pwd)"
+    CR="$SRC/scripts/cycles-reference"
+    help=$(COLUMNS=200 "$CR" --help) || fail "cycles-reference --help exited $?"
+    grep -q -- "--spp SPP *samples per pixel (default: 64)" <<< "$help" || fail "--spp default not shown: $help"
+    grep -q -- "--seed SEED *Cycles seed (default: 1)" <<< "$help" || fail "--seed default not shown: $help"
+    grep -q "run inside Debian's blender" <<< "$help" || fail "--help does not name Debian's blender: $help"
+    grep -q "3\.4\.1" <<< "$help" && fail "--help names a Blender version: $help"
+    err=$(cd "$SRC" && scripts/cycles-reference --scene datasets/scenes/sphere.json --fabric lambert.json \
+            --spp 16 --out "$TMP/x.exr" 2>&1) && fail "missing --fabric accepted"
+    [ "$(wc -l <<< "$err")" -eq 1 ] && grep -q "^cycles-reference: error: lambert.json: no such file (--fabric)$" <<< "$err" \
+      || fail "missing --fabric: $err"
+    err=$("$CR" --scene "$TMP/none.json" --fabric "$SRC/datasets/materials/lambert.json" --out "$TMP/x.exr" 2>&1) \
+      && fail "missing --scene accepted"
+    grep -q "^cycles-reference: error: .*none.json: no such file (--scene)$" <<< "$err" || fail "missing --scene: $err"
+    printf '{"gltf": ' > "$TMP/bad.json"
+    err=$("$CR" --scene "$TMP/bad.json" --fabric "$SRC/datasets/materials/lambert.json" --out "$TMP/x.exr" 2>&1) \
+      && fail "broken card accepted"
+    grep -q "^cycles-reference: error: .*bad.json: not valid JSON (--scene)" <<< "$err" || fail "broken card: $err"
+    err=$("$CR" --scene "$SRC/datasets/scenes/swatch.json" --principled "base_color=0.35:0.05:0.1, roughness=x" \
+            --out "$TMP/x.exr" 2>&1) && fail "--principled roughness=x accepted"
+    grep -q "^cycles-reference: error: --principled: roughness: 'x' is not a number$" <<< "$err" || fail "roughness=x: $err"
+    err=$("$CR" --scene "$SRC/datasets/scenes/swatch.json" --principled "base_color=0.35:0.05:0.1" \
+            --out "$TMP/nodir/x.exr" 2>&1) && fail "missing --out directory accepted"
+    grep -q "x.exr: output directory .*nodir does not exist (--out)$" <<< "$err" || fail "--out directory: $err"
+    ! grep -q "Traceback" <<< "$err" || fail "traceback: $err"
+    if command -v "${BLENDER:-blender}" >/dev/null 2>&1; then
+      # the list as the docs print it, a space after each comma
+      out=$("$CR" --scene "$SRC/datasets/scenes/swatch.json" --principled "base_color=0.35:0.05:0.1, roughness=0.9 , sheen = 1" \
+              --spp 1 --width 8 --height 8 --out "$TMP/p.exr" 2>&1) || fail "--principled with spaces: $(tail -3 <<< "$out")"
+      [ -s "$TMP/p.exr" ] || fail "--principled with spaces wrote no image"
+    else
+      echo "note: blender not installed: the --principled render with spaces was not run"
+    fi
     ;;
   shards)
     # render-references --shard: two shards into one cache directory produce exactly the

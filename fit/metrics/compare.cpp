@@ -16,6 +16,19 @@
 namespace clothfit::metrics {
 using namespace internal;
 
+namespace {
+// Empty when the reference's automatic HDR-FLIP range is finite; otherwise why it is not, in
+// words (the range goes to *range).
+std::string UnusableAutomaticRange(const RgbImage& ref, const Map* mask, ExposureRange* range) {
+  *range = AutomaticExposureRange(ref, mask);
+  if (std::isfinite(range->start) && std::isfinite(range->stop)) return {};
+  const char* what = std::isfinite(range->start) ? "median" : "maximum";
+  return std::string("the automatic exposure range is not finite: the reference's ") + what +
+         " luminance over the counted pixels is 0 (e.g. a transparent film or a black "
+         "background)";
+}
+}  // namespace
+
 // ---- public: Compare --------------------------------------------------------------------------
 
 CompareResult Compare(const RgbImage& ref, const RgbImage& test, const CompareOptions& o,
@@ -42,11 +55,18 @@ CompareResult Compare(const RgbImage& ref, const RgbImage& test, const CompareOp
   res.ssim_used_border_pixels = s.used_border_pixels;
   MetricResult f = Flip(ref_d, test_d, FlipOptions{o.ppd}, mask);
   res.flip = f.value;
-  HdrFlipResult hf = HdrFlip(ref, test, HdrFlipOptions{o.ppd, o.hdr_range}, mask);
-  res.hdr_flip = hf.value;
-  res.hdr_range = hf.range;
-  res.hdr_range_automatic = hf.automatic_range;
-  res.hdr_exposures = hf.exposures;
+  // HDR-FLIP: an automatic range that is not finite makes it unavailable, not the comparison.
+  HdrFlipResult hf;
+  if (!o.hdr_range) res.hdr_flip_unavailable = UnusableAutomaticRange(ref, mask, &res.hdr_range);
+  if (res.hdr_flip_unavailable.empty()) {
+    hf = HdrFlip(ref, test, HdrFlipOptions{o.ppd, o.hdr_range}, mask);
+    res.hdr_flip = hf.value;
+    res.hdr_range = hf.range;
+    res.hdr_exposures = hf.exposures;
+  } else {
+    res.hdr_flip = std::numeric_limits<double>::quiet_NaN();
+  }
+  res.hdr_range_automatic = !o.hdr_range;
   Ciede2000Result de = Ciede2000(ref, test, mask);
   res.ciede2000_mean = de.value;
   res.ciede2000_p95 = de.p95;
@@ -64,8 +84,10 @@ CompareResult Compare(const RgbImage& ref, const RgbImage& test, const CompareOp
   res.maps.push_back({"rmse_display", std::move(rd.map)});
   res.maps.push_back({"ssim", std::move(s.map)});
   res.maps.push_back({"flip", std::move(f.map)});
-  res.maps.push_back({"hdr_flip", std::move(hf.map)});
-  res.maps.push_back({"hdr_flip_exposure", std::move(hf.exposure_map)});
+  if (res.hdr_flip_unavailable.empty()) {
+    res.maps.push_back({"hdr_flip", std::move(hf.map)});
+    res.maps.push_back({"hdr_flip_exposure", std::move(hf.exposure_map)});
+  }
   res.maps.push_back({"ciede2000", std::move(de.map)});
   res.maps.push_back({"ciede2000_display", std::move(ded.map)});
   return res;

@@ -238,10 +238,16 @@ struct CompareResult {
   double ssim = 0;                            // display values, L = 1
   bool ssim_used_border_pixels = false;
   double flip = 0;      // LDR-FLIP of the display images
-  double hdr_flip = 0;  // HDR-FLIP of the linear images
+  double hdr_flip = 0;  // HDR-FLIP of the linear images (NaN when unavailable, below)
   ExposureRange hdr_range;
   bool hdr_range_automatic = false;
   int hdr_exposures = 0;
+  // Empty when HDR-FLIP was computed. Otherwise why not: without CompareOptions::hdr_range the
+  // automatic range is not finite (the reference's median or maximum luminance over counted
+  // pixels is 0, e.g. a transparent film or a black background); hdr_flip is then NaN,
+  // hdr_range holds the non-finite automatic range, there are no hdr_flip maps, and every
+  // other metric is computed as usual.
+  std::string hdr_flip_unavailable;
   double ciede2000_mean = 0, ciede2000_p95 = 0;                  // Lab of the linear values
   double ciede2000_display_mean = 0, ciede2000_display_p95 = 0;  // Lab of the displayed colour
   struct NamedMap {
@@ -252,7 +258,9 @@ struct CompareResult {
 };
 // Every metric between a reference and a test image (linear). Display metrics use
 // ToDisplay(tone_mapping, exposure). Non-finite pixels of the linear inputs are excluded from
-// all metrics consistently (their map values are 0).
+// all metrics consistently (their map values are 0). HDR-FLIP without an explicit range whose
+// automatic range is not finite does not throw (HdrFlip would): it is reported unavailable
+// (CompareResult::hdr_flip_unavailable) and the other metrics are still computed.
 CompareResult Compare(const RgbImage& ref_linear, const RgbImage& test_linear,
                       const CompareOptions& options = {}, const Map* mask = nullptr);
 // Reads the images (and the mask when mask_path is not empty) and runs Compare. Errors name
