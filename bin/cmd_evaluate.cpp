@@ -10,6 +10,7 @@
 // fabric under another environment).
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <limits>
 #include <fstream>
 #include <memory>
@@ -185,10 +186,36 @@ int RunEvaluate(const EvaluateArgs& a, bool quiet) {
   std::vector<fit::Reference> references;
   loaded.reserve(scenes.size());
   references.reserve(refs.size());
+  // A preset's own fit.scenes name files of the machine that fitted it (the reference cache):
+  // a missing one keeps its error, with a hint (session 27).
+  const bool own_scenes = SplitList(a.references).empty();
+  const auto with_hint = [&](auto load, const std::string& path, size_t i, const char* field) {
+    try {
+      return load();
+    } catch (const std::exception& e) {
+      std::error_code ec;
+      if (!own_scenes || std::filesystem::exists(path, ec)) throw;
+      const auto prov = pj.find("provenance");
+      const std::string fabric =
+          prov != pj.end() && prov->is_object() && prov->contains("fabric") &&
+                  (*prov)["fabric"].is_string()
+              ? (*prov)["fabric"].get<std::string>()
+              : std::string("FABRIC");
+      throw std::runtime_error(
+          std::string(e.what()) + " (hint: " + a.preset + ": field 'fit.scenes[" +
+          std::to_string(i) + "]." + field + "' names a file that is not on this machine, e.g. " +
+          "the reference cache where the preset was fitted: render the references here with " +
+          "`clothfit fit --fabric " + fabric + " ...` or `clothfit render-references`, or "
+          "evaluate against references you have with --references and --scenes)");
+    }
+  };
   for (size_t i = 0; i < scenes.size(); ++i) {
-    loaded.push_back(render::LoadScene(scenes[i]));
+    loaded.push_back(
+        with_hint([&] { return render::LoadScene(scenes[i]); }, scenes[i], i, "scene"));
     envs.push_back(LoadSceneEnvironment(loaded.back(), quiet));
-    references.push_back(fit::ReadReference(refs[i], fit::ReferenceOptions{}));
+    references.push_back(with_hint(
+        [&] { return fit::ReadReference(refs[i], fit::ReferenceOptions{}); }, refs[i], i,
+        "reference"));
   }
   std::vector<fit::SceneInput> inputs;
   for (size_t i = 0; i < scenes.size(); ++i)

@@ -195,7 +195,11 @@ std::vector<std::string> CanonicalScenes() {
 namespace {
 
 struct FitArgs {
-  std::string fabric, references, scenes, model = "cloth", space = "display", lock, out;
+  // --model woven by default (session 27): the project's recommended model (README "Use woven
+  // for woven fabrics"; best on another renderer's smooth materials too, docs/fitting.md "A
+  // start for glossy references"). Until session 26 it was cloth, which loses to plain three.js
+  // materials.
+  std::string fabric, references, scenes, model = "woven", space = "display", lock, out;
   std::string level = "auto", loss = "huber", variant = "filament", sheen_default = "explicit";
   std::string images, references2, alpha = "auto", coverage_channel, noise = "auto";
   std::string weave_period, starts, start_values, weave_maps = "auto";
@@ -238,36 +242,54 @@ constexpr woven::IblMode kDefaultWovenIbl = woven::IblMode::kSplit;
 void AddFitOptions(CLI::App* cmd, FitArgs& a) {
   cmd->add_option("--fabric", a.fabric,
                   "fabric definition: render (or reuse cached) references on the canonical scenes "
-                  "(or on --scenes; with --references too, only the weave maps and period)");
+                  "(or on --scenes; with --references too, only the weave maps and period); "
+                  "give --fabric or --references");
   cmd->add_option("--references", a.references, "comma-separated reference EXRs");
   cmd->add_option("--scenes", a.scenes,
                   "comma-separated scene cards, one per reference (with --fabric: instead of the "
-                  "canonical cards, e.g. under another environment)");
-  cmd->add_option("--model", a.model, "cloth | standard | physical-sheen | gltf-sheen | woven | physical-aniso");
-  cmd->add_option("--space", a.space, "residual space: display (default) | linear | log");
-  cmd->add_option("--lock", a.lock, "comma-separated parameters to hold at their defaults");
+                  "canonical cards, e.g. under another environment; default with --fabric: "
+                  "datasets/scenes/{sphere,drape,swatch}.json)");
+  cmd->add_option("--model", a.model,
+                  "woven (default) | cloth | standard | physical-sheen | gltf-sheen | "
+                  "physical-aniso");
+  // Checked whatever the model (session 27): a value that does not apply is still a typo.
+  cmd->add_option("--space", a.space, "residual space: display (default) | linear | log")
+      ->check(CLI::IsMember({"display", "linear", "log"}));
+  cmd->add_option("--lock", a.lock,
+                  "comma-separated parameters to hold at their defaults or --start values "
+                  "(default: none beyond the model's own locks); locking every free parameter "
+                  "fits nothing: "
+                  "a warning, exit 0, the preset written at the start values with their error");
   cmd->add_option("--level", a.level,
-                  "block level: residuals on 2^level blocks (auto: from the weave scale)");
-  cmd->add_option("--loss", a.loss, "huber (default) | cauchy | none");
-  cmd->add_option("--loss-scale", a.loss_scale, "robust loss scale, in noise-floor units");
-  cmd->add_option("--variant", a.variant, "cloth variant: filament | seed-threejs");
+                  "block level: residuals on 2^level blocks, 0-6 or auto (default auto: from the "
+                  "weave scale, else 4)");
+  cmd->add_option("--loss", a.loss, "huber (default) | cauchy | none")
+      ->check(CLI::IsMember({"huber", "cauchy", "none"}));
+  cmd->add_option("--loss-scale", a.loss_scale,
+                  "robust loss scale, in noise-floor units (default 1)");
+  cmd->add_option("--variant", a.variant, "cloth variant: filament (default) | seed-threejs")
+      ->check(CLI::IsMember({"filament", "seed-threejs"}));
   cmd->add_option("--sheen-default", a.sheen_default,
-                  "cloth sheen convention: explicit (fit it) | sqrt-base-color | white");
+                  "cloth sheen convention: explicit (default: fit it) | sqrt-base-color | white")
+      ->check(CLI::IsMember({"explicit", "sqrt-base-color", "white"}));
   cmd->add_flag("--subsurface", a.subsurface, "cloth: fit a subsurface colour too");
-  cmd->add_option("--spp", a.spp, "reference samples per pixel (--fabric)")
+  cmd->add_option("--spp", a.spp, "reference samples per pixel (--fabric; default 256)")
       ->check(CLI::Range(16, 65536));
   cmd->add_option("--target-error", a.target_error,
                   "references (--fabric): adaptive sampling to this mean standard error / mean "
-                  "value, 'E' or per scene 'sphere=E,drape=E,swatch=E'; --spp is the budget");
+                  "value, 'E' or per scene 'sphere=E,drape=E,swatch=E'; --spp is the budget "
+                  "(default: none, a fixed --spp)");
   cmd->add_option("--stride", a.stride,
-                  "evaluate every n-th pixel per block axis (0 = auto: at most 4 x 4 per block)")
+                  "evaluate every n-th pixel per block axis (default 0 = auto: at most 4 x 4 per "
+                  "block)")
       ->check(CLI::Range(0, 16));
   cmd->add_flag("--no-noise-floor", a.no_floor, "(--fabric) skip the second-seed references");
   cmd->add_flag("--second-seed", a.second_seed,
                 "(--fabric) render second-seed references for the noise floor even when the "
                 "references carry half channels (default: the floor from the halves)");
   cmd->add_option("--weave-maps", a.weave_maps,
-                  "woven with an Irawan --fabric: auto (bake weave maps next to --out, per-texel "
+                  "woven with an Irawan --fabric: auto (default: bake weave maps next to --out, "
+                  "per-texel "
                   "fit, and fit with them; fit/weave_maps.h), indicator (analytic yarn-on-top "
                   "maps, no per-texel fit), relief (auto plus a yarn-relief normal map), glint "
                   "(auto plus the reference's glint map) or none (the uniform woven model)")
@@ -288,22 +310,27 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                 "view bands (by default the maps are also baked once per view cosine, 0.887, "
                 "0.5, 0.113, and drawn blended by NoV; the preset's weave_maps.view_cosines; "
                 "docs/preview.md \"View-dependent weave maps\")");
-  cmd->add_option("--images", a.images, "directory for fitted previews and residual images");
-  cmd->add_option("--threads", a.threads, "worker threads (0 = all)")->check(CLI::Range(0, 1024));
+  cmd->add_option("--images", a.images,
+                  "directory for fitted previews and residual images (default: none written)");
+  cmd->add_option("--threads", a.threads, "worker threads (default 0 = all)")
+      ->check(CLI::Range(0, 1024));
   cmd->add_option("--references2", a.references2,
-                  "second renders of the references (another seed): the noise floor");
+                  "second renders of the references (another seed): the noise floor (a floor "
+                  "above the fit's error is warned about: not the same material and scene)");
   cmd->add_option("--alpha", a.alpha,
                   "reference alpha: auto (default) | premultiplied | straight (docs/references.md)");
   cmd->add_option("--coverage-channel", a.coverage_channel,
                   "reference coverage channel (default: fabric, else A; none: all covered)");
   cmd->add_option("--min-coverage", a.min_coverage,
-                  "keep a block when its reference coverage fraction is at least this")
+                  "keep a block when its reference coverage fraction is at least this "
+                  "(default 0.5)")
       ->check(CLI::Range(0.0, 1.0));
   cmd->add_option("--noise", a.noise,
                   "reference noise without stderr.*: auto (default) | image | none");
   cmd->add_option("--weave-period", a.weave_period,
                   "weave period for --level auto: metres (0.002, 2mm) via the cards' "
-                  "uv_metres_per_unit, or UV units (0.05uv)");
+                  "uv_metres_per_unit, or UV units (0.05uv); default: the --fabric's, else "
+                  "unknown");
   cmd->add_option("--max-iterations", a.max_iterations, "solver iterations per start (default 50)")
       ->check(CLI::Range(1, 100000));
   cmd->add_option("--starts", a.starts, "comma-separated start roughness values (default 0.6,0.9,0.3; woven 0.6,0.3)");
@@ -311,7 +338,9 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                 "woven: skip the cloth-basin start (yarn lobes off, broad sheen; default on "
                 "unless --start)");
   cmd->add_option("--start", a.start_values,
-                  "start values: name=value,... (colours as r:g:b, e.g. base_color=0.5:0.4:0.3)");
+                  "start values: name=value,... (colours as r:g:b, e.g. base_color=0.5:0.4:0.3), "
+                  "one start; default: the model's defaults, colours from the references, the "
+                  "--starts roughness values");
   cmd->add_option("--exact-ibl", a.exact_ibl,
                   "measurement only: fit with the environment integrated exactly (Monte Carlo, "
                   "this many directions per pixel, seed 1; no split sum); 0 = the engine (default)")
@@ -375,12 +404,15 @@ void AddFitOptions(CLI::App* cmd, FitArgs& a) {
                   "sum about each yarn lobe's bent normal, three.js getIBLAnisotropyRadiance "
                   "style; brdf/woven.h IblMode::kBent)")
       ->check(CLI::IsMember({"auto", "fis", "split", "bent"}));
-  cmd->add_option("--fis-taps", a.fis_taps, "woven FIS: yarn-lobe taps (1-64)")
+  cmd->add_option("--fis-taps", a.fis_taps, "woven FIS: yarn-lobe taps (1-64; default 16)")
       ->check(CLI::Range(1, woven::kMaxFisTaps));
   cmd->add_option("--fis-diffuse-taps", a.fis_diffuse_taps,
-                  "woven FIS: diffuse irradiance taps (0 = the engine's irradiance; 0-64)")
+                  "woven FIS: diffuse irradiance taps (default 0 = the engine's irradiance; 0-64)")
       ->check(CLI::Range(0, woven::kMaxFisTaps));
-  cmd->add_option("--out", a.out, "output preset JSON")->required();
+  cmd->add_option("--out", a.out,
+                  "output preset JSON (its directory must exist and be writable, and it must not "
+                  "be one of the inputs; checked before any work)")
+      ->required();
 }
 
 render::IblEngine ParseIblEngine(const std::string& s) {
@@ -754,6 +786,17 @@ LoadedScenes LoadFitScenes(const FitFiles& f, const fit::ReferenceOptions& ro) {
   return l;
 }
 
+// A scene's noise floor above the fit's error (session 27). The floor is one reference's own
+// noise, which no fit can beat (a fit's squared error is about the floor's square plus the
+// model's error), so a floor well above the error is not the reference's noise: e.g.
+// --references2 of another material or scene. From 1.5x: a sound floor exceeds the error only
+// by what the fit's parameters absorb of the noise and by the floor's own sampling error, a
+// few percent over the blocks of a scene.
+constexpr double kImplausibleFloorRatio = 1.5;
+bool ImplausibleNoiseFloor(const fit::SceneError& e) {
+  return e.noise_floor >= 0.0 && e.noise_floor > kImplausibleFloorRatio * e.rmse;
+}
+
 // The "fit" record of the preset: settings, solver outcome and, per scene, what
 // `clothfit report` needs.
 nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::FitResult& res,
@@ -820,6 +863,9 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
     flagged_bound = flagged_bound || b.flagged;
   }
   fitj["at_bound"] = ab;
+  std::string why;  // free parameters without effect at the solution (session 27)
+  const std::vector<std::string> none = fit::ParametersWithoutEffect(res.preset, o, &why);
+  if (!none.empty()) fitj["no_effect"] = {{"parameters", none}, {"why", why}};
   fitj["status"] = !res.converged ? "not converged" : flagged_bound ? "at bound" : "ok";
   fitj["solver"] = res.solver_report;
   fitj["rmse"] = res.rmse;
@@ -833,6 +879,7 @@ nlohmann::json FitRecord(const FitArgs& a, const fit::FitOptions& o, const fit::
     if (e.noise_floor >= 0) {
       x["noise_floor"] = e.noise_floor;
       x["noise_floor_source"] = e.noise_floor_source;
+      if (ImplausibleNoiseFloor(e)) x["noise_floor_suspect"] = true;  // WarnImplausibleNoiseFloors
     }
     // What `clothfit report` needs: the second-seed reference (noise floor), the display
     // transform of the scene card, and the linear fitted preview written below.
@@ -916,10 +963,38 @@ void PrintFitSummary(const FitArgs& a, const fit::FitOptions& o, const fit::FitR
                 o.min_coverage);
 }
 
+// A WARNING line per scene whose floor is implausible (the exit status is unchanged: the fit
+// itself is not in question, its noise floor is).
+void WarnImplausibleNoiseFloors(const fit::FitResult& res, const FitFiles& f) {
+  for (size_t i = 0; i < res.scenes.size(); ++i) {
+    const fit::SceneError& e = res.scenes[i];
+    if (!ImplausibleNoiseFloor(e)) continue;
+    const std::string why =
+        e.noise_floor_source == "second reference" && i < f.refs2.size()
+            ? f.refs2[i] + " and " + e.reference +
+                  " do not look like two renders (seeds) of the same material and scene"
+            : e.reference + "'s half channels do not look like two halves of its image";
+    std::printf("fit: WARNING: %s: noise floor %.4f is above the fit's rmse %.4f; a fit cannot "
+                "beat its reference's own noise, so the floor looks wrong: %s\n",
+                fs::path(e.scene).filename().string().c_str(), e.noise_floor, e.rmse,
+                why.c_str());
+  }
+}
+
 // Convergence (docs/references.md): 3 when the fit did not converge or stopped at a
-// degenerate bound (the preset is written and flagged), else 0; says why on stdout.
+// degenerate bound (the preset is written and flagged), else 0; says why on stdout. Parameters
+// without effect at the solution (fit::ParametersWithoutEffect) get a note and no flag.
 int ConvergenceStatus(const fit::FitOptions& o, const fit::FitResult& res) {
   int status = 0;
+  std::string why;
+  const std::vector<std::string> none = fit::ParametersWithoutEffect(res.preset, o, &why);
+  if (!none.empty()) {
+    std::string names;
+    for (const std::string& n : none) names += (names.empty() ? "" : ", ") + n;
+    std::printf("fit: note: %s: no effect %s (both yarn lobes are one isotropic GGX lobe; "
+                "their values are arbitrary and a bound on them is not flagged)\n",
+                names.c_str(), why.c_str());
+  }
   if (!res.converged) {
     std::printf("fit: WARNING: not converged (%s; --max-iterations %d per start)\n",
                 res.termination.c_str(), o.max_iterations);
@@ -992,13 +1067,47 @@ bool IsWithin(const fs::path& path, const fs::path& dir) {
   return !rel.empty() && *rel.begin() != "..";
 }
 
+// The fit's outputs against its inputs and the file system, before any work (session 27): no
+// output is one of the inputs (before, `--fabric canvas.json --out canvas.json` replaced the
+// fabric by the preset), and each output's directory takes new files (before, an unwritable
+// --out failed only after the whole fit). Outputs: --out, the weave maps written next to it
+// (woven and physical-aniso with --fabric) and the --images files; inputs: --fabric and every
+// file of --references, --references2 and --scenes.
+void CheckFitOutputs(const FitArgs& a) {
+  std::vector<NamedPath> inputs;
+  if (!a.fabric.empty()) inputs.push_back({"--fabric", a.fabric});
+  const std::pair<std::string, std::string> lists[] = {
+      {"--references", a.references}, {"--references2", a.references2}, {"--scenes", a.scenes}};
+  for (const auto& [flag, list] : lists)
+    for (const std::string& path : SplitList(list)) inputs.push_back({flag, path});
+  std::vector<NamedPath> outputs = {{"--out", a.out}};
+  if ((a.model == "woven" || a.model == "physical-aniso") && !a.fabric.empty() &&
+      a.weave_maps != "none")
+    outputs.push_back({"--out's weave maps", (fs::path(a.out).parent_path() /
+                                              (fs::path(a.out).stem().string() + ".weave.exr"))
+                                                 .string()});
+  if (!a.images.empty()) {
+    const std::vector<std::string> scenes =
+        a.scenes.empty() ? CanonicalScenes() : SplitList(a.scenes);
+    for (const std::string& scene : scenes)
+      for (const char* suffix : {"_preview.png", "_preview.exr", "_residual.exr"})
+        outputs.push_back({"--images", (fs::path(a.images) /
+                                        (fs::path(scene).stem().string() + suffix)).string()});
+  }
+  for (const NamedPath& out : outputs) RefuseOutputOverInput(out, inputs);
+  RequireWritableOutput(a.out, "--out");
+  if (!a.images.empty()) RequireWritableDirectory(a.images, "--images");
+}
+
 // `clothfit fit` after parsing: returns the exit status (throws on bad input).
 int RunFit(const FitArgs& a, const Globals& g) {
   // Where the results go, before any work: --out's directory must exist, unless --images (created
   // when the images are written, before the preset) is that directory or lies below it, as in
-  // `--images out/x --out out/x.json`.
+  // `--images out/x --out out/x.json`; no output may be an input, and the directories must take
+  // new files (CheckFitOutputs).
   if (a.images.empty() || !IsWithin(a.images, fs::path(a.out).parent_path()))
     io::RequireOutputDirectory(a.out);
+  CheckFitOutputs(a);
   std::unique_ptr<tbb::global_control> limit;
   if (a.threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -1058,6 +1167,20 @@ int RunFit(const FitArgs& a, const Globals& g) {
   for (size_t i = 0; i < l.rr.size(); ++i)
     std::printf("fit: %s: %s; noise: %s\n", files.refs[i].c_str(), l.rr[i].layout.c_str(),
                 l.rr[i].noise.c_str());
+  // Every parameter locked (session 27): nothing to fit. Not an error (a preset's error at its
+  // own values, as `clothfit evaluate` measures it), but said: before, "0 iterations", status ok.
+  const bool nothing_fitted = fit::FreeParameterCount(o) == 0;
+  if (nothing_fitted) {
+    std::vector<std::string> names;  // --lock and the model's own locks, each once
+    for (const std::string& n : o.locked)
+      if (std::find(names.begin(), names.end(), n) == names.end()) names.push_back(n);
+    std::string locked;
+    for (const std::string& n : names) locked += (locked.empty() ? "" : ",") + n;
+    std::printf("fit: WARNING: nothing to fit: every parameter of %s is locked (%s: --lock and "
+                "the model's own locks); the preset is written at the start values, with their "
+                "error\n",
+                render::ToString(o.start.model).c_str(), locked.c_str());
+  }
   // the light map's second pass (the cards' "visibility", session 13) around the model's fit
   const fit::FitResult res = fit::FitWithLightMapAlbedo(
       inputs, o, [&](const fit::FitOptions& opt, const fit::PreparedScenes* prepared) {
@@ -1072,6 +1195,7 @@ int RunFit(const FitArgs& a, const Globals& g) {
   }
   render::MaterialPreset preset = res.preset;
   preset.extra["fit"] = FitRecord(a, o, res, files, l);
+  if (nothing_fitted) preset.extra["fit"]["nothing_fitted"] = true;
   if (o.start.model == render::ModelKind::kCloth && o.start.cloth.subsurface)
     CheckSubsurfaceAgainstPlain(inputs, o, res, preset);
   preset.extra["provenance"] = {{"tool", "clothfit 0.1.0"},
@@ -1084,6 +1208,7 @@ int RunFit(const FitArgs& a, const Globals& g) {
   render::AddPresetWeaveMapUris(&preset, a.out);
   render::WritePreset(a.out, preset);
   PrintFitSummary(a, o, res, preset);
+  WarnImplausibleNoiseFloors(res, files);
   return ConvergenceStatus(o, res);
 }
 

@@ -1,10 +1,18 @@
 // clothfit render-preview: what the real-time engine draws for a scene and a material preset.
+// Also `clothfit tonemap`, and the output checks that fit, render-preview and tonemap share.
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <algorithm>
+#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <system_error>
 
 #include "bin/commands.h"
 #include "render/scene/image_io.h"
@@ -28,6 +36,102 @@ std::vector<float> ToDisplayImage(const std::vector<float>& linear, render::Tone
   return out;
 }
 
+namespace {
+namespace fs = std::filesystem;
+
+// Whether two command-line paths name the same file (RefuseOutputOverInput).
+bool SameFile(const std::string& a, const std::string& b) {
+  std::error_code ec;
+  if (fs::exists(a, ec) && fs::exists(b, ec)) {
+    const bool same = fs::equivalent(a, b, ec);
+    if (!ec) return same;
+  }
+  const auto canonical = [](const std::string& p) {
+    std::error_code e;
+    const fs::path c = fs::weakly_canonical(p, e);
+    return e ? fs::absolute(p, e).lexically_normal() : c;
+  };
+  return canonical(a) == canonical(b);
+}
+
+// The directory itself if it exists, else its nearest existing ancestor ("." for a relative
+// path with none).
+fs::path NearestExisting(const fs::path& dir) {
+  std::error_code ec;
+  fs::path p = dir.empty() ? fs::path(".") : dir;
+  while (!fs::exists(p, ec)) {
+    const fs::path up = p.parent_path();
+    if (up.empty() || up == p) return fs::path(".");
+    p = up;
+  }
+  return p;
+}
+
+// Creates and removes a file in `dir`; the error text (strerror) when it cannot, else "".
+std::string ProbeWrite(const fs::path& dir) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return "not a directory";
+  for (int attempt = 0; attempt < 8; ++attempt) {
+    const fs::path probe = dir / (".clothfit-write-probe." + std::to_string(::getpid()) + "." +
+                                  std::to_string(attempt));
+    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+    if (fd < 0) {
+      if (errno == EEXIST) continue;  // another probe of this process id: try the next name
+      return std::strerror(errno);
+    }
+    ::close(fd);
+    ::unlink(probe.c_str());
+    return "";
+  }
+  return "cannot create a file in it";
+}
+
+void RequireWritableIn(const fs::path& dir, const std::string& flag, const std::string& path) {
+  const fs::path d = NearestExisting(dir);
+  const std::string why = ProbeWrite(d);
+  if (!why.empty())
+    throw io::IoError(flag + ": " + path + ": output directory " + d.string() +
+                      " is not writable (" + why + ")");
+}
+
+}  // namespace
+
+void RefuseOutputOverInput(const NamedPath& out, const std::vector<NamedPath>& inputs) {
+  for (const NamedPath& in : inputs)
+    if (!in.path.empty() && SameFile(out.path, in.path))
+      throw std::invalid_argument(out.flag + " " + out.path + " is the same file as " + in.flag +
+                                  " " + in.path + ": refusing to overwrite an input");
+}
+
+void RequireWritableOutput(const std::string& path, const std::string& flag) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec))
+    throw io::IoError(flag + ": " + path + " is a directory, not an output file");
+  RequireWritableIn(fs::path(path).parent_path(), flag, path);
+}
+
+void RequireWritableDirectory(const std::string& dir, const std::string& flag) {
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+    throw io::IoError(flag + ": " + dir + " exists and is not a directory");
+  RequireWritableIn(fs::path(dir), flag, dir);
+}
+
+const CLI::Validator& PositiveFinite() {
+  static const CLI::Validator kPositiveFinite(
+      [](std::string& text) {
+        try {
+          size_t used = 0;
+          const double v = std::stod(text, &used);
+          if (used == text.size() && std::isfinite(v) && v > 0.0) return std::string();
+        } catch (const std::logic_error&) {
+        }
+        return "must be a finite number > 0, got \"" + text + "\"";
+      },
+      "> 0");
+  return kPositiveFinite;
+}
+
 void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
   struct Args {
     std::string in, out, scene, tone_mapping;
@@ -37,11 +141,13 @@ void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "tonemap", "linear EXR -> display PNG with a scene card's (or the given) tone mapping");
   cmd->add_option("input", a->in, "linear EXR (channels R, G, B)")->required();
-  cmd->add_option("output", a->out, "output PNG")->required();
+  cmd->add_option("output", a->out, "output PNG (.png: the only format written)")->required();
   cmd->add_option("--scene", a->scene, "take tone mapping and exposure from this scene card");
   cmd->add_option("--tone-mapping", a->tone_mapping,
                   "Linear|Reinhard|Cineon|ACESFilmic|AgX|Neutral (default ACESFilmic)");
-  cmd->add_option("--exposure", a->exposure, "exposure (default 1)");
+  cmd->add_option("--exposure", a->exposure,
+                  "exposure, a finite number > 0 (default: the --scene card's, else 1)")
+      ->check(PositiveFinite());
   cmd->callback([a, &exit_code]() {
     try {
       std::string tm = "ACESFilmic";
@@ -52,7 +158,17 @@ void AddTonemapCommand(CLI::App& app, const Globals&, int& exit_code) {
         exposure = card.exposure;
       }
       if (!a->tone_mapping.empty()) tm = a->tone_mapping;
-      if (a->exposure > 0.0) exposure = a->exposure;
+      if (a->exposure > 0.0) exposure = a->exposure;  // given: checked > 0 and finite above
+      // The output, before the image is read (session 27): a PNG by name, as it is by content
+      // (before, "out.exr" received PNG bytes); not an input; a writable directory.
+      std::string ext = std::filesystem::path(a->out).extension().string();
+      for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+      if (ext != ".png")
+        throw std::invalid_argument("output '" + a->out + "': must end in .png (tonemap writes "
+                                    "an 8-bit sRGB PNG; the linear image is the EXR itself)");
+      io::RequireOutputDirectory(a->out);
+      RefuseOutputOverInput({"output", a->out}, {{"input", a->in}, {"--scene", a->scene}});
+      RequireWritableOutput(a->out, "output");
       const io::Image img = io::ReadImage(a->in);
       int ch[3] = {-1, -1, -1};
       const char* names[3] = {"R", "G", "B"};
@@ -148,6 +264,16 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                      args->out.c_str());
         exit_code = 1;
         return;
+      }
+      // Not an input, and a directory that takes the file (session 27), before any work.
+      RefuseOutputOverInput({"--out", args->out},
+                            {{"--scene", args->scene}, {"--material", args->material}});
+      RequireWritableOutput(args->out, "--out");
+      if (!args->light_map_out.empty()) {
+        RefuseOutputOverInput({"--light-map-out", args->light_map_out},
+                              {{"--scene", args->scene}, {"--material", args->material},
+                               {"--out", args->out}});
+        RequireWritableOutput(args->light_map_out, "--light-map-out");
       }
       const render::MaterialPreset preset = render::ReadPreset(args->material);
       if (const auto fit = preset.extra.find("fit");

@@ -74,4 +74,28 @@ std::vector<std::string> CanonicalScenes();
 std::vector<float> ToDisplayImage(const std::vector<float>& linear, render::ToneMapping op,
                                   double exposure);
 
+// Output checks before any work (bin/cmd_preview.cpp; fit, render-preview, tonemap).
+// A command-line path and the flag (or positional) that gave it, for messages.
+struct NamedPath {
+  std::string flag, path;
+};
+// Throws std::invalid_argument "<flag> <path> is the same file as <flag> <path>: refusing to
+// overwrite an input" when `out` names the same file as one of `inputs`: equivalent files when
+// both exist (symbolic and hard links), else equal weakly canonical paths.
+void RefuseOutputOverInput(const NamedPath& out, const std::vector<NamedPath>& inputs);
+// The writers replace a file atomically, by a temporary file in its directory and a rename
+// (render/scene/image_io.h), so an output needs a directory that takes new files; the old
+// file's own mode does not matter. Throws io::IoError "<flag>: <path>: output directory <dir> is
+// not writable (<reason>)" unless a file can be created in the directory of `path` (the
+// nearest existing one when the command creates it, as fit --images does), or "... is a
+// directory" when `path` is one. Probed by creating and removing a file: nothing is left
+// behind. The directory's existence is io::RequireOutputDirectory's, called first.
+void RequireWritableOutput(const std::string& path, const std::string& flag);
+// The same for a directory the command creates or writes into (fit --images): the directory
+// if it exists, else its nearest existing ancestor, must take new files.
+void RequireWritableDirectory(const std::string& dir, const std::string& flag);
+// A CLI11 check: a finite number > 0 (CLI::PositiveNumber accepts inf and prints DBL_MAX in its
+// message); the rule of compare's --exposure, for tonemap's.
+const CLI::Validator& PositiveFinite();
+
 }  // namespace clothfit::cli

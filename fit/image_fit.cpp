@@ -982,7 +982,44 @@ nlohmann::json WeaveMapsField(const render::MaterialPreset& p) {
   const auto it = p.extra.find("weave_maps");
   return it == p.extra.end() ? nlohmann::json() : *it;
 }
+
+// Whether woven's yarn lobes at `p` are one isotropic GGX lobe (ParametersWithoutEffect).
+bool IsotropicGgxYarnLobes(const render::MaterialPreset& p, const FitOptions& opt) {
+  if (p.model != render::ModelKind::kWoven || p.yarn_lobe || opt.yarn_far_field ||
+      opt.yarn_table || p.woven.ibl == woven::IblMode::kBent)
+    return false;
+  const int s = p.Offset("anisotropy");
+  return size_t(s) < p.values.size() && std::abs(p.values[size_t(s)]) <= kIsotropicAnisotropy;
+}
 }  // namespace
+
+int FreeParameterCount(const FitOptions& options) {
+  return FreeScalars(render::ParameterTable(options.start.model), options);
+}
+
+std::vector<std::string> ParametersWithoutEffect(const render::MaterialPreset& p,
+                                                 const FitOptions& opt, std::string* reason) {
+  std::vector<std::string> names;
+  if (!IsotropicGgxYarnLobes(p, opt)) return names;
+  // the two lobes' weights: the weave maps' per-texel warp / weft ratios, the tints
+  const Rgb<double>& tw = p.woven.tint_warp;
+  const Rgb<double>& tf = p.woven.tint_weft;
+  const bool same_weights =
+      WeaveMapsField(p).is_null() && tw.r == tf.r && tw.g == tf.g && tw.b == tf.b;
+  if (same_weights && !IsLocked(opt, "warp_share")) names.push_back("warp_share");
+  if (!IsLocked(opt, "twist")) names.push_back("twist");
+  if (reason && !names.empty()) *reason = "at anisotropy 0";
+  return names;
+}
+
+void ApplyNoEffect(const FitOptions& opt, FitResult* r) {
+  const std::vector<std::string> none = ParametersWithoutEffect(r->preset, opt, nullptr);
+  const bool isotropic = IsotropicGgxYarnLobes(r->preset, opt);
+  for (AtBound& b : r->at_bound)
+    if (std::find(none.begin(), none.end(), b.name) != none.end() ||
+        (isotropic && b.name == "anisotropy" && !b.upper))
+      b.flagged = false;
+}
 
 namespace {
 std::shared_ptr<PreparedScenes> BuildPrepared(const std::vector<SceneInput>& inputs,
@@ -1253,6 +1290,7 @@ FitResult FitImagesOnce(const std::vector<SceneInput>& inputs, const FitOptions&
     return best;
   }
   best.at_bound = ParametersAtBounds(best.preset, opt.locked);
+  ApplyNoEffect(opt, &best);
   AddSceneErrors(data, best);
   best.seconds = SecondsSince(t0);
   return best;

@@ -192,7 +192,8 @@ struct FitResult {
   bool albedo_pass = false;
   std::string termination;
   bool converged = false;             // the winning start's termination was CONVERGENCE
-  std::vector<AtBound> at_bound;      // free parameters at a bound (fit/convergence.h)
+  std::vector<AtBound> at_bound;      // free parameters at a bound (fit/convergence.h;
+                                      // ApplyNoEffect)
   std::vector<SceneError> scenes;
   double rmse = 0.0;          // over all blocks of all scenes, fit space, unweighted
   std::string solver_report;  // Ceres BriefReport of the winning start
@@ -221,6 +222,34 @@ int AutoLevel(const std::vector<SceneInput>& inputs, double weave_period_uv, int
 // The fit. Throws FitError on bad input (mismatched sizes, no usable blocks, infeasible
 // start); returns usable = false when the solver fails.
 FitResult FitImages(const std::vector<SceneInput>& inputs, const FitOptions& options);
+
+// Free scalars of the fit: the parameters neither locked nor ignored by the model's options
+// (cloth's sheen_color unless explicit, subsurface_color without subsurface). 0: nothing to fit
+// (every start returns at once; `clothfit fit` warns).
+int FreeParameterCount(const FitOptions& options);
+
+// The woven model's degenerate solution (brdf/woven.h), with its own GGX yarn lobes: not with a
+// far-field yarn lobe, which replaces them (the preset's "yarn_lobe", FitOptions::
+// yarn_far_field / yarn_table), nor with "ibl": "bent", whose tables are built for the held
+// anisotropy and twist. At `anisotropy` s <= kIsotropicAnisotropy (the bound tolerance of
+// ParametersAtBounds: alpha_across - alpha_along = (1 - r^2) s^2 <= 1e-12) both yarn lobes are
+// the same isotropic GGX lobe L:
+//  - `twist`, which only turns the lobes' axes in the tangent plane, has no effect;
+//  - `warp_share` m has none either when the two lobes' weights agree in every pixel (no weave
+//    maps, tint_warp == tint_weft): m L + (1 - m) L = L, direct and IBL alike.
+// Returns those of the two that are free (not in options.locked; a caller whose fit ran in
+// stages passes its own options, not a stage's), and the reason ("at anisotropy 0"); empty for
+// every other model and solution. `clothfit fit` prints them and records fit.no_effect.
+inline constexpr double kIsotropicAnisotropy = 1e-6;
+std::vector<std::string> ParametersWithoutEffect(const render::MaterialPreset& preset,
+                                                 const FitOptions& options, std::string* reason);
+// What FitImages does with a solution's bounds (FitResult::at_bound): the parameters without
+// effect are reported at a bound but not flagged (a bound on a parameter that does not change
+// the image says nothing about the fit). So is woven's `anisotropy` at 0 under the same
+// conditions: s enters its lobes only as s^2, so its derivative vanishes at 0 and the isotropic
+// lobe is a stationary point the bound did not stop (every lobe shape is reachable from it by
+// roughness and twist): "none of this term", as a colour at 0 (fit/convergence.h).
+void ApplyNoEffect(const FitOptions& options, FitResult* result);
 
 // The per-scene fit data (preview caches of the sampled pixels, blocks, targets, weights),
 // built once and shared by several fits of the same inputs (the woven stages): they must use

@@ -43,8 +43,18 @@ NoiseMode ParseNoiseMode(const std::string& s) {
   throw std::invalid_argument("--noise: unknown '" + s + "' (valid: auto, image, none)");
 }
 
+void RequireLinearImage(const io::Image& image, const std::string& path) {
+  if (image.float_source) return;
+  throw FitError(path + ": a reference must be linear radiance (float or half EXR, or Radiance "
+                 "HDR); this is a " + image.source_format + " " + image.file_format +
+                 " with display-encoded (sRGB) values, which the fit would take for radiance: "
+                 "give the renderer's linear EXR or HDR, not a tone-mapped image "
+                 "(docs/references.md)");
+}
+
 Reference ReadReference(const std::string& path, const ReferenceOptions& o) {
   const io::Image img = io::ReadImage(path);
+  RequireLinearImage(img, path);
   Reference r;
   r.path = path;
   r.width = img.width;

@@ -11,12 +11,19 @@
 // fit's noise floor comes from them when no second reference is given.
 // Missing stderr.*: estimated from the image (Immerkaer 1996, relative to the radiance), or
 // zero with NoiseMode::kNone.
+// Only linear images are references: an 8/16-bit PNG (or an EXR with integer channels) holds
+// display-encoded values, which the fit would take for radiance; it is refused
+// (RequireLinearImage; `clothfit compare` refuses it the same way, fit/metrics/compare.cpp).
 #pragma once
 
 #include <string>
 #include <vector>
 
 #include "render/scene/scene.h"
+
+namespace clothfit::io {
+struct Image;
+}  // namespace clothfit::io
 
 namespace clothfit::fit {
 
@@ -35,9 +42,15 @@ AlphaMode ParseAlphaMode(const std::string& s);  // throws std::invalid_argument
 NoiseMode ParseNoiseMode(const std::string& s);  // throws std::invalid_argument
 
 // Reads a reference (see above). Throws io::IoError naming the file on missing/corrupt files
-// and FitError on missing R/G/B, a missing named coverage channel, NaN/Inf radiance, or
-// inconsistent half channels / metadata.
+// and FitError on a display-encoded image (RequireLinearImage), missing R/G/B, a missing named
+// coverage channel, NaN/Inf radiance, or inconsistent half channels / metadata.
 Reference ReadReference(const std::string& path, const ReferenceOptions& options);
+
+// Throws FitError "<path>: a reference must be linear radiance (float or half EXR, or
+// Radiance HDR); this is a uint8 png ..." unless `image` (read from `path` by io::ReadImage)
+// was stored as floats (io::Image::float_source): the one check of every reference that `fit`
+// and `evaluate` read (--references, --references2, a preset's fit.scenes).
+void RequireLinearImage(const io::Image& image, const std::string& path);
 
 // Immerkaer's noise estimate (CVIU 64(2), 1996) of one channel of a reference, relative to
 // the radiance: sqrt(pi/2) / 6 x mean |Laplacian-difference response| / mean radiance, over
