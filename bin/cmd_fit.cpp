@@ -1253,15 +1253,22 @@ int RunFitBatch(const std::string& list, const Globals& g) {
     FitArgs a;
     CLI::App app("clothfit fit (batch job)");
     AddFitOptions(&app, a);
+    // -q/--quiet is accepted on a job's line too, as after `clothfit fit` (session 27): that
+    // job runs quietly; the process's own -q still silences every job.
+    bool job_quiet = false;
+    app.add_flag("-q,--quiet", job_quiet, "no progress output on stderr for this job");
     std::vector<std::string> rev(jobs[j].rbegin(), jobs[j].rend());  // CLI11 takes them reversed
     int status = 0;
     try {
       app.parse(rev);
     } catch (const CLI::ParseError& e) {
-      std::fprintf(stderr, "clothfit fit: error: %s: job %zu: %s\n", list.c_str(), j + 1, e.what());
+      std::fprintf(stderr, "clothfit fit: error: %s: job %zu: %s\n", list.c_str(), j + 1,
+                   limits::EscapeForMessage(e.what(), 300).c_str());
       status = 1;
     }
-    if (status == 0) status = RunFitReporting(a, g);
+    Globals job_globals = g;
+    job_globals.quiet = g.quiet || job_quiet;
+    if (status == 0) status = RunFitReporting(a, job_globals);
     std::printf("fit: batch job %zu: exit %d\n", j + 1, status);
     std::fflush(stdout);
     if (status == 3 && result == 0) result = 3;

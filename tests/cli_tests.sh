@@ -244,6 +244,12 @@ PY
     out=$("$BIN" --quiet fit --batch "$TMP/list.txt" 2>&1) && fail "failing batch job accepted"
     grep -q "fit: batch job 1: exit 1" <<< "$out" || fail "batch status line missing: $out"
     grep -q "none.exr" <<< "$out" || fail "batch job error does not name the file: $out"
+    # -q on a job's line is accepted, as after `clothfit fit` (session 27)
+    printf -- '-q --references %s --scenes %s --out %s\n' "$TMP/none.exr" \
+      "$(dirname "$0")/../datasets/scenes/sphere.json" "$TMP/b.json" > "$TMP/list.txt"
+    out=$("$BIN" fit --batch "$TMP/list.txt" 2>&1) && fail "failing batch job accepted (-q line)"
+    grep -q "none.exr" <<< "$out" || fail "batch job with -q: $out"
+    ! grep -q "not expected" <<< "$out" || fail "batch job refused -q: $out"
     err=$("$BIN" --quiet fit --model standard 2>&1) && fail "fit without --out accepted"
     grep -q -- "--out is required" <<< "$err" || fail "missing --out not named: $err"
     # A missing --out directory is an error before any work (session 25): here before the
