@@ -17,22 +17,6 @@
 
 namespace {
 
-// Optimal string alignment distance: insertions, deletions, substitutions and swaps of two
-// adjacent characters each cost 1 ("previwe" -> "preview" is 1).
-size_t EditDistance(std::string_view a, std::string_view b) {
-  std::vector<std::vector<size_t>> d(a.size() + 1, std::vector<size_t>(b.size() + 1));
-  for (size_t i = 0; i <= a.size(); ++i) d[i][0] = i;
-  for (size_t j = 0; j <= b.size(); ++j) d[0][j] = j;
-  for (size_t i = 1; i <= a.size(); ++i)
-    for (size_t j = 1; j <= b.size(); ++j) {
-      d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1,
-                          d[i - 1][j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
-      if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1])
-        d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
-    }
-  return d[a.size()][b.size()];
-}
-
 // The subcommand closest to `typed`, compared with each name and with each of its endings after
 // a '-' ("previwe" finds render-preview through "preview"); empty when none is within
 // max(1, length / 3) edits (more would suggest unrelated names).
@@ -42,7 +26,8 @@ std::string ClosestSubcommand(const std::string& typed, const std::vector<std::s
   size_t best_distance = std::max<size_t>(1, typed.size() / 3) + 1;
   for (const std::string& name : names) {
     for (size_t start = 0; start != std::string::npos;) {
-      const size_t distance = EditDistance(typed, std::string_view(name).substr(start));
+      const size_t distance = clothfit::limits::NameDistance(
+          typed, std::string_view(name).substr(start), /*fold_case=*/false);
       if (distance < best_distance) {
         best_distance = distance;
         best = name;

@@ -118,6 +118,7 @@ TEST(Material, MisspeltTopLevelFieldIsRefusedUnknownOnesAreKept) {
        "paramters: unknown field; did you mean 'parameters'?"},
       {R"("model":"cloth","parameters":{},"provenence":{}})", "did you mean 'provenance'?"},
       {R"("model":"cloth","parameters":{},"Fit":{}})", "did you mean 'fit'?"},
+      {R"("model":"woven","parameters":{},"waeve_maps":{}})", "did you mean 'weave_maps'?"},
   };
   for (const auto& c : cases) {
     const std::string e = ErrorOf(head + c.text);

@@ -419,37 +419,46 @@ TEST_F(ReportTest, BadInputsNameTheFile) {
 namespace clothfit::report {
 namespace {
 
-// Issue 13: each fitted preset links to web/viewer.html with its scene card and preset,
-// relative to the page, and every file the link names exists.
+// Issue 13: each fitted preset links to web/viewer.html with its scene card and preset.
+// Session 27: absolute links to serve.mjs's address (kViewerOrigin), the preset and card as URL
+// paths on that server: /<path in the repository>, or /fs/<absolute path> for a file outside it,
+// with the --root directories serve.mjs then needs named on the page.
 TEST_F(ReportTest, FittedPresetsLinkToTheViewerWithExistingCardAndPreset) {
-  // A repository-like tree: dir_/web/viewer.html, dir_/datasets/scenes/scene{0,1}.json (the
-  // paths the presets name), the presets in dir_, the report in dir_/out.
-  fs::create_directories(dir_ / "web");
-  std::ofstream(dir_ / "web" / "viewer.html") << "<!doctype html>\n";
-  fs::create_directories(dir_ / "datasets" / "scenes");
+  // A repository-like tree: dir_/repo/web/viewer.html, dir_/repo/datasets/scenes/scene{0,1}.json
+  // (the paths the presets name, relative), the presets in dir_ (outside the repository), the
+  // report in dir_/repo/out.
+  const fs::path repo = dir_ / "repo";
+  fs::create_directories(repo / "web");
+  std::ofstream(repo / "web" / "viewer.html") << "<!doctype html>\n";
+  fs::create_directories(repo / "datasets" / "scenes");
   for (int i = 0; i < 2; ++i)
-    std::ofstream(dir_ / "datasets" / "scenes" / ("scene" + std::to_string(i) + ".json")) << "{}";
+    std::ofstream(repo / "datasets" / "scenes" / ("scene" + std::to_string(i) + ".json")) << "{}";
   const std::vector<FabricReport> all = {BuildFabricReport(FabricsFromPresets(MakeFit())[0])};
-  WriteReport(all, (dir_ / "out").string());
-  std::ifstream in(dir_ / "out" / "testcloth.html");
+  WriteReport(all, (repo / "out").string());
+  std::ifstream in(repo / "out" / "testcloth.html");
   const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   const std::regex link("<a class=\"viewer\" href=\"([^\"?]*)\\?preset=([^\"&]*)&amp;card=([^\"]*)\">");
   size_t n = 0;
   std::set<std::string> presets;
+  // serve.mjs's mapping: /fs/<absolute> -> the file, /<rel> -> repo/<rel>
+  const auto served = [&](const std::string& url_path) {
+    return url_path.rfind("/fs/", 0) == 0 ? fs::path(url_path.substr(3))
+                                           : repo / url_path.substr(1);
+  };
   for (auto it = std::sregex_iterator(html.begin(), html.end(), link); it != std::sregex_iterator();
        ++it, ++n) {
-    const fs::path page = dir_ / "out" / (*it)[1].str();
-    EXPECT_EQ((*it)[1].str(), "../web/viewer.html");
-    EXPECT_TRUE(fs::exists(page)) << page;
-    const fs::path web = page.parent_path();
-    EXPECT_TRUE(fs::exists(web / (*it)[2].str())) << (*it)[2].str();
-    EXPECT_TRUE(fs::exists(web / (*it)[3].str())) << (*it)[3].str();
-    EXPECT_NE((*it)[3].str().find("datasets/scenes/scene"), std::string::npos);
+    EXPECT_EQ((*it)[1].str(), std::string(kViewerOrigin) + "/web/viewer.html");
+    EXPECT_TRUE(fs::exists(served((*it)[2].str()))) << (*it)[2].str();
+    EXPECT_TRUE(fs::exists(served((*it)[3].str()))) << (*it)[3].str();
+    EXPECT_EQ((*it)[3].str().rfind("/datasets/scenes/scene", 0), 0u) << (*it)[3].str();
     presets.insert((*it)[2].str());
   }
   EXPECT_EQ(n, 4u);  // 2 models x 2 scenes
-  EXPECT_EQ(presets, (std::set<std::string>{"../standard.json", "../cloth.json"}));
-
+  const std::string d = fs::absolute(dir_).lexically_normal().generic_string();
+  EXPECT_EQ(presets, (std::set<std::string>{"/fs" + d + "/standard.json", "/fs" + d + "/cloth.json"}));
+  // the page names the server command with the one outside directory
+  EXPECT_NE(html.find("node web/serve.mjs --root " + d + "</code>"), std::string::npos)
+      << html.substr(html.find("three.js viewer"), 300);
 }
 
 }  // namespace

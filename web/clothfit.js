@@ -2643,19 +2643,17 @@ export function loadClothfitPreset(json, options = {}) {
 const PRESET_TOP_LEVEL_KEYS = ['schema', 'version', 'model', 'engine', 'cloth', 'woven', 'conventions',
   'parameters', 'fit', 'provenance', 'weave_maps', 'convert', 'maps', 'side', 'name'];
 function presetKeyDistance(a, b) {
+  // optimal string alignment, case-folded (render/scene/input_limits.cpp NameDistance)
   if (a.length > 64 || b.length > 64) return 1000;
   a = a.toLowerCase(); b = b.toLowerCase();
-  let row = Array.from({ length: b.length + 1 }, (_, j) => j);
+  const d = Array.from({ length: a.length + 1 }, (_, i) => Array.from({ length: b.length + 1 }, (_, j) => (i === 0 ? j : j === 0 ? i : 0)));
   for (let i = 1; i <= a.length; ++i) {
-    let diag = row[0];
-    row[0] = i;
     for (let j = 1; j <= b.length; ++j) {
-      const up = row[j];
-      row[j] = Math.min(row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] === b[j - 1] ? 0 : 1));
-      diag = up;
+      d[i][j] = Math.min(d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] === b[j - 1] ? 0 : 1));
+      if (i > 1 && j > 1 && a[i - 1] === b[j - 2] && a[i - 2] === b[j - 1]) d[i][j] = Math.min(d[i][j], d[i - 2][j - 2] + 1);
     }
   }
-  return row[b.length];
+  return d[a.length][b.length];
 }
 function checkPresetTopLevelKeys(preset) {
   for (const k of Object.keys(preset)) {

@@ -1210,6 +1210,18 @@ std::string UrlEncode(const std::string& s) {
   return out;
 }
 
+// A path as one POSIX shell word: kept as is when it holds only safe characters, else in single
+// quotes (a ' inside as '\'').
+std::string ShellQuote(const std::string& s) {
+  const bool safe = !s.empty() && std::all_of(s.begin(), s.end(), [](unsigned char c) {
+    return std::isalnum(c) || c == '/' || c == '.' || c == '_' || c == '-' || c == '+';
+  });
+  if (safe) return s;
+  std::string out = "'";
+  for (const char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
 // "open in the three.js viewer" links, one per scene, for one fitted preset.
 void ViewerLinks(std::ostream& h, const FabricSpec& spec, const ModelSpec& m,
                  const std::string& report_dir) {
@@ -1221,41 +1233,87 @@ void ViewerLinks(std::ostream& h, const FabricSpec& spec, const ModelSpec& m,
     links += std::string(links.empty() ? "" : " &middot; ") + "<a class=\"viewer\" href=\"" +
              EscapeHtml(href) + "\">" + EscapeHtml(sc.name) + "</a>";
   }
-  if (!links.empty())
-    h << "<p class=\"meta\">three.js viewer (web/viewer.html, served by "
-         "<code>node web/serve.mjs</code>): "
-      << links << "</p>\n";
+  if (links.empty()) return;
+  std::vector<std::string> scene_paths;
+  for (const SceneSpec& sc : spec.scenes) scene_paths.push_back(sc.scene_path);
+  std::string roots;
+  for (const std::string& d : ViewerRoots(report_dir, m.preset_path, scene_paths))
+    roots += " --root " + EscapeHtml(ShellQuote(d));
+  h << "<p class=\"meta\">three.js viewer: in the repository run <code>node web/serve.mjs"
+    << roots << "</code>, then open " << links << "</p>\n";
 }
 
 }  // namespace
 
-std::string ViewerLink(const std::string& report_dir, const std::string& scene_path,
-                       const std::string& preset_path) {
+namespace {
+fs::path ViewerRepoRoot(const std::string& report_dir) {
   std::error_code ec;
   fs::path root = FindRepoRoot(report_dir);
   if (root.empty()) root = FindRepoRoot(fs::current_path(ec));
-  if (root.empty()) return "";
-  const fs::path web = root / "web";
-  fs::path card = scene_path;
-  if (card.is_relative()) {
-    const fs::path candidates[] = {root / card, fs::absolute(card, ec),
-                                   fs::path(preset_path).parent_path() / card};
-    card.clear();
-    for (const fs::path& c : candidates)
-      if (fs::is_regular_file(c, ec)) {
-        card = c;
-        break;
-      }
+  if (root.empty()) {
+    // the running binary: build/bin/clothfit inside the checkout
+    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+    if (!ec && !exe.empty()) root = FindRepoRoot(exe.parent_path());
   }
-  const fs::path preset = fs::absolute(preset_path, ec).lexically_normal();
-  const fs::path page = fs::absolute(report_dir, ec).lexically_normal();
-  std::string href = (web / "viewer.html").lexically_relative(page).generic_string() +
-                     "?preset=" +
-                     UrlEncode(preset.lexically_relative(web).generic_string());
-  if (!card.empty())
-    href += "&card=" + UrlEncode(fs::absolute(card, ec).lexically_normal()
-                                     .lexically_relative(web).generic_string());
+  return root;
+}
+
+// The scene card's file, or empty when it cannot be found.
+fs::path ResolveCard(const fs::path& root, const std::string& scene_path,
+                     const std::string& preset_path) {
+  std::error_code ec;
+  fs::path card = scene_path;
+  if (!card.is_relative()) return fs::is_regular_file(card, ec) ? card : fs::path();
+  const fs::path candidates[] = {root / card, fs::absolute(card, ec),
+                                 fs::path(preset_path).parent_path() / card};
+  for (const fs::path& c : candidates)
+    if (fs::is_regular_file(c, ec)) return fs::absolute(c, ec).lexically_normal();
+  return {};
+}
+
+bool InsideDir(const fs::path& file, const fs::path& dir) {
+  const fs::path rel = file.lexically_relative(dir);
+  return !rel.empty() && *rel.begin() != "..";
+}
+
+// The URL path serve.mjs answers for `file` (see ViewerLink).
+std::string ServedPath(const fs::path& root, const fs::path& file) {
+  std::error_code ec;
+  const fs::path abs = fs::absolute(file, ec).lexically_normal();
+  if (InsideDir(abs, root)) return "/" + abs.lexically_relative(root).generic_string();
+  return "/fs" + abs.generic_string();
+}
+}  // namespace
+
+std::string ViewerLink(const std::string& report_dir, const std::string& scene_path,
+                       const std::string& preset_path) {
+  const fs::path root = ViewerRepoRoot(report_dir);
+  if (root.empty()) return "";
+  std::string href = std::string(kViewerOrigin) + "/web/viewer.html?preset=" +
+                     UrlEncode(ServedPath(root, preset_path));
+  const fs::path card = ResolveCard(root, scene_path, preset_path);
+  if (!card.empty()) href += "&card=" + UrlEncode(ServedPath(root, card));
   return href;
+}
+
+std::vector<std::string> ViewerRoots(const std::string& report_dir, const std::string& preset_path,
+                                     const std::vector<std::string>& scene_paths) {
+  const fs::path root = ViewerRepoRoot(report_dir);
+  std::vector<std::string> dirs;
+  if (root.empty()) return dirs;
+  std::error_code ec;
+  std::vector<fs::path> files = {preset_path};
+  for (const std::string& sc : scene_paths) {
+    const fs::path card = ResolveCard(root, sc, preset_path);
+    if (!card.empty()) files.push_back(card);
+  }
+  for (const fs::path& f : files) {
+    const fs::path abs = fs::absolute(f, ec).lexically_normal();
+    if (InsideDir(abs, root)) continue;
+    const std::string d = abs.parent_path().generic_string();
+    if (std::find(dirs.begin(), dirs.end(), d) == dirs.end()) dirs.push_back(d);
+  }
+  return dirs;
 }
 
 namespace {

@@ -179,14 +179,24 @@ std::string PageName(const std::string& fabric_name);
 // (ViewerLink).
 std::string FabricHtml(const FabricReport& report, const std::string& report_dir = "");
 
-// The relative link from a page in `report_dir` to the repository's web/viewer.html with
-// ?card=<scene card>&preset=<preset>, both relative to web/ (viewer.html resolves them against
-// itself); empty when no web/viewer.html is found above `report_dir` or the working directory.
-// A relative `scene_path` is taken from the repository root, the working directory or the
-// preset's directory, whichever holds it. The viewer needs `node web/serve.mjs` (an HTTP
-// server rooted at the repository), so the card and preset must lie inside the repository.
+// The link to the repository's web/viewer.html, served by `node web/serve.mjs` on its default
+// address (kViewerOrigin), with ?preset=<path>&card=<path> as URL paths on that server: a file
+// inside the repository as /<path from the repository root>, any other file as /fs/<absolute
+// path> (serve.mjs serves those with --root DIR; ViewerRoots lists the directories). Absolute
+// http links, so that they work from the page opened as a file as well as served (session 27:
+// the relative links before broke in both cases the audit tried). Empty when no web/viewer.html
+// is found above `report_dir`, the working directory or the running binary. A relative
+// `scene_path` is taken from the repository root, the working directory or the preset's
+// directory, whichever holds it.
+inline constexpr const char* kViewerOrigin = "http://127.0.0.1:8000";
 std::string ViewerLink(const std::string& report_dir, const std::string& scene_path,
                        const std::string& preset_path);
+
+// The directories outside the repository that hold the preset or any of the scene cards (found
+// as ViewerLink finds them): what `node web/serve.mjs --root DIR` must serve for ViewerLink's
+// /fs/ paths (empty when every file is inside).
+std::vector<std::string> ViewerRoots(const std::string& report_dir, const std::string& preset_path,
+                                     const std::vector<std::string>& scene_paths);
 std::string IndexHtml(const std::vector<FabricReport>& reports);
 nlohmann::json ReportJson(const std::vector<FabricReport>& reports);
 std::string ReportCsv(const std::vector<FabricReport>& reports);

@@ -8,6 +8,7 @@
 #include <cctype>
 #include <cerrno>
 #include <cstring>
+#include <vector>
 
 namespace clothfit::limits {
 namespace fs = std::filesystem;
@@ -193,6 +194,26 @@ bool IsValidUtf8(std::string_view s) {
     i += n;
   }
   return true;
+}
+
+size_t NameDistance(std::string_view a, std::string_view b, bool fold_case) {
+  if (a.size() > 64 || b.size() > 64) return 1000;
+  const auto at = [fold_case](std::string_view s, size_t i) {
+    const char c = s[i];
+    return fold_case ? char(std::tolower(static_cast<unsigned char>(c))) : c;
+  };
+  // d[i][j]: distance between a's first i bytes and b's first j bytes
+  std::vector<std::vector<size_t>> d(a.size() + 1, std::vector<size_t>(b.size() + 1));
+  for (size_t i = 0; i <= a.size(); ++i) d[i][0] = i;
+  for (size_t j = 0; j <= b.size(); ++j) d[0][j] = j;
+  for (size_t i = 1; i <= a.size(); ++i)
+    for (size_t j = 1; j <= b.size(); ++j) {
+      d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1,
+                          d[i - 1][j - 1] + (at(a, i - 1) == at(b, j - 1) ? 0 : 1)});
+      if (i > 1 && j > 1 && at(a, i - 1) == at(b, j - 2) && at(a, i - 2) == at(b, j - 1))
+        d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
+    }
+  return d[a.size()][b.size()];
 }
 
 std::string EscapeForMessage(std::string_view s, size_t max_bytes) {

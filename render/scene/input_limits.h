@@ -101,6 +101,12 @@ std::string EscapeForMessage(std::string_view s, size_t max_bytes = 200);
 // True when `s` is valid UTF-8 (no overlongs, no surrogates, <= U+10FFFF).
 bool IsValidUtf8(std::string_view s);
 
+// Edit distance between two short names for "did you mean" hints (a mistyped subcommand, a
+// misspelt preset field): insertions, deletions, substitutions and swaps of two adjacent
+// bytes each cost 1 (optimal string alignment), ASCII letters compared case-folded when
+// `fold_case`. Names longer than 64 bytes are never close: returns 1000 (bounds the table).
+size_t NameDistance(std::string_view a, std::string_view b, bool fold_case);
+
 // ---- Paths ----------------------------------------------------------------------------------
 struct PathPolicy {
   std::filesystem::path root;   // empty: no confinement

@@ -107,29 +107,11 @@ namespace {
   throw MaterialError(where + ": " + limits::EscapeForMessage(field, 200) + ": " + msg);
 }
 
-// Edit distance (insertions, deletions, substitutions) between two short ASCII keys,
-// case-folded; keys longer than 64 bytes are never near misses (returns a large value).
-size_t KeyDistance(const std::string& a, const std::string& b) {
-  if (a.size() > 64 || b.size() > 64) return 1000;
-  const auto low = [](char c) { return char(std::tolower(static_cast<unsigned char>(c))); };
-  std::vector<size_t> row(b.size() + 1);
-  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (size_t i = 1; i <= a.size(); ++i) {
-    size_t diag = row[0];
-    row[0] = i;
-    for (size_t j = 1; j <= b.size(); ++j) {
-      const size_t up = row[j];
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (low(a[i - 1]) == low(b[j - 1]) ? 0 : 1)});
-      diag = up;
-    }
-  }
-  return row[b.size()];
-}
-
 // An unknown top-level key that is a case variant of `known` or one edit from it (two for keys
-// of 8 bytes or more) is taken for a typo and refused, naming the key it resembles.
+// of 8 bytes or more; a swap of two adjacent letters is one edit) is taken for a typo and
+// refused, naming the key it resembles.
 void CheckNotNearMiss(const std::string& key, const std::string& known, const std::string& where) {
-  const size_t d = KeyDistance(key, known);
+  const size_t d = limits::NameDistance(key, known, /*fold_case=*/true);
   const size_t limit = known.size() >= 8 ? 2 : known.size() >= 4 ? 1 : 0;
   if (d <= limit)
     Fail(where, key, "unknown field; did you mean '" + known + "'? (a misspelt field would be "

@@ -561,6 +561,7 @@ if (args.clothfit) {
   check(() => assert.throws(() => loadClothfitPreset({ ...pre('woven', {}), weave_map: { file: 'x.exr' } }), /weave_map: unknown field; did you mean 'weave_maps'\?/), 'weave_map refused');
   check(() => assert.throws(() => loadClothfitPreset({ ...pre('woven', {}), Woven: {} }), /Woven: unknown field; did you mean 'woven'\?/), 'Woven refused');
   check(() => assert.throws(() => loadClothfitPreset({ ...pre('cloth', {}), paramters: {} }), /did you mean 'parameters'\?/), 'paramters refused');
+  check(() => assert.throws(() => loadClothfitPreset({ ...pre('woven', {}), waeve_maps: {} }), /did you mean 'weave_maps'\?/), 'a swap of two letters is one edit');
   check(() => assert.equal(loadClothfitPreset({ ...pre('cloth', {}), future_block: { a: 1 } }).userData.clothfit.future_block.a, 1), 'an unknown field far from every known one is kept');
 }
 
