@@ -238,6 +238,15 @@ TEST_F(ReportTest, HtmlContainsEveryImageAndNumber) {
   EXPECT_NE(index.find("href=\"testcloth.html\""), std::string::npos);
   EXPECT_NE(index.find(FormatNumber(rep.model_means[0].flip, 4)), std::string::npos);
   EXPECT_NE(index.find("<script>"), std::string::npos);
+  // Session 27: "Which model" in words: the lowest fit error (fit.rmse, both 0.0123 here: the
+  // first in canonical order) and the lowest per-pixel FLIP.
+  const size_t which = index.find("<h2>Which model</h2>");
+  ASSERT_NE(which, std::string::npos);
+  EXPECT_NE(index.find("has the lowest fit error (block RMSE 0.0123", which), std::string::npos);
+  const double flip_min = std::min(rep.model_means[0].flip, rep.model_means[1].flip);
+  EXPECT_NE(index.find("lowest per-pixel FLIP (" + FormatNumber(flip_min, 3) + ")", which),
+            std::string::npos)
+      << index.substr(which, 600);
   const nlohmann::json j = ReportJson(all);
   EXPECT_DOUBLE_EQ(j["fabrics"][0]["scenes"][1]["models"]["cloth"]["flip"].get<double>(), flips[1]);
   EXPECT_DOUBLE_EQ(j["fabrics"][0]["models"][0]["mean"]["flip"].get<double>(),

@@ -1399,6 +1399,64 @@ std::string FabricHtml(const FabricReport& rep, const std::string& report_dir) {
   return h.str();
 }
 
+namespace {
+
+// "Which model": per fabric, the model with the lowest fit error (fit.rmse, the block display
+// RMSE the fit minimises, the README's headline figure) and the one with the lowest per-pixel
+// FLIP, said in words for a reader who does not know the metrics (session 27: the index gave
+// only the table, and on twill its columns disagree); then what the badges mean.
+void IndexWhichModel(std::ostream& h, const std::vector<FabricReport>& reports) {
+  h << "<h2>Which model</h2>\n<ul>\n";
+  bool any_badge = false;
+  for (const FabricReport& r : reports) {
+    int best_fit = -1, best_flip = -1;
+    double fit_min = 0, flip_min = 0;
+    for (size_t mi = 0; mi < r.spec.models.size(); ++mi) {
+      const nlohmann::json fit = r.spec.models[mi].preset.value("fit", nlohmann::json::object());
+      any_badge = any_badge || !ConvergenceBadge(fit).empty();
+      if (fit.contains("rmse") && fit.at("rmse").is_number()) {
+        const double v = fit.at("rmse").get<double>();
+        if (std::isfinite(v) && (best_fit < 0 || v < fit_min)) {
+          best_fit = int(mi);
+          fit_min = v;
+        }
+      }
+      const Numbers& n = r.model_means[mi];
+      if (n.ok && std::isfinite(n.flip) && (best_flip < 0 || n.flip < flip_min)) {
+        best_flip = int(mi);
+        flip_min = n.flip;
+      }
+    }
+    if (best_fit < 0 && best_flip < 0) continue;
+    const auto title = [&](int mi) { return EscapeHtml(ModelTitle(r.spec.models[size_t(mi)].model)); };
+    h << "<li><a href=\"" << EscapeHtml(PageName(r.spec.name)) << "\">" << EscapeHtml(r.spec.name)
+      << "</a>: ";
+    if (best_fit >= 0)
+      h << "<b>" << title(best_fit) << "</b> has the lowest fit error (block RMSE "
+        << FormatNumber(fit_min, 4) << ", the error over 16-pixel blocks the fit minimises)";
+    if (best_flip >= 0) {
+      if (best_flip == best_fit)
+        h << " and the lowest per-pixel FLIP (" << FormatNumber(flip_min, 3) << ")";
+      else
+        h << (best_fit >= 0 ? "; " : "") << "<b>" << title(best_flip)
+          << "</b> has the lowest per-pixel FLIP (" << FormatNumber(flip_min, 3)
+          << "): the metrics disagree, compare the images on the fabric's page";
+    }
+    h << ".</li>\n";
+  }
+  h << "</ul>\n<p class=\"meta\">Lower is better in every column but PSNR and SSIM. FLIP (0 to "
+       "1) is the perceived difference per pixel; CIEDE2000 &Delta;E is the colour difference "
+       "(1 is about the smallest a viewer notices). A preset that only a path tracer could match "
+       "still differs: compare with the noise-floor row.";
+  if (any_badge)
+    h << " A red badge next to a model flags its fit: <i>not converged</i> (the solver stopped "
+         "at its iteration limit) or <i>at bound</i> (a parameter stopped at the end of its "
+         "range, named when you hover the badge); the preset is usable but worth a look.";
+  h << "</p>\n";
+}
+
+}  // namespace
+
 std::string IndexHtml(const std::vector<FabricReport>& reports) {
   std::ostringstream h;
   h << Header("clothfit report");
@@ -1439,7 +1497,9 @@ std::string IndexHtml(const std::vector<FabricReport>& reports) {
           ConvergenceBadge(fit));
     }
   }
-  h << "</tbody></table>\n<h2>Fabrics</h2>\n<ul>\n";
+  h << "</tbody></table>\n";
+  IndexWhichModel(h, reports);
+  h << "<h2>Fabrics</h2>\n<ul>\n";
   for (const FabricReport& r : reports)
     h << "<li><a href=\"" << EscapeHtml(PageName(r.spec.name)) << "\">" << EscapeHtml(r.spec.name)
       << "</a> (" << r.spec.models.size() << " models, " << r.spec.scenes.size()
