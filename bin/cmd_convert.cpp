@@ -204,7 +204,7 @@ int RunBenchConvert(const std::string& catalogue_in, int count, int jobs, bool q
   }
   std::sort(errors.begin(), errors.end());
   if (!errors.empty())
-    std::printf("median BRDF-space fit error over all %zu materials: %.4f (cube-root units)\n",
+    std::printf("median BRDF-space fit error over all %zu materials: %.4f (square-root units)\n",
                 errors.size(), errors[errors.size() / 2]);
   return status;
 }

@@ -138,7 +138,7 @@ TEST(ConvertReaders, SeedSurfaceMaterialAndErrorsNameFileAndField) {
 }
 
 // glTF sheen material -> cloth preset through the reader: the stated error (docs/convert.md)
-// is 0.02 cube-root units on the canonical directions.
+// is 0.02 square-root units on the canonical directions.
 // Two-sidedness (issue 13): a glTF source's doubleSided goes to the three.js "side" (DoubleSide
 // 2 / FrontSide 0, which culls back faces) and back to glTF; sources without it are two-sided.
 TEST(ConvertRoundTrip, SideFollowsTheSourceTwoSidedness) {

@@ -245,8 +245,8 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
                   {"uuid", Uuid(std::stoull(hash, nullptr, 16))},
                   {"fit",
                    {{"space",
-                     "cube-root of cosine-weighted BRDF, canonical directions "
-                     "(docs/convert.md)"},
+                     "square root of cosine-weighted BRDF (Hellinger), half-vector canonical "
+                     "directions (docs/convert.md)"},
                     {"directions", CanonicalDirections().size()},
                     {"error", fits},
                     {"starts", cr.starts},
@@ -328,6 +328,7 @@ void ConvertFile(const InputFile& in, const ConvertOptions& o, std::vector<ItemR
     try {
       Fnv h;
       h.Add(std::string(kToolVersion));
+      h.Add(std::string(kFitRevision));  // outputs of an older fit are converted again
       h.Add(OptionsKey(o));
       h.Add(m.name);
       h.AddFile(in.path);
@@ -503,7 +504,7 @@ std::string SummaryTable(const ConvertReport& r) {
   s << buf;
   if (!errors.empty()) {
     std::snprintf(buf, sizeof buf,
-                  "cloth fit error (cube-root units): median %.4f, 90th %.4f, max %.4f over %zu\n",
+                  "cloth fit error (square-root units): median %.4f, 90th %.4f, max %.4f over %zu\n",
                   errors[errors.size() / 2], errors[errors.size() * 9 / 10], errors.back(),
                   errors.size());
     s << buf;

@@ -10,8 +10,8 @@
 // Per material: the source BRDF on the canonical directions (fit/brdf_fit.h), one fit per
 // target model (cloth always; physical-sheen for threejs; gltf-sheen for gltf), the outputs
 // written atomically, then a resume record `.clothfit-convert/<stem>.json` holding the content
-// hash. The hash (64-bit FNV-1a, change detection, not security) covers the tool version, the
-// options that change outputs (targets, cloth variant), the material name, the input file's
+// hash. The hash (64-bit FNV-1a, change detection, not security) covers the tool version and
+// the fit's revision (fit/brdf_fit.h kFitRevision), the options that change outputs (targets, cloth variant), the material name, the input file's
 // bytes and every file it depends on (maps, weave files). A material whose record hash matches
 // and whose outputs all exist is skipped. A bad input is reported (file and reason) and
 // skipped; the others complete.
@@ -44,7 +44,7 @@ struct ItemResult {
   std::string file, material, stem, kind;
   std::string status;   // converted, skipped, failed
   std::string reason;   // failures
-  double error = -1.0;  // cloth fit error (cube-root units); -1 when not fitted
+  double error = -1.0;  // cloth fit error (square-root units); -1 when not fitted
   double seconds = 0.0;
   std::vector<std::string> outputs;
   std::vector<std::string> notes;
