@@ -42,17 +42,23 @@ struct ConvertOptions {
 
 struct ItemResult {
   std::string file, material, stem, kind;
-  std::string status;   // converted, skipped, failed
+  // converted; skipped (up to date); failed (a broken input: reason); refused (every requested
+  // target refused by design: `refused`); ignored (not a material: notes)
+  std::string status;
   std::string reason;   // failures
   double error = -1.0;  // cloth fit error (square-root units); -1 when not fitted
   double seconds = 0.0;
   std::vector<std::string> outputs;
   std::vector<std::string> notes;
+  // Requested targets this source cannot be written to by design (target, reason), e.g. a
+  // woven preset for threejs/gltf; the other targets are written (docs/convert.md section 4).
+  std::vector<std::pair<std::string, std::string>> refused;
 };
 
 struct ConvertReport {
   std::vector<ItemResult> items;
-  int converted = 0, skipped = 0, failed = 0, files = 0;
+  int converted = 0, skipped = 0, failed = 0, refused = 0, ignored = 0, files = 0;
+  int refused_targets = 0;  // (material, target) pairs refused by design, over all items
   double seconds = 0.0;
 };
 

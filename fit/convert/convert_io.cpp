@@ -695,6 +695,14 @@ std::vector<SourceMaterial> ReadMaterials(const std::string& path,
           ? j["schema"].get<std::string>()
           : (j.contains("format") && j["format"].is_string() ? j["format"].get<std::string>() : "");
   if (schema == "clothfit.preset") return ReadPresetFile(path);
+  // clothfit's own documents that are not materials (NotAMaterial, convert_io.h).
+  const char* what = nullptr;
+  if (schema == "clothfit.report") what = "a clothfit report (schema clothfit.report)";
+  if (schema == "clothfit.models") what = "the model list of `clothfit models` (schema clothfit.models)";
+  if (schema.empty() && j.contains("tool") && j["tool"].is_string() &&
+      j["tool"].get<std::string>().rfind("clothfit", 0) == 0 && j.contains("items"))
+    what = "a clothfit convert log";
+  if (what) throw NotAMaterial(path + ": not a material: " + what);
   if (schema == "clothfit-fabric") return ReadFabricFile(path, j);
   if (schema == "seed.SurfaceMaterial") return ReadSurfaceMaterial(j, path);
   if (schema == "seed.TextureStack") return ReadTextureStack(j, path);
