@@ -106,6 +106,10 @@ void AddConvertCommand(CLI::App& app, const Globals& g, int& exit_code) {
       // replaced rather than throwing, so the log is always written.
       io::WriteTextAtomic(log, limits::DumpJson(fit::ReportJson(rep, o)) + "\n");
       std::printf("log: %s\n", log.c_str());
+      // 2: an input is broken (unreadable, invalid, a fit that failed). Targets refused by
+      // design (a woven preset has no glTF/three.js form) and clothfit documents that are not
+      // materials (report.json) are listed in the summary and the log, and leave it 0: they
+      // are properties of the source, the same on every run (docs/convert.md section 4).
       exit_code = rep.failed > 0 ? 2 : 0;
     } catch (const std::exception& e) {
       std::fprintf(stderr, "clothfit convert: error: %s\n",
@@ -204,7 +208,7 @@ int RunBenchConvert(const std::string& catalogue_in, int count, int jobs, bool q
   }
   std::sort(errors.begin(), errors.end());
   if (!errors.empty())
-    std::printf("median BRDF-space fit error over all %zu materials: %.4f (cube-root units)\n",
+    std::printf("median BRDF-space fit error over all %zu materials: %.4f (square-root units)\n",
                 errors.size(), errors[errors.size() / 2]);
   return status;
 }

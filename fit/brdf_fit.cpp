@@ -15,39 +15,59 @@ namespace clothfit::fit {
 namespace {
 
 std::vector<DirectionPair> BuildDirections() {
-  const lut::GaussLegendre gl(kDirNodes);
-  std::vector<double> mu(kDirNodes), wmu(kDirNodes);
-  for (int i = 0; i < kDirNodes; ++i) {  // [-1, 1] -> [0, 1]
-    mu[size_t(i)] = 0.5 * (gl.x[size_t(i)] + 1.0);
-    wmu[size_t(i)] = 0.5 * gl.w[size_t(i)];
-  }
+  // View cosines: Gauss-Legendre on [0, 1]; weight w_GL(mu_v) 2 mu_v (brdf_fit.h).
+  const lut::GaussLegendre gv(kDirNodes), gt(kHalfNodes);
   std::vector<DirectionPair> out;
-  double total = 0.0;
   for (int a = 0; a < kDirNodes; ++a) {
-    const double mv = mu[size_t(a)], sv = std::sqrt(1.0 - mv * mv);
-    for (int b = 0; b < kDirNodes; ++b) {
-      const double ml = mu[size_t(b)], sl = std::sqrt(1.0 - ml * ml);
-      for (int k = 0; k < kAzimuths; ++k) {
-        const double phi = (k + 0.5) * kPi / kAzimuths;
+    const double mv = 0.5 * (gv.x[size_t(a)] + 1.0), sv = std::sqrt(1.0 - mv * mv);
+    const double view_weight = 0.5 * gv.w[size_t(a)] * 2.0 * mv;
+    const Vec3<double> v(sv, 0.0, mv);
+    // Light directions through the half vector: theta_h = (pi/2) t^2, t at Gauss-Legendre nodes
+    // of [0, 1] (d theta_h = pi t dt: nodes crowd the mirror configuration; MERL's mapping),
+    // phi_h = (k + 0.5) pi / kHalfAzimuths relative to v's azimuth; l = 2 (v.h) h - v,
+    // d omega_l = 4 (v.h) d omega_h, d omega_h = sin theta_h d theta_h d phi_h. Half vectors
+    // whose l falls below the horizon (or behind v) lie outside the domain and are dropped.
+    const size_t first = out.size();
+    double measure = 0.0;
+    for (int b = 0; b < kHalfNodes; ++b) {
+      const double t = 0.5 * (gt.x[size_t(b)] + 1.0), wt = 0.5 * gt.w[size_t(b)];
+      const double th = 0.5 * kPi * t * t, dth = kPi * t;
+      for (int k = 0; k < kHalfAzimuths; ++k) {
+        const double ph = (k + 0.5) * kPi / kHalfAzimuths;
+        const Vec3<double> h(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph),
+                             std::cos(th));
+        const double vh = Dot(v, h);
+        if (!(vh > 0.0)) continue;
+        const Vec3<double> l = h * (2.0 * vh) - v;
+        if (!(l.z > kMinLightCosine)) continue;
         DirectionPair d;
-        d.v = Vec3<double>(sv, 0.0, mv);
-        d.l = Vec3<double>(sl * std::cos(phi), sl * std::sin(phi), ml);
+        d.v = v;
+        d.l = Normalize(l);
         d.cos = CosinesFromDirections(d.v, d.l);
-        d.weight = wmu[size_t(a)] * wmu[size_t(b)] * (kPi / kAzimuths) * 2.0 * mv;
-        total += d.weight;
+        d.weight = wt * dth * std::sin(th) * (kPi / kHalfAzimuths) * 4.0 * vh;
+        measure += d.weight;
         out.push_back(d);
       }
     }
+    // Per view, the light weights are rescaled to sum to pi (the solid angle of the half
+    // hemisphere phi in [0, pi]) exactly: the horizon cuts the (theta_h, phi_h) grid, and the
+    // truncated product rule's own total is off by a few percent at grazing views.
+    for (size_t i = first; i < out.size(); ++i) out[i].weight *= view_weight * kPi / measure;
   }
+  double total = 0.0;
+  for (const DirectionPair& d : out) total += d.weight;
   for (DirectionPair& d : out) d.weight /= total;
   return out;
 }
 
+// The square-root compression of brdf_fit.h (Hellinger): sqrt(max(x, 0) + eps).
 template <typename T>
 T Compress(const T& x) {
-  using std::cbrt;
-  return cbrt(Max(x, Const<T>(0.0)) + Const<T>(kCbrtEps));
+  using std::sqrt;
+  return sqrt(Max(x, Const<T>(0.0)) + Const<T>(kCompressEps));
 }
+// Its inverse on the compressed targets: y = t^2 - eps.
+double Expand(double t) { return std::max(t * t - kCompressEps, 0.0); }
 
 // The valid samples, compressed, with sqrt weights renormalised over them.
 struct Target {
@@ -108,9 +128,9 @@ double ErrorOf(const Target& t, render::ModelKind m, const cloth::Options& co, c
 
 // Cloth (explicit sheen, no subsurface) is linear in its colours for a fixed roughness:
 // f n.l = base * a + sheen * b with a = n.l / pi and b = D V n.l. Per channel, the 2 x 2
-// weighted least squares in linear space, weighted by the cube-root compression's slope
-// (d cbrt(y) = dy / (3 (y + eps)^(2/3))), gives the colours that are best to first order in
-// the fit space; a bound hit is clamped and the other colour re-solved.
+// weighted least squares in linear space, weighted by the compression's slope
+// (d sqrt(y + eps) = dy / (2 sqrt(y + eps))), gives the colours that are best to first order
+// in the fit space; a bound hit is clamped and the other colour re-solved.
 void ClosedFormClothColours(const Target& t, const cloth::Options& co, std::vector<double>& x) {
   double unit_base[10] = {1, 1, 1, 0, 0, 0, x[6], 0, 0, 0};
   double unit_sheen[10] = {0, 0, 0, 1, 1, 1, x[6], 0, 0, 0};
@@ -120,8 +140,8 @@ void ClosedFormClothColours(const Target& t, const cloth::Options& co, std::vect
     const Rgb<double> a = EvalDirectFlat(render::ModelKind::kCloth, co, unit_base, t.cos[k]);
     const Rgb<double> b = EvalDirectFlat(render::ModelKind::kCloth, co, unit_sheen, t.cos[k]);
     for (int ch = 0; ch < 3; ++ch) {
-      const double y = std::max(std::pow(t.t[k][ch], 3.0) - kCbrtEps, 0.0);
-      const double slope = 1.0 / (3.0 * std::pow(y + kCbrtEps, 2.0 / 3.0));
+      const double y = Expand(t.t[k][ch]);
+      const double slope = 1.0 / (2.0 * std::sqrt(y + kCompressEps));
       const double w = Sq(t.sw[k] * slope);
       aa[ch] += w * a[ch] * a[ch];
       ab[ch] += w * a[ch] * b[ch];
@@ -154,8 +174,7 @@ Rgb<double> SourceAlbedo(const Target& target) {
   for (size_t k = 0; k < target.cos.size(); ++k) {
     const double w = target.sw[k] * target.sw[k];
     for (int ch = 0; ch < 3; ++ch) {
-      const double v = std::pow(target.t[k][ch], 3.0) - kCbrtEps;
-      albedo[ch] += w * kPi * std::max(v, 0.0) / std::max(target.cos[k].NoL, 1e-3);
+      albedo[ch] += w * kPi * Expand(target.t[k][ch]) / std::max(target.cos[k].NoL, 1e-3);
     }
   }
   for (int ch = 0; ch < 3; ++ch) albedo[ch] = std::clamp(albedo[ch], 0.02, 0.95);
@@ -185,6 +204,13 @@ FlatBounds MakeBounds(const ParameterLayout& layout, const BrdfFitOptions& opt) 
     double lower = b.lower;
     if (model == render::ModelKind::kCloth && b.name == "roughness")
       lower = cloth::MinRoughness(opt.cloth);
+    // gltf-sheen's roughness reaches 0 (alpha floored at 1e-8): held at kMinFitRoughness or
+    // above (brdf_fit.h), except down to the source's own value when it is of this model.
+    if (model == render::ModelKind::kGltfSheen && b.name == "roughness") {
+      lower = std::max(lower, kMinFitRoughness);
+      if (opt.source_preset && opt.source_preset->model == model)
+        lower = std::min(lower, opt.source_preset->values[size_t(b.offset)]);
+    }
     for (int c = 0; c < b.size; ++c) {
       fb.lo[size_t(b.offset + c)] = lower;
       fb.hi[size_t(b.offset + c)] = b.upper;

@@ -1,27 +1,46 @@
 // fit/brdf_fit.h: conversion by fitting in BRDF space (docs/convert.md, "The BRDF-space fit").
 //
-// Directions. A fixed, deterministic set of (view, light) pairs in the shading frame (n = +z):
-//   mu_v = cos(theta_v) and mu_l = cos(theta_l) at the kDirNodes Gauss-Legendre nodes of [0, 1]
-//   (no node at exactly 0 or 1: grazing down to ~86 degrees), relative azimuth
-//   phi = (k + 0.5) pi / kAzimuths, k = 0..kAzimuths-1 (isotropic sources: [0, pi] suffices by
-//   symmetry); v = (sqrt(1 - mu_v^2), 0, mu_v), l = (sin_l cos phi, sin_l sin phi, mu_l).
+// Directions. A fixed, deterministic set of (view, light) pairs in the shading frame (n = +z),
+// a product rule over the view cosine and the half vector (session 27; before, the light was
+// gridded in (mu_l, phi), whose nodes never came within ~1.5 degrees of a mirror
+// configuration, so a GGX lobe narrower than that was invisible to the fit and a cloth source
+// converted to a mirror-smooth engine material with a tiny error; docs/convert.md section 2):
+//   mu_v = cos(theta_v) at the kDirNodes Gauss-Legendre nodes of [0, 1] (no node at exactly 0
+//   or 1: grazing down to ~88 degrees), v = (sqrt(1 - mu_v^2), 0, mu_v);
+//   h at theta_h = (pi/2) t^2 (the MERL tables' mapping), t at the kHalfNodes Gauss-Legendre
+//   nodes of [0, 1] (the first nodes sit 2.7e-4 and 7.2e-3 rad from the mirror direction: a
+//   GGX lobe down to roughness ~0.02, alpha = r^2 ~ 4e-4, is seen), phi_h = (k + 0.5) pi / kHalfAzimuths relative to v's azimuth (isotropic sources:
+//   [0, pi] suffices by symmetry); l = 2 (v.h) h - v, kept when l.z > kMinLightCosine.
 // Weights (normalised to sum 1):
-//   w = w_GL(mu_v) * w_GL(mu_l) * (pi / kAzimuths)       solid-angle quadrature, dw = dmu dphi
-//     * 2 mu_v                                           how often a view cosine occurs in the
-//                                                        canonical scenes: the fabric pixels of
-//                                                        a convex object under the camera
-//                                                        have n.v distributed as 2 mu dmu
-//                                                        (projected area; sphere, drape)
-//   Light directions are uniform over the hemisphere (environment light arrives from all
+//   w = w_GL(mu_v) * 2 mu_v                            how often a view cosine occurs in the
+//                                                      canonical scenes: the fabric pixels of
+//                                                      a convex object under the camera have
+//                                                      n.v distributed as 2 mu dmu (projected
+//                                                      area; sphere, drape)
+//     * w_GL(t) pi t sin(theta_h) (pi / kHalfAzimuths) 4 (v.h)
+//                                                      solid angle of l: d omega_l =
+//                                                      4 (v.h) d omega_h (Walter et al. 2007,
+//                                                      eq. 14), d omega_h = sin theta_h
+//                                                      d theta_h d phi_h
+//   the light weights of each view rescaled to sum to pi exactly (the horizon truncates the
+//   grid). Light directions are uniform over the hemisphere (environment light arrives from all
 //   directions; the canonical scenes' key/rim lights sit at a range of elevations): the cosine
 //   of the light is in the compared value itself, not in the weight.
 // Value compared: the cosine-weighted BRDF f(v, l) * n.l (what EvalDirect returns), per RGB
-// channel, compressed by a cube root to tame the sheen and specular peaks:
-//   residual = sqrt(w) * (cbrt(max(f_target n.l, 0) + eps) - cbrt(max(f_source n.l, 0) + eps)),
-//   eps = 1e-4 (keeps the derivative of cbrt finite at 0; shifts cbrt(0) to 0.046).
-// Fit error: sqrt(sum_k w_k sum_c residual^2 / (3 sum_k w_k)), in cube-root units (a value of
-// 0.01 is ~3 % relative error at f n.l = 0.1). Missing source samples (MERL cells marked
-// negative) are dropped and the weights renormalised.
+// channel, compressed by a square root (session 27; a cube root before):
+//   residual = sqrt(w) * (sqrt(max(f_target n.l, 0) + eps) - sqrt(max(f_source n.l, 0) + eps)),
+//   eps = 1e-4 (keeps the derivative finite at 0: at most 1 / (2 sqrt(eps)) = 50).
+// Summed over the light hemisphere, sum_c residual^2 is the squared Hellinger distance
+// int (sqrt(f_t) - sqrt(f_s))^2 d omega_l between the two reflected-light distributions.
+// Why the square root: a lobe of energy E over a solid angle A that the source does not have
+// costs A (E / A)^(2p) = E^(2p) A^(1 - 2p) under a compression x^p. For the cube root (p = 1/3)
+// that vanishes as A -> 0, so the fit hid a target's unwanted specular energy (the F0 = 0.04 of
+// the engines' dielectric base) in a mirror-sharp lobe; for p = 1/2 it costs E whatever its
+// width (and less where the source has light to mask it, ~ f^2 / (4 f_source)), so the energy
+// goes where it shows least. Larger p would weight the bright peaks ever more.
+// Fit error: sqrt(sum_k w_k sum_c residual^2 / (3 sum_k w_k)), in square-root units (a value
+// of 0.01 is ~6 % relative error at f n.l = 0.1: d sqrt(y) / sqrt(y) = dy / (2 y)). Missing
+// source samples (MERL cells marked negative) are dropped and the weights renormalised.
 //
 // Solver: Ceres Levenberg-Marquardt, one parameter block in the model's flat layout
 // (fit/parameter_layout.h bounds; cloth roughness floored at the variant's clamp), dynamic
@@ -43,9 +62,21 @@
 
 namespace clothfit::fit {
 
-inline constexpr int kDirNodes = 6;  // Gauss-Legendre nodes per cosine
-inline constexpr int kAzimuths = 8;  // relative azimuths over [0, pi]
-inline constexpr double kCbrtEps = 1e-4;
+inline constexpr int kDirNodes = 6;      // Gauss-Legendre nodes of the view cosine
+inline constexpr int kHalfNodes = 10;    // Gauss-Legendre nodes of t, theta_h = (pi/2) t^2
+inline constexpr int kHalfAzimuths = 8;  // half-vector azimuths over [0, pi]
+inline constexpr double kMinLightCosine = 1e-3;  // pairs with l.z at or below are dropped
+inline constexpr double kCompressEps = 1e-4;
+// Names the direction set and metric; part of convert's resume hash (fit/convert/convert.h), so
+// outputs fitted under an earlier revision are converted again.
+inline constexpr const char* kFitRevision = "s27: half-vector directions, square-root metric";
+// Lowest roughness a fit may reach in a model whose range goes to 0 (gltf-sheen): below it
+// the lobe falls between the half-vector nodes (the first sits 2.7e-4 rad from the mirror
+// direction) and the fit would see a specular lobe of roughness -> 0 as no lobe at all
+// (measured, docs/convert.md section 2). 0.045 is Filament's MIN_PERCEPTUAL_ROUGHNESS and the
+// floor of this repository's cloth, standard and physical-sheen models; engines draw glTF
+// roughness 0 at their own floor (three.js r187: 0.0525), never as an invisible lobe.
+inline constexpr double kMinFitRoughness = 0.045;
 
 struct DirectionPair {
   Vec3<double> v, l;
@@ -53,7 +84,7 @@ struct DirectionPair {
   double weight = 0.0;  // normalised over the whole set
 };
 
-// The canonical set (kDirNodes^2 * kAzimuths pairs), built once.
+// The canonical set (at most kDirNodes * kHalfNodes * kHalfAzimuths pairs), built once.
 const std::vector<DirectionPair>& CanonicalDirections();
 
 // A source BRDF sampled on the canonical set: value[k] = f * n.l (linear RGB), valid[k] false
@@ -121,7 +152,7 @@ struct BrdfFitResult {
   bool usable = false;
   std::string message;
   render::MaterialPreset preset;
-  double error = 0.0;  // weighted RMS in cube-root units (see above)
+  double error = 0.0;  // weighted RMS in square-root units (see above)
   int starts = 0, iterations = 0;
 };
 

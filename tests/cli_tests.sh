@@ -403,16 +403,32 @@ PY
     "$BIN" convert "$TMP/nothing" --out "$TMP/x" 2>/dev/null && fail "missing input accepted"
     out=$("$BIN" --quiet bench convert --catalogue "$TMP/cat" -j 1 2>&1) || fail "bench convert: $out"
     grep -q "materials/s" <<< "$out" || fail "bench convert prints no rate: $out"
-    # A woven preset has no glTF form: refused (exit 2) naming the model; preset-maps carries it.
+    # A woven preset has no glTF form: the target is refused by design (exit 0, not a failure),
+    # naming the model; preset-maps carries it. Session 27: per target, the others are written.
     mkdir -p "$TMP/wv"
     printf '{"schema": "clothfit.preset", "version": 1, "model": "woven", "parameters": {}}\n' \
       > "$TMP/wv/w.json"
     out=$("$BIN" --quiet convert "$TMP/wv" --to gltf --out "$TMP/wvo" 2>&1)
-    [ $? -eq 2 ] || fail "woven preset to glTF was not refused: $out"
+    [ $? -eq 0 ] || fail "woven preset to glTF alone: a refusal by design must exit 0: $out"
+    grep -q "| refused (no requested target can hold the source) | 1 |" <<< "$out" \
+      || fail "woven preset to glTF was not reported refused: $out"
     grep -q "w.json: model: 'woven'" <<< "$out" || fail "woven refusal does not name the model: $out"
+    [ -e "$TMP/wvo/w.gltf" ] && fail "woven preset: a glTF was written"
     "$BIN" --quiet convert "$TMP/wv" --to preset-maps --out "$TMP/wvo" >/dev/null \
       || fail "preset-maps on a woven preset failed"
     grep -q '"model": "woven"' "$TMP/wvo/w.maps.preset.json" || fail "preset-maps did not write the woven preset"
+    # All targets on a fit folder (a woven preset, a report.json): what can be written is, the
+    # refused targets and the report are listed, exit 0.
+    printf '{"schema": "clothfit.report", "version": 1, "fabrics": []}\n' > "$TMP/wv/report.json"
+    out=$("$BIN" --quiet convert "$TMP/wv" --to preset,threejs,gltf,filament,preset-maps --out "$TMP/wva" 2>&1)
+    [ $? -eq 0 ] || fail "fit folder with a woven preset and report.json: exit $? (want 0): $out"
+    for f in w.preset.json w.mat w.maps.preset.json; do
+      [ -s "$TMP/wva/$f" ] || fail "woven preset, all targets: $f not written: $out"
+    done
+    [ -e "$TMP/wva/w.gltf" ] || [ -e "$TMP/wva/w.three.json" ] && fail "woven preset: an engine file was written"
+    grep -q "| w | threejs, gltf | " <<< "$out" || fail "refused targets not listed per material: $out"
+    grep -q "report.json: not a material" <<< "$out" || fail "report.json not noted as not a material: $out"
+    grep -q '"refused_targets": 2' "$TMP/wva/convert-log.json" || fail "log lacks refused_targets"
     ;;
   globalopts)
     # Session 27: the global options work after the subcommand too (CLI11 fallthrough), and a

@@ -1,5 +1,5 @@
-// `clothfit convert` with weave maps, read by three.js r187's OWN loaders (docs/convert.md,
-// "Weave maps in glTF and three.js"): GLTFLoader on <stem>.gltf and the documented
+// `clothfit convert` with weave maps (and, since session 27, with carried colour maps), read
+// by three.js r187's OWN loaders (docs/convert.md, "Weave maps in glTF and three.js"): GLTFLoader on <stem>.gltf and the documented
 // ObjectLoader + MaterialLoader snippet on <stem>.three.json must give the same
 // MeshPhysicalMaterial: base colour factor, the two textures (files, repeat = uv_repeats,
 // REPEAT, trilinear, colour spaces, flipY false), anisotropy, rotation, sheen, specular.
@@ -45,25 +45,31 @@ execFileSync(args.clothfit, ['--quiet', 'convert', path.join(repo, 'tests', 'dat
   '--to', 'threejs,gltf', '--out', out], { stdio: 'inherit' });
 
 // glTF through GLTFLoader (one triangle added so that the parser builds the material).
+async function loadGltf(gltfFile, dir) {
+  const g = JSON.parse(fs.readFileSync(gltfFile, 'utf8'));
+  g.buffers = [{ byteLength: 60, uri: 'data:application/octet-stream;base64,' + Buffer.alloc(60).toString('base64') }];
+  g.bufferViews = [{ buffer: 0, byteLength: 36 }, { buffer: 0, byteOffset: 36, byteLength: 24 }];
+  g.accessors = [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3', min: [0, 0, 0], max: [0, 0, 0] },
+    { bufferView: 1, componentType: 5126, count: 3, type: 'VEC2' }];
+  g.meshes = [{ primitives: [{ attributes: { POSITION: 0, TEXCOORD_0: 1 }, material: 0 }] }];
+  g.nodes = [{ mesh: 0 }]; g.scenes = [{ nodes: [0] }]; g.scene = 0;
+  return new Promise((resolve, reject) => new GLTFLoader().parse(JSON.stringify(g), dir + '/', (gl) => {
+    let m; gl.scene.traverse((o) => { if (o.material) m = o.material; }); resolve(m);
+  }, reject));
+}
 const gltfFile = path.join(out, 'aniso.gltf');
-const g = JSON.parse(fs.readFileSync(gltfFile, 'utf8'));
-const gm = g.materials[0];
-g.buffers = [{ byteLength: 60, uri: 'data:application/octet-stream;base64,' + Buffer.alloc(60).toString('base64') }];
-g.bufferViews = [{ buffer: 0, byteLength: 36 }, { buffer: 0, byteOffset: 36, byteLength: 24 }];
-g.accessors = [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3', min: [0, 0, 0], max: [0, 0, 0] },
-  { bufferView: 1, componentType: 5126, count: 3, type: 'VEC2' }];
-g.meshes = [{ primitives: [{ attributes: { POSITION: 0, TEXCOORD_0: 1 }, material: 0 }] }];
-g.nodes = [{ mesh: 0 }]; g.scenes = [{ nodes: [0] }]; g.scene = 0;
-const fromGltf = await new Promise((resolve, reject) => new GLTFLoader().parse(JSON.stringify(g), out + '/', (gl) => {
-  let m; gl.scene.traverse((o) => { if (o.material) m = o.material; }); resolve(m);
-}, reject));
+const gm = JSON.parse(fs.readFileSync(gltfFile, 'utf8')).materials[0];
+const fromGltf = await loadGltf(gltfFile, out);
 
 // three.json through the snippet of docs/convert.md.
-const json = JSON.parse(fs.readFileSync(path.join(out, 'aniso.three.json'), 'utf8'));
-const objects = new THREE.ObjectLoader().setResourcePath(out + '/');
-const images = await objects.parseImagesAsync(json.images ?? []);
-const textures = objects.parseTextures(json.textures ?? [], images);
-const fromJson = new THREE.MaterialLoader().setTextures(textures).parse(json);
+async function loadThreeJson(file, dir) {
+  const json = JSON.parse(fs.readFileSync(file, 'utf8'));
+  const objects = new THREE.ObjectLoader().setResourcePath(dir + '/');
+  const images = await objects.parseImagesAsync(json.images ?? []);
+  const textures = objects.parseTextures(json.textures ?? [], images);
+  return new THREE.MaterialLoader().setTextures(textures).parse(json);
+}
+const fromJson = await loadThreeJson(path.join(out, 'aniso.three.json'), out);
 
 const repeats = 7;  // the fixture's uv_repeats
 const ext = gm.extensions;
@@ -91,5 +97,30 @@ for (const [name, m] of [['GLTFLoader', fromGltf], ['MaterialLoader', fromJson]]
     if (t.channel !== 0) fail(`${name} ${slot}: channel ${t.channel}`);
   }
 }
+// Session 27 audit, item 2: a glTF with base and sheen colour maps (tests/data/convert_maps).
+// The three.json must attach both maps (before, they sat in userData only and `color` held
+// fitted / mean(map), drawn as near white), on the same files as the glTF output, with the
+// glTF output's texture conventions as GLTFLoader sets them: sRGB, flipY false, REPEAT.
+const outMaps = path.join(work, 'out_maps');
+execFileSync(args.clothfit, ['--quiet', 'convert', path.join(repo, 'tests', 'data', 'convert_maps'),
+  '--to', 'threejs,gltf', '--out', outMaps], { stdio: 'inherit' });
+const mapsGltf = await loadGltf(path.join(outMaps, 'velvet.gltf'), outMaps);
+const mapsJson = await loadThreeJson(path.join(outMaps, 'velvet.three.json'), outMaps);
+const mapsData = JSON.parse(fs.readFileSync(path.join(outMaps, 'velvet.three.json'), 'utf8'));
+for (const [slot, file] of [['map', 'albedo.png'], ['sheenColorMap', 'sheen.png']]) {
+  const want = path.join(repo, 'tests', 'data', 'convert_maps', 'tex', file);
+  for (const [name, m] of [['GLTFLoader', mapsGltf], ['MaterialLoader', mapsJson]]) {
+    const t = m[slot];
+    if (!t) { fail(`maps ${name}: no ${slot}`); continue; }
+    const src = t.image?._src ?? t.source?.data?._src;
+    if (path.resolve(src ?? '') !== want) fail(`maps ${name} ${slot}: image ${src}, want ${want}`);
+    if (t.colorSpace !== THREE.SRGBColorSpace) fail(`maps ${name} ${slot}: colorSpace ${JSON.stringify(t.colorSpace)}`);
+    if (t.flipY !== false) fail(`maps ${name} ${slot}: flipY ${t.flipY}`);
+    if (t.wrapS !== THREE.RepeatWrapping || t.wrapT !== THREE.RepeatWrapping) fail(`maps ${name} ${slot}: wrap`);
+  }
+}
+// color is the hex the file states (the factor that multiplies the map), not replaced.
+if (mapsJson.color.getHex() !== mapsData.color) fail(`maps MaterialLoader color ${mapsJson.color.getHexString()} vs ${mapsData.color.toString(16)}`);
+
 console.log(failures ? `${failures} failure(s)` : 'three.js GLTFLoader and MaterialLoader read both exports alike');
 process.exit(failures ? 1 : 0);

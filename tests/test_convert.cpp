@@ -138,7 +138,7 @@ TEST(ConvertReaders, SeedSurfaceMaterialAndErrorsNameFileAndField) {
 }
 
 // glTF sheen material -> cloth preset through the reader: the stated error (docs/convert.md)
-// is 0.02 cube-root units on the canonical directions.
+// is 0.02 square-root units on the canonical directions.
 // Two-sidedness (issue 13): a glTF source's doubleSided goes to the three.js "side" (DoubleSide
 // 2 / FrontSide 0, which culls back faces) and back to glTF; sources without it are two-sided.
 TEST(ConvertRoundTrip, SideFollowsTheSourceTwoSidedness) {
@@ -230,6 +230,111 @@ TEST(ConvertReaders, GltfBaseColourMapIsDecodedFromSrgbAndCarried) {
   // factor x mean(map) = the fitted colour.
   for (size_t k = 0; k < 3; ++k)
     EXPECT_NEAR(back[0].analytic->values[k], c.gltf_sheen->values[k], 1e-9) << k;
+  fs::remove_all(d);
+}
+
+// Session 27 audit, item 2: the three.js outputs wrote color = fitted / mean(map) but left
+// the map in userData, so three.js drew the divided factor (a glTF velvet: f6ffff where the
+// preset says ae3c46). The colour maps are now attached as ObjectLoader textures; color x
+// mean(map) is the fitted colour, and userData keeps the fitted colour itself.
+TEST(ConvertMaps, ThreejsOutputsAttachTheColourMapsTheirColourIsDividedBy) {
+  const fs::path d = TempDir("threejs_maps");
+  fs::create_directories(d / "tex");
+  std::vector<float> albedo, sheen;
+  for (int i = 0; i < 4; ++i)  // two texel colours each, so the mean is not any texel
+    for (float v : {i % 2 ? 0.9f : 0.5f, 0.3f, i % 2 ? 0.2f : 0.4f}) albedo.push_back(v);
+  for (int i = 0; i < 4; ++i)
+    for (float v : {0.8f, i < 2 ? 0.6f : 0.7f, 0.5f}) sheen.push_back(v);
+  io::WritePng8((d / "tex" / "albedo.png").string(), 2, 2, albedo);
+  io::WritePng8((d / "tex" / "sheen.png").string(), 2, 2, sheen);
+  {
+    std::ofstream f(d / "velvet.gltf");
+    f << R"({"asset": {"version": "2.0"}, "extensionsUsed": ["KHR_materials_sheen"],
+             "images": [{"uri": "tex/albedo.png"}, {"uri": "tex/sheen.png"}],
+             "textures": [{"source": 0}, {"source": 1}],
+             "materials": [{"name": "velvet", "pbrMetallicRoughness": {
+               "baseColorFactor": [1.0, 1.0, 1.0, 1.0], "roughnessFactor": 0.9,
+               "metallicFactor": 0.0, "baseColorTexture": {"index": 0}},
+               "extensions": {"KHR_materials_sheen": {"sheenColorFactor": [0.9, 0.5, 0.5],
+                 "sheenColorTexture": {"index": 1}, "sheenRoughnessFactor": 0.4}}}]})";
+  }
+  const auto m = ReadMaterials((d / "velvet.gltf").string());
+  ASSERT_EQ(m.size(), 1u);
+  ASSERT_EQ(m[0].maps.size(), 2u);
+  Converted c = Example();
+  c.maps = m[0].maps;
+  const MapRef* base_map = &m[0].maps[0];
+  const MapRef* sheen_map = &m[0].maps[1];
+  ASSERT_EQ(base_map->attribute, "base_color");
+  ASSERT_EQ(sheen_map->attribute, "sheen_color");
+  // Fitted colours below the maps' means (factors < 1, no clamp).
+  for (size_t k = 0; k < 3; ++k) {
+    c.physical_sheen->values[k] = 0.6 * base_map->mean[int(k)];
+    c.physical_sheen->values[5 + k] = 0.7 * sheen_map->mean[int(k)];
+    c.cloth.values[k] = 0.5 * base_map->mean[int(k)];
+  }
+  c.provenance["uuid"] = "01234567-89ab-4cde-8f01-23456789abcd";
+  fs::create_directories(d / "out");
+  WriteThreejsPhysical((d / "out" / "v.three.json").string(), c);
+  WriteThreejsCloth((d / "out" / "v.meshcloth.json").string(), c);
+  auto load = [&](const char* name) {
+    std::ifstream in(d / "out" / name);
+    nlohmann::json j;
+    in >> j;
+    return j;
+  };
+  // The texture a slot names, resolved to its image file (relative to the JSON's directory).
+  auto image_of = [&](const nlohmann::json& j, const char* slot) -> fs::path {
+    if (!j.contains(slot)) return {};
+    for (const auto& t : j["textures"]) {
+      if (t["uuid"] != j[slot]) continue;
+      EXPECT_EQ(t["colorSpace"], "srgb") << slot;
+      EXPECT_EQ(t["flipY"], false) << slot;
+      EXPECT_EQ(t["wrap"], nlohmann::json::array({1000, 1000})) << slot;
+      for (const auto& i : j["images"])
+        if (i["uuid"] == t["image"])
+          return fs::weakly_canonical(d / "out" / i["url"].get<std::string>());
+    }
+    return {};
+  };
+  auto hex_linear = [](int h, int k) { return SrgbToLinear(double((h >> (16 - 8 * k)) & 255) / 255.0); };
+  const fs::path albedo_file = fs::weakly_canonical(d / "tex" / "albedo.png");
+  const fs::path sheen_file = fs::weakly_canonical(d / "tex" / "sheen.png");
+  const nlohmann::json ps = load("v.three.json");
+  EXPECT_EQ(image_of(ps, "map"), albedo_file);
+  EXPECT_EQ(image_of(ps, "sheenColorMap"), sheen_file);
+  const nlohmann::json cl = load("v.meshcloth.json");
+  EXPECT_EQ(image_of(cl, "map"), albedo_file);
+  // color x mean(map) = the fitted colour, to the 8-bit sRGB quantisation of the hex (half a
+  // step: <= 0.45 % relative near 1, more in the darks; 1.5 % bounds these values).
+  for (int k = 0; k < 3; ++k) {
+    const double fitted = c.physical_sheen->values[size_t(k)];
+    EXPECT_NEAR(hex_linear(ps["color"], k) * base_map->mean[k], fitted, 0.015 * fitted) << k;
+    const double fs_ = c.physical_sheen->values[size_t(5 + k)];
+    EXPECT_NEAR(hex_linear(ps["sheenColor"], k) * sheen_map->mean[k], fs_, 0.015 * fs_) << k;
+    const double fc = c.cloth.values[size_t(k)];
+    EXPECT_NEAR(hex_linear(cl["color"], k) * base_map->mean[k], fc, 0.015 * fc) << k;
+  }
+  // The un-divided fitted colours, for a loader that drops the textures.
+  const auto& note = ps["userData"]["clothfit"]["colour_maps"];
+  for (int k = 0; k < 3; ++k)
+    EXPECT_NEAR(hex_linear(note["mean_color"], k), c.physical_sheen->values[size_t(k)],
+                0.015 * c.physical_sheen->values[size_t(k)]);
+  EXPECT_FALSE(note.contains("map_mean_shortfall"));
+
+  // End to end: `convert --to threejs` of the glTF attaches both maps.
+  ConvertOptions o;
+  o.out_dir = (d / "conv").string();
+  o.targets = {"threejs"};
+  const ConvertReport r = RunConvert(ExpandInputs({(d / "velvet.gltf").string()}), o);
+  ASSERT_EQ(r.converted, 1) << SummaryTable(r);
+  std::ifstream in(d / "conv" / "velvet.three.json");
+  nlohmann::json conv;
+  in >> conv;
+  ASSERT_TRUE(conv.contains("map"));
+  ASSERT_EQ(conv["images"].size(), 2u);
+  for (const auto& i : conv["images"])
+    EXPECT_TRUE(fs::exists(d / "conv" / i["url"].get<std::string>())) << i;
   fs::remove_all(d);
 }
 

@@ -376,13 +376,81 @@ TEST(ConvertWeave, WovenPresetIsRefusedForGltfAndThreejsNamingTheModel) {
   for (const char* target : {"gltf", "threejs"}) {
     const ConvertReport r = RunBatch({(d / "in").string()}, d / ("out_" + std::string(target)),
                                      {target});
-    ASSERT_EQ(r.failed, 1) << target;
-    const std::string& why = r.items.at(0).reason;
+    // Refused by design, not failed (session 27): nothing requested can be written.
+    EXPECT_EQ(r.failed, 0) << target;
+    ASSERT_EQ(r.refused, 1) << target;
+    EXPECT_EQ(r.items.at(0).status, "refused");
+    ASSERT_EQ(r.items.at(0).refused.size(), 1u);
+    EXPECT_EQ(r.items.at(0).refused[0].first, target);
+    const std::string& why = r.items.at(0).refused[0].second;
     EXPECT_NE(why.find("woven.json: model: 'woven'"), std::string::npos) << why;
     EXPECT_NE(why.find("no exact glTF or three.js form"), std::string::npos) << why;
-    EXPECT_NE(why.find("preset-maps"), std::string::npos) << why;
+    EXPECT_NE(why.find("--to preset-maps carries it exactly"), std::string::npos) << why;
     EXPECT_FALSE(fs::exists(d / ("out_" + std::string(target)) / "woven.gltf"));
   }
+  fs::remove_all(d);
+}
+
+// Session 27 audit, item 3: `convert <fit folder> --to preset,threejs,gltf,filament,preset-maps`
+// failed the whole woven material ("use --to preset-maps", which was requested) and the
+// folder's report.json, exit 2. Per target now: the targets that can be written are, the
+// refused ones are reported per material and target; clothfit's non-material documents are
+// ignored with a note; neither is a failure.
+TEST(ConvertWeave, WovenPresetWritesTheTargetsItCanAndReportsTheRefusedOnes) {
+  const fs::path d = TempDir("woven_partial");
+  fs::create_directories(d / "in");
+  WritePresetWithMapsFile(d / "in", "woven", render::DefaultPreset(ModelKind::kWoven),
+                          SyntheticMaps(16, 5.0, 3));
+  {  // the fit folder's other JSON documents
+    std::ofstream(d / "in" / "report.json") << R"({"schema": "clothfit.report", "version": 1})";
+    std::ofstream(d / "in" / "convert-log.json")
+        << R"({"tool": "clothfit 0.1.0", "targets": ["preset"], "items": []})";
+  }
+  const ConvertReport r = RunBatch({(d / "in").string()}, d / "out",
+                                   {"preset", "threejs", "gltf", "filament", "preset-maps"});
+  EXPECT_EQ(r.failed, 0) << SummaryTable(r);
+  EXPECT_EQ(r.converted, 1);
+  EXPECT_EQ(r.ignored, 2);
+  EXPECT_EQ(r.refused_targets, 2);
+  const ItemResult* w = nullptr;
+  for (const ItemResult& i : r.items) {
+    if (i.material == "woven") w = &i;
+    if (i.status == "ignored") {
+      ASSERT_EQ(i.notes.size(), 1u);
+      EXPECT_NE(i.notes[0].find(": not a material: "), std::string::npos) << i.notes[0];
+    }
+  }
+  ASSERT_TRUE(w);
+  EXPECT_EQ(w->status, "converted");
+  for (const char* f : {"woven.preset.json", "woven.mat", "woven.maps.preset.json",
+                        "woven.maps.weave.exr"})
+    EXPECT_TRUE(fs::exists(d / "out" / f)) << f;
+  for (const char* f : {"woven.gltf", "woven.three.json", "woven.meshcloth.json"})
+    EXPECT_FALSE(fs::exists(d / "out" / f)) << f;
+  ASSERT_EQ(w->refused.size(), 2u);
+  EXPECT_EQ(w->refused[0].first, "threejs");
+  EXPECT_EQ(w->refused[1].first, "gltf");
+  EXPECT_NE(w->refused[0].second.find("its preset-maps output carries it exactly"),
+            std::string::npos)
+      << w->refused[0].second;
+  const nlohmann::json log = ReportJson(r, ConvertOptions{});
+  EXPECT_EQ(log["refused_targets"], 2);
+  EXPECT_EQ(log["ignored"], 2);
+  bool logged = false;
+  for (const auto& i : log["items"])
+    if (i["material"] == "woven") logged = i["refused"].contains("gltf") && i["refused"].contains("threejs");
+  EXPECT_TRUE(logged);
+  const std::string summary = SummaryTable(r);
+  EXPECT_NE(summary.find("| refused targets (by design; listed below) | 2 |"), std::string::npos)
+      << summary;
+  EXPECT_NE(summary.find("| woven | threejs, gltf | "), std::string::npos) << summary;
+  EXPECT_NE(summary.find("| ignored (not a material) | 2 |"), std::string::npos) << summary;
+  // A second run: up to date, the refusals reported again.
+  const ConvertReport again = RunBatch({(d / "in").string()}, d / "out",
+                                       {"preset", "threejs", "gltf", "filament", "preset-maps"});
+  EXPECT_EQ(again.skipped, 1);
+  EXPECT_EQ(again.refused_targets, 2);
+  EXPECT_EQ(again.failed, 0);
   fs::remove_all(d);
 }
 

@@ -110,29 +110,70 @@ std::string OptionsKey(const ConvertOptions& o) {
   return k;
 }
 
-// A physical-aniso preset with weave maps, for the three.js or glTF target: the maps are baked
-// into PNG textures (fit/convert/weave_textures.h) that both outputs reference.
-bool BakesWeaveTextures(const ConvertOptions& o, const SourceMaterial& m) {
-  return m.analytic && m.analytic->model == ModelKind::kPhysicalAniso && m.weave_maps &&
-         (Wants(o, "threejs") || Wants(o, "gltf"));
+// What is written for one source: the requested targets minus those it is refused for by
+// design (woven: no engine form; physical-aniso maps with a relief normal map: not baked),
+// each refusal with its reason. The other targets are written; the refusals are reported per
+// material and target (ItemResult::refused), not as a failure (docs/convert.md section 4).
+struct Plan {
+  bool preset = false, threejs = false, gltf = false, filament = false, preset_maps = false;
+  bool bake_weave = false;  // physical-aniso weave maps baked into PNG textures
+  std::vector<std::pair<std::string, std::string>> refused;
+  bool Empty() const { return !preset && !threejs && !gltf && !filament && !preset_maps; }
+};
+
+Plan PlanFor(const ConvertOptions& o, const SourceMaterial& m) {
+  Plan p;
+  p.preset = Wants(o, "preset");
+  p.threejs = Wants(o, "threejs");
+  p.gltf = Wants(o, "gltf");
+  p.filament = Wants(o, "filament");
+  p.preset_maps = Wants(o, "preset-maps") && m.analytic;  // other sources: a note, no file
+  auto refuse_engines = [&](const std::string& why) {
+    for (const char* t : {"threejs", "gltf"})
+      if (Wants(o, t)) p.refused.emplace_back(t, why);
+    p.threejs = p.gltf = false;
+  };
+  // woven: no engine form (docs/convert.md, "Weave maps in glTF and three.js"): refused for
+  // the engine targets rather than silently fitted without its maps and lobes.
+  if (m.analytic && m.analytic->model == ModelKind::kWoven && (p.threejs || p.gltf))
+    refuse_engines(
+        m.file + ": model: 'woven' (brdf/woven.h) has no exact glTF or three.js form: its two "
+        "yarn lobes (warp- and weft-aligned anisotropic GGX under the phase Fresnel f0 + (1 - f0) "
+        "exp(-2 beta LoH^2), weighted per texel by the weave maps' warp/weft channels) cannot be "
+        "written as KHR_materials_anisotropy/specular/sheen or MeshPhysicalMaterial (one "
+        "anisotropic lobe, Schlick Fresnel); " +
+        std::string(p.preset_maps ? "its preset-maps output carries it exactly"
+                                  : "--to preset-maps carries it exactly") +
+        " (web/clothfit.js draws woven presets); `clothfit fit --model physical-aniso` gives the "
+        "nearest three.js material");
+  const bool aniso_maps =
+      m.analytic && m.analytic->model == ModelKind::kPhysicalAniso && m.weave_maps;
+  if (aniso_maps && (p.threejs || p.gltf) && m.weave_maps->has_normals())
+    refuse_engines(m.file + ": weave_maps: the maps carry a relief normal map (N.X, N.Y, N.Z), "
+                   "which this exporter does not bake into a normalTexture");
+  // A physical-aniso preset with weave maps, for the three.js or glTF target: the maps are
+  // baked into PNG textures (fit/convert/weave_textures.h) that both outputs reference.
+  p.bake_weave = aniso_maps && (p.threejs || p.gltf);
+  return p;
 }
 
 std::vector<std::string> OutputsFor(const ConvertOptions& o, const std::string& stem,
                                     const SourceMaterial& m) {
+  const Plan p = PlanFor(o, m);
   std::vector<std::string> out;
   const fs::path d(o.out_dir);
-  if (Wants(o, "preset")) out.push_back((d / (stem + ".preset.json")).string());
-  if (Wants(o, "threejs")) {
+  if (p.preset) out.push_back((d / (stem + ".preset.json")).string());
+  if (p.threejs) {
     out.push_back((d / (stem + ".three.json")).string());
     out.push_back((d / (stem + ".meshcloth.json")).string());
   }
-  if (Wants(o, "gltf")) out.push_back((d / (stem + ".gltf")).string());
-  if (Wants(o, "filament")) out.push_back((d / (stem + ".mat")).string());
-  if (BakesWeaveTextures(o, m)) {
+  if (p.gltf) out.push_back((d / (stem + ".gltf")).string());
+  if (p.filament) out.push_back((d / (stem + ".mat")).string());
+  if (p.bake_weave) {
     out.push_back((d / (stem + ".basecolor.png")).string());
     out.push_back((d / (stem + ".anisotropy.png")).string());
   }
-  if (Wants(o, "preset-maps") && m.analytic) {  // the source preset itself, with its maps
+  if (p.preset_maps) {  // the source preset itself, with its maps
     out.push_back((d / (stem + ".maps.preset.json")).string());
     if (!m.weave_maps_file.empty()) out.push_back((d / (stem + ".maps.weave.exr")).string());
     if (!m.glint_file.empty()) out.push_back((d / (stem + ".maps.glint.exr")).string());
@@ -183,22 +224,8 @@ BrdfFitResult FitOrThrow(const BrdfSamples& s, ModelKind model, const cloth::Opt
   return r;
 }
 
-void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::string& stem,
-                const std::string& hash, ItemResult& item) {
-  // woven: no engine form (docs/convert.md, "Weave maps in glTF and three.js"): refused for
-  // the engine targets rather than silently fitted without its maps and lobes.
-  if (m.analytic && m.analytic->model == ModelKind::kWoven &&
-      (Wants(o, "gltf") || Wants(o, "threejs")))
-    throw ConvertError(
-        m.file + ": model: 'woven' (brdf/woven.h) has no exact glTF or three.js form: its two "
-        "yarn lobes (warp- and weft-aligned anisotropic GGX under the phase Fresnel f0 + (1 - f0) "
-        "exp(-2 beta LoH^2), weighted per texel by the weave maps' warp/weft channels) cannot be "
-        "written as KHR_materials_anisotropy/specular/sheen or MeshPhysicalMaterial (one "
-        "anisotropic lobe, Schlick Fresnel); use --to preset-maps (web/clothfit.js draws woven "
-        "presets) or `clothfit fit --model physical-aniso` for the nearest three.js material");
-  if (BakesWeaveTextures(o, m) && m.weave_maps->has_normals())
-    throw ConvertError(m.file + ": weave_maps: the maps carry a relief normal map (N.X, N.Y, "
-                       "N.Z), which this exporter does not bake into a normalTexture");
+void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const Plan& plan,
+                const std::string& stem, const std::string& hash, ItemResult& item) {
   const BrdfSamples s = SampleSource(m);
   Converted c;
   c.name = m.name;
@@ -215,7 +242,7 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
     c.physical_aniso = *m.analytic;
     fits["physical-aniso"] = 0.0;
   }
-  if (Wants(o, "threejs")) {
+  if (plan.threejs) {
     if (!c.physical_aniso) {
       const BrdfFitResult r = FitOrThrow(s, ModelKind::kPhysicalSheen, {}, m);
       c.physical_sheen = r.preset;
@@ -231,7 +258,7 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
       iterations["cloth/seed-threejs"] = sr.iterations;
     }
   }
-  if (Wants(o, "gltf") && !c.physical_aniso) {
+  if (plan.gltf && !c.physical_aniso) {
     const BrdfFitResult r = FitOrThrow(s, ModelKind::kGltfSheen, {}, m);
     c.gltf_sheen = r.preset;
     fits["gltf-sheen"] = r.error;
@@ -245,15 +272,15 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
                   {"uuid", Uuid(std::stoull(hash, nullptr, 16))},
                   {"fit",
                    {{"space",
-                     "cube-root of cosine-weighted BRDF, canonical directions "
-                     "(docs/convert.md)"},
+                     "square root of cosine-weighted BRDF (Hellinger), half-vector canonical "
+                     "directions (docs/convert.md)"},
                     {"directions", CanonicalDirections().size()},
                     {"error", fits},
                     {"starts", cr.starts},
                     {"iterations", iterations}}},
                   {"notes", m.notes}};
   const std::vector<std::string> outs = OutputsFor(o, stem, m);
-  if (BakesWeaveTextures(o, m)) {
+  if (plan.bake_weave) {
     c.weave = BakePhysicalAnisoTextures(*m.analytic, *m.weave_maps);
     const WeaveTextures& w = *c.weave;
     c.base_color_png = (fs::path(o.out_dir) / (stem + ".basecolor.png")).string();
@@ -267,20 +294,20 @@ void ConvertOne(const SourceMaterial& m, const ConvertOptions& o, const std::str
                   w.base_max_abs_error, w.base_max_rel_error, w.clipped_texels,
                   w.strength_max_abs_error, w.direction_max_angle_error);
     item.notes.push_back(line);
-  } else if (m.weave_maps && (Wants(o, "preset") || Wants(o, "filament"))) {
+  } else if (m.weave_maps && (plan.preset || plan.filament)) {
     item.notes.push_back("weave maps not carried by the preset/filament targets (cloth fits)");
   }
   if (Wants(o, "preset-maps") && !m.analytic)
     item.notes.push_back("preset-maps: not a clothfit preset source, nothing written");
   size_t k = 0;
-  if (Wants(o, "preset")) WriteClothPreset(outs[k++], c);
-  if (Wants(o, "threejs")) {
+  if (plan.preset) WriteClothPreset(outs[k++], c);
+  if (plan.threejs) {
     WriteThreejsPhysical(outs[k++], c);
     WriteThreejsCloth(outs[k++], c);
   }
-  if (Wants(o, "gltf")) WriteGltf(outs[k++], c);
-  if (Wants(o, "filament")) WriteFilamentMat(outs[k++], c);
-  if (Wants(o, "preset-maps") && m.analytic)
+  if (plan.gltf) WriteGltf(outs[k++], c);
+  if (plan.filament) WriteFilamentMat(outs[k++], c);
+  if (plan.preset_maps)
     WritePresetWithMaps((fs::path(o.out_dir) / (stem + ".maps.preset.json")).string(), m,
                         c.provenance);
   item.outputs = outs;
@@ -297,6 +324,15 @@ void ConvertFile(const InputFile& in, const ConvertOptions& o, std::vector<ItemR
   std::vector<SourceMaterial> mats;
   try {
     mats = ReadMaterials(in.path, limits::PathPolicy{in.root, o.allow_outside_paths});
+  } catch (const NotAMaterial& e) {  // clothfit's own non-material documents: a note
+    ItemResult r;
+    r.file = in.path;
+    r.stem = in.stem;
+    r.status = "ignored";
+    r.notes.push_back(limits::EscapeForMessage(e.what(), 2000));
+    out.push_back(r);
+    done(1);
+    return;
   } catch (const std::bad_alloc&) {
     ItemResult r;
     r.file = in.path;
@@ -328,18 +364,24 @@ void ConvertFile(const InputFile& in, const ConvertOptions& o, std::vector<ItemR
     try {
       Fnv h;
       h.Add(std::string(kToolVersion));
+      h.Add(std::string(kFitRevision));  // outputs of an older fit are converted again
       h.Add(OptionsKey(o));
       h.Add(m.name);
       h.AddFile(in.path);
       for (const std::string& d : m.dependencies) h.AddFile(d);
       const std::string hash = HexString(h.h);
+      const Plan plan = PlanFor(o, m);
+      for (const auto& [target, why] : plan.refused)
+        r.refused.emplace_back(target, limits::EscapeForMessage(why, 2000));
       double err = -1.0;
-      if (UpToDate(o, r.stem, m, hash, &err)) {
+      if (plan.Empty() && !plan.refused.empty()) {
+        r.status = "refused";  // nothing requested can be written: no fit, no record
+      } else if (UpToDate(o, r.stem, m, hash, &err)) {
         r.status = "skipped";
         r.error = err;
         r.outputs = OutputsFor(o, r.stem, m);
       } else {
-        ConvertOne(m, o, r.stem, hash, r);
+        ConvertOne(m, o, plan, r.stem, hash, r);
         r.status = "converted";
       }
     } catch (const std::exception& e) {
@@ -482,6 +524,9 @@ ConvertReport RunConvert(const std::vector<InputFile>& all, const ConvertOptions
       rep.converted += r.status == "converted";
       rep.skipped += r.status == "skipped";
       rep.failed += r.status == "failed";
+      rep.refused += r.status == "refused";
+      rep.ignored += r.status == "ignored";
+      rep.refused_targets += int(r.refused.size());
       rep.items.push_back(std::move(r));
     }
   rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -498,15 +543,45 @@ std::string SummaryTable(const ConvertReport& r) {
   s << "| status | materials |\n|---|---:|\n";
   s << "| converted | " << r.converted << " |\n| skipped (up to date) | " << r.skipped
     << " |\n| failed | " << r.failed << " |\n";
+  // By design, not failures (exit status 0): targets a source has no form in, and clothfit
+  // documents that are not materials.
+  if (r.refused)
+    s << "| refused (no requested target can hold the source) | " << r.refused << " |\n";
+  if (r.refused_targets)
+    s << "| refused targets (by design; listed below) | " << r.refused_targets
+      << " |\n";
+  if (r.ignored) s << "| ignored (not a material) | " << r.ignored << " |\n";
   std::snprintf(buf, sizeof buf, "%d input files, %.2f s, %.1f materials/s converted\n", r.files,
                 r.seconds, r.seconds > 0 ? r.converted / r.seconds : 0.0);
   s << buf;
   if (!errors.empty()) {
     std::snprintf(buf, sizeof buf,
-                  "cloth fit error (cube-root units): median %.4f, 90th %.4f, max %.4f over %zu\n",
+                  "cloth fit error (square-root units): median %.4f, 90th %.4f, max %.4f over %zu\n",
                   errors[errors.size() / 2], errors[errors.size() * 9 / 10], errors.back(),
                   errors.size());
     s << buf;
+  }
+  if (r.refused_targets) {
+    s << "\n| input | material | refused targets | reason |\n|---|---|---|---|\n";
+    for (const ItemResult& i : r.items)
+      for (size_t k = 0; k < i.refused.size(); ++k) {
+        bool seen = false;  // one row per reason, naming every target it refuses
+        for (size_t e = 0; e < k; ++e) seen = seen || i.refused[e].second == i.refused[k].second;
+        if (seen) continue;
+        std::string targets;
+        for (const auto& [t, why] : i.refused)
+          if (why == i.refused[k].second) targets += (targets.empty() ? "" : ", ") + t;
+        s << "| " << limits::EscapeForMessage(i.file, 400) << " | "
+          << (i.material.empty() ? "-" : limits::EscapeForMessage(i.material, 200)) << " | "
+          << targets << " | " << i.refused[k].second << " |\n";
+      }
+  }
+  if (r.ignored) {
+    s << "\n| ignored input | note |\n|---|---|\n";
+    for (const ItemResult& i : r.items)
+      if (i.status == "ignored")
+        s << "| " << limits::EscapeForMessage(i.file, 400) << " | "
+          << (i.notes.empty() ? "" : i.notes.front()) << " |\n";
   }
   if (r.failed) {
     s << "\n| failed input | material | reason |\n|---|---|---|\n";
@@ -528,6 +603,10 @@ nlohmann::json ReportJson(const ConvertReport& r, const ConvertOptions& o) {
               {"outputs", i.outputs}, {"notes", i.notes}};
     if (i.error >= 0) j["error"] = i.error;
     if (!i.reason.empty()) j["reason"] = i.reason;
+    if (!i.refused.empty()) {
+      j["refused"] = json::object();  // target -> reason
+      for (const auto& [target, why] : i.refused) j["refused"][target] = why;
+    }
     items.push_back(j);
   }
   return {{"tool", kToolVersion},
@@ -537,6 +616,9 @@ nlohmann::json ReportJson(const ConvertReport& r, const ConvertOptions& o) {
           {"converted", r.converted},
           {"skipped", r.skipped},
           {"failed", r.failed},
+          {"refused", r.refused},
+          {"refused_targets", r.refused_targets},
+          {"ignored", r.ignored},
           {"seconds", r.seconds},
           {"items", items}};
 }

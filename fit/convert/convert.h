@@ -10,8 +10,8 @@
 // Per material: the source BRDF on the canonical directions (fit/brdf_fit.h), one fit per
 // target model (cloth always; physical-sheen for threejs; gltf-sheen for gltf), the outputs
 // written atomically, then a resume record `.clothfit-convert/<stem>.json` holding the content
-// hash. The hash (64-bit FNV-1a, change detection, not security) covers the tool version, the
-// options that change outputs (targets, cloth variant), the material name, the input file's
+// hash. The hash (64-bit FNV-1a, change detection, not security) covers the tool version and
+// the fit's revision (fit/brdf_fit.h kFitRevision), the options that change outputs (targets, cloth variant), the material name, the input file's
 // bytes and every file it depends on (maps, weave files). A material whose record hash matches
 // and whose outputs all exist is skipped. A bad input is reported (file and reason) and
 // skipped; the others complete.
@@ -42,17 +42,23 @@ struct ConvertOptions {
 
 struct ItemResult {
   std::string file, material, stem, kind;
-  std::string status;   // converted, skipped, failed
+  // converted; skipped (up to date); failed (a broken input: reason); refused (every requested
+  // target refused by design: `refused`); ignored (not a material: notes)
+  std::string status;
   std::string reason;   // failures
-  double error = -1.0;  // cloth fit error (cube-root units); -1 when not fitted
+  double error = -1.0;  // cloth fit error (square-root units); -1 when not fitted
   double seconds = 0.0;
   std::vector<std::string> outputs;
   std::vector<std::string> notes;
+  // Requested targets this source cannot be written to by design (target, reason), e.g. a
+  // woven preset for threejs/gltf; the other targets are written (docs/convert.md section 4).
+  std::vector<std::pair<std::string, std::string>> refused;
 };
 
 struct ConvertReport {
   std::vector<ItemResult> items;
-  int converted = 0, skipped = 0, failed = 0, files = 0;
+  int converted = 0, skipped = 0, failed = 0, refused = 0, ignored = 0, files = 0;
+  int refused_targets = 0;  // (material, target) pairs refused by design, over all items
   double seconds = 0.0;
 };
 

@@ -695,6 +695,14 @@ std::vector<SourceMaterial> ReadMaterials(const std::string& path,
           ? j["schema"].get<std::string>()
           : (j.contains("format") && j["format"].is_string() ? j["format"].get<std::string>() : "");
   if (schema == "clothfit.preset") return ReadPresetFile(path);
+  // clothfit's own documents that are not materials (NotAMaterial, convert_io.h).
+  const char* what = nullptr;
+  if (schema == "clothfit.report") what = "a clothfit report (schema clothfit.report)";
+  if (schema == "clothfit.models") what = "the model list of `clothfit models` (schema clothfit.models)";
+  if (schema.empty() && j.contains("tool") && j["tool"].is_string() &&
+      j["tool"].get<std::string>().rfind("clothfit", 0) == 0 && j.contains("items"))
+    what = "a clothfit convert log";
+  if (what) throw NotAMaterial(path + ": not a material: " + what);
   if (schema == "clothfit-fabric") return ReadFabricFile(path, j);
   if (schema == "seed.SurfaceMaterial") return ReadSurfaceMaterial(j, path);
   if (schema == "seed.TextureStack") return ReadTextureStack(j, path);
@@ -759,6 +767,81 @@ json WeaveTexturesJson(const WeaveTextures& w, const char* target) {
           {"clipped_texels", w.clipped_texels}};
 }
 
+// The carried colour maps in the three.js JSON (session 27; before, they sat only in
+// userData while `color` held fitted / mean(map), so a loader drew the divided factor, near
+// white). ObjectLoader format (Texture.toJSON / Source.toJSON of r187): MaterialLoader
+// resolves "map" / "sheenColorMap" by uuid from setTextures(...), built by
+// ObjectLoader.parseImagesAsync + parseTextures (the snippet of docs/convert.md). The map is
+// the file the glTF output names as baseColorTexture / sheenColorTexture, with the same uv
+// convention (glTF: v = 0 at the image's top row, so flipY false), sRGB, REPEAT (glTF's
+// default sampler), trilinear. Normal maps stay in userData only: three.js's normalScale.y
+// sign depends on whether the mesh has tangents (GLTFLoader flips it without), which a
+// material file cannot know.
+struct ThreejsMaps {
+  json images = json::array(), textures = json::array();
+  // Adds the colour map of `attr`, if carried, under material key `slot`.
+  void Add(json& material, const Converted& c, const std::string& attr, const char* slot,
+           const std::string& uuid, const std::string& out_file) {
+    const MapRef* m = FindMap(c, attr);
+    if (!m) return;
+    const std::string id = uuid + "-" + attr;
+    images.push_back({{"uuid", id + "-i"}, {"url", Relative(m->path, out_file)}});
+    textures.push_back({{"uuid", id + "-t"},
+                        {"name", attr},
+                        {"image", id + "-i"},
+                        {"mapping", 300},  // UVMapping
+                        {"channel", 0},    // TEXCOORD_0 / uv
+                        {"repeat", {1, 1}},
+                        {"offset", {0, 0}},
+                        {"center", {0, 0}},
+                        {"rotation", 0},
+                        {"wrap", {1000, 1000}},  // RepeatWrapping
+                        {"colorSpace", m->colour_space == "srgb" ? "srgb" : ""},
+                        {"minFilter", 1008},  // LinearMipmapLinearFilter
+                        {"magFilter", 1006},  // LinearFilter
+                        {"anisotropy", 1},
+                        {"flipY", false},
+                        {"generateMipmaps", true}});
+    material[slot] = id + "-t";
+  }
+  void WriteInto(json& material) const {
+    if (textures.empty()) return;
+    for (const json& t : textures) material["textures"].push_back(t);
+    for (const json& i : images) material["images"].push_back(i);
+  }
+};
+
+// What userData records about the colours and maps of a three.js output: the un-divided
+// fitted colours (for a loader that drops the textures) and, where the factor fitted / mean
+// had to be clamped at 1 (a hex colour holds at most 1), how far below the fitted colour the
+// attached map's mean then falls (relative, worst channel).
+json ThreejsColourNote(const Converted& c, const Rgb<double>& base, const Rgb<double>& sheen,
+                       bool sheen_map_attached) {
+  json j = {{"mean_color", Hex(base)}};
+  if (sheen_map_attached) j["mean_sheenColor"] = Hex(sheen);
+  auto shortfall = [&](const Rgb<double>& fitted, const MapRef* m) {
+    const Rgb<double> f = Factor(fitted, m);
+    double worst = 0.0;
+    for (int k = 0; k < 3; ++k)
+      if (fitted[k] > 0.0) worst = std::max(worst, 1.0 - f[k] * m->mean[k] / fitted[k]);
+    return worst;
+  };
+  const MapRef* bm = FindMap(c, "base_color");
+  if (bm && shortfall(base, bm) > 1e-9) j["map_mean_shortfall"] = shortfall(base, bm);
+  const MapRef* sm = FindMap(c, "sheen_color");
+  if (sheen_map_attached && shortfall(sheen, sm) > 1e-9)
+    j["sheenColorMap_mean_shortfall"] = shortfall(sheen, sm);
+  j["convention"] =
+      bm || sheen_map_attached
+          ? "color (sheenColor) x the mean linear texel of map (sheenColorMap) = the fitted "
+            "colour, up to the clamp of the factor at 1 (*_mean_shortfall): the maps are "
+            "attached as textures (uuid references into textures[] / images[], ObjectLoader "
+            "format; docs/convert.md). A loader that drops the textures must use mean_color "
+            "(mean_sheenColor) instead, the fitted colour itself."
+          : "no colour map: color is the fitted colour";
+  return j;
+}
+
 void CheckHexable(const Rgb<double>& c, const std::string& path, const char* field) {
   for (int k = 0; k < 3; ++k)
     if (!(c[k] >= 0.0 && c[k] <= 1.0))
@@ -793,6 +876,15 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
     CheckHexable(Colour(p, "specular_color"), path, "specular_color");
     j["specularColor"] = Hex(Colour(p, "specular_color"));
   }
+  // The carried colour maps, attached (ThreejsMaps). A weave-baked texture takes "map".
+  if (c.physical_aniso && c.weave && FindMap(c, "base_color"))
+    throw ConvertError(path + ": map: the preset has both a carried colour map and weave maps; "
+                              "only one base colour texture can be written");
+  ThreejsMaps carried;
+  const std::string material_uuid = j["uuid"].get<std::string>();
+  carried.Add(j, c, "base_color", "map", material_uuid, path);
+  carried.Add(j, c, "sheen_color", "sheenColorMap", material_uuid, path);
+  carried.WriteInto(j);
   if (c.physical_aniso && c.weave) {
     // The weave maps (fit/convert/weave_textures.h): color = the texture's factor (an exact
     // 8-bit sRGB value, so the hex holds it exactly), map = the kd texture, anisotropyMap =
@@ -830,8 +922,8 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
                           {"flipY", false},  // glTF uv convention: v = 0 at the image's top row
                           {"generateMipmaps", true}});
     }
-    j["textures"] = textures;
-    j["images"] = images;
+    for (const json& t : textures) j["textures"].push_back(t);  // after any carried map
+    for (const json& i : images) j["images"].push_back(i);
   }
   j["side"] = c.double_sided ? 2 : 0;  // THREE.DoubleSide : THREE.FrontSide (back faces culled)
   j["userData"] = {{"clothfit",
@@ -839,6 +931,9 @@ void WriteThreejsPhysical(const std::string& path, const Converted& c) {
                      {"colour",
                       "color/sheenColor are sRGB hex (three.js getHex); "
                       "MaterialLoader decodes them to linear"},
+                     {"colour_maps", ThreejsColourNote(c, Colour(p, "base_color"),
+                                                       Colour(p, "sheen_color"),
+                                                       FindMap(c, "sheen_color") != nullptr)},
                      {"maps", MapsJson(c, path)},
                      {"provenance", c.provenance}}}};
   if (c.physical_aniso && c.weave)
@@ -853,7 +948,13 @@ void WriteThreejsCloth(const std::string& path, const Converted& c) {
   j["type"] = "MeshClothMaterial";
   j["name"] = c.name;
   j["color"] = Hex(Factor(Colour(p, "base_color"), FindMap(c, "base_color")));
+  // The sheen is the fitted colour itself: no sheen map is attached to MeshClothMaterial.
   j["sheen"] = Hex(EffectiveSheen(p));
+  ThreejsMaps carried;
+  carried.Add(j, c, "base_color", "map",
+              c.provenance.value("uuid", "00000000-0000-4000-8000-000000000000") + "-cloth",
+              path);
+  carried.WriteInto(j);
   j["roughness"] = p.values[6];
   j["side"] = c.double_sided ? 2 : 0;  // THREE.DoubleSide : THREE.FrontSide (back faces culled)
   if (p.cloth.subsurface) {
@@ -865,6 +966,8 @@ void WriteThreejsCloth(const std::string& path, const Converted& c) {
                       "the seed's MeshClothMaterial (three.js fork): color, "
                       "sheen, subsurfaceColor as sRGB hex; roughness "
                       "perceptual"},
+                     {"colour_maps", ThreejsColourNote(c, Colour(p, "base_color"),
+                                                       EffectiveSheen(p), false)},
                      {"maps", MapsJson(c, path)},
                      {"provenance", c.provenance}}}};
   io::WriteTextAtomic(path, j.dump(2) + "\n");

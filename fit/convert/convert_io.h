@@ -37,6 +37,15 @@ class ConvertError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// One of clothfit's own JSON documents that is not a material (a `clothfit report`
+// report.json, the model list of `clothfit models`, a convert log), found next to the presets
+// of a fit folder: `convert` skips it with this note ("<file>: not a material: ...") instead
+// of failing. An unknown schema is still a ConvertError.
+class NotAMaterial : public ConvertError {
+ public:
+  using ConvertError::ConvertError;
+};
+
 inline constexpr int kSeedSchemaVersion = 1;
 
 struct MapRef {
