@@ -15,7 +15,7 @@ namespace clothfit::fit {
 namespace {
 
 constexpr int kN = render::WeaveMaps::kChannels;  // unknowns: a_w, a_f, kd_R, kd_G, kd_B
-constexpr double kEps = 1e-4;                     // fit/brdf_fit.h kCbrtEps
+constexpr double kEps = 1e-4;  // the cube-root metric's eps (fit/brdf_fit.h's before session 27)
 
 struct Pair {
   render::Vec3d v, l;

@@ -18,8 +18,9 @@
 // texel's WeaveSample as unknowns:
 //   f(k) = B_sheen(k) + a_w B_warp(k) + a_f B_weft(k) + kd_c B_kd,c(k)     (per channel c)
 // which is LINEAR in x = (a_w, a_f, kd_R, kd_G, kd_B). It is solved per texel in closed form
-// (5 x 5 normal equations; no Ceres, no start needed) for the cube-root metric of
-// fit/brdf_fit.h linearised at the target (weight w (target + eps)^(-4/3) / 9 per squared
+// (5 x 5 normal equations; no Ceres, no start needed) for a cube-root metric (fit/brdf_fit.h's
+// until session 27, which moved to a square root; the bake keeps the cube root) linearised at
+// the target (weight w (target + eps)^(-4/3) / 9 per squared
 // linear residual), with non-negativity by an active set (a negative unknown is fixed at 0 and
 // the rest re-solved), and a small ridge towards the tile's uniform value (1) that keeps
 // texels with no specular information (e.g. a lobe that is dark on every direction) finite.
@@ -69,7 +70,7 @@ double WeaveViewBandCosine(int k, int mu_nodes);
 
 struct WeaveBakeResult {
   render::WeaveMaps maps;
-  // Fit error over all texels and pairs (fit/brdf_fit.h metric, cube-root units): the tile
+  // Fit error over all texels and pairs (the cube-root metric above, cube-root units): the tile
   // with one uniform x (the texel-mean solution, what the uniform model can do with these
   // global lobes) and with the per-texel x (what the maps can do).
   double error_uniform = 0.0, error_mapped = 0.0;
