@@ -46,13 +46,47 @@ const HERE = new URL('.', import.meta.url);
 let clothDGPromise = null;
 let clothDGTexture = null;
 
+// The tables (web/lut/*.f32) sit next to this module. A browser fetches them by URL; node's
+// fetch does not read file: URLs ("fetch failed ... not implemented"), so in node a file: URL is
+// read from disk (session 27: a MeshClothMaterial made in node crashed the process with that
+// unhandled rejection). Errors name the table, the URL and what to serve.
+async function loadTableBytes(url, what) {
+  if (url.protocol === 'file:' && globalThis.process?.versions?.node) {
+    const fsModule = 'node:fs/promises';  // a variable: browser bundlers leave the import alone
+    const { readFile } = await import(/* @vite-ignore */ fsModule);
+    let buf;
+    try {
+      buf = await readFile(url);
+    } catch (e) {
+      throw new Error(`${what}: cannot read ${decodeURIComponent(url.pathname)}: ${e.code ?? e.message} (web/lut/ must stay next to clothfit.js)`);
+    }
+    return buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength);
+  }
+  let r;
+  try {
+    r = await fetch(url);
+  } catch (e) {
+    throw new Error(`${what}: cannot fetch ${url.href}: ${e.message}${e.cause?.message ? ` (${e.cause.message})` : ''}`);
+  }
+  if (!r.ok) throw new Error(`${what}: ${url.href}: HTTP ${r.status} (serve web/lut/ next to clothfit.js; docs/web.md "Use it in your own page")`);
+  return r.arrayBuffer();
+}
+
+// A material's constructor starts the table load without awaiting it: a failure is reported
+// once per table on the console (not an unhandled rejection); awaiting clothDGTable() /
+// wovenPhaseTable() (loadSceneCard does) still throws it.
+const reportedTableErrors = new WeakSet();
+function reportTableError(promise) {
+  promise.catch((e) => {
+    if (reportedTableErrors.has(promise)) return;
+    reportedTableErrors.add(promise);
+    console.error(`clothfit: ${e.message}; materials that need it do not draw correctly`);
+  });
+}
+
 export function clothDGTable() {
   if (!clothDGPromise) {
-    clothDGPromise = fetch(new URL('lut/cloth_dg_128.f32', HERE))
-      .then((r) => {
-        if (!r.ok) throw new Error(`cloth DG table: HTTP ${r.status}`);
-        return r.arrayBuffer();
-      })
+    clothDGPromise = loadTableBytes(new URL('lut/cloth_dg_128.f32', HERE), 'cloth DG table')
       .then((buf) => {
         const data = new Float32Array(buf);
         const n = Math.round(Math.sqrt(data.length));
@@ -296,7 +330,10 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
       clothSubsurfaceIntensity: { value: 0.5 },
       clothDG: { value: clothDGTexture },
     };
-    if (!clothDGTexture) clothDGTable().then((t) => { this._clothUniforms.clothDG.value = t; this.needsUpdate = true; });
+    if (!clothDGTexture) {
+      clothDGTable().then((t) => { this._clothUniforms.clothDG.value = t; this.needsUpdate = true; }, () => {});
+      reportTableError(clothDGPromise);
+    }
   }
 
   // The sheen colour the engine uses (brdf/cloth.h EffectiveSheen).
@@ -384,11 +421,7 @@ let wovenPhasePromise = null;
 let wovenPhaseTexture = null;
 export function wovenPhaseTable() {
   if (!wovenPhasePromise) {
-    wovenPhasePromise = fetch(new URL('lut/woven_phase_32.f32', HERE))
-      .then((r) => {
-        if (!r.ok) throw new Error(`woven phase table: HTTP ${r.status}`);
-        return r.arrayBuffer();
-      })
+    wovenPhasePromise = loadTableBytes(new URL('lut/woven_phase_32.f32', HERE), 'woven phase table')
       .then((buf) => {
         const data = new Float32Array(buf);
         const n = 32, ch = WOVEN_PHASE_BETAS.length;
@@ -1701,8 +1734,14 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     this.weaveMaps = null;  // a WeaveMaps (weaveMapsFromExr) or null: the uniform material
     this._setYarnLobe(yarnLobe);
     this._updateWovenUniforms();
-    if (!wovenPhaseTexture) wovenPhaseTable().then(() => { this.needsUpdate = true; });
-    if (!clothDGTexture) clothDGTable().then(() => { this.needsUpdate = true; });
+    if (!wovenPhaseTexture) {
+      wovenPhaseTable().then(() => { this.needsUpdate = true; }, () => {});
+      reportTableError(wovenPhasePromise);
+    }
+    if (!clothDGTexture) {
+      clothDGTable().then(() => { this.needsUpdate = true; }, () => {});
+      reportTableError(clothDGPromise);
+    }
   }
 
   _updateWovenUniforms() {
