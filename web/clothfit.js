@@ -2638,11 +2638,14 @@ export function wovenOptions(w) {
  * A preset naming "weave_maps" (woven, physical-aniso) needs options.weaveMaps: the parsed maps
  * (fetchWeaveMaps / weaveMapsFromExr), or null to draw the uniform material on purpose;
  * fetchClothfitPreset(url) fetches them next to the preset.
+ * three.js JSON (`clothfit convert --to threejs`) naming textures takes options.textures
+ * (uuid -> THREE.Texture: fetchThreejsTextures); without them it is drawn without its textures,
+ * with a console warning and userData.clothfit.skippedTextures listing the slots.
  */
 export function loadClothfitPreset(json, options = {}) {
   if (typeof json === 'string') presetIntegerLiterals(json);  // "fis_taps": 16.0 etc. (C++ refuses them)
   const preset = typeof json === 'string' ? JSON.parse(json) : json;
-  if (preset?.metadata?.type === 'Material') return fromThreejsJson(preset);
+  if (preset?.metadata?.type === 'Material') return fromThreejsJson(preset, options);
   if (preset?.schema !== 'clothfit.preset') throw new Error('loadClothfitPreset: schema is not "clothfit.preset"');
   if (preset.version !== 1) throw new Error(`loadClothfitPreset: version ${preset.version} not supported (1)`);
   const model = MODELS.get(preset.model);
@@ -2735,8 +2738,30 @@ function checkPresetParameters(model, given) {
 // by three.js's own MaterialLoader) or the seed's MeshClothMaterial layout (type
 // "MeshClothMaterial"; color / sheen / subsurfaceColor are sRGB hex, decoded to linear by
 // THREE.Color.setHex as MaterialLoader does; roughness perceptual; the seed variant).
-function fromThreejsJson(j) {
+//
+// Textures (session 27; before, they were dropped without a word): such a JSON may name textures
+// by uuid (convert's weave textures: `map` and `anisotropyMap`; any MaterialLoader slot:
+// normalMap, roughnessMap, sheenColorMap, ...) and carry ObjectLoader-format `textures` and
+// `images` arrays. options.textures (uuid -> THREE.Texture, as fetchThreejsTextures or
+// ObjectLoader.parseTextures make them) attaches them; a slot whose texture is not given is left
+// empty, listed in userData.clothfit.skippedTextures and warned about on the console (not when
+// options.textures is null: the material without its textures on purpose).
+export function threejsTextureSlots(j) {
+  const uuids = new Set(Array.isArray(j?.textures) ? j.textures.map((t) => t?.uuid).filter((u) => typeof u === 'string') : []);
+  const slots = [];
+  for (const [k, v] of Object.entries(j ?? {})) {
+    if (k === 'uuid' || k === 'name' || k === 'type' || typeof v !== 'string') continue;
+    if (uuids.has(v) || k === 'map' || /Map$/.test(k)) slots.push([k, v]);
+  }
+  return slots;
+}
+
+function fromThreejsJson(j, options = {}) {
+  const given = options.textures ?? {};
+  const slots = threejsTextureSlots(j);
   let m;
+  const isSlot = (mat, k) => k in mat && (mat[k] === null || mat[k]?.isTexture);
+  const skipped = [];
   if (j.type === 'MeshClothMaterial') {
     m = new MeshClothMaterial({
       color: new THREE.Color().setHex(j.color ?? 0xffffff),
@@ -2748,12 +2773,85 @@ function fromThreejsJson(j) {
       variant: ClothVariant.SEED,
     });
     m.name = j.name ?? '';
+    for (const [k, uuid] of slots) {
+      if (given[uuid]?.isTexture && isSlot(m, k)) m[k] = given[uuid];
+      else skipped.push(k);
+    }
   } else {
-    m = new THREE.MaterialLoader().parse(j);
+    // Slots whose texture is not given are taken out before MaterialLoader sees them (it would
+    // set them to undefined with a bare "Undefined texture" warning).
+    const missing = new Set(slots.filter(([, uuid]) => !given[uuid]?.isTexture).map(([k]) => k));
+    const src = missing.size ? Object.fromEntries(Object.entries(j).filter(([k]) => !missing.has(k))) : j;
+    m = new THREE.MaterialLoader().setTextures(given).parse(src);
+    for (const [k] of slots) if (missing.has(k) || !isSlot(m, k)) skipped.push(k);
   }
   if (j.side !== undefined) m.side = j.side;
   m.userData.clothfit = { schema: 'three.js', model: j.type, parameters: {}, source: j };
+  if (skipped.length) {
+    m.userData.clothfit.skippedTextures = skipped;
+    if (options.textures !== null) {
+      const why = options.texturesNote ?? 'the JSON names them by uuid; its "images" and "textures" must be loaded';
+      console.warn(`loadClothfitPreset: ${JSON.stringify(j.name ?? j.type ?? '')}: textures not loaded (${skipped.join(', ')}): ${why}; drawn without them. Load the file with fetchClothfitPreset(url), which loads the images next to it, or pass {textures} (uuid -> THREE.Texture, fetchThreejsTextures)`);
+    }
+  }
   return m;
+}
+
+/**
+ * The textures of a three.js MaterialLoader JSON (ObjectLoader-format "images" and "textures",
+ * as `clothfit convert --to threejs` writes them): uuid -> THREE.Texture, for
+ * loadClothfitPreset(json, {textures}). An image `url` is relative to jsonUrl and is refused if it
+ * is absolute, has a scheme or leaves the JSON's directory (the rule of weave_maps.uri), except
+ * "data:image/..." URLs; embedded image data ({data, width, height, type}, three.js's
+ * DataTexture form) is taken as it is. Each texture's `anisotropy` is clamped to the renderer's
+ * max (options.renderer). Decoding a PNG or JPEG needs a DOM (an HTMLImageElement): where there is
+ * none (node) such images are skipped and listed in `skipped` with the reason.
+ * Returns {textures, skipped: [{field, why}]}; a malformed entry or an image that fails to load
+ * throws, naming the field and the URL.
+ */
+export async function fetchThreejsTextures(json, jsonUrl, options = {}) {
+  const images = json?.images ?? [], textures = json?.textures ?? [];
+  if (!Array.isArray(images)) throw new Error('images: expected an array');
+  if (!Array.isArray(textures)) throw new Error('textures: expected an array');
+  const hasDom = typeof document !== 'undefined' && typeof document.createElementNS === 'function';
+  const loader = new THREE.ObjectLoader().setResourcePath('');
+  const loaded = {}, skipped = [];
+  for (let i = 0; i < images.length; ++i) {
+    const im = images[i], f = `images[${i}]`;
+    if (im === null || typeof im !== 'object' || Array.isArray(im)) throw new Error(`${f}: expected an object {uuid, url}`);
+    if (typeof im.uuid !== 'string') throw new Error(`${f}.uuid: expected a string`);
+    const one = (u, fu) => {
+      if (typeof u === 'string') return /^data:image\/[a-z0-9.+-]+[;,]/i.test(u) ? u : weaveMapUriUrl(u, jsonUrl, `${fu}`);
+      if (u !== null && typeof u === 'object' && !Array.isArray(u) && u.data !== undefined) return u;
+      throw new Error(`${fu}: expected a URL relative to the JSON or embedded image data {data, width, height, type}`);
+    };
+    const url = Array.isArray(im.url) ? im.url.map((u, k) => one(u, `${f}.url[${k}]`)) : one(im.url, `${f}.url`);
+    if (!hasDom && [url].flat().some((u) => typeof u === 'string')) {
+      skipped.push({ field: `${f}.url`, why: 'no DOM to decode PNG / JPEG images in (node)' });
+      continue;
+    }
+    try {
+      Object.assign(loaded, await loader.parseImagesAsync([{ uuid: im.uuid, url }]));
+    } catch (e) {
+      throw new Error(`${f}.url: cannot load ${[url].flat().map((u) => (typeof u === 'string' ? u.slice(0, 200) : 'embedded data')).join(', ')}${e instanceof Error ? `: ${e.message}` : ' (not found or not an image)'}`);
+    }
+  }
+  const maxAnisotropy = options.maxAnisotropy ?? options.renderer?.capabilities?.getMaxAnisotropy?.() ?? Infinity;
+  const out = {};
+  for (let i = 0; i < textures.length; ++i) {
+    const t = textures[i], f = `textures[${i}]`;
+    if (t === null || typeof t !== 'object' || Array.isArray(t)) throw new Error(`${f}: expected an object {uuid, image, ...}`);
+    if (typeof t.uuid !== 'string') throw new Error(`${f}.uuid: expected a string`);
+    if (!images.some((im) => im?.uuid === t.image)) throw new Error(`${f}.image: ${ylKeyShown(String(t.image))} is not the uuid of an entry of "images"`);
+    if (!loaded[t.image]) continue;  // its image is in `skipped`
+    const [tex] = Object.values(loader.parseTextures([t], loaded));
+    if (tex.anisotropy > maxAnisotropy) {
+      console.info(`clothfit: ${f} (${ylKeyShown(t.name ?? t.uuid)}): anisotropy ${tex.anisotropy} clamped to the renderer's max anisotropy ${maxAnisotropy}`);
+      tex.anisotropy = maxAnisotropy;
+    }
+    out[t.uuid] = tex;
+  }
+  return { textures: out, skipped };
 }
 
 // options.resolveWeaveMapPath(file, presetUrl): where the preset's weave-map file is fetched
@@ -2764,6 +2862,12 @@ export async function fetchClothfitPreset(url, options = {}) {
   try {
     j = JSON.parse(text);
     presetIntegerLiterals(text);
+    if (j?.metadata?.type === 'Material') {
+      // three.js JSON from `clothfit convert --to threejs`: its textures, loaded next to it
+      const { textures, skipped } = await fetchThreejsTextures(j, url, options);
+      const texturesNote = skipped.length ? `${skipped.map((x) => x.field).join(', ')} skipped: ${[...new Set(skipped.map((x) => x.why))].join('; ')}` : undefined;
+      return loadClothfitPreset(j, { textures, texturesNote });
+    }
     const weaveMaps = j?.schema === 'clothfit.preset' ? await fetchWeaveMaps(j, url, options) : null;
     return loadClothfitPreset(j, { weaveMaps });
   } catch (e) {
