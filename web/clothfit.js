@@ -2898,6 +2898,22 @@ export function environmentUrl(path, cardUrl, options = {}) {
   return resolveRelative(`${path}.exr`, options.hdriBase ?? new URL('/hdri/', cardUrl).href);
 }
 
+/**
+ * The message for an environment map that did not load (session 27): a name ('studio') that is
+ * not found (HTTP 404) is an HDRI missing from the data cache, with the command that fetches it;
+ * any other failure names the environment and the URL.
+ */
+export function environmentLoadError(path, url, e) {
+  const status = e?.response?.status;
+  const shown = JSON.stringify(String(path));
+  const isName = typeof path === 'string' && !path.includes('/') && !/\.[A-Za-z0-9]+$/.test(path);
+  if (status === 404 && isName) {
+    return `environment ${shown}: ${url} not found (HTTP 404): the HDRI is not in the data cache. Run scripts/fetch-data (or make data) to fetch the HDRIs into $CLOTHFIT_DATA/hdri (default ~/.cache/clothfit/hdri), which web/serve.mjs serves at /hdri/, then reload`;
+  }
+  if (status === 404) return `environment ${shown}: ${url} not found (HTTP 404; a path is relative to the scene card)`;
+  return `environment ${shown}: ${url}: ${e instanceof Error ? e.message : String(e?.type ?? e)}`;
+}
+
 const envCache = new Map();
 const pmremCache = new WeakMap();  // renderer -> Map(key -> Promise<{target, source}>)
 
@@ -2975,7 +2991,9 @@ async function pmremForTexture(renderer, key, texture) {
 async function loadEquirect(url) {
   if (!envCache.has(url)) {
     const loader = /\.hdr$/i.test(url) ? new HDRLoader() : new EXRLoader();
-    envCache.set(url, loader.loadAsync(url).then((t) => {
+    const loading = loader.loadAsync(url);
+    loading.catch(() => envCache.delete(url));  // not cached: a later call tries again (after scripts/fetch-data)
+    envCache.set(url, loading.then((t) => {
       t.mapping = THREE.EquirectangularReflectionMapping;
       const st = clampEnvironmentTexels(t);
       if (st.negative || st.nonfinite) {
@@ -3258,7 +3276,12 @@ export async function loadSceneCard(url, options = {}) {
       const renderer = options.renderer;
       if (!renderer) throw new Error('loadSceneCard: options.renderer is needed for the environment PMREM');
       const url = environmentUrl(path, cardUrl, options);
-      const eq = await loadEquirect(url);
+      let eq;
+      try {
+        eq = await loadEquirect(url);
+      } catch (e) {
+        throw new Error(environmentLoadError(path, url, e));
+      }
       const rot = THREE.MathUtils.degToRad(rotationYDegrees);
       let target;
       const sp = sun !== 'off' ? await sunSplitFor(url, sun) : null;
