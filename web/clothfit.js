@@ -411,8 +411,9 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
 //     > 0) E_d by filtered importance sampling of the PMREM (wovenFisRadiance /
 //     wovenFisIrradianceOverPi below; docs/web.md "Filtered importance sampling").
 // No geometryRoughness (as the C++ preview for this model). A mesh without a TANGENT attribute
-// gets BufferGeometry.computeTangents() (three.js's own, not clothfit's generator: a stated
-// difference for such meshes; the canonical glTFs carry TANGENT).
+// gets BufferGeometry.computeTangents() after its first frame (three.js's own, not clothfit's
+// generator: a stated difference for such meshes; the canonical glTFs carry TANGENT; see
+// onBeforeRender).
 
 export const WOVEN_PHASE_BETAS = Object.freeze([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]);
 const WOVEN_MIN_ROUGHNESS = 0.045, WOVEN_MAX_BETA = 8.0;
@@ -1137,6 +1138,8 @@ vWovenWeaveUv = ( wovenWeaveTransform * vec3( uv, 1.0 ) ).xy;
 #endif
 `;
 
+const wovenTangentsPending = new WeakSet();  // geometries whose tangents are computed after this frame
+
 // The horizon fade's light slots: the environment's sun and its panels (web/sun.js).
 const WOVEN_AREA_LIGHTS = 1 + MAX_PANEL_LIGHTS;
 const _areaDir = new THREE.Vector3(), _areaTarget = new THREE.Vector3();
@@ -1812,7 +1815,18 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
   }
 
   onBeforeRender(renderer, scene, camera, geometry) {
-    if (!geometry.attributes.tangent && geometry.attributes.uv && geometry.index) geometry.computeTangents();
+    // A mesh without TANGENT: three.js's computeTangents, added AFTER this frame (session 27).
+    // three.js r187 uploads a geometry's attributes before onBeforeRender and caches the vertex
+    // bindings at the draw, so an attribute added here was never bound: the tangent read as
+    // (0, 0, 0) and the lit fabric drew black on such a mesh (web/test/own-page.test.mjs). Added
+    // between frames, the next frame uploads and binds it; this first frame has no tangent.
+    if (!geometry.attributes.tangent && geometry.attributes.uv && geometry.index && !wovenTangentsPending.has(geometry)) {
+      wovenTangentsPending.add(geometry);
+      queueMicrotask(() => {
+        wovenTangentsPending.delete(geometry);
+        if (!geometry.attributes.tangent) geometry.computeTangents();
+      });
+    }
     this._updateWovenUniforms();
     // The horizon fade's lights (scene.userData.clothfitAreaLights, set by setEnvironment: the
     // environment's sun and panels, each with userData.sinAngularRadius), in view space as
