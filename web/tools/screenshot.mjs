@@ -42,7 +42,10 @@ const query = opts.query;
 const timeoutS = opts.timeout;
 let done;
 const shot = new Promise((r) => { done = r; });
-const server = await startServer({ onShot: (png) => done(png), onLog: (m) => console.error(`page: ${m}`) });
+// The page's log is untrusted text (it may quote the query string): control and bidi characters
+// are shown escaped, never sent to the terminal as they are.
+const printable = (t) => t.replace(/[\u0000-\u0008\u000b-\u001f\u007f-\u009f\u200e\u200f\u202a-\u202e\u2066-\u2069]/g, (c) => `\\u${c.charCodeAt(0).toString(16).padStart(4, '0')}`);
+const server = await startServer({ onShot: (png) => done(png), onLog: (m) => console.error(`page: ${printable(m)}`) });
 const url = `http://127.0.0.1:${server.address().port}/web/viewer.html?shot=1&${query}`;
 const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'clothfit-shot-'));
 const browser = spawn(opts.chromium, ['--headless=new', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
