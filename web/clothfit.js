@@ -46,13 +46,47 @@ const HERE = new URL('.', import.meta.url);
 let clothDGPromise = null;
 let clothDGTexture = null;
 
+// The tables (web/lut/*.f32) sit next to this module. A browser fetches them by URL; node's
+// fetch does not read file: URLs ("fetch failed ... not implemented"), so in node a file: URL is
+// read from disk (session 27: a MeshClothMaterial made in node crashed the process with that
+// unhandled rejection). Errors name the table, the URL and what to serve.
+async function loadTableBytes(url, what) {
+  if (url.protocol === 'file:' && globalThis.process?.versions?.node) {
+    const fsModule = 'node:fs/promises';  // a variable: browser bundlers leave the import alone
+    const { readFile } = await import(/* @vite-ignore */ fsModule);
+    let buf;
+    try {
+      buf = await readFile(url);
+    } catch (e) {
+      throw new Error(`${what}: cannot read ${decodeURIComponent(url.pathname)}: ${e.code ?? e.message} (web/lut/ must stay next to clothfit.js)`);
+    }
+    return buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength);
+  }
+  let r;
+  try {
+    r = await fetch(url);
+  } catch (e) {
+    throw new Error(`${what}: cannot fetch ${url.href}: ${e.message}${e.cause?.message ? ` (${e.cause.message})` : ''}`);
+  }
+  if (!r.ok) throw new Error(`${what}: ${url.href}: HTTP ${r.status} (serve web/lut/ next to clothfit.js; docs/web.md "Use it in your own page")`);
+  return r.arrayBuffer();
+}
+
+// A material's constructor starts the table load without awaiting it: a failure is reported
+// once per table on the console (not an unhandled rejection); awaiting clothDGTable() /
+// wovenPhaseTable() (loadSceneCard does) still throws it.
+const reportedTableErrors = new WeakSet();
+function reportTableError(promise) {
+  promise.catch((e) => {
+    if (reportedTableErrors.has(promise)) return;
+    reportedTableErrors.add(promise);
+    console.error(`clothfit: ${e.message}; materials that need it do not draw correctly`);
+  });
+}
+
 export function clothDGTable() {
   if (!clothDGPromise) {
-    clothDGPromise = fetch(new URL('lut/cloth_dg_128.f32', HERE))
-      .then((r) => {
-        if (!r.ok) throw new Error(`cloth DG table: HTTP ${r.status}`);
-        return r.arrayBuffer();
-      })
+    clothDGPromise = loadTableBytes(new URL('lut/cloth_dg_128.f32', HERE), 'cloth DG table')
       .then((buf) => {
         const data = new Float32Array(buf);
         const n = Math.round(Math.sqrt(data.length));
@@ -296,7 +330,10 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
       clothSubsurfaceIntensity: { value: 0.5 },
       clothDG: { value: clothDGTexture },
     };
-    if (!clothDGTexture) clothDGTable().then((t) => { this._clothUniforms.clothDG.value = t; this.needsUpdate = true; });
+    if (!clothDGTexture) {
+      clothDGTable().then((t) => { this._clothUniforms.clothDG.value = t; this.needsUpdate = true; }, () => {});
+      reportTableError(clothDGPromise);
+    }
   }
 
   // The sheen colour the engine uses (brdf/cloth.h EffectiveSheen).
@@ -374,8 +411,9 @@ export class MeshClothMaterial extends THREE.MeshStandardMaterial {
 //     > 0) E_d by filtered importance sampling of the PMREM (wovenFisRadiance /
 //     wovenFisIrradianceOverPi below; docs/web.md "Filtered importance sampling").
 // No geometryRoughness (as the C++ preview for this model). A mesh without a TANGENT attribute
-// gets BufferGeometry.computeTangents() (three.js's own, not clothfit's generator: a stated
-// difference for such meshes; the canonical glTFs carry TANGENT).
+// gets BufferGeometry.computeTangents() after its first frame (three.js's own, not clothfit's
+// generator: a stated difference for such meshes; the canonical glTFs carry TANGENT; see
+// onBeforeRender).
 
 export const WOVEN_PHASE_BETAS = Object.freeze([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]);
 const WOVEN_MIN_ROUGHNESS = 0.045, WOVEN_MAX_BETA = 8.0;
@@ -384,11 +422,7 @@ let wovenPhasePromise = null;
 let wovenPhaseTexture = null;
 export function wovenPhaseTable() {
   if (!wovenPhasePromise) {
-    wovenPhasePromise = fetch(new URL('lut/woven_phase_32.f32', HERE))
-      .then((r) => {
-        if (!r.ok) throw new Error(`woven phase table: HTTP ${r.status}`);
-        return r.arrayBuffer();
-      })
+    wovenPhasePromise = loadTableBytes(new URL('lut/woven_phase_32.f32', HERE), 'woven phase table')
       .then((buf) => {
         const data = new Float32Array(buf);
         const n = 32, ch = WOVEN_PHASE_BETAS.length;
@@ -1104,6 +1138,8 @@ vWovenWeaveUv = ( wovenWeaveTransform * vec3( uv, 1.0 ) ).xy;
 #endif
 `;
 
+const wovenTangentsPending = new WeakSet();  // geometries whose tangents are computed after this frame
+
 // The horizon fade's light slots: the environment's sun and its panels (web/sun.js).
 const WOVEN_AREA_LIGHTS = 1 + MAX_PANEL_LIGHTS;
 const _areaDir = new THREE.Vector3(), _areaTarget = new THREE.Vector3();
@@ -1701,8 +1737,14 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
     this.weaveMaps = null;  // a WeaveMaps (weaveMapsFromExr) or null: the uniform material
     this._setYarnLobe(yarnLobe);
     this._updateWovenUniforms();
-    if (!wovenPhaseTexture) wovenPhaseTable().then(() => { this.needsUpdate = true; });
-    if (!clothDGTexture) clothDGTable().then(() => { this.needsUpdate = true; });
+    if (!wovenPhaseTexture) {
+      wovenPhaseTable().then(() => { this.needsUpdate = true; }, () => {});
+      reportTableError(wovenPhasePromise);
+    }
+    if (!clothDGTexture) {
+      clothDGTable().then(() => { this.needsUpdate = true; }, () => {});
+      reportTableError(clothDGPromise);
+    }
   }
 
   _updateWovenUniforms() {
@@ -1773,7 +1815,18 @@ export class MeshWovenMaterial extends THREE.MeshStandardMaterial {
   }
 
   onBeforeRender(renderer, scene, camera, geometry) {
-    if (!geometry.attributes.tangent && geometry.attributes.uv && geometry.index) geometry.computeTangents();
+    // A mesh without TANGENT: three.js's computeTangents, added AFTER this frame (session 27).
+    // three.js r187 uploads a geometry's attributes before onBeforeRender and caches the vertex
+    // bindings at the draw, so an attribute added here was never bound: the tangent read as
+    // (0, 0, 0) and the lit fabric drew black on such a mesh (web/test/own-page.test.mjs). Added
+    // between frames, the next frame uploads and binds it; this first frame has no tangent.
+    if (!geometry.attributes.tangent && geometry.attributes.uv && geometry.index && !wovenTangentsPending.has(geometry)) {
+      wovenTangentsPending.add(geometry);
+      queueMicrotask(() => {
+        wovenTangentsPending.delete(geometry);
+        if (!geometry.attributes.tangent) geometry.computeTangents();
+      });
+    }
     this._updateWovenUniforms();
     // The horizon fade's lights (scene.userData.clothfitAreaLights, set by setEnvironment: the
     // environment's sun and panels, each with userData.sinAngularRadius), in view space as
@@ -2599,11 +2652,14 @@ export function wovenOptions(w) {
  * A preset naming "weave_maps" (woven, physical-aniso) needs options.weaveMaps: the parsed maps
  * (fetchWeaveMaps / weaveMapsFromExr), or null to draw the uniform material on purpose;
  * fetchClothfitPreset(url) fetches them next to the preset.
+ * three.js JSON (`clothfit convert --to threejs`) naming textures takes options.textures
+ * (uuid -> THREE.Texture: fetchThreejsTextures); without them it is drawn without its textures,
+ * with a console warning and userData.clothfit.skippedTextures listing the slots.
  */
 export function loadClothfitPreset(json, options = {}) {
   if (typeof json === 'string') presetIntegerLiterals(json);  // "fis_taps": 16.0 etc. (C++ refuses them)
   const preset = typeof json === 'string' ? JSON.parse(json) : json;
-  if (preset?.metadata?.type === 'Material') return fromThreejsJson(preset);
+  if (preset?.metadata?.type === 'Material') return fromThreejsJson(preset, options);
   if (preset?.schema !== 'clothfit.preset') throw new Error('loadClothfitPreset: schema is not "clothfit.preset"');
   if (preset.version !== 1) throw new Error(`loadClothfitPreset: version ${preset.version} not supported (1)`);
   const model = MODELS.get(preset.model);
@@ -2694,8 +2750,30 @@ function checkPresetParameters(model, given) {
 // by three.js's own MaterialLoader) or the seed's MeshClothMaterial layout (type
 // "MeshClothMaterial"; color / sheen / subsurfaceColor are sRGB hex, decoded to linear by
 // THREE.Color.setHex as MaterialLoader does; roughness perceptual; the seed variant).
-function fromThreejsJson(j) {
+//
+// Textures (session 27; before, they were dropped without a word): such a JSON may name textures
+// by uuid (convert's weave textures: `map` and `anisotropyMap`; any MaterialLoader slot:
+// normalMap, roughnessMap, sheenColorMap, ...) and carry ObjectLoader-format `textures` and
+// `images` arrays. options.textures (uuid -> THREE.Texture, as fetchThreejsTextures or
+// ObjectLoader.parseTextures make them) attaches them; a slot whose texture is not given is left
+// empty, listed in userData.clothfit.skippedTextures and warned about on the console (not when
+// options.textures is null: the material without its textures on purpose).
+export function threejsTextureSlots(j) {
+  const uuids = new Set(Array.isArray(j?.textures) ? j.textures.map((t) => t?.uuid).filter((u) => typeof u === 'string') : []);
+  const slots = [];
+  for (const [k, v] of Object.entries(j ?? {})) {
+    if (k === 'uuid' || k === 'name' || k === 'type' || typeof v !== 'string') continue;
+    if (uuids.has(v) || k === 'map' || /Map$/.test(k)) slots.push([k, v]);
+  }
+  return slots;
+}
+
+function fromThreejsJson(j, options = {}) {
+  const given = options.textures ?? {};
+  const slots = threejsTextureSlots(j);
   let m;
+  const isSlot = (mat, k) => k in mat && (mat[k] === null || mat[k]?.isTexture);
+  const skipped = [];
   if (j.type === 'MeshClothMaterial') {
     m = new MeshClothMaterial({
       color: new THREE.Color().setHex(j.color ?? 0xffffff),
@@ -2707,12 +2785,85 @@ function fromThreejsJson(j) {
       variant: ClothVariant.SEED,
     });
     m.name = j.name ?? '';
+    for (const [k, uuid] of slots) {
+      if (given[uuid]?.isTexture && isSlot(m, k)) m[k] = given[uuid];
+      else skipped.push(k);
+    }
   } else {
-    m = new THREE.MaterialLoader().parse(j);
+    // Slots whose texture is not given are taken out before MaterialLoader sees them (it would
+    // set them to undefined with a bare "Undefined texture" warning).
+    const missing = new Set(slots.filter(([, uuid]) => !given[uuid]?.isTexture).map(([k]) => k));
+    const src = missing.size ? Object.fromEntries(Object.entries(j).filter(([k]) => !missing.has(k))) : j;
+    m = new THREE.MaterialLoader().setTextures(given).parse(src);
+    for (const [k] of slots) if (missing.has(k) || !isSlot(m, k)) skipped.push(k);
   }
   if (j.side !== undefined) m.side = j.side;
   m.userData.clothfit = { schema: 'three.js', model: j.type, parameters: {}, source: j };
+  if (skipped.length) {
+    m.userData.clothfit.skippedTextures = skipped;
+    if (options.textures !== null) {
+      const why = options.texturesNote ?? 'the JSON names them by uuid; its "images" and "textures" must be loaded';
+      console.warn(`loadClothfitPreset: ${JSON.stringify(j.name ?? j.type ?? '')}: textures not loaded (${skipped.join(', ')}): ${why}; drawn without them. Load the file with fetchClothfitPreset(url), which loads the images next to it, or pass {textures} (uuid -> THREE.Texture, fetchThreejsTextures)`);
+    }
+  }
   return m;
+}
+
+/**
+ * The textures of a three.js MaterialLoader JSON (ObjectLoader-format "images" and "textures",
+ * as `clothfit convert --to threejs` writes them): uuid -> THREE.Texture, for
+ * loadClothfitPreset(json, {textures}). An image `url` is relative to jsonUrl and is refused if it
+ * is absolute, has a scheme or leaves the JSON's directory (the rule of weave_maps.uri), except
+ * "data:image/..." URLs; embedded image data ({data, width, height, type}, three.js's
+ * DataTexture form) is taken as it is. Each texture's `anisotropy` is clamped to the renderer's
+ * max (options.renderer). Decoding a PNG or JPEG needs a DOM (an HTMLImageElement): where there is
+ * none (node) such images are skipped and listed in `skipped` with the reason.
+ * Returns {textures, skipped: [{field, why}]}; a malformed entry or an image that fails to load
+ * throws, naming the field and the URL.
+ */
+export async function fetchThreejsTextures(json, jsonUrl, options = {}) {
+  const images = json?.images ?? [], textures = json?.textures ?? [];
+  if (!Array.isArray(images)) throw new Error('images: expected an array');
+  if (!Array.isArray(textures)) throw new Error('textures: expected an array');
+  const hasDom = typeof document !== 'undefined' && typeof document.createElementNS === 'function';
+  const loader = new THREE.ObjectLoader().setResourcePath('');
+  const loaded = {}, skipped = [];
+  for (let i = 0; i < images.length; ++i) {
+    const im = images[i], f = `images[${i}]`;
+    if (im === null || typeof im !== 'object' || Array.isArray(im)) throw new Error(`${f}: expected an object {uuid, url}`);
+    if (typeof im.uuid !== 'string') throw new Error(`${f}.uuid: expected a string`);
+    const one = (u, fu) => {
+      if (typeof u === 'string') return /^data:image\/[a-z0-9.+-]+[;,]/i.test(u) ? u : weaveMapUriUrl(u, jsonUrl, `${fu}`);
+      if (u !== null && typeof u === 'object' && !Array.isArray(u) && u.data !== undefined) return u;
+      throw new Error(`${fu}: expected a URL relative to the JSON or embedded image data {data, width, height, type}`);
+    };
+    const url = Array.isArray(im.url) ? im.url.map((u, k) => one(u, `${f}.url[${k}]`)) : one(im.url, `${f}.url`);
+    if (!hasDom && [url].flat().some((u) => typeof u === 'string')) {
+      skipped.push({ field: `${f}.url`, why: 'no DOM to decode PNG / JPEG images in (node)' });
+      continue;
+    }
+    try {
+      Object.assign(loaded, await loader.parseImagesAsync([{ uuid: im.uuid, url }]));
+    } catch (e) {
+      throw new Error(`${f}.url: cannot load ${[url].flat().map((u) => (typeof u === 'string' ? u.slice(0, 200) : 'embedded data')).join(', ')}${e instanceof Error ? `: ${e.message}` : ' (not found or not an image)'}`);
+    }
+  }
+  const maxAnisotropy = options.maxAnisotropy ?? options.renderer?.capabilities?.getMaxAnisotropy?.() ?? Infinity;
+  const out = {};
+  for (let i = 0; i < textures.length; ++i) {
+    const t = textures[i], f = `textures[${i}]`;
+    if (t === null || typeof t !== 'object' || Array.isArray(t)) throw new Error(`${f}: expected an object {uuid, image, ...}`);
+    if (typeof t.uuid !== 'string') throw new Error(`${f}.uuid: expected a string`);
+    if (!images.some((im) => im?.uuid === t.image)) throw new Error(`${f}.image: ${ylKeyShown(String(t.image))} is not the uuid of an entry of "images"`);
+    if (!loaded[t.image]) continue;  // its image is in `skipped`
+    const [tex] = Object.values(loader.parseTextures([t], loaded));
+    if (tex.anisotropy > maxAnisotropy) {
+      console.info(`clothfit: ${f} (${ylKeyShown(t.name ?? t.uuid)}): anisotropy ${tex.anisotropy} clamped to the renderer's max anisotropy ${maxAnisotropy}`);
+      tex.anisotropy = maxAnisotropy;
+    }
+    out[t.uuid] = tex;
+  }
+  return { textures: out, skipped };
 }
 
 // options.resolveWeaveMapPath(file, presetUrl): where the preset's weave-map file is fetched
@@ -2723,6 +2874,12 @@ export async function fetchClothfitPreset(url, options = {}) {
   try {
     j = JSON.parse(text);
     presetIntegerLiterals(text);
+    if (j?.metadata?.type === 'Material') {
+      // three.js JSON from `clothfit convert --to threejs`: its textures, loaded next to it
+      const { textures, skipped } = await fetchThreejsTextures(j, url, options);
+      const texturesNote = skipped.length ? `${skipped.map((x) => x.field).join(', ')} skipped: ${[...new Set(skipped.map((x) => x.why))].join('; ')}` : undefined;
+      return loadClothfitPreset(j, { textures, texturesNote });
+    }
     const weaveMaps = j?.schema === 'clothfit.preset' ? await fetchWeaveMaps(j, url, options) : null;
     return loadClothfitPreset(j, { weaveMaps });
   } catch (e) {
@@ -2751,6 +2908,22 @@ export function environmentUrl(path, cardUrl, options = {}) {
   if (options.resolvePath) return options.resolvePath(path, cardUrl);
   if (path.includes('/') || /\.[A-Za-z0-9]+$/.test(path)) return resolveRelative(path, cardUrl);
   return resolveRelative(`${path}.exr`, options.hdriBase ?? new URL('/hdri/', cardUrl).href);
+}
+
+/**
+ * The message for an environment map that did not load (session 27): a name ('studio') that is
+ * not found (HTTP 404) is an HDRI missing from the data cache, with the command that fetches it;
+ * any other failure names the environment and the URL.
+ */
+export function environmentLoadError(path, url, e) {
+  const status = e?.response?.status;
+  const shown = JSON.stringify(String(path));
+  const isName = typeof path === 'string' && !path.includes('/') && !/\.[A-Za-z0-9]+$/.test(path);
+  if (status === 404 && isName) {
+    return `environment ${shown}: ${url} not found (HTTP 404): the HDRI is not in the data cache. Run scripts/fetch-data (or make data) to fetch the HDRIs into $CLOTHFIT_DATA/hdri (default ~/.cache/clothfit/hdri), which web/serve.mjs serves at /hdri/, then reload`;
+  }
+  if (status === 404) return `environment ${shown}: ${url} not found (HTTP 404; a path is relative to the scene card)`;
+  return `environment ${shown}: ${url}: ${e instanceof Error ? e.message : String(e?.type ?? e)}`;
 }
 
 const envCache = new Map();
@@ -2830,7 +3003,9 @@ async function pmremForTexture(renderer, key, texture) {
 async function loadEquirect(url) {
   if (!envCache.has(url)) {
     const loader = /\.hdr$/i.test(url) ? new HDRLoader() : new EXRLoader();
-    envCache.set(url, loader.loadAsync(url).then((t) => {
+    const loading = loader.loadAsync(url);
+    loading.catch(() => envCache.delete(url));  // not cached: a later call tries again (after scripts/fetch-data)
+    envCache.set(url, loading.then((t) => {
       t.mapping = THREE.EquirectangularReflectionMapping;
       const st = clampEnvironmentTexels(t);
       if (st.negative || st.nonfinite) {
@@ -3113,7 +3288,12 @@ export async function loadSceneCard(url, options = {}) {
       const renderer = options.renderer;
       if (!renderer) throw new Error('loadSceneCard: options.renderer is needed for the environment PMREM');
       const url = environmentUrl(path, cardUrl, options);
-      const eq = await loadEquirect(url);
+      let eq;
+      try {
+        eq = await loadEquirect(url);
+      } catch (e) {
+        throw new Error(environmentLoadError(path, url, e));
+      }
       const rot = THREE.MathUtils.degToRad(rotationYDegrees);
       let target;
       const sp = sun !== 'off' ? await sunSplitFor(url, sun) : null;

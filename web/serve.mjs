@@ -2,6 +2,8 @@
 // A small static server for web/viewer.html: the repository at /, the HDRI data cache at /hdri/
 // ($CLOTHFIT_DATA/hdri or ~/.cache/clothfit/hdri; /hdri/index.json lists the names), 127.0.0.1 only.
 //   node web/serve.mjs [--port 8000]   then open http://127.0.0.1:8000/web/viewer.html
+// A malformed path ('/%') is a 400, a '..' segment after decoding a 403; a busy port is one line
+// naming it (choose another with --port). Test: web/test/serve.test.mjs.
 // POST /shot (a PNG body) is accepted only when started with onShot (web/tools/screenshot.mjs).
 import fs from 'node:fs';
 import http from 'node:http';
@@ -20,8 +22,29 @@ const MIME = { '.html': 'text/html', '.js': 'text/javascript', '.mjs': 'text/jav
 // symlinked entries of a root are followed).
 export function startServer({ port = 0, onShot = null, onLog = null, onPost = null, fsRoots = [] } = {}) {
   const roots = fsRoots.flatMap((r) => [r, fs.realpathSync(r)]);
-  const server = http.createServer((req, res) => {
-    const url = new URL(req.url, 'http://127.0.0.1');
+  // A refused request: a status and a short plain-text reason (never the request's own text).
+  const refuse = (res, status, why) => {
+    if (!res.headersSent) {
+      res.statusCode = status;
+      res.setHeader('Content-Type', 'text/plain; charset=utf-8');
+    }
+    res.end(`${status} ${why}\n`);
+  };
+  const sendFile = (res, file) => {
+    res.setHeader('Content-Type', MIME[path.extname(file)] ?? 'application/octet-stream');
+    const stream = fs.createReadStream(file);
+    // an unreadable file (EACCES) or one removed meanwhile: answered, not an unhandled 'error'
+    stream.on('error', (e) => refuse(res, e.code === 'EACCES' ? 403 : 500, e.code === 'EACCES' ? 'forbidden' : 'read error'));
+    stream.pipe(res);
+  };
+  const handle = (req, res) => {
+    let url;
+    try {
+      url = new URL(req.url, 'http://127.0.0.1');
+    } catch {
+      refuse(res, 400, 'bad request: malformed URL');
+      return;
+    }
     if (req.method === 'POST') {
       const chunks = [];
       req.on('data', (d) => chunks.push(d));
@@ -34,14 +57,25 @@ export function startServer({ port = 0, onShot = null, onLog = null, onPost = nu
       });
       return;
     }
-    const rel = path.normalize(decodeURIComponent(url.pathname));
+    // The path is decoded once, here: a malformed escape ('/%', '/%zz') is a 400, not an
+    // exception; a NUL is refused; a '..' segment that survived URL normalisation (an encoded
+    // slash: '/web/..%2f..%2fetc') is refused before any file name is built.
+    let decoded;
+    try {
+      decoded = decodeURIComponent(url.pathname);
+    } catch {
+      refuse(res, 400, 'bad request: malformed percent-encoding in the path');
+      return;
+    }
+    if (decoded.includes('\0')) { refuse(res, 400, 'bad request: NUL in the path'); return; }
+    if (decoded.split('/').includes('..')) { refuse(res, 403, 'forbidden: ".." in the path'); return; }
+    const rel = path.normalize(decoded);
     let file;
     if (rel.startsWith('/fs/') && roots.length) {
       file = rel.slice(3);
-      if (!roots.some((r) => file === r || file.startsWith(r + path.sep))) { res.statusCode = 403; res.end(); return; }
-      if (!fs.existsSync(file) || fs.statSync(file).isDirectory()) { res.statusCode = 404; res.end(); return; }
-      res.setHeader('Content-Type', MIME[path.extname(file)] ?? 'application/octet-stream');
-      fs.createReadStream(file).pipe(res);
+      if (!roots.some((r) => file === r || file.startsWith(r + path.sep))) { refuse(res, 403, 'forbidden'); return; }
+      if (!fs.existsSync(file) || fs.statSync(file).isDirectory()) { refuse(res, 404, 'not found'); return; }
+      sendFile(res, file);
       return;
     }
     if (rel === '/hdri/index.json') {
@@ -52,16 +86,58 @@ export function startServer({ port = 0, onShot = null, onLog = null, onPost = nu
     }
     if (rel.startsWith('/hdri/')) file = path.join(hdriDir, rel.slice(6));
     else file = path.join(repoRoot, rel);
-    if (!file.startsWith(repoRoot + path.sep) && !file.startsWith(hdriDir + path.sep)) { res.statusCode = 403; res.end(); return; }
-    if (!fs.existsSync(file) || fs.statSync(file).isDirectory()) { res.statusCode = 404; res.end(); return; }
-    res.setHeader('Content-Type', MIME[path.extname(file)] ?? 'application/octet-stream');
-    fs.createReadStream(file).pipe(res);
+    if (!file.startsWith(repoRoot + path.sep) && !file.startsWith(hdriDir + path.sep)) { refuse(res, 403, 'forbidden'); return; }
+    if (!fs.existsSync(file) || fs.statSync(file).isDirectory()) { refuse(res, 404, 'not found'); return; }
+    sendFile(res, file);
+  };
+  const server = http.createServer((req, res) => {
+    try {
+      handle(req, res);
+    } catch (e) {  // anything else: a 500 for this request, the server goes on
+      console.error(`web/serve.mjs: ${req.method} request failed: ${e.message}`);
+      refuse(res, 500, 'internal error');
+    }
   });
-  return new Promise((resolve) => server.listen(port, '127.0.0.1', () => resolve(server)));
+  // Rejects on a listen error (EADDRINUSE, EACCES) instead of an unhandled 'error' event.
+  return new Promise((resolve, reject) => {
+    server.once('error', reject);
+    server.listen(port, '127.0.0.1', () => {
+      server.removeListener('error', reject);
+      resolve(server);
+    });
+  });
 }
 
+const USAGE = `Usage: node web/serve.mjs [--port N]
+Serves the repository at / and the HDRI data cache at /hdri/ on 127.0.0.1 (default port 8000;
+--port 0 picks a free one), then open http://127.0.0.1:PORT/web/viewer.html (docs/web.md).`;
+
 if (process.argv[1] && fileURLToPath(import.meta.url) === path.resolve(process.argv[1])) {
-  const i = process.argv.indexOf('--port');
-  const server = await startServer({ port: i > 0 ? Number(process.argv[i + 1]) : 8000 });
+  const argv = process.argv.slice(2);
+  let port = 8000;
+  for (let i = 0; i < argv.length; ++i) {
+    const a = argv[i];
+    if (a === '--help' || a === '-h') { console.log(USAGE); process.exit(0); }
+    if (a === '--port' || a.startsWith('--port=')) {
+      const v = a === '--port' ? argv[++i] : a.slice(7);
+      if (v === undefined || !/^\d+$/.test(v) || Number(v) > 65535) {
+        console.error(`web/serve.mjs: --port: expected an integer in [0, 65535], got ${v === undefined ? 'nothing' : JSON.stringify(v)}`);
+        process.exit(2);
+      }
+      port = Number(v);
+    } else {
+      console.error(`web/serve.mjs: unknown option ${JSON.stringify(a)}\n${USAGE}`);
+      process.exit(2);
+    }
+  }
+  let server;
+  try {
+    server = await startServer({ port });
+  } catch (e) {
+    if (e.code === 'EADDRINUSE') console.error(`web/serve.mjs: port ${port} is already in use (another web/serve.mjs?); choose another with --port N, or --port 0 for a free one`);
+    else if (e.code === 'EACCES') console.error(`web/serve.mjs: port ${port} needs privileges to listen on; choose a port above 1023 with --port N, or --port 0 for a free one`);
+    else console.error(`web/serve.mjs: cannot listen on 127.0.0.1:${port}: ${e.message}`);
+    process.exit(1);
+  }
   console.log(`clothfit viewer: http://127.0.0.1:${server.address().port}/web/viewer.html`);
 }

@@ -6,9 +6,13 @@
 // environment.sun, else auto), shot (=1: POST the first finished frame as PNG to /shot, for
 // web/tools/screenshot.mjs), shadows (1 | 0 | a JSON object of shadow settings; session 13),
 // units (N: keep the shadow maps within N texture units, as on such a GPU; session 23).
+// Untrusted text (the query string, file names, preset contents, error messages) reaches the page
+// only as text (web/viewer-ui.js); errors show their message in the error panel, the stack goes
+// to the console (session 27).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
-import { loadSceneCard, fetchClothfitPreset } from './clothfit.js';
+import { loadSceneCard, fetchClothfitPreset, loadClothfitPreset } from './clothfit.js';
+import { fillSelect, showError, clearError, parseShadowsParam, parseUnitsParam, readLocalPreset } from './viewer-ui.js';
 
 const q = new URLSearchParams(location.search);
 const CARDS = ['../datasets/scenes/sphere.json', '../datasets/scenes/drape.json', '../datasets/scenes/swatch.json'];
@@ -16,29 +20,26 @@ const cardUrl = q.get('card') ?? CARDS[0];
 const presets = (q.get('presets') ?? q.get('preset') ?? '../docs/presets/twill-handpicked-cloth.json').split(',');
 const presetUrl = q.get('preset') ?? presets[0];
 const info = document.getElementById('info');
+const errorPanel = document.getElementById('error');
 const canvas = document.getElementById('c');
 const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: q.has('shot') });
 
-function fill(select, values, current, label = (v) => v) {
-  const list = values.includes(current) ? values : [current, ...values];
-  select.innerHTML = list.map((v) => `<option value="${v}"${v === current ? ' selected' : ''}>${label(v)}</option>`).join('');
-}
 const base = (u) => u.split('/').pop().replace(/\.json$/, '');
 
 async function main() {
-  fill(document.getElementById('card'), CARDS, cardUrl, base);
-  fill(document.getElementById('preset'), presets, presetUrl, base);
-  const names = await fetch('/hdri/index.json').then((r) => (r.ok ? r.json() : [])).catch(() => []);
-  fill(document.getElementById('env'), ['card', 'none', ...names], q.get('env') ?? 'card');
+  fillSelect(document.getElementById('card'), CARDS, cardUrl, base);
+  fillSelect(document.getElementById('preset'), presets, presetUrl, base);
   // shadows=1: three.js shadow maps with web/clothfit.js's defaults (SHADOW_DEFAULTS); a JSON
   // object overrides fields (?shadows={"type":"pcf","mapSize":4096}); 0: off; absent: the card's
-  // visibility.shadows.
-  const sq = q.get('shadows');
-  const shadows = sq === null ? undefined : sq === '1' || sq === 'true' ? true : sq === '0' || sq === 'false' ? false : JSON.parse(sq);
+  // visibility.shadows. A bad value names the parameter and the expected form.
+  const shadows = parseShadowsParam(q.get('shadows'));
+  const units = parseUnitsParam(q.get('units'));
+  const names = await fetch('/hdri/index.json').then((r) => (r.ok ? r.json() : [])).catch(() => []);
+  fillSelect(document.getElementById('env'), ['card', 'none', ...names.filter((n) => typeof n === 'string')], q.get('env') ?? 'card');
   const sc = await loadSceneCard(cardUrl, { renderer, shadows });
   // units=N: budget the shadow maps as on a GPU with N texture units (docs/web.md "Real GPUs";
   // the budget only: this GPU still links what it can)
-  if (q.has('units')) sc.samplerLimit = Math.max(1, Math.floor(Number(q.get('units')))) || null;
+  if (units !== null) sc.samplerLimit = units;
   sc.apply(renderer);
   renderer.setSize(Math.max(sc.width, 512), Math.max(sc.width, 512) * sc.height / sc.width);
   sc.camera.aspect = sc.width / sc.height;
@@ -51,7 +52,8 @@ async function main() {
   controls.update();
 
   let material = null;
-  const setPreset = (m) => {
+  // notes: lines about what the preset lost (a local file's weave maps or textures)
+  const setPreset = (m, notes = []) => {
     material?.dispose();
     material = m;
     sc.setMaterial(m);
@@ -63,6 +65,8 @@ async function main() {
       (m.yarnLobe ? `far-field yarn lobe: ${m.yarnLobe.fabric || 'fabric not named'}, ${m.yarnLobe.threads
         ? `${m.yarnLobe.model}, ${m.yarnLobe.threads.map((t) => t.offsets.length).join(' + ')} tangents`
         : `${m.yarnLobe.groups.length} yarn groups x ${m.yarnLobe.nodes} nodes`}, IBL table ${m.yarnLobe.ibl.n_theta} x ${m.yarnLobe.ibl.n_phi}\n` : '') +
+      (p.skippedTextures && !notes.length ? `textures not loaded: ${p.skippedTextures.join(', ')} (drawn without them; the console says why)\n` : '') +
+      notes.map((n) => `${n}\n`).join('') +
       `tone mapping ${sc.card.tone_mapping ?? 'ACESFilmic'}, exposure ${sc.exposure}, three.js r${THREE.REVISION}`;
     showShadowBudget();
   };
@@ -100,17 +104,28 @@ async function main() {
   };
   if ((q.get('env') ?? 'card') !== 'card' || sun !== cardSun) await setEnv(q.get('env') ?? 'card');
 
-  document.getElementById('card').onchange = (e) => { q.set('card', e.target.value); location.search = q.toString(); };
-  document.getElementById('preset').onchange = async (e) => setPreset(await fetchClothfitPreset(e.target.value, { renderer }));
-  document.getElementById('env').onchange = (e) => setEnv(e.target.value);
-  sunSelect.onchange = (e) => { sun = e.target.value; return setEnv(envChoice); };
-  document.getElementById('file').onchange = async (e) => {
-    const { loadClothfitPreset } = await import('./clothfit.js');
-    // A local file cannot fetch the weave maps it names: drawn uniform (open it by URL instead).
-    const j = JSON.parse(await e.target.files[0].text());
-    if (j.weave_maps) console.warn(`viewer: ${e.target.files[0].name} names weave maps (${j.weave_maps.file}); a local file cannot fetch them, drawing the uniform material (open it with ?preset=URL)`);
-    setPreset(loadClothfitPreset(j, { weaveMaps: null }));
+  // The menus and the file picker: a failure shows in the error panel (the page goes on).
+  const guarded = (what, fn) => async (e) => {
+    try {
+      await fn(e);
+      clearError(errorPanel);
+    } catch (err) {
+      showError(errorPanel, err, what(e));
+    }
   };
+  document.getElementById('card').onchange = (e) => { q.set('card', e.target.value); location.search = q.toString(); };
+  document.getElementById('preset').onchange = guarded((e) => `preset ${e.target.value}`, async (e) => setPreset(await fetchClothfitPreset(e.target.value, { renderer })));
+  document.getElementById('env').onchange = guarded((e) => `environment ${e.target.value}`, (e) => setEnv(e.target.value));
+  sunSelect.onchange = guarded((e) => `sun ${e.target.value}`, (e) => { sun = e.target.value; return setEnv(envChoice); });
+  // A local file: read and checked here, its errors shown naming it. It cannot fetch the weave
+  // maps or textures it names (files next to it): drawn without them, and the info panel says so
+  // and how to see them (serve the folder, ?preset=URL).
+  document.getElementById('file').onchange = guarded(() => 'preset file', async (e) => {
+    if (!e.target.files[0]) return;
+    const { material: m, notes } = await readLocalPreset(e.target.files[0], loadClothfitPreset);
+    notes.forEach((n) => console.warn(`viewer: ${n}`));
+    setPreset(m, notes);
+  });
 
   let shot = q.has('shot');
   renderer.setAnimationLoop(() => {
@@ -122,4 +137,7 @@ async function main() {
     }
   });
 }
-main().catch((e) => { info.textContent = `error: ${e.stack ?? e}`; fetch('/log', { method: 'POST', body: String(e.stack ?? e) }); });
+main().catch((e) => {
+  showError(errorPanel, e);  // the message in the page, the stack on the console
+  fetch('/log', { method: 'POST', body: String(e?.stack ?? e) }).catch(() => {});
+});
