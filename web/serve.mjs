@@ -108,16 +108,30 @@ export function startServer({ port = 0, onShot = null, onLog = null, onPost = nu
   });
 }
 
-const USAGE = `Usage: node web/serve.mjs [--port N]
+const USAGE = `Usage: node web/serve.mjs [--port N] [--root DIR]...
 Serves the repository at / and the HDRI data cache at /hdri/ on 127.0.0.1 (default port 8000;
---port 0 picks a free one), then open http://127.0.0.1:PORT/web/viewer.html (docs/web.md).`;
+--port 0 picks a free one), then open http://127.0.0.1:PORT/web/viewer.html (docs/web.md).
+--root DIR also serves the directory DIR (e.g. presets fitted outside the repository) as
+/fs/<absolute path of DIR>/...; clothfit report's viewer links name the --root they need.`;
 
 if (process.argv[1] && fileURLToPath(import.meta.url) === path.resolve(process.argv[1])) {
   const argv = process.argv.slice(2);
   let port = 8000;
+  const fsRoots = [];
   for (let i = 0; i < argv.length; ++i) {
     const a = argv[i];
     if (a === '--help' || a === '-h') { console.log(USAGE); process.exit(0); }
+    if (a === '--root' || a.startsWith('--root=')) {
+      const v = a === '--root' ? argv[++i] : a.slice(7);
+      let dir = null;
+      try { dir = v !== undefined && v !== '' ? fs.realpathSync(path.resolve(v)) : null; } catch { dir = null; }
+      if (!dir || !fs.statSync(dir).isDirectory()) {
+        console.error(`web/serve.mjs: --root: expected an existing directory, got ${v === undefined ? 'nothing' : JSON.stringify(v)}`);
+        process.exit(2);
+      }
+      fsRoots.push(path.resolve(v));  // startServer adds its real path too
+      continue;
+    }
     if (a === '--port' || a.startsWith('--port=')) {
       const v = a === '--port' ? argv[++i] : a.slice(7);
       if (v === undefined || !/^\d+$/.test(v) || Number(v) > 65535) {
@@ -132,7 +146,7 @@ if (process.argv[1] && fileURLToPath(import.meta.url) === path.resolve(process.a
   }
   let server;
   try {
-    server = await startServer({ port });
+    server = await startServer({ port, fsRoots });
   } catch (e) {
     if (e.code === 'EADDRINUSE') console.error(`web/serve.mjs: port ${port} is already in use (another web/serve.mjs?); choose another with --port N, or --port 0 for a free one`);
     else if (e.code === 'EACCES') console.error(`web/serve.mjs: port ${port} needs privileges to listen on; choose a port above 1023 with --port N, or --port 0 for a free one`);
@@ -140,4 +154,5 @@ if (process.argv[1] && fileURLToPath(import.meta.url) === path.resolve(process.a
     process.exit(1);
   }
   console.log(`clothfit viewer: http://127.0.0.1:${server.address().port}/web/viewer.html`);
+  for (const r of fsRoots) console.log(`  also serving ${r} as /fs${r}/`);
 }

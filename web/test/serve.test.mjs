@@ -7,7 +7,7 @@
 //     a bad --port value or unknown option is refused naming it, --help prints the usage.
 // Usage: node web/test/serve.test.mjs   (exits non-zero on a failure)
 import assert from 'node:assert/strict';
-import { spawnSync } from 'node:child_process';
+import { spawn, spawnSync } from 'node:child_process';
 import fs from 'node:fs';
 import net from 'node:net';
 import os from 'node:os';
@@ -78,6 +78,24 @@ try {
   }
   const help = run('--help');
   check(help.status === 0 && /^Usage: node web\/serve\.mjs/.test(help.stdout), `--help: exit ${help.status}`);
+  // --root DIR (session 27; clothfit report's viewer links name it): DIR served as /fs/<DIR>/,
+  // nothing beside it; a missing directory refused
+  const bad = run('--root', path.join(work, 'nope'));
+  check(bad.status === 2 && /--root: expected an existing directory/.test(bad.stderr), `--root missing: exit ${bad.status}, ${JSON.stringify(bad.stderr)}`);
+  const child = spawn(process.execPath, [serveMjs, '--port', '0', '--root', allowed], { stdio: ['ignore', 'pipe', 'pipe'] });
+  try {
+    const rootPort = await new Promise((resolve, reject) => {
+      let out = '';
+      child.stdout.on('data', (d) => { out += d; const m = /127\.0\.0\.1:(\d+)\//.exec(out); if (m) resolve(Number(m[1])); });
+      child.on('exit', (c) => reject(new Error(`serve.mjs --root exited ${c}`)));
+      setTimeout(() => reject(new Error('serve.mjs --root: no address printed')), 15000);
+    });
+    const ok = await rawGet(rootPort, `/fs${allowed}/ok.txt`);
+    check(ok.status === 200 && ok.body === 'inside', `--root: a file inside is served (${ok.status})`);
+    check((await rawGet(rootPort, `/fs${work}/secret.txt`)).status === 403, '--root: a file beside the root is refused');
+  } finally {
+    child.kill();
+  }
 } finally {
   server.close();
   fs.rmSync(work, { recursive: true, force: true });
