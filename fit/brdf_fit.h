@@ -8,7 +8,8 @@
 //   mu_v = cos(theta_v) at the kDirNodes Gauss-Legendre nodes of [0, 1] (no node at exactly 0
 //   or 1: grazing down to ~88 degrees), v = (sqrt(1 - mu_v^2), 0, mu_v);
 //   h at theta_h = (pi/2) t^2 (the MERL tables' mapping), t at the kHalfNodes Gauss-Legendre
-//   nodes of [0, 1] (the first nodes sit 2.7e-4 and 7.2e-3 rad from the mirror direction: a
+//   nodes of [0, 1] (the first nodes at theta_h = 2.7e-4 and 7.2e-3 rad, the light about twice
+//   that from the mirror direction: a
 //   GGX lobe down to roughness ~0.02, alpha = r^2 ~ 4e-4, is seen), phi_h = (k + 0.5) pi / kHalfAzimuths relative to v's azimuth (isotropic sources:
 //   [0, pi] suffices by symmetry); l = 2 (v.h) h - v, kept when l.z > kMinLightCosine.
 // Weights (normalised to sum 1):

@@ -127,10 +127,15 @@ TEST(Material, MisspeltTopLevelFieldIsRefusedUnknownOnesAreKept) {
   }
   // Far from every known field: kept and written back, as before.
   const std::string path = WriteTemp("fwd.json",
-      head + R"("model":"cloth","parameters":{},"future_block":{"a":1},"side":"double","name":"n"})");
+      head + R"("model":"cloth","parameters":{},"future_block":{"a":1},"side":"double","name":"n",)"
+             R"("size":1,"mode":2,"names":3,"mod\u00e9l":4})");
   const MaterialPreset p = ReadPreset(path);
   EXPECT_EQ(p.extra.at("future_block")["a"], 1);
   EXPECT_EQ(p.extra.at("side"), "double");
+  EXPECT_EQ(p.extra.at("size"), 1);  // short names are refused by case only
+  EXPECT_EQ(p.extra.at("mode"), 2);
+  EXPECT_EQ(p.extra.at("names"), 3);
+  EXPECT_EQ(p.extra.at("mod\u00e9l"), 4);  // non-ASCII keys never
   fs::remove(path);
 }
 

@@ -465,6 +465,14 @@ TEST_F(ReportTest, FittedPresetsLinkToTheViewerWithExistingCardAndPreset) {
   EXPECT_EQ(n, 4u);  // 2 models x 2 scenes
   const std::string d = fs::absolute(dir_).lexically_normal().generic_string();
   EXPECT_EQ(presets, (std::set<std::string>{"/fs" + d + "/standard.json", "/fs" + d + "/cloth.json"}));
+  // a '#' or '%' in a file name reaches the server as part of the name: encoded in the path
+  // segment, then once more as a query value (the viewer's URLSearchParams undoes the second)
+  const std::string odd = (dir_ / "st#d%.json").string();
+  fs::copy_file(dir_ / "standard.json", odd);
+  const std::string href = ViewerLink((repo / "out").string(), "datasets/scenes/scene0.json", odd);
+  EXPECT_NE(href.find("?preset=/fs" + d + "/st%2523d%2525.json&card=/datasets/scenes/scene0.json"),
+            std::string::npos)
+      << href;
   // the page names the server command with the one outside directory
   EXPECT_NE(html.find("node web/serve.mjs --root " + d + "</code>"), std::string::npos)
       << html.substr(html.find("three.js viewer"), 300);

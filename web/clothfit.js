@@ -2692,8 +2692,8 @@ export function loadClothfitPreset(json, options = {}) {
   return m;
 }
 
-// Top-level keys (session 27, as render/scene/material.cpp ParsePreset): a key that is a case
-// variant of a known one, or one edit from it (two for names of 8 or more characters), is a typo
+// Top-level keys (session 27, as render/scene/material.cpp ParsePreset): an ASCII key that is a
+// case variant of a known one, one edit from it for names of 6 or 7 letters, two for 8 or more, is a typo
 // ("weave_map", "Woven") and refused: kept, it would draw the material without what it meant.
 // Any other unknown key is left alone (a newer writer's field).
 const PRESET_TOP_LEVEL_KEYS = ['schema', 'version', 'model', 'engine', 'cloth', 'woven', 'conventions',
@@ -2713,9 +2713,9 @@ function presetKeyDistance(a, b) {
 }
 function checkPresetTopLevelKeys(preset) {
   for (const k of Object.keys(preset)) {
-    if (PRESET_TOP_LEVEL_KEYS.includes(k)) continue;
+    if (PRESET_TOP_LEVEL_KEYS.includes(k) || !/^[\x00-\x7f]*$/.test(k)) continue;  // ASCII keys only
     for (const known of PRESET_TOP_LEVEL_KEYS) {
-      const limit = known.length >= 8 ? 2 : known.length >= 4 ? 1 : 0;
+      const limit = known.length >= 8 ? 2 : known.length >= 6 ? 1 : 0;
       if (presetKeyDistance(k, known) <= limit) {
         throw new Error(`loadClothfitPreset: ${ylKeyShown(k)}: unknown field; did you mean '${known}'? (a misspelt field would be ignored and the material drawn without it)`);
       }

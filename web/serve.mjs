@@ -91,6 +91,11 @@ export function startServer({ port = 0, onShot = null, onLog = null, onPost = nu
     sendFile(res, file);
   };
   const server = http.createServer((req, res) => {
+    // Only requests addressed to this machine by name or loopback address (a page elsewhere
+    // that re-binds its own host name to 127.0.0.1 sends its own Host: refused, so it cannot
+    // read the repository or a --root directory through the browser).
+    const host = req.headers.host;
+    if (host !== undefined && !/^(127\.0\.0\.1|localhost|\[::1\])(:\d+)?$/i.test(host)) { res.statusCode = 403; res.end(); return; }
     try {
       handle(req, res);
     } catch (e) {  // anything else: a 500 for this request, the server goes on

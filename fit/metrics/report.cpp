@@ -1276,12 +1276,21 @@ bool InsideDir(const fs::path& file, const fs::path& dir) {
   return !rel.empty() && *rel.begin() != "..";
 }
 
-// The URL path serve.mjs answers for `file` (see ViewerLink).
+// The URL path serve.mjs answers for `file` (see ViewerLink), each path segment percent-encoded
+// (a '#', '?', '%' or ',' in a file name must reach the server as part of the name; ViewerLink
+// then encodes the whole path once more as a query value).
 std::string ServedPath(const fs::path& root, const fs::path& file) {
   std::error_code ec;
   const fs::path abs = fs::absolute(file, ec).lexically_normal();
-  if (InsideDir(abs, root)) return "/" + abs.lexically_relative(root).generic_string();
-  return "/fs" + abs.generic_string();
+  const bool inside = InsideDir(abs, root);
+  const fs::path rel = inside ? abs.lexically_relative(root) : abs.relative_path();
+  std::string out = inside ? "" : "/fs";
+  for (const fs::path& seg : rel) {
+    std::string e;
+    for (const char c : seg.string()) e += c == '/' ? std::string("%2F") : UrlEncode(std::string(1, c));
+    out += "/" + e;
+  }
+  return out;
 }
 }  // namespace
 

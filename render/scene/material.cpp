@@ -107,12 +107,17 @@ namespace {
   throw MaterialError(where + ": " + limits::EscapeForMessage(field, 200) + ": " + msg);
 }
 
-// An unknown top-level key that is a case variant of `known` or one edit from it (two for keys
-// of 8 bytes or more; a swap of two adjacent letters is one edit) is taken for a typo and
-// refused, naming the key it resembles.
+// An unknown top-level ASCII key that is a case variant of `known`, one edit from it when
+// `known` has 6 or 7 letters, or two when it has 8 or more (a swap of two adjacent letters is
+// one edit), is taken for a typo and refused, naming the key it resembles.
 void CheckNotNearMiss(const std::string& key, const std::string& known, const std::string& where) {
+  // ASCII keys only (a key with other bytes is never taken for a typo: web/clothfit.js counts
+  // UTF-16 units, this reader bytes, and the two must agree). Short names only by case: a
+  // one-letter change of a 4- or 5-letter name ("mode", "size", "names") is as likely a new
+  // field as a typo.
+  if (!std::all_of(key.begin(), key.end(), [](char c) { return (unsigned char)c < 0x80; })) return;
   const size_t d = limits::NameDistance(key, known, /*fold_case=*/true);
-  const size_t limit = known.size() >= 8 ? 2 : known.size() >= 4 ? 1 : 0;
+  const size_t limit = known.size() >= 8 ? 2 : known.size() >= 6 ? 1 : 0;
   if (d <= limit)
     Fail(where, key, "unknown field; did you mean '" + known + "'? (a misspelt field would be "
                      "ignored and the material drawn without it)");

@@ -563,6 +563,7 @@ if (args.clothfit) {
   check(() => assert.throws(() => loadClothfitPreset({ ...pre('cloth', {}), paramters: {} }), /did you mean 'parameters'\?/), 'paramters refused');
   check(() => assert.throws(() => loadClothfitPreset({ ...pre('woven', {}), waeve_maps: {} }), /did you mean 'weave_maps'\?/), 'a swap of two letters is one edit');
   check(() => assert.equal(loadClothfitPreset({ ...pre('cloth', {}), future_block: { a: 1 } }).userData.clothfit.future_block.a, 1), 'an unknown field far from every known one is kept');
+  check(() => loadClothfitPreset({ ...pre('cloth', {}), size: 1, mode: 2, names: 3, 'mod\u00e9l': 4 }), 'short names refused by case only, non-ASCII keys never (as the C++ reader)');
 }
 
 // Session 24: environment texels as the C++ reader keeps them (render/scene/environment.cpp):

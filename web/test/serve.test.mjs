@@ -64,6 +64,13 @@ try {
   const inside = await rawGet(port, `/fs${allowed}/ok.txt`);
   check(inside.status === 200 && inside.body === 'inside', `/fs/ still serves inside its root (${inside.status})`);
   check((await rawGet(port, '/web/serve.mjs')).status === 200, 'still serving after the bad requests');
+  // another Host (DNS rebinding) is refused; the loopback names are served
+  const rebound = await new Promise((resolve, reject) => {
+    const sock = net.connect(port, '127.0.0.1', () => sock.write('GET /web/viewer.html HTTP/1.0\r\nHost: evil.example:8000\r\n\r\n'));
+    let t = ''; sock.on('data', (d) => { t += d; }); sock.on('error', reject);
+    sock.on('close', () => resolve(Number((/^HTTP\/1\.[01] (\d{3})/.exec(t) || [0, 0])[1])));
+  });
+  check(rebound === 403, `Host evil.example: status ${rebound}, expected 403`);
 
   // the command line, on the port this server holds
   const run = (...a) => spawnSync(process.execPath, [serveMjs, ...a], { encoding: 'utf8', timeout: 20000 });
