@@ -174,19 +174,6 @@ void WriteMaps(const std::string& dir, const metrics::CompareResult& r) {
   }
 }
 
-// A finite number > 0 (CLI::PositiveNumber prints DBL_MAX in its message).
-const CLI::Validator kPositive(
-    [](std::string& text) {
-      try {
-        size_t used = 0;
-        const double v = std::stod(text, &used);
-        if (used == text.size() && std::isfinite(v) && v > 0.0) return std::string();
-      } catch (const std::logic_error&) {
-      }
-      return "must be a finite number > 0, got \"" + text + "\"";
-    },
-    "> 0");
-
 }  // namespace
 
 void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code) {
@@ -213,15 +200,15 @@ void AddCompareCommand(CLI::App& app, const Globals& g, int& exit_code) {
                   "display transform for the display metrics (Linear|Reinhard|Cineon|"
                   "ACESFilmic|AgX|Neutral)");
   cmd->add_option("--exposure", args->exposure, "display exposure multiplier (> 0)")
-      ->check(kPositive);
+      ->check(PositiveFinite());
   cmd->add_option("--hdr-range", args->hdr_range,
                   "HDR-FLIP exposure range \"cstart,cstop\" in stops; use the same range for "
                   "every test image of one reference (required when the reference's median "
                   "luminance is 0); automatic from the reference when absent");
   cmd->add_option("--ppd", args->ppd, "FLIP pixels per degree (67: 0.7 m, 3840 px over 0.7 m)")
-      ->check(kPositive);
+      ->check(PositiveFinite());
   cmd->add_option("--peak", args->peak, "peak value for the linear PSNR (display PSNR uses 1)")
-      ->check(kPositive);
+      ->check(PositiveFinite());
   cmd->callback([args, &g, &exit_code]() {
     try {
       metrics::CompareOptions o;

@@ -95,7 +95,7 @@ void RequireWritableOutput(const std::string& path, const std::string& flag);
 // if it exists, else its nearest existing ancestor, must take new files.
 void RequireWritableDirectory(const std::string& dir, const std::string& flag);
 // A CLI11 check: a finite number > 0 (CLI::PositiveNumber accepts inf and prints DBL_MAX in its
-// message); the rule of compare's --exposure, for tonemap's.
+// message); compare's and tonemap's --exposure and the like.
 const CLI::Validator& PositiveFinite();
 
 }  // namespace clothfit::cli
