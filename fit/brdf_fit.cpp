@@ -341,22 +341,43 @@ BrdfSamples SampleAnalytic(const render::MaterialPreset& preset) {
   return s;
 }
 
-BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int grid, int rotations) {
+BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int samples) {
+  if (samples < 1 || !(period_uv > 0.0))
+    throw std::invalid_argument("SampleBsdf: samples must be >= 1 and period_uv > 0");
   const auto& dirs = CanonicalDirections();
+  // (u, v, azimuth) from the R3 low-discrepancy sequence (Roberts 2018: alpha_k = g^-k, g the
+  // root of x^4 = x + 1): the point over kSourcePeriods x kSourcePeriods weave periods, the
+  // azimuth over [0, 2 pi). Low discrepancy modulo the period too (the weave's structure), many
+  // periods so that position-hashed detail (Irawan's fineness glints, a draw per cell of the
+  // absolute position) enters by its mean, and a continuous azimuth so that a sharp
+  // anisotropic lobe (Sadeghi's satin) is averaged, not hit at a few angles.
+  constexpr double kG = 1.22074408460575947536;
+  const double a1 = 1.0 / kG, a2 = a1 / kG, a3 = a2 / kG, extent = kSourcePeriods * period_uv;
+  struct Draw {
+    render::ShadingPoint sp;
+    double c, s;
+  };
+  std::vector<Draw> draws(static_cast<size_t>(samples));
+  for (size_t i = 0; i < draws.size(); ++i) {
+    const double x = 0.5 + a1 * double(i), y = 0.5 + a2 * double(i), z = 0.5 + a3 * double(i);
+    draws[i].sp.uv = {(x - std::floor(x)) * extent, (y - std::floor(y)) * extent};
+    const double phi = 2.0 * kPi * (z - std::floor(z));
+    draws[i].c = std::cos(phi);
+    draws[i].s = std::sin(phi);
+  }
   BrdfSamples s;
-  const double n = double(grid) * double(grid) * double(rotations);
+  const double n = 2.0 * double(samples);
   for (const DirectionPair& d : dirs) {
     Rgb<double> sum(0, 0, 0);
-    for (int r = 0; r < rotations; ++r) {
-      const double a = kPi * r / rotations, ca = std::cos(a), sa = std::sin(a);
-      const render::Vec3d wo(ca * d.v.x - sa * d.v.y, sa * d.v.x + ca * d.v.y, d.v.z);
-      const render::Vec3d wi(ca * d.l.x - sa * d.l.y, sa * d.l.x + ca * d.l.y, d.l.z);
-      for (int i = 0; i < grid; ++i)
-        for (int j = 0; j < grid; ++j) {
-          render::ShadingPoint sp;
-          sp.uv = {(i + 0.5) / grid * period_uv, (j + 0.5) / grid * period_uv};
-          sum += bsdf.Eval(wo, wi, sp) * wi.z;
-        }
+    for (const Draw& w : draws) {
+      const render::Vec3d wo(w.c * d.v.x - w.s * d.v.y, w.s * d.v.x + w.c * d.v.y, d.v.z);
+      const render::Vec3d wi(w.c * d.l.x - w.s * d.l.y, w.s * d.l.x + w.c * d.l.y, d.l.z);
+      // The pair and its mirror image (y -> -y in the shading frame): the direction set holds
+      // one side of the plane of incidence only (brdf_fit.h), which is exact for a
+      // mirror-symmetric source; a chiral weave (twill) contributes its symmetric part, the
+      // part an isotropic target model can fit.
+      sum += bsdf.Eval(wo, wi, w.sp) * wi.z;
+      sum += bsdf.Eval({wo.x, -wo.y, wo.z}, {wi.x, -wi.y, wi.z}, w.sp) * wi.z;
     }
     const Rgb<double> mean = sum * (1.0 / n);
     s.value.push_back(mean);

@@ -70,7 +70,8 @@ inline constexpr double kMinLightCosine = 1e-3;  // pairs with l.z at or below a
 inline constexpr double kCompressEps = 1e-4;
 // Names the direction set and metric; part of convert's resume hash (fit/convert/convert.h), so
 // outputs fitted under an earlier revision are converted again.
-inline constexpr const char* kFitRevision = "s27: half-vector directions, square-root metric";
+inline constexpr const char* kFitRevision =
+    "s28: woven sources by (point, azimuth) draws, mirror-averaged; s27: half-vector directions, square-root metric";
 // Lowest roughness a fit may reach in a model whose range goes to 0 (gltf-sheen): below it
 // the lobe falls between the half-vector nodes (the first sits 2.7e-4 rad from the mirror
 // direction) and the fit would see a specular lobe of roughness -> 0 as no lobe at all
@@ -130,10 +131,22 @@ Rgb<T> EvalDirectFlat(render::ModelKind m, const cloth::Options& co, const T* x,
 
 // An analytic preset sampled on the canonical set.
 BrdfSamples SampleAnalytic(const render::MaterialPreset& preset);
-// A woven (spatially varying, possibly anisotropic) BSDF: the mean of Eval * cos over a
-// grid x grid stratified set of points of one weave period [0, period_uv)^2 and over
-// `rotations` azimuthal rotations of the pair about n (an isotropic average).
-BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int grid = 4, int rotations = 4);
+// A woven (spatially varying, possibly anisotropic) BSDF: the mean of Eval * cos over
+// `samples` draws of a surface point (a low-discrepancy set over kSourcePeriods^2 weave
+// periods, period_uv wide each) and an azimuthal rotation of the pair about n (over
+// [0, 2 pi): an isotropic average), each pair also taken as its mirror image (y -> -y; the
+// direction set holds one side of the plane of incidence). Session 28; before, a 4 x 4 grid
+// of one period at 4 rotations over [0, pi), no mirror: the twill's tile is 4 x 8 yarn cells,
+// so every other cell row was never sampled (its albedo came out 1.6-1.9x too high), and the
+// satin's sharp anisotropic lobe was hit at 4 angles (its summed samples 3.3x a converged
+// average's). docs/convert.md "Woven fabrics" has the measurements.
+inline constexpr double kSourcePeriods = 16.0;
+// Defaults, measured against 65536 draws (docs/convert.md "Woven fabrics"): Irawan fabrics
+// (point-dependent, glints) 4096, weighted mean deviation <= 1.8 % (denim), 0.28 s; a BSDF
+// that is the same at every point (Sadeghi) needs azimuths only: 1024, <= 0.3 %.
+inline constexpr int kSourceSamples = 4096;
+inline constexpr int kSourceSamplesUniform = 1024;
+BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int samples = kSourceSamples);
 
 struct BrdfFitOptions {
   render::ModelKind model = render::ModelKind::kCloth;

@@ -393,7 +393,13 @@ std::vector<SourceMaterial> ReadFabricFile(const std::string& file, const json& 
                                   : "../weaves/" + m.fabric->preset + ".weave";
     m.dependencies.push_back((fs::path(file).parent_path() / weave).string());
   }
-  m.notes.push_back("woven BSDF averaged over one weave period (4 x 4 points) and 4 azimuths");
+  m.notes.push_back(m.fabric->model == "sadeghi"
+                        ? "woven BSDF (the same at every point) averaged over " +
+                              std::to_string(kSourceSamplesUniform) +
+                              " azimuths, each pair also mirrored"
+                        : "woven BSDF averaged over " + std::to_string(kSourceSamples) +
+                              " (point, azimuth) draws over 16 x 16 weave periods, each pair "
+                              "also mirrored");
   return {m};
 }
 
@@ -715,7 +721,9 @@ std::vector<SourceMaterial> ReadMaterials(const std::string& path,
 BrdfSamples SampleSource(const SourceMaterial& m) {
   if (m.analytic) return SampleAnalytic(*m.analytic);
   if (m.merl) return SampleMerl(*m.merl);
-  if (m.fabric) return SampleBsdf(*m.fabric->bsdf, m.fabric->weave_period_uv, 4, 4);
+  if (m.fabric)  // Sadeghi's BSDF does not depend on the surface point: azimuths only
+    return SampleBsdf(*m.fabric->bsdf, m.fabric->weave_period_uv,
+                      m.fabric->model == "sadeghi" ? kSourceSamplesUniform : kSourceSamples);
   throw ConvertError(m.file + ": " + m.name + ": no BRDF to sample");
 }
 
