@@ -1071,7 +1071,7 @@ bool IsWithin(const fs::path& path, const fs::path& dir) {
 // output is one of the inputs (before, `--fabric canvas.json --out canvas.json` replaced the
 // fabric by the preset), and each output's directory takes new files (before, an unwritable
 // --out failed only after the whole fit). Outputs: --out, the weave maps written next to it
-// (woven and physical-aniso with --fabric) and the --images files; inputs: --fabric and every
+// (woven and physical-aniso with --fabric; woven's glint map) and the --images files; inputs: --fabric and every
 // file of --references, --references2 and --scenes.
 void CheckFitOutputs(const FitArgs& a) {
   std::vector<NamedPath> inputs;
@@ -1086,6 +1086,12 @@ void CheckFitOutputs(const FitArgs& a) {
     outputs.push_back({"--out's weave maps", (fs::path(a.out).parent_path() /
                                               (fs::path(a.out).stem().string() + ".weave.exr"))
                                                  .string()});
+  // Woven's --weave-maps glint also writes the glint map (fit/woven_fit.cpp AttachWeaveMaps;
+  // session 28: before, it was not checked and could replace an input).
+  if (a.model == "woven" && !a.fabric.empty() && a.weave_maps == "glint")
+    outputs.push_back({"--out's glint map", (fs::path(a.out).parent_path() /
+                                             (fs::path(a.out).stem().string() + ".glint.exr"))
+                                                .string()});
   if (!a.images.empty()) {
     const std::vector<std::string> scenes =
         a.scenes.empty() ? CanonicalScenes() : SplitList(a.scenes);

@@ -65,6 +65,12 @@ for args in "--references $REF --out $TMP/../$(basename "$TMP")/ref1.exr" \
   grep -q -- "is the same file as --" <<< "$err" || fail "fit $args: $err"
   grep -q "^fit: level" <<< "$err" && fail "fit $args started before refusing"
 done
+# Woven's glint map (--weave-maps glint writes OUT.glint.exr next to OUT.weave.exr; session 28).
+cp "$REF" "$TMP/g.glint.exr"
+err=$("$BIN" --quiet fit --fabric "$TMP/fabrics/canvas.json" --references "$TMP/g.glint.exr" --scenes "$CARD" \
+      --model woven --weave-maps glint --out "$TMP/g.json" 2>&1) && fail "a glint map over a reference accepted"
+grep -q -- "--out's glint map .*g.glint.exr is the same file as --references" <<< "$err" || fail "glint map over a reference: $err"
+cmp -s "$TMP/g.glint.exr" "$REF" || fail "the reference was changed by the glint map"
 mkdir "$TMP/imgs" && cp "$REF" "$TMP/imgs/small_preview.exr"
 err=$("$BIN" --quiet fit --references "$TMP/imgs/small_preview.exr" --scenes "$CARD" --model standard \
       --images "$TMP/imgs" --out "$TMP/f.json" 2>&1) && fail "an --images file over a reference accepted"
