@@ -369,6 +369,37 @@ TEST_F(ReportTest, OwnReferencesAreGroupedByTheirReferences) {
   EXPECT_EQ(specs[1].scenes[0].reference, rb[0]);
 }
 
+// Session 28: a fit to the user's own references whose name (from the reference stems) is a
+// fabric's name: both orders of the arguments give the same pages, the fabric keeps its name
+// and the references' fit becomes "NAME-2". Before, the fabric given second was refused ("its
+// scenes or references differ") or given first, named the other fit's page.
+TEST_F(ReportTest, OwnReferencesNamedLikeAFabricDoNotDependOnArgumentOrder) {
+  const std::vector<std::string> presets = MakeFit();
+  const std::string fabric_name = "testcloth";  // MakeFit's provenance.fabric
+  fs::create_directories(dir_ / "c");
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(presets[1]));
+  j.erase("provenance");
+  for (size_t i = 0; i < j["fit"]["scenes"].size(); ++i) {
+    const fs::path ref = dir_ / "c" / (fabric_name + "_" + std::to_string(i) + ".exr");
+    fs::copy_file(refs2_[i], ref);
+    j["fit"]["scenes"][i]["reference"] = ref.string();
+  }
+  const std::string own = (dir_ / "own.json").string();
+  std::ofstream(own) << j.dump();
+  for (const bool own_first : {true, false}) {
+    const std::vector<FabricSpec> specs =
+        FabricsFromPresets(own_first ? std::vector<std::string>{own, presets[0]}
+                                     : std::vector<std::string>{presets[0], own});
+    ASSERT_EQ(specs.size(), 2u) << "own first: " << own_first;
+    const FabricSpec& fabric = specs[own_first ? 1 : 0];
+    const FabricSpec& mine = specs[own_first ? 0 : 1];
+    EXPECT_EQ(fabric.name, fabric_name) << "own first: " << own_first;
+    EXPECT_FALSE(fabric.fabric_path.empty());
+    EXPECT_EQ(mine.name, fabric_name + "-2") << "own first: " << own_first;
+    EXPECT_TRUE(mine.fabric_path.empty());
+  }
+}
+
 TEST_F(ReportTest, BadInputsNameTheFile) {
   const std::vector<std::string> presets = MakeFit();
   // Missing preset.

@@ -681,8 +681,24 @@ std::vector<FabricSpec> FabricsFromPresets(const std::vector<std::string>& prese
   if (preset_paths.empty()) throw ReportError("report: no fit presets given");
   std::vector<FabricSpec> fabrics;
   std::map<std::string, std::string> first_preset_of;  // fabric -> preset path (for errors)
-  for (const std::string& path : preset_paths)
-    AddToFabric(fabrics, first_preset_of, ReadFitPreset(path));
+  // Fabrics first, then fits to the user's own references: a fabric keeps its name and a fit
+  // whose references' stems spell it becomes "NAME-2", whatever the argument order (session 28:
+  // before, the fabric given after such a fit was refused as "the same fabric"). The pages then
+  // keep the order of each group's first preset on the command line.
+  std::vector<FitPreset> read;
+  for (const std::string& path : preset_paths) read.push_back(ReadFitPreset(path));
+  std::map<std::string, size_t> position;  // preset path -> index on the command line
+  for (size_t i = 0; i < preset_paths.size(); ++i) position.emplace(preset_paths[i], i);
+  for (const bool own : {false, true})
+    for (FitPreset& p : read)
+      if (p.fabric_path.empty() == own) AddToFabric(fabrics, first_preset_of, std::move(p));
+  const auto first = [&](const FabricSpec& f) {
+    size_t m = preset_paths.size();
+    for (const ModelSpec& x : f.models) m = std::min(m, position.at(x.preset_path));
+    return m;
+  };
+  std::stable_sort(fabrics.begin(), fabrics.end(),
+                   [&](const FabricSpec& a, const FabricSpec& b) { return first(a) < first(b); });
   for (FabricSpec& f : fabrics)
     std::stable_sort(f.models.begin(), f.models.end(), [](const ModelSpec& a, const ModelSpec& b) {
       return ModelRank(a.model) < ModelRank(b.model);
