@@ -71,7 +71,8 @@ inline constexpr double kCompressEps = 1e-4;
 // Names the direction set and metric; part of convert's resume hash (fit/convert/convert.h), so
 // outputs fitted under an earlier revision are converted again.
 inline constexpr const char* kFitRevision =
-    "s28: woven sources by (point, azimuth) draws, mirror-averaged; s27: half-vector directions, square-root metric";
+    "s28: woven sources by (point, azimuth) draws, mirror-averaged; "
+    "s27: half-vector directions, square-root metric";
 // Lowest roughness a fit may reach in a model whose range goes to 0 (gltf-sheen): below it
 // the lobe falls between the half-vector nodes (the first sits 2.7e-4 rad from the mirror
 // direction) and the fit would see a specular lobe of roughness -> 0 as no lobe at all

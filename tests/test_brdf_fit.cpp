@@ -372,7 +372,8 @@ TEST(BrdfFit, ChiralWeaveIsSampledSymmetrically) {
       const double x = a.value[k][c], y = b.value[k][c];
       max_rel = std::max(max_rel, std::abs(x - y) / std::max({std::abs(x), std::abs(y), 1e-3}));
     }
-  std::printf("twill: samples against the mirrored twill's, max relative difference %.3g\n", max_rel);
+  std::printf("twill: samples against the mirrored twill's, max relative difference %.3g\n",
+              max_rel);
   EXPECT_LT(max_rel, 1e-12);
   const auto& dirs = CanonicalDirections();
   double num = 0.0, den = 0.0;
@@ -439,7 +440,8 @@ TEST(BrdfFit, WovenSourceAlbedoMatchesAnIndependentEstimate) {
         const double phi = 2.0 * kPi * rng.Uniform(), st = std::sqrt(1.0 - mu * mu);
         const render::Vec3d wo(st * std::cos(phi), st * std::sin(phi), mu);
         render::ShadingPoint sp;
-        sp.uv = {64.0 * f.weave_period_uv * rng.Uniform(), 64.0 * f.weave_period_uv * rng.Uniform()};
+        const double extent = 64.0 * f.weave_period_uv;
+        sp.uv = {extent * rng.Uniform(), extent * rng.Uniform()};
         render::BsdfSample bs;
         if (!f.bsdf->Sample(wo, {rng.Uniform(), rng.Uniform()}, rng.Uniform(), sp, &bs)) continue;
         if (bs.pdf > 0.0 && bs.wi.z > kMinLightCosine) sum += bs.f[1] * bs.wi.z / bs.pdf;
