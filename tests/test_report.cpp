@@ -509,5 +509,35 @@ TEST_F(ReportTest, FittedPresetsLinkToTheViewerWithExistingCardAndPreset) {
       << html.substr(html.find("three.js viewer"), 300);
 }
 
+// Session 28: the page's --root list also names the directories of the files the viewer
+// fetches through the preset and the cards: a weave map named relative to the preset, a card's
+// glTF and an environment given as a path (before: only the preset's and the cards' own).
+TEST_F(ReportTest, ViewerRootsNameTheMapsMeshAndEnvironmentDirectories) {
+  const fs::path repo = dir_ / "repo";
+  fs::create_directories(repo / "web");
+  std::ofstream(repo / "web" / "viewer.html") << "<!doctype html>\n";
+  for (const char* d : {"presets", "maps", "cards", "meshes", "env"})
+    fs::create_directories(dir_ / d);
+  std::ofstream(dir_ / "maps" / "m.weave.exr") << "x";
+  std::ofstream(dir_ / "meshes" / "m.gltf") << "{}";
+  std::ofstream(dir_ / "env" / "e.exr") << "x";
+  std::ofstream(dir_ / "cards" / "c.json")
+      << R"({"gltf": "../meshes/m.gltf", "environment": {"path": "../env/e.exr"}})";
+  std::ofstream(dir_ / "cards" / "named.json")
+      << R"({"gltf": "../meshes/m.gltf", "environment": {"path": "studio"}})";
+  std::ofstream(dir_ / "presets" / "p.json") << R"({"weave_maps": {"file": "../maps/m.weave.exr"}})";
+  const auto abs = [](const fs::path& p) {
+    return fs::absolute(p).lexically_normal().generic_string();
+  };
+  const std::vector<std::string> roots =
+      ViewerRoots((repo / "out").string(), (dir_ / "presets" / "p.json").string(),
+                  {(dir_ / "cards" / "c.json").string(), (dir_ / "cards" / "named.json").string()});
+  const std::set<std::string> got(roots.begin(), roots.end());
+  EXPECT_EQ(got, (std::set<std::string>{abs(dir_ / "presets"), abs(dir_ / "maps"),
+                                        abs(dir_ / "cards"), abs(dir_ / "meshes"),
+                                        abs(dir_ / "env")}));
+  EXPECT_EQ(roots.size(), got.size());  // each directory once
+}
+
 }  // namespace
 }  // namespace clothfit::report

@@ -1328,9 +1328,41 @@ std::vector<std::string> ViewerRoots(const std::string& report_dir, const std::s
   if (root.empty()) return dirs;
   std::error_code ec;
   std::vector<fs::path> files = {preset_path};
+  // A JSON file's string field, "" when the file, the field or its type is not there (the
+  // page's hint only; the fit and the viewer report real errors).
+  const auto field = [](const fs::path& file, std::initializer_list<const char*> keys) {
+    try {
+      const std::string text =
+          limits::ReadFileBounded(file.string(), limits::kMaxJsonFileBytes, "JSON file");
+      limits::CheckJsonDepth(text, file.string());
+      const nlohmann::json j = nlohmann::json::parse(text);
+      const nlohmann::json* v = &j;
+      for (const char* k : keys) {
+        if (!v->is_object() || !v->contains(k)) return std::string();
+        v = &v->at(k);
+      }
+      return v->is_string() ? v->get<std::string>() : std::string();
+    } catch (const std::exception&) {
+      return std::string();
+    }
+  };
+  // Session 28: the files the viewer fetches through the preset and the cards too, where they
+  // sit in other directories: a weave map named relative to the preset (web/clothfit.js
+  // weaveMapUrl; an absolute name is looked up next to the preset), a card's glTF and an
+  // environment given as a path (environmentUrl; a name is served from the data cache).
+  const auto relative_to = [&](const fs::path& base, const std::string& rel) {
+    if (rel.empty() || fs::path(rel).is_absolute()) return;
+    files.push_back(base.parent_path() / rel);
+  };
+  for (const char* key : {"file", "uri"})
+    relative_to(preset_path, field(preset_path, {"weave_maps", key}));
   for (const std::string& sc : scene_paths) {
     const fs::path card = ResolveCard(root, sc, preset_path);
-    if (!card.empty()) files.push_back(card);
+    if (card.empty()) continue;
+    files.push_back(card);
+    relative_to(card, field(card, {"gltf"}));
+    const std::string env = field(card, {"environment", "path"});
+    if (env.find('/') != std::string::npos || fs::path(env).has_extension()) relative_to(card, env);
   }
   for (const fs::path& f : files) {
     const fs::path abs = fs::absolute(f, ec).lexically_normal();
