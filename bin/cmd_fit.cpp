@@ -1071,8 +1071,8 @@ bool IsWithin(const fs::path& path, const fs::path& dir) {
 // output is one of the inputs (before, `--fabric canvas.json --out canvas.json` replaced the
 // fabric by the preset), and each output's directory takes new files (before, an unwritable
 // --out failed only after the whole fit). Outputs: --out, the weave maps written next to it
-// (woven and physical-aniso with --fabric; woven's glint map) and the --images files; inputs: --fabric and every
-// file of --references, --references2 and --scenes.
+// (woven and physical-aniso with --fabric; woven's glint map) and the --images files; inputs:
+// --fabric and every file of --references, --references2 and --scenes.
 void CheckFitOutputs(const FitArgs& a) {
   std::vector<NamedPath> inputs;
   if (!a.fabric.empty()) inputs.push_back({"--fabric", a.fabric});

@@ -10,6 +10,7 @@
 
 #include "brdf/lut.h"
 #include "fit/parameter_layout.h"
+#include "render/reference/irawan.h"
 
 namespace clothfit::fit {
 namespace {
@@ -345,45 +346,69 @@ BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int samples) 
   if (samples < 1 || !(period_uv > 0.0))
     throw std::invalid_argument("SampleBsdf: samples must be >= 1 and period_uv > 0");
   const auto& dirs = CanonicalDirections();
-  // (u, v, azimuth) from the R3 low-discrepancy sequence (Roberts 2018: alpha_k = g^-k, g the
-  // root of x^4 = x + 1): the point over kSourcePeriods x kSourcePeriods weave periods, the
-  // azimuth over [0, 2 pi). Low discrepancy modulo the period too (the weave's structure), many
-  // periods so that position-hashed detail (Irawan's fineness glints, a draw per cell of the
-  // absolute position) enters by its mean, and a continuous azimuth so that a sharp
-  // anisotropic lobe (Sadeghi's satin) is averaged, not hit at a few angles.
+  // Draw i: the position inside the weave period and the azimuth from the R3 low-discrepancy
+  // sequence (Roberts 2018: alpha_k = g^-k, g the real root of x^4 = x + 1), the period itself
+  // one of kSourcePeriods x kSourcePeriods in turn (i mod kSourcePeriods^2). R3 within the
+  // period keeps the weave's structure evenly covered; many periods let position-hashed detail
+  // (Irawan's fineness glints, a draw per cell of the absolute position) enter by its mean; a
+  // continuous azimuth averages a sharp anisotropic lobe (Sadeghi's satin) instead of hitting
+  // it at a few angles.
   constexpr double kG = 1.22074408460575947536;
-  const double a1 = 1.0 / kG, a2 = a1 / kG, a3 = a2 / kG, extent = kSourcePeriods * period_uv;
-  struct Draw {
+  const double a1 = 1.0 / kG, a2 = a1 / kG, a3 = a2 / kG;
+  const int tiles = int(kSourcePeriods);
+  std::vector<Rgb<double>> sum(dirs.size(), Rgb<double>(0, 0, 0));
+  // Draws outside, directions inside: the Irawan BSDF locates a surface point once per point
+  // (its per-thread memo of the last uv), not once per evaluation.
+  for (int i = 0; i < samples; ++i) {
+    const double x = 0.5 + a1 * i, y = 0.5 + a2 * i, z = 0.5 + a3 * i;
+    const int t = i % (tiles * tiles);
     render::ShadingPoint sp;
-    double c, s;
-  };
-  std::vector<Draw> draws(static_cast<size_t>(samples));
-  for (size_t i = 0; i < draws.size(); ++i) {
-    const double x = 0.5 + a1 * double(i), y = 0.5 + a2 * double(i), z = 0.5 + a3 * double(i);
-    draws[i].sp.uv = {(x - std::floor(x)) * extent, (y - std::floor(y)) * extent};
-    const double phi = 2.0 * kPi * (z - std::floor(z));
-    draws[i].c = std::cos(phi);
-    draws[i].s = std::sin(phi);
-  }
-  BrdfSamples s;
-  const double n = 2.0 * double(samples);
-  for (const DirectionPair& d : dirs) {
-    Rgb<double> sum(0, 0, 0);
-    for (const Draw& w : draws) {
-      const render::Vec3d wo(w.c * d.v.x - w.s * d.v.y, w.s * d.v.x + w.c * d.v.y, d.v.z);
-      const render::Vec3d wi(w.c * d.l.x - w.s * d.l.y, w.s * d.l.x + w.c * d.l.y, d.l.z);
+    sp.uv = {(t % tiles + x - std::floor(x)) * period_uv,
+             (t / tiles + y - std::floor(y)) * period_uv};
+    const double phi = 2.0 * kPi * (z - std::floor(z)), c = std::cos(phi), sn = std::sin(phi);
+    for (size_t k = 0; k < dirs.size(); ++k) {
+      const DirectionPair& d = dirs[k];
+      const render::Vec3d wo(c * d.v.x - sn * d.v.y, sn * d.v.x + c * d.v.y, d.v.z);
+      const render::Vec3d wi(c * d.l.x - sn * d.l.y, sn * d.l.x + c * d.l.y, d.l.z);
       // The pair and its mirror image (y -> -y in the shading frame): the direction set holds
       // one side of the plane of incidence only (brdf_fit.h), which is exact for a
       // mirror-symmetric source; a chiral weave (twill) contributes its symmetric part, the
-      // part an isotropic target model can fit.
-      sum += bsdf.Eval(wo, wi, w.sp) * wi.z;
-      sum += bsdf.Eval({wo.x, -wo.y, wo.z}, {wi.x, -wi.y, wi.z}, w.sp) * wi.z;
+      // part an isotropic target model can fit. Over phi in [0, 2 pi) the two make the
+      // average over all rotations and reflections.
+      sum[k] += bsdf.Eval(wo, wi, sp) * wi.z;
+      sum[k] += bsdf.Eval({wo.x, -wo.y, wo.z}, {wi.x, -wi.y, wi.z}, sp) * wi.z;
     }
-    const Rgb<double> mean = sum * (1.0 / n);
+  }
+  BrdfSamples s;
+  const double n = 2.0 * double(samples);
+  for (const Rgb<double>& v : sum) {
+    const Rgb<double> mean = v * (1.0 / n);
     s.value.push_back(mean);
     s.valid.push_back(std::isfinite(mean[0]) && std::isfinite(mean[1]) && std::isfinite(mean[2]));
   }
   return s;
+}
+
+int SourceSampleCount(const render::Fabric& fabric) {
+  // Irawan's BSDF depends on the surface point; the others (Sadeghi, lambert, ggx_conductor)
+  // do not, and need azimuths only.
+  return fabric.model == "irawan" ? kSourceSamples : kSourceSamplesUniform;
+}
+
+BrdfSamples SampleFabric(const render::Fabric& fabric) {
+  const auto* irawan = dynamic_cast<const render::IrawanBsdf*>(fabric.bsdf.get());
+  if (!irawan || !(irawan->pattern().fineness > 0.0))
+    return SampleBsdf(*fabric.bsdf, fabric.weave_period_uv, SourceSampleCount(fabric));
+  // The fineness glints multiply the specular by I = min(-log xi, 10), xi a uniform hash per
+  // cell of the absolute position, independent of where in the weave the cell lies; so the
+  // average over many periods is the glint-free BSDF with the specular scaled by
+  // E[I] = 1 - e^-10 (render/reference/irawan.cpp Locate). Drawn from it directly, the
+  // average has no glint variance (denim, the most glints: a few percent at 4096 draws).
+  render::WeavePattern pattern = irawan->pattern();
+  pattern.fineness = 0.0;
+  for (render::Yarn& y : pattern.yarns) y.ks = y.ks * (1.0 - std::exp(-10.0));
+  const render::IrawanBsdf mean(pattern, irawan->repeat_u(), irawan->repeat_v());
+  return SampleBsdf(mean, fabric.weave_period_uv, SourceSampleCount(fabric));
 }
 
 double BrdfError(const BrdfSamples& source, const render::MaterialPreset& preset) {

@@ -59,6 +59,7 @@
 #include "brdf/models.h"
 #include "brdf/params.h"
 #include "render/reference/bsdf.h"
+#include "render/reference/fabric.h"
 #include "render/scene/material.h"
 
 namespace clothfit::fit {
@@ -133,21 +134,31 @@ Rgb<T> EvalDirectFlat(render::ModelKind m, const cloth::Options& co, const T* x,
 // An analytic preset sampled on the canonical set.
 BrdfSamples SampleAnalytic(const render::MaterialPreset& preset);
 // A woven (spatially varying, possibly anisotropic) BSDF: the mean of Eval * cos over
-// `samples` draws of a surface point (a low-discrepancy set over kSourcePeriods^2 weave
-// periods, period_uv wide each) and an azimuthal rotation of the pair about n (over
+// `samples` draws of a surface point (low-discrepancy within the weave period, period_uv wide,
+// over kSourcePeriods^2 periods in turn) and an azimuthal rotation of the pair about n (over
 // [0, 2 pi): an isotropic average), each pair also taken as its mirror image (y -> -y; the
 // direction set holds one side of the plane of incidence). Session 28; before, a 4 x 4 grid
 // of one period at 4 rotations over [0, pi), no mirror: the twill's tile is 4 x 8 yarn cells,
 // so every other cell row was never sampled (its albedo came out 1.6-1.9x too high), and the
 // satin's sharp anisotropic lobe was hit at 4 angles (its summed samples 3.3x a converged
-// average's). docs/convert.md "Woven fabrics" has the measurements.
+// average's). docs/convert.md "Woven fabrics" has the measurements. Not averaged: variation
+// slower than kSourcePeriods periods, e.g. a .weave's `period` > 0 (umax noise over 50-500
+// cells: polyester, silk_shantung; no shipped fabric uses them).
 inline constexpr double kSourcePeriods = 16.0;
-// Defaults, measured against 65536 draws (docs/convert.md "Woven fabrics"): Irawan fabrics
-// (point-dependent, glints) 4096, weighted mean deviation <= 1.8 % (denim), 0.28 s; a BSDF
-// that is the same at every point (Sadeghi) needs azimuths only: 1024, <= 0.3 %.
+// Defaults, measured against 65536 draws and against an independent Monte Carlo average
+// (docs/convert.md "Woven fabrics"): Irawan fabrics (point-dependent, glints) 4096; a BSDF that
+// is the same at every point (Sadeghi, lambert, ggx_conductor) needs azimuths only: 1024.
 inline constexpr int kSourceSamples = 4096;
 inline constexpr int kSourceSamplesUniform = 1024;
 BrdfSamples SampleBsdf(const render::Bsdf& bsdf, double period_uv, int samples = kSourceSamples);
+// The number of draws convert uses for a fabric (kSourceSamples for irawan, else
+// kSourceSamplesUniform).
+int SourceSampleCount(const render::Fabric& fabric);
+// A fabric's BRDF-space source, as convert takes it: SampleBsdf with SourceSampleCount draws,
+// of the fabric's BSDF or, for an Irawan fabric with fineness glints, of the same BSDF without
+// them and its specular scaled by their mean (1 - e^-10): the same average, without the
+// glints' variance.
+BrdfSamples SampleFabric(const render::Fabric& fabric);
 
 struct BrdfFitOptions {
   render::ModelKind model = render::ModelKind::kCloth;

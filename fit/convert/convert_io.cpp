@@ -393,13 +393,14 @@ std::vector<SourceMaterial> ReadFabricFile(const std::string& file, const json& 
                                   : "../weaves/" + m.fabric->preset + ".weave";
     m.dependencies.push_back((fs::path(file).parent_path() / weave).string());
   }
-  m.notes.push_back(m.fabric->model == "sadeghi"
-                        ? "woven BSDF (the same at every point) averaged over " +
-                              std::to_string(kSourceSamplesUniform) +
-                              " azimuths, each pair also mirrored"
-                        : "woven BSDF averaged over " + std::to_string(kSourceSamples) +
-                              " (point, azimuth) draws over 16 x 16 weave periods, each pair "
-                              "also mirrored");
+  const int n = SourceSampleCount(*m.fabric);
+  m.notes.push_back(
+      m.fabric->model == "irawan"
+          ? "woven BSDF averaged over " + std::to_string(n) + " (point, azimuth) draws in " +
+                std::to_string(int(kSourcePeriods)) + " x " + std::to_string(int(kSourcePeriods)) +
+                " weave periods, each pair also mirrored; fineness glints by their mean"
+          : "BSDF (the same at every point) averaged over " + std::to_string(n) +
+                " azimuths, each pair also mirrored");
   return {m};
 }
 
@@ -721,9 +722,7 @@ std::vector<SourceMaterial> ReadMaterials(const std::string& path,
 BrdfSamples SampleSource(const SourceMaterial& m) {
   if (m.analytic) return SampleAnalytic(*m.analytic);
   if (m.merl) return SampleMerl(*m.merl);
-  if (m.fabric)  // Sadeghi's BSDF does not depend on the surface point: azimuths only
-    return SampleBsdf(*m.fabric->bsdf, m.fabric->weave_period_uv,
-                      m.fabric->model == "sadeghi" ? kSourceSamplesUniform : kSourceSamples);
+  if (m.fabric) return SampleFabric(*m.fabric);
   throw ConvertError(m.file + ": " + m.name + ": no BRDF to sample");
 }
 

@@ -689,9 +689,11 @@ std::vector<FabricSpec> FabricsFromPresets(const std::vector<std::string>& prese
   for (const std::string& path : preset_paths) read.push_back(ReadFitPreset(path));
   std::map<std::string, size_t> position;  // preset path -> index on the command line
   for (size_t i = 0; i < preset_paths.size(); ++i) position.emplace(preset_paths[i], i);
+  std::vector<bool> own_refs;  // read before any preset is moved from
+  for (const FitPreset& p : read) own_refs.push_back(p.fabric_path.empty());
   for (const bool own : {false, true})
-    for (FitPreset& p : read)
-      if (p.fabric_path.empty() == own) AddToFabric(fabrics, first_preset_of, std::move(p));
+    for (size_t i = 0; i < read.size(); ++i)
+      if (own_refs[i] == own) AddToFabric(fabrics, first_preset_of, std::move(read[i]));
   const auto first = [&](const FabricSpec& f) {
     size_t m = preset_paths.size();
     for (const ModelSpec& x : f.models) m = std::min(m, position.at(x.preset_path));
