@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <tbb/global_control.h>
 
+#include <cctype>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -115,6 +116,17 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->callback([args, &g, &exit_code]() {
     try {
       io::RequireOutputDirectory(args->out);  // before minutes of rendering
+      // An EXR by name as by content, not one of the inputs, in a directory that takes the file
+      // (session 28: before, `--out canvas.json` replaced the fabric with the image after the
+      // render, and `--out x.png` received EXR bytes).
+      std::string ext = std::filesystem::path(args->out).extension().string();
+      for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+      if (ext != ".exr")
+        throw std::invalid_argument("--out: '" + args->out + "' must end in .exr (render-reference "
+                                    "writes a linear EXR; clothfit tonemap makes a PNG of it)");
+      RefuseOutputOverInput({"--out", args->out},
+                            {{"--scene", args->scene}, {"--fabric", args->fabric}});
+      RequireWritableOutput(args->out, "--out");
       render::RenderSettings st;
       st.spp = args->spp;
       st.seed = args->seed;
@@ -145,6 +157,19 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       }
       const render::Scene scene = render::LoadScene(args->scene);
       const render::Fabric fabric = render::LoadFabric(args->fabric);
+      // The files the card names are inputs too (its glTF, its environment map).
+      RefuseOutputOverInput(
+          {"--out", args->out},
+          {{"--scene's gltf", scene.card.gltf},
+           {"--scene's environment.path",
+            scene.card.environment && scene.card.environment->found &&
+                    scene.card.environment->path != "procedural-sky"
+                ? scene.card.environment->path
+                : std::string()}});
+      // The loader's repairs (computed normals, tangents) and a missing map, as render-preview
+      // prints them (session 28: render-reference repaired silently).
+      for (const std::string& w : scene.warnings)
+        if (!g.quiet) std::fprintf(stderr, "clothfit: warning: %s\n", limits::EscapeForMessage(w, 2000).c_str());
       const auto env = LoadSceneEnvironment(scene, g.quiet);
       render::PathTracer tracer(scene, *fabric.bsdf, env.get());
       ProgressBar bar("render " + fabric.name, g.quiet);

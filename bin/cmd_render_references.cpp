@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "bin/commands.h"
+#include "render/reference/fabric.h"
 #include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
@@ -99,6 +100,31 @@ std::vector<std::string> ReadFabricList(const std::string& path) {
   return out;
 }
 
+// --seeds: comma-separated decimal integers in [0, 2^64) (the renderer's uint64_t seed).
+// Before session 28 std::stoull took "-1" as 2^64 - 1, "1.5" and "1abc" as 1, failed "x" with
+// the bare message "stoull", and an empty list rendered nothing with status 0.
+std::vector<uint64_t> ParseSeeds(const std::string& spec) {
+  std::vector<uint64_t> seeds;
+  for (const std::string& s : SplitList(spec)) {
+    uint64_t v = 0;
+    bool ok = !s.empty() && s.size() <= 20 &&
+              s.find_first_not_of("0123456789") == std::string::npos;
+    if (ok) {
+      try {
+        v = std::stoull(s);
+      } catch (const std::exception&) {
+        ok = false;  // above 2^64 - 1
+      }
+    }
+    if (!ok)
+      throw std::invalid_argument("--seeds: '" + s +
+                                  "' is not a seed (a non-negative integer below 2^64)");
+    seeds.push_back(v);
+  }
+  if (seeds.empty()) throw std::invalid_argument("--seeds: '" + spec + "' lists no seed");
+  return seeds;
+}
+
 }  // namespace
 
 void AddRenderReferencesCommand(CLI::App& app, const Globals& g, int& exit_code) {
@@ -131,17 +157,37 @@ void AddRenderReferencesCommand(CLI::App& app, const Globals& g, int& exit_code)
       for (const std::string& f : SplitList(a->fabrics)) fabrics.push_back(f);
       if (fabrics.empty()) throw std::invalid_argument("give --fabric-list or --fabrics");
       const auto [shard, shards] = ParseShard(a->shard);
-      std::vector<uint64_t> seeds;
-      for (const std::string& s : SplitList(a->seeds)) seeds.push_back(std::stoull(s));
+      const std::vector<uint64_t> seeds = ParseSeeds(a->seeds);
+      const std::vector<std::string> scenes = CanonicalScenes();
+      // Every input before the first render (session 28: a broken second fabric, or a bad
+      // --target-error item for the last scene, failed only after the earlier references had
+      // been rendered, minutes each): the cards (their warnings once), the fabrics, each
+      // task's target and the budget adaptive sampling needs.
+      for (const std::string& scene : scenes)
+        for (const std::string& w : LoadSceneAtWidth(scene, a->width).warnings)
+          if (!g.quiet)
+            std::fprintf(stderr, "clothfit: warning: %s\n", limits::EscapeForMessage(w, 2000).c_str());
+      std::vector<std::vector<double>> targets;  // [fabric][scene]
+      for (const std::string& fabric : fabrics) {
+        render::LoadFabric(fabric);
+        targets.emplace_back();
+        for (const std::string& scene : scenes) {
+          targets.back().push_back(TargetErrorFor(a->target_error, fabric, scene));
+          if (targets.back().back() > 0.0 && (a->spp < 32 || a->spp % 16 != 0))
+            throw std::invalid_argument("--spp: with --target-error the budget must be a "
+                                        "multiple of 16 >= 32, got " + std::to_string(a->spp));
+        }
+      }
       std::unique_ptr<tbb::global_control> limit;
       if (a->threads > 0)
         limit = std::make_unique<tbb::global_control>(
             tbb::global_control::max_allowed_parallelism, size_t(a->threads));
-      const std::vector<std::string> scenes = CanonicalScenes();
       int task = 0;
-      for (const std::string& fabric : fabrics) {
-        for (const std::string& scene : scenes) {
-          const double te = TargetErrorFor(a->target_error, fabric, scene);
+      for (size_t fi = 0; fi < fabrics.size(); ++fi) {
+        const std::string& fabric = fabrics[fi];
+        for (size_t si = 0; si < scenes.size(); ++si) {
+          const std::string& scene = scenes[si];
+          const double te = targets[fi][si];
           for (uint64_t seed : seeds) {
             if (task++ % shards != shard) continue;
             if (a->dry_run) {

@@ -1,0 +1,84 @@
+#!/usr/bin/env bash
+# Session 28: the user audit of render-reference, render-references, render-preview, lut and
+# the hand-written inputs, one block per item: test_s28_render_cli.sh <clothfit> <source dir>.
+# render-reference's output refused over an input or under a non-EXR name (1) and its scene's
+# repairs reported (2); render-references checks every input before the first render (3).
+. "$(dirname "$0")/cli_common.sh"
+D=$SRC/datasets
+# A 16 x 16 copy of the sphere card (no environment: nothing to install) and a fabric beside it
+# with its own weave file.
+mkdir -p "$TMP/card" "$TMP/fab"
+sed -e "s#\"sphere.gltf\"#\"$D/scenes/sphere.gltf\"#" -e 's/"width": 256/"width": 16/' \
+    -e 's/"height": 256/"height": 16/' "$SCENE" > "$TMP/card/small.json"
+CARD=$TMP/card/small.json
+cp "$D/weaves/cotton_canvas.weave" "$TMP/fab/my.weave"
+printf '{"format":"clothfit-fabric","version":1,"name":"mine","model":"irawan","preset":"cotton_canvas","weave_file":"my.weave","uv_repeats":60}' \
+  > "$TMP/fab/f.json"
+FAB=$TMP/fab/f.json
+render() { "$BIN" --quiet render-reference --scene "$CARD" --fabric "$FAB" --spp 2 "$@"; }
+
+# (1) --out: an input is never replaced (before, `--out f.json` rendered, then wrote the EXR over
+# the fabric), and the name says EXR (before, `--out x.png` received EXR bytes).
+cp "$FAB" "$TMP/fab/f.orig"
+err=$(render --out "$FAB" 2>&1) && fail "--out over the fabric accepted"
+grep -q -- "--out: '.*f.json' must end in .exr" <<< "$err" || fail "--out over the fabric: $err"
+cmp -s "$FAB" "$TMP/fab/f.orig" || fail "the fabric file was changed"
+err=$(render --out "$TMP/x.png" 2>&1) && fail "--out x.png accepted"
+grep -q "must end in .exr" <<< "$err" || fail "--out x.png: $err"
+[ ! -e "$TMP/x.png" ] || fail "--out x.png was written"
+err=$(render --out "$TMP" 2>&1) && fail "--out a directory accepted"
+# the card's environment map is an input too
+oiiotool --pattern constant:color=0.5,0.5,0.5 16x8 3 -d half -o "$TMP/card/env.exr" || fail "oiiotool"
+cp "$TMP/card/env.exr" "$TMP/card/env.orig"
+sed -e 's#"background"#"environment": {"path": "env.exr"}, "background"#' "$CARD" > "$TMP/card/env.json"
+err=$("$BIN" --quiet render-reference --scene "$TMP/card/env.json" --fabric "$FAB" --spp 2 \
+  --out "$TMP/card/env.exr" 2>&1) && fail "--out over the environment map accepted"
+grep -q "same file as --scene's environment.path" <<< "$err" || fail "--out over the map: $err"
+cmp -s "$TMP/card/env.exr" "$TMP/card/env.orig" || fail "the environment map was changed"
+render --out "$TMP/ok.EXR" > /dev/null || fail "render-reference --out ok.EXR exited $?"
+[ -s "$TMP/ok.EXR" ] || fail "no image"
+
+# (2) The loader's repairs are reported, as render-preview does (before: silent).
+python3 - "$D/scenes/sphere.gltf" "$TMP/card/nonormal.gltf" <<'PY' || fail "python"
+import json, sys
+g = json.load(open(sys.argv[1]))
+for m in g["meshes"]:
+    for p in m["primitives"]:
+        p["attributes"].pop("NORMAL", None)
+json.dump(g, open(sys.argv[2], "w"))
+PY
+sed -e "s#\"$D/scenes/sphere.gltf\"#\"nonormal.gltf\"#" "$CARD" > "$TMP/card/nn.json"
+err=$("$BIN" render-reference --scene "$TMP/card/nn.json" --fabric "$D/materials/lambert.json" --spp 2 \
+  --out "$TMP/nn.exr" 2>&1 >/dev/null) || fail "render without normals exited $?"
+grep -q "warning: .*nonormal.gltf: .*no NORMAL attribute" <<< "$err" || fail "no repair warning: $err"
+err=$("$BIN" --quiet render-reference --scene "$TMP/card/nn.json" --fabric "$D/materials/lambert.json" --spp 2 \
+  --out "$TMP/nn.exr" 2>&1 >/dev/null) || fail "quiet render without normals exited $?"
+[ -z "$err" ] || fail "--quiet printed: $err"
+
+# (3) render-references: every input is checked before the first render. Before, the first
+# fabric's references were rendered (and cached) before a missing second fabric, a bad target
+# item of the last scene or an adaptive budget that is not a multiple of 16 failed.
+export CLOTHFIT_CACHE=$TMP/cache
+M=$D/materials/lambert.json
+refs() { "$BIN" --quiet render-references --width 8 "$@"; }
+err=$(refs --fabrics "$M,$TMP/none.json" --seeds 1 2>&1) && fail "a missing fabric accepted"
+grep -q "none.json" <<< "$err" || fail "missing fabric not named: $err"
+err=$(refs --fabrics "$M" --seeds 1 --spp 32 --target-error "sphere=0.05,drape=0.05,swatch=abc" 2>&1) \
+  && fail "a bad target item accepted"
+grep -q -- "--target-error: 'abc'" <<< "$err" || fail "bad target item: $err"
+err=$(refs --fabrics "$M" --seeds 1 --target-error 0.05 --spp 40 2>&1) \
+  && fail "an adaptive budget of 40 accepted"
+grep -q -- "--spp: with --target-error the budget must be a multiple of 16 >= 32, got 40" <<< "$err" \
+  || fail "adaptive budget: $err"
+[ ! -e "$TMP/cache" ] || [ -z "$(ls "$TMP/cache")" ] || fail "a refused run rendered: $(ls "$TMP/cache")"
+# --seeds: integers only (before: -1 was 2^64 - 1, 1.5 and 1abc were 1, x said "stoull", an
+# empty list rendered nothing with status 0)
+for s in "-1" "1.5" "1abc" "1,x" "" "," "18446744073709551616"; do
+  err=$(refs --fabrics "$M" --seeds "$s" --dry-run 2>&1) && fail "--seeds '$s' accepted: $err"
+  grep -q -- "--seeds: '${s#1,}'" <<< "$err" || fail "--seeds '$s': $err"
+done
+out=$(refs --fabrics "$M" --seeds "0,18446744073709551615" --dry-run) || fail "--seeds 0,2^64-1"
+grep -q "sphere.json seed 18446744073709551615" <<< "$out" || fail "largest seed: $out"
+[ "$(wc -l <<< "$out")" -eq 6 ] || fail "expected 6 tasks: $out"
+
+echo "PASS: s28 render audit"
