@@ -46,10 +46,15 @@ bool SameFile(const std::string& a, const std::string& b) {
     const bool same = fs::equivalent(a, b, ec);
     if (!ec) return same;
   }
+  // Absolute first: weakly_canonical leaves a relative path whose first element does not exist
+  // relative ("a.exr" stayed "a.exr" while "./a.exr" became "/cwd/a.exr"; session 28), so two
+  // spellings of one new file compared unequal.
   const auto canonical = [](const std::string& p) {
     std::error_code e;
-    const fs::path c = fs::weakly_canonical(p, e);
-    return e ? fs::absolute(p, e).lexically_normal() : c;
+    const fs::path abs = fs::absolute(p, e);
+    if (e) return fs::path(p).lexically_normal();
+    const fs::path c = fs::weakly_canonical(abs, e);
+    return e ? abs.lexically_normal() : c;
   };
   return canonical(a) == canonical(b);
 }

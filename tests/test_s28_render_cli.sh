@@ -2,9 +2,11 @@
 # Session 28: the user audit of render-reference, render-references, render-preview, lut and
 # the hand-written inputs, one block per item: test_s28_render_cli.sh <clothfit> <source dir>.
 # render-reference's output refused over an input or under a non-EXR name (1) and its scene's
-# repairs reported (2); render-references checks every input before the first render (3).
+# repairs reported (2); render-references checks every input before the first render (3); lut's
+# outputs, and two spellings of one new file (4).
 . "$(dirname "$0")/cli_common.sh"
 D=$SRC/datasets
+BIN=$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")  # the blocks below cd
 # A 16 x 16 copy of the sphere card (no environment: nothing to install) and a fabric beside it
 # with its own weave file.
 mkdir -p "$TMP/card" "$TMP/fab"
@@ -80,5 +82,25 @@ done
 out=$(refs --fabrics "$M" --seeds "0,18446744073709551615" --dry-run) || fail "--seeds 0,2^64-1"
 grep -q "sphere.json seed 18446744073709551615" <<< "$out" || fail "largest seed: $out"
 [ "$(wc -l <<< "$out")" -eq 6 ] || fail "expected 6 tasks: $out"
+
+# (4) lut: two tables never go to one file, and both are EXRs by name (before, --sheen-out equal
+# to --out replaced the DFG LUT, and --out dfg.png received EXR bytes). Two spellings of one new
+# file are one file (before, "a.exr" and "./a.exr" compared unequal while neither existed: the
+# shared check of fit, render-preview and tonemap too).
+(cd "$TMP" && "$BIN" --quiet lut --size 8 --out a.exr --sheen-out ./a.exr > /dev/null 2> err.txt) \
+  && fail "lut --out a.exr --sheen-out ./a.exr accepted"
+grep -q -- "--sheen-out ./a.exr is the same file as --out a.exr" "$TMP/err.txt" || fail "lut same file: $(cat "$TMP/err.txt")"
+[ ! -e "$TMP/a.exr" ] || fail "lut wrote a.exr"
+err=$("$BIN" --quiet lut --size 8 --out "$TMP/dfg.png" 2>&1) && fail "lut --out dfg.png accepted"
+grep -q -- "--out: '.*dfg.png' must end in .exr" <<< "$err" || fail "lut --out dfg.png: $err"
+err=$("$BIN" --quiet lut --size 8 --out "$TMP/d.exr" --sheen-out "$TMP/s.png" 2>&1) && fail "lut --sheen-out s.png accepted"
+[ ! -e "$TMP/d.exr" ] || fail "lut wrote --out before refusing --sheen-out"
+"$BIN" --quiet lut --size 8 --out "$TMP/d.EXR" --sheen-out "$TMP/s.exr" --sheen-size 4 > /dev/null || fail "lut exited $?"
+[ -s "$TMP/d.EXR" ] && [ -s "$TMP/s.exr" ] || fail "lut wrote no tables"
+printf '{"schema":"clothfit.preset","version":1,"model":"standard","parameters":{}}' > "$TMP/std.json"
+(cd "$TMP" && "$BIN" --quiet render-preview --scene "$CARD" --material std.json --out q.exr \
+  --light-map-out ./q.exr > /dev/null 2> err.txt) && fail "render-preview --out q.exr --light-map-out ./q.exr accepted"
+grep -q -- "--light-map-out ./q.exr is the same file as --out q.exr" "$TMP/err.txt" \
+  || fail "render-preview same file: $(cat "$TMP/err.txt")"
 
 echo "PASS: s28 render audit"
