@@ -53,12 +53,25 @@ std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& s
     const std::string key = e.path + key_tail;
     std::lock_guard<std::mutex> lock(memo_mutex);
     auto it = memo.find(key);
-    if (it == memo.end())
-      it = memo.emplace(key, std::make_shared<const render::Environment>(render::Environment::Load(
-                                 e.path, e.intensity, e.rotation_y, warn)))
-               .first;
+    if (it == memo.end()) {
+      try {
+        it = memo.emplace(key, std::make_shared<const render::Environment>(
+                                   render::Environment::Load(e.path, e.intensity, e.rotation_y,
+                                                             warn)))
+                 .first;
+      } catch (const io::IoError& error) {  // the map's own message, with the card and field
+        throw io::IoError(scene.card.path + ": field 'environment.path': " + error.what());
+      }
+    }
     return std::make_unique<render::Environment>(*it->second);
   }
+  // A file the card names is the user's own map, not one scripts/fetch-data installs: a typo
+  // there rendered the procedural sky with status 0 (session 28).
+  if (e.is_file)
+    throw io::IoError(scene.card.path + ": field 'environment.path': '" + e.name +
+                      "': no such file " + e.path + " (a path with '/' or an extension is a "
+                      "file, relative to the card's directory; only a map name such as "
+                      "\"studio\" may be missing, until scripts/fetch-data installs it)");
   if (e.path != "procedural-sky") {
     warn(scene.card.path + ": environment '" + e.path +
          "' is not installed (run scripts/fetch-data); using the procedural sky");

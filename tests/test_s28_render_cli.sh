@@ -3,7 +3,8 @@
 # the hand-written inputs, one block per item: test_s28_render_cli.sh <clothfit> <source dir>.
 # render-reference's output refused over an input or under a non-EXR name (1) and its scene's
 # repairs reported (2); render-references checks every input before the first render (3); lut's
-# outputs, and two spellings of one new file (4).
+# outputs, and two spellings of one new file (4); environment maps that are PNGs or missing
+# files (5).
 . "$(dirname "$0")/cli_common.sh"
 D=$SRC/datasets
 BIN=$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")  # the blocks below cd
@@ -102,5 +103,29 @@ printf '{"schema":"clothfit.preset","version":1,"model":"standard","parameters":
   --light-map-out ./q.exr > /dev/null 2> err.txt) && fail "render-preview --out q.exr --light-map-out ./q.exr accepted"
 grep -q -- "--light-map-out ./q.exr is the same file as --out q.exr" "$TMP/err.txt" \
   || fail "render-preview same file: $(cat "$TMP/err.txt")"
+
+# (5) The card's environment: an 8-bit PNG is refused (before, its display codes were taken for
+# radiance, status 0), and so is a missing file the card names by path (before, the procedural
+# sky was rendered with a warning to run scripts/fetch-data, status 0); the card, the field and
+# the file are named. A missing map *name* still falls back to the sky (a fresh checkout).
+oiiotool --pattern constant:color=0.9,0.8,0.7 16x8 3 -d uint8 -o "$TMP/card/sky.png" || fail "oiiotool png"
+for name in sky.png nope.exr maps/nope; do
+  sed -e "s#\"background\"#\"environment\": {\"path\": \"$name\"}, \"background\"#" "$CARD" > "$TMP/card/e.json"
+  err=$("$BIN" --quiet render-reference --scene "$TMP/card/e.json" --fabric "$D/materials/lambert.json" \
+    --spp 2 --out "$TMP/e.exr" 2>&1) && fail "render-reference with environment '$name' accepted"
+  grep -q "e.json: field 'environment.path': .*$(basename "$name")" <<< "$err" || fail "render-reference, environment '$name': $err"
+  err=$("$BIN" --quiet render-preview --scene "$TMP/card/e.json" --material "$TMP/std.json" \
+    --out "$TMP/e.png" 2>&1) && fail "render-preview with environment '$name' accepted"
+  grep -q "e.json: field 'environment.path': .*$(basename "$name")" <<< "$err" || fail "render-preview, environment '$name': $err"
+  [ ! -e "$TMP/e.exr" ] && [ ! -e "$TMP/e.png" ] || fail "an image was written with environment '$name'"
+done
+grep -q "must be linear radiance" <<< "$(CLOTHFIT_DATA=$TMP "$BIN" --quiet render-reference \
+  --scene "$TMP/card/env.json" --fabric "$D/materials/lambert.json" --spp 2 --out "$TMP/ok2.exr" 2>&1)" \
+  && fail "an EXR map refused"
+sed -e 's#"background"#"environment": {"path": "no-such-map"}, "background"#' "$CARD" > "$TMP/card/n.json"
+err=$(CLOTHFIT_DATA=$TMP "$BIN" render-reference --scene "$TMP/card/n.json" \
+  --fabric "$D/materials/lambert.json" --spp 2 --out "$TMP/sky.exr" 2>&1 >/dev/null) \
+  || fail "a missing map name failed: $err"
+grep -q "using the procedural sky" <<< "$err" || fail "no fallback warning: $err"
 
 echo "PASS: s28 render audit"
