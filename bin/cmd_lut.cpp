@@ -35,6 +35,8 @@ void AddLutCommand(CLI::App& app, const Globals& g, int& exit_code) {
       "lut",
       "compute the DFG LUT (R,G = GGX scale/bias, B = cloth sheen albedo) and the glTF "
       "sheen albedo table");
+  // --help shows each default ("=64"), as bench does (session 28: it showed none).
+  cmd->option_defaults()->always_capture_default();
   cmd->add_option("--size", args->size, "DFG texels per axis")->check(CLI::Range(2, 4096));
   cmd->add_option("--gl-order", args->order, "Gauss-Legendre nodes per theta_h panel")
       ->check(CLI::Range(2, 64));

@@ -213,6 +213,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
       "render-preview", "render what the real-time engine draws for a scene and a material");
+  // --help shows each default ("=filament"), as bench does (session 28: it showed none).
+  cmd->option_defaults()->always_capture_default();
   cmd->add_option("--scene", args->scene, "scene card (JSON)")->required();
   cmd->add_option("--material", args->material, "material preset (JSON, docs/preset-format.md)")
       ->required();

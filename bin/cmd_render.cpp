@@ -108,6 +108,8 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("render-reference",
                                      "path-trace a reference image of a fabric on a scene");
+  // --help shows each default ("=64"), as bench does (session 28: it showed none).
+  cmd->option_defaults()->always_capture_default();
   cmd->add_option("--scene", args->scene, "scene card (JSON)")->required();
   cmd->add_option("--fabric", args->fabric, "fabric definition (JSON)")->required();
   cmd->add_option("--out", args->out, "output EXR")->required();
@@ -119,7 +121,8 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--env-samples", args->env_samples,
                   "environment samples at each camera ray's hit (default: the renderer's; with "
                   "--target-error: chosen among 2, 4, 8 by a pilot)")
-      ->check(CLI::Range(1, 16));
+      ->check(CLI::Range(1, 16))
+      ->default_str("");  // -1, "not given", is no value to show
   cmd->add_option("--target-error", args->target_error,
                   "adaptive sampling: target mean standard error / mean value (0.02 = 2 %); "
                   "--spp is then the per-pixel budget (a multiple of 16 >= 32)")

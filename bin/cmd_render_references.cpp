@@ -137,6 +137,8 @@ void AddRenderReferencesCommand(CLI::App& app, const Globals& g, int& exit_code)
   CLI::App* cmd = app.add_subcommand(
       "render-references",
       "render (or reuse) the cached references of fabrics on the canonical scenes, one shard");
+  // --help shows each default ("=64"), as bench does (session 28: it showed none).
+  cmd->option_defaults()->always_capture_default();
   cmd->add_option("--fabric-list", a->fabric_list, "file: one fabric JSON per line");
   cmd->add_option("--fabrics", a->fabrics, "comma-separated fabric JSON files");
   cmd->add_option("--shard", a->shard, "i/N: render task indices equal to i modulo N (0-based)");

@@ -4,7 +4,7 @@
 # render-reference's output refused over an input or under a non-EXR name (1) and its scene's
 # repairs reported (2); render-references checks every input before the first render (3); lut's
 # outputs, and two spellings of one new file (4); environment maps that are PNGs or missing
-# files (5).
+# files (5); --help defaults and CLOTHFIT_PROGRESS=0 (6).
 . "$(dirname "$0")/cli_common.sh"
 D=$SRC/datasets
 BIN=$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")  # the blocks below cd
@@ -127,5 +127,20 @@ err=$(CLOTHFIT_DATA=$TMP "$BIN" render-reference --scene "$TMP/card/n.json" \
   --fabric "$D/materials/lambert.json" --spp 2 --out "$TMP/sky.exr" 2>&1 >/dev/null) \
   || fail "a missing map name failed: $err"
 grep -q "using the procedural sky" <<< "$err" || fail "no fallback warning: $err"
+
+# (6) --help shows the defaults, as the README says ("every default shown"; before, none of
+# render-reference, render-references, render-preview, lut and stress did), and
+# CLOTHFIT_PROGRESS=0 turns the progress bar off (before, any value turned it on).
+"$BIN" render-reference --help | grep -q -- "--spp INT:INT in \[1 - 1048576\]=64" || fail "render-reference --spp default"
+"$BIN" render-reference --help | grep -q -- "--max-depth INT:INT in \[1 - 64\]=8" || fail "render-reference --max-depth default"
+! "$BIN" render-reference --help | grep -q -- "=-1" || fail "render-reference shows a sentinel -1"
+"$BIN" render-references --help | grep -q -- "--seeds TEXT=1,2" || fail "render-references --seeds default"
+"$BIN" render-preview --help | grep -q -- "--ibl-engine TEXT:{auto,threejs,filament}=filament" || fail "render-preview --ibl-engine default"
+"$BIN" lut --help | grep -q -- "--size INT:INT in \[2 - 4096\]=128" || fail "lut --size default"
+"$BIN" stress --help | grep -q -- "--evals INT:INT in \[1 - 10000000000\]=1000000" || fail "stress --evals default"
+err=$(CLOTHFIT_PROGRESS=0 "$BIN" lut --size 8 --out "$TMP/p0.exr" 2>&1 >/dev/null) || fail "lut exited $?"
+[ -z "$err" ] || fail "CLOTHFIT_PROGRESS=0 printed: $err"
+err=$(CLOTHFIT_PROGRESS=1 "$BIN" lut --size 8 --out "$TMP/p1.exr" 2>&1 >/dev/null) || fail "lut exited $?"
+grep -q "lut dfg \[" <<< "$err" || fail "CLOTHFIT_PROGRESS=1 printed no bar: $err"
 
 echo "PASS: s28 render audit"

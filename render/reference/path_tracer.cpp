@@ -590,7 +590,7 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   const auto t0 = std::chrono::steady_clock::now();
   const Scene& scene = impl_->scene;
   const int W = scene.card.width, H = scene.card.height;
-  // Session 28: a reference the project's own reader refuses (4096 x 4096 is 738 MiB as float
+  // Session 28: a reference the project's own reader refuses (4096 x 4096 is 704 MiB as float
   // with no AOV) was rendered, for hours, and written; refused here before any allocation.
   const size_t exr_bytes =
       size_t(W) * size_t(H) * size_t(RenderExrChannels(st.aovs)) * sizeof(float);
