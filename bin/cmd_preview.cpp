@@ -265,7 +265,9 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
     try {
       io::RequireOutputDirectory(args->out);  // before the PMREM and the cache build
       if (!args->light_map_out.empty()) io::RequireOutputDirectory(args->light_map_out);
-      const std::string ext = std::filesystem::path(args->out).extension().string();
+      // Case-insensitive, as tonemap and render-reference (session 28: "P.PNG" was refused).
+      std::string ext = std::filesystem::path(args->out).extension().string();
+      for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
       if (ext != ".png" && ext != ".exr") {
         std::fprintf(stderr, "clothfit render-preview: error: --out: '%s' must end in .png or .exr\n",
                      args->out.c_str());

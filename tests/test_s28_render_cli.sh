@@ -4,7 +4,8 @@
 # render-reference's output refused over an input or under a non-EXR name (1) and its scene's
 # repairs reported (2); render-references checks every input before the first render (3); lut's
 # outputs, and two spellings of one new file (4); environment maps that are PNGs or missing
-# files (5); --help defaults and CLOTHFIT_PROGRESS=0 (6).
+# files (5); --help defaults and CLOTHFIT_PROGRESS=0 (6); bench's --width and --count (7);
+# render-preview's upper-case extension (8).
 . "$(dirname "$0")/cli_common.sh"
 D=$SRC/datasets
 BIN=$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")  # the blocks below cd
@@ -142,5 +143,18 @@ err=$(CLOTHFIT_PROGRESS=0 "$BIN" lut --size 8 --out "$TMP/p0.exr" 2>&1 >/dev/nul
 [ -z "$err" ] || fail "CLOTHFIT_PROGRESS=0 printed: $err"
 err=$(CLOTHFIT_PROGRESS=1 "$BIN" lut --size 8 --out "$TMP/p1.exr" 2>&1 >/dev/null) || fail "lut exited $?"
 grep -q "lut dfg \[" <<< "$err" || fail "CLOTHFIT_PROGRESS=1 printed no bar: $err"
+
+# (7) bench: a negative --width or --count is a usage error (before, `bench reference --width -5`
+# rendered at the card's width and `bench convert --count -3` benchmarked 6 materials).
+err=$("$BIN" bench reference --width -5 2>&1) && fail "bench reference --width -5 accepted"
+grep -q -- "--width" <<< "$err" || fail "bench --width: $err"
+err=$("$BIN" bench convert --count -3 2>&1) && fail "bench convert --count -3 accepted"
+grep -q -- "--count" <<< "$err" || fail "bench --count: $err"
+
+# (8) render-preview takes an upper-case extension, as tonemap does (before, "--out P.PNG" was
+# "must end in .png or .exr").
+"$BIN" --quiet render-preview --scene "$CARD" --material "$TMP/std.json" --out "$TMP/P.PNG" > /dev/null \
+  || fail "render-preview --out P.PNG exited $?"
+[ "$(head -c 4 "$TMP/P.PNG" | tail -c 3)" = PNG ] || fail "P.PNG is not a PNG"
 
 echo "PASS: s28 render audit"
