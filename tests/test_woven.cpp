@@ -730,6 +730,30 @@ TEST(WovenFabric, ErrorsNameTheFileAndField) {
   ExpectFabricError("[1, 2]", "top level must be a JSON object");
 }
 
+// Session 28: Fabric::weave_path is the file the weave was read from, for content keys (the
+// reference cache keyed ../weaves/<preset>.weave even when 'weave_file' named another file).
+TEST(WovenFabric, WeavePathIsTheFileRead) {
+  const auto dir = std::filesystem::temp_directory_path() / "clothfit_woven_weave_path";
+  std::filesystem::create_directories(dir / "fabrics");
+  std::filesystem::create_directories(dir / "weaves");
+  std::ofstream(dir / "fabrics" / "mine.weave") << ReadText(WeavePath("polyester"));
+  std::ofstream(dir / "weaves" / "polyester.weave") << ReadText(WeavePath("polyester"));
+  const std::string own = (dir / "fabrics" / "own.json").string();
+  std::ofstream(own) << R"({"format": "clothfit-fabric", "version": 1, "name": "own", )"
+                     << R"("model": "irawan", "preset": "polyester", "weave_file": "mine.weave", )"
+                     << R"("uv_repeats": 3})";
+  EXPECT_EQ(LoadFabric(own).weave_path, (dir / "fabrics" / "mine.weave").string());
+  const std::string by_preset = (dir / "fabrics" / "preset.json").string();
+  std::ofstream(by_preset) << R"({"format": "clothfit-fabric", "version": 1, "name": "p", )"
+                           << R"("model": "irawan", "preset": "polyester", "uv_repeats": 3})";
+  EXPECT_EQ(LoadFabric(by_preset).weave_path, (dir / "weaves" / "polyester.weave").string());
+  const std::string simple = (dir / "fabrics" / "lambert.json").string();
+  std::ofstream(simple) << R"({"format": "clothfit-fabric", "version": 1, "name": "l", )"
+                        << R"("model": "lambert", "albedo": [0.5, 0.5, 0.5]})";
+  EXPECT_EQ(LoadFabric(simple).weave_path, "");
+  std::filesystem::remove_all(dir);
+}
+
 TEST(WovenFabric, WeaveErrorsKeepTheirFileAndLine) {
   const auto dir = std::filesystem::temp_directory_path() / "clothfit_woven_test";
   std::filesystem::create_directories(dir);

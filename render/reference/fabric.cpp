@@ -158,8 +158,9 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
       weave = std::filesystem::path("..") / "weaves" / (f.preset + ".weave");
     }
     if (weave.is_relative()) weave = std::filesystem::path(path).parent_path() / weave;
+    f.weave_path = weave.lexically_normal().string();
     try {
-      WeavePattern pattern = LoadWeave(weave.lexically_normal().string());
+      WeavePattern pattern = LoadWeave(f.weave_path);
       f.bsdf = std::make_unique<IrawanBsdf>(std::move(pattern), f.uv_repeats, f.uv_repeats);
     } catch (const WeavePatternError& e) {
       // A fabric copied out of datasets/fabrics/ loses its ../weaves/ neighbour: say where the
