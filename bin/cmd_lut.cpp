@@ -54,8 +54,9 @@ void AddLutCommand(CLI::App& app, const Globals& g, int& exit_code) {
       // EXRs by name as by content, two different files, directories that take them (session
       // 28: before, `--sheen-out` equal to `--out` replaced the DFG LUT with the sheen table,
       // and `--out dfg.png` received EXR bytes).
-      for (const auto& [flag, path] : {std::pair<const char*, const std::string&>{"--out", args->out},
-                                       {"--sheen-out", args->sheen_out}}) {
+      using Output = std::pair<const char*, const std::string&>;
+      for (const auto& [flag, path] :
+           {Output{"--out", args->out}, Output{"--sheen-out", args->sheen_out}}) {
         if (path.empty()) continue;
         std::string ext = std::filesystem::path(path).extension().string();
         for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));

@@ -185,7 +185,9 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       // The loader's repairs (computed normals, tangents) and a missing map, as render-preview
       // prints them (session 28: render-reference repaired silently).
       for (const std::string& w : scene.warnings)
-        if (!g.quiet) std::fprintf(stderr, "clothfit: warning: %s\n", limits::EscapeForMessage(w, 2000).c_str());
+        if (!g.quiet)
+          std::fprintf(stderr, "clothfit: warning: %s\n",
+                       limits::EscapeForMessage(w, 2000).c_str());
       const auto env = LoadSceneEnvironment(scene, g.quiet);
       render::PathTracer tracer(scene, *fabric.bsdf, env.get());
       ProgressBar bar("render " + fabric.name, g.quiet);

@@ -168,7 +168,8 @@ void AddRenderReferencesCommand(CLI::App& app, const Globals& g, int& exit_code)
       for (const std::string& scene : scenes)
         for (const std::string& w : LoadSceneAtWidth(scene, a->width).warnings)
           if (!g.quiet)
-            std::fprintf(stderr, "clothfit: warning: %s\n", limits::EscapeForMessage(w, 2000).c_str());
+            std::fprintf(stderr, "clothfit: warning: %s\n",
+                         limits::EscapeForMessage(w, 2000).c_str());
       std::vector<std::vector<double>> targets;  // [fabric][scene]
       for (const std::string& fabric : fabrics) {
         render::LoadFabric(fabric);

@@ -453,7 +453,8 @@ TEST_F(EnvironmentLoad, DisplayEncodedPngIsRefusedNamingIt) {
     EXPECT_NE(msg.find("uint8 png"), std::string::npos) << msg;
   }
   // The same texels in an EXR load.
-  const std::string exr = WriteMap("sky.exr", 8, 4, [](int, int) { return Rgb<double>(0.75, 0.75, 0.75); });
+  const std::string exr =
+      WriteMap("sky.exr", 8, 4, [](int, int) { return Rgb<double>(0.75, 0.75, 0.75); });
   EXPECT_EQ(Environment::Load(exr, 1.0, 0.0).pixels()[0], 0.75f);
 }
 

@@ -239,8 +239,9 @@ TEST(FabricRegression, NameMustBePrintable) {
       EXPECT_FALSE(Contains(e.what(), "\x1b[")) << "unescaped ESC in the message";
     }
   }
-  const std::string ok = R"({"format": "clothfit-fabric", "version": 1, "name": "Leinen \u00e9t\u00e9 #2",
-                             "model": "lambert", "albedo": [0.5, 0.5, 0.5]})";
+  const std::string ok =
+      R"({"format": "clothfit-fabric", "version": 1, "name": "Leinen \u00e9t\u00e9 #2",
+          "model": "lambert", "albedo": [0.5, 0.5, 0.5]})";
   EXPECT_EQ(render::ParseFabric(ok, "/tmp/f.json").name, "Leinen \u00e9t\u00e9 #2");
 }
 

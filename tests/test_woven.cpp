@@ -210,8 +210,9 @@ TEST(WovenPattern, MalformedFilesGiveFileAndLine) {
   ExpectWeaveError("", "bad.weave:1", "header");
   // Session 28: a pattern shorter or longer than its tile says. Before, the yarn line after a
   // missing row was "a pattern row with 17 ids", and an extra row "unknown keyword '4'".
-  ExpectWeaveError(replace_line(20, ""), "bad.weave:21",
-                   "pattern has 1 rows, but 'tile 2 2' (line 17) declares 2; this line starts 'yarn'");
+  ExpectWeaveError(
+      replace_line(20, ""), "bad.weave:21",
+      "pattern has 1 rows, but 'tile 2 2' (line 17) declares 2; this line starts 'yarn'");
   ExpectWeaveError(replace_line(17, "tile 2 1"), "bad.weave:20",
                    "a pattern row after the 1 rows that 'tile 2 1' (line 17) declares");
 }

@@ -422,12 +422,14 @@ WeavePattern ParseWeave(std::string_view text, const std::string& source) {
       ParsePatternBlock(lines, source, tok, where, &li, &d);
     } else if (key == "yarn") {
       ParseYarnLine(tok, where, line_no, &d);
-    } else if (d.seen.count("pattern") && key.find_first_not_of("0123456789") == std::string::npos) {
+    } else if (d.seen.count("pattern") &&
+               key.find_first_not_of("0123456789") == std::string::npos) {
       // Rows after the pattern: it is longer than the tile says (session 28: before, "unknown
       // keyword '1'").
-      Fail(where, "a pattern row after the " + std::to_string(d.p.tile_height) + " rows that 'tile " +
-                      std::to_string(d.p.tile_width) + " " + std::to_string(d.p.tile_height) +
-                      "' (line " + std::to_string(d.seen["tile"]) + ") declares");
+      Fail(where, "a pattern row after the " + std::to_string(d.p.tile_height) +
+                      " rows that 'tile " + std::to_string(d.p.tile_width) + " " +
+                      std::to_string(d.p.tile_height) + "' (line " +
+                      std::to_string(d.seen["tile"]) + ") declares");
     } else {
       ParseScalarLine(fields, key, tok, where, &d.p);
     }
