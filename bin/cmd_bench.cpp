@@ -420,8 +420,7 @@ void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
   cmd->add_option("--catalogue", a.catalogue,
                   "`bench convert`: catalogue directory (default: generate one in a temporary "
                   "directory with datasets/catalogue/generate.py)");
-  cmd->add_option("--count", a.count,
-                  "`bench convert`: materials per input format when generating")
+  cmd->add_option("--count", a.count, "`bench convert`: materials per input format when generating")
       ->check(CLI::Range(1, 100000))  // session 28: 0 and negative counts were accepted
       ->capture_default_str();
   // --threads: the name fit and render-* use; -j/--jobs kept (bench reference's --threads

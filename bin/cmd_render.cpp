@@ -1,12 +1,12 @@
 // clothfit render-reference: path-traced reference of a fabric on a scene.
-#include <algorithm>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cstdio>
 #include <filesystem>
-#include <memory>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <sstream>
@@ -14,12 +14,12 @@
 
 #include "bin/commands.h"
 #include "bin/progress.h"
-#include "render/scene/environment.h"
-#include "render/scene/image_io.h"
 #include "render/reference/fabric.h"
 #include "render/reference/path_tracer.h"
-#include "render/scene/scene.h"
+#include "render/scene/environment.h"
+#include "render/scene/image_io.h"
 #include "render/scene/input_limits.h"
+#include "render/scene/scene.h"
 
 namespace clothfit::cli {
 
@@ -55,10 +55,10 @@ std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& s
     auto it = memo.find(key);
     if (it == memo.end()) {
       try {
-        it = memo.emplace(key, std::make_shared<const render::Environment>(
-                                   render::Environment::Load(e.path, e.intensity, e.rotation_y,
-                                                             warn)))
-                 .first;
+        it =
+            memo.emplace(key, std::make_shared<const render::Environment>(render::Environment::Load(
+                                  e.path, e.intensity, e.rotation_y, warn)))
+                .first;
       } catch (const io::IoError& error) {  // the map's own message, with the card and field
         throw io::IoError(scene.card.path + ": field 'environment.path': " + error.what());
       }
@@ -69,7 +69,8 @@ std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& s
   // there rendered the procedural sky with status 0 (session 28).
   if (e.is_file)
     throw io::IoError(scene.card.path + ": field 'environment.path': '" + e.name +
-                      "': no such file " + e.path + " (a path with '/' or an extension is a "
+                      "': no such file " + e.path +
+                      " (a path with '/' or an extension is a "
                       "file, relative to the card's directory; only a map name such as "
                       "\"studio\" may be missing, until scripts/fetch-data installs it)");
   if (e.path != "procedural-sky") {
@@ -138,7 +139,8 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       std::string ext = std::filesystem::path(args->out).extension().string();
       for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
       if (ext != ".exr")
-        throw std::invalid_argument("--out: '" + args->out + "' must end in .exr (render-reference "
+        throw std::invalid_argument("--out: '" + args->out +
+                                    "' must end in .exr (render-reference "
                                     "writes a linear EXR; clothfit tonemap makes a PNG of it)");
       RefuseOutputOverInput({"--out", args->out},
                             {{"--scene", args->scene}, {"--fabric", args->fabric}});
@@ -177,11 +179,10 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       RefuseOutputOverInput(
           {"--out", args->out},
           {{"--scene's gltf", scene.card.gltf},
-           {"--scene's environment.path",
-            scene.card.environment && scene.card.environment->found &&
-                    scene.card.environment->path != "procedural-sky"
-                ? scene.card.environment->path
-                : std::string()}});
+           {"--scene's environment.path", scene.card.environment && scene.card.environment->found &&
+                                                  scene.card.environment->path != "procedural-sky"
+                                              ? scene.card.environment->path
+                                              : std::string()}});
       // The loader's repairs (computed normals, tangents) and a missing map, as render-preview
       // prints them (session 28: render-reference repaired silently).
       for (const std::string& w : scene.warnings)

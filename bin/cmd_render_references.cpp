@@ -107,8 +107,8 @@ std::vector<uint64_t> ParseSeeds(const std::string& spec) {
   std::vector<uint64_t> seeds;
   for (const std::string& s : SplitList(spec)) {
     uint64_t v = 0;
-    bool ok = !s.empty() && s.size() <= 20 &&
-              s.find_first_not_of("0123456789") == std::string::npos;
+    bool ok =
+        !s.empty() && s.size() <= 20 && s.find_first_not_of("0123456789") == std::string::npos;
     if (ok) {
       try {
         v = std::stoull(s);
@@ -177,14 +177,16 @@ void AddRenderReferencesCommand(CLI::App& app, const Globals& g, int& exit_code)
         for (const std::string& scene : scenes) {
           targets.back().push_back(TargetErrorFor(a->target_error, fabric, scene));
           if (targets.back().back() > 0.0 && (a->spp < 32 || a->spp % 16 != 0))
-            throw std::invalid_argument("--spp: with --target-error the budget must be a "
-                                        "multiple of 16 >= 32, got " + std::to_string(a->spp));
+            throw std::invalid_argument(
+                "--spp: with --target-error the budget must be a "
+                "multiple of 16 >= 32, got " +
+                std::to_string(a->spp));
         }
       }
       std::unique_ptr<tbb::global_control> limit;
       if (a->threads > 0)
-        limit = std::make_unique<tbb::global_control>(
-            tbb::global_control::max_allowed_parallelism, size_t(a->threads));
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      size_t(a->threads));
       int task = 0;
       for (size_t fi = 0; fi < fabrics.size(); ++fi) {
         const std::string& fabric = fabrics[fi];

@@ -227,7 +227,7 @@ TEST(FabricRegression, PresetNameMustBePlain) {
 // control bytes in it are refused, naming the file and field, shown escaped.
 TEST(FabricRegression, NameMustBePrintable) {
   for (const std::string& name : {std::string("x\\u001b[31mred"), std::string("a\\nb"),
-                                 std::string("tab\\there"), std::string("del\\u007f")}) {
+                                  std::string("tab\\there"), std::string("del\\u007f")}) {
     const std::string text = R"({"format": "clothfit-fabric", "version": 1, "name": ")" + name +
                              R"(", "model": "lambert", "albedo": [0.5, 0.5, 0.5]})";
     try {

@@ -601,7 +601,8 @@ RenderResult PathTracer::Render(const RenderSettings& st,
         std::to_string(RenderExrChannels(st.aovs)) + " channels is " +
         std::to_string(exr_bytes >> 20) + " MiB as float, over the " +
         std::to_string(limits::kMaxImageBytes >> 20) + " MiB an image may have to be read back " +
-        limits::LimitRef("kMaxImageBytes") + " (fit, evaluate and compare could not read it); "
+        limits::LimitRef("kMaxImageBytes") +
+        " (fit, evaluate and compare could not read it); "
         "lower the width or height, or ask for fewer --aov");
   RenderResult r = AllocateResult(W, H, st.aovs);
 

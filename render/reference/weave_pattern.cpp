@@ -238,8 +238,8 @@ void ParsePatternBlock(const std::vector<std::string_view>& lines, const std::st
     if (row[0].find_first_not_of("+-0123456789") == 0) {
       Fail(row_where, "pattern has " + std::to_string(rows) + " rows, but 'tile " +
                           std::to_string(p.tile_width) + " " + std::to_string(p.tile_height) +
-                          "' (line " + std::to_string(d->seen.at("tile")) +
-                          ") declares " + std::to_string(p.tile_height) + "; this line starts '" +
+                          "' (line " + std::to_string(d->seen.at("tile")) + ") declares " +
+                          std::to_string(p.tile_height) + "; this line starts '" +
                           limits::EscapeForMessage(row[0], 40) + "'");
     }
     if (int(row.size()) != p.tile_width) {

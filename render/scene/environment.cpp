@@ -199,7 +199,8 @@ Environment Environment::Load(const std::string& path, double intensity, double 
   // An 8/16-bit PNG holds display-encoded (sRGB) codes clipped at 1, not radiance: read as
   // radiance it lights the scene dimly and without its sun, with no error (session 28).
   if (!img.float_source) {
-    throw io::IoError(limits::EscapeForMessage(path, 400) + ": an environment map must be "
+    throw io::IoError(limits::EscapeForMessage(path, 400) +
+                      ": an environment map must be "
                       "linear radiance (float or half EXR, or Radiance HDR); this is a " +
                       img.source_format + " " + img.file_format +
                       " with display-encoded values clipped at 1 (docs/environments.md)");

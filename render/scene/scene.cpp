@@ -1212,13 +1212,13 @@ Scene LoadScene(const std::string& card_path) {
   if (card.environment && !card.environment->found) {
     // A missing file (not a cache name) is an error of the renderers (bin/cmd_render.cpp
     // LoadSceneEnvironment), not a fallback to the sky.
-    scene.warnings.push_back(
-        card.environment->is_file
-            ? card.path + ": field 'environment.path': no such file " + card.environment->path +
-                  " (the renderers refuse it)"
-            : card.path + ": field 'environment.path': map " + Quote(card.environment->name) +
-                  " is not installed (looked for " + card.environment->path +
-                  "); renderers use the procedural sky");
+    scene.warnings.push_back(card.environment->is_file
+                                 ? card.path + ": field 'environment.path': no such file " +
+                                       card.environment->path + " (the renderers refuse it)"
+                                 : card.path + ": field 'environment.path': map " +
+                                       Quote(card.environment->name) +
+                                       " is not installed (looked for " + card.environment->path +
+                                       "); renderers use the procedural sky");
   }
   return scene;
 }
