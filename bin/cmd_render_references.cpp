@@ -11,6 +11,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <system_error>
 #include <utility>
 #include <vector>
 
@@ -78,6 +79,9 @@ namespace {
 // One fabric JSON path per line; blank lines and '#' comments skipped; relative paths are
 // relative to the list file's directory.
 std::vector<std::string> ReadFabricList(const std::string& path) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec))  // a directory opened and read as empty (session 28)
+    throw std::invalid_argument(path + ": the fabric list (--fabric-list) is not a file");
   std::ifstream in(path);
   if (!in) throw std::invalid_argument(path + ": cannot read the fabric list (--fabric-list)");
   std::vector<std::string> out;
@@ -85,6 +89,8 @@ std::vector<std::string> ReadFabricList(const std::string& path) {
   int line_no = 0;
   while (std::getline(in, line)) {
     ++line_no;
+    // A UTF-8 byte order mark (Windows editors) is not part of the first path (session 28).
+    if (line_no == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);
     const size_t hash = line.find('#');
     if (hash != std::string::npos) line.resize(hash);
     const size_t b = line.find_first_not_of(" \t\r"), e = line.find_last_not_of(" \t\r");

@@ -81,6 +81,13 @@ for s in "-1" "1.5" "1abc" "1,x" "" "," "18446744073709551616"; do
   err=$(refs --fabrics "$M" --seeds "$s" --dry-run 2>&1) && fail "--seeds '$s' accepted: $err"
   grep -q -- "--seeds: '${s#1,}'" <<< "$err" || fail "--seeds '$s': $err"
 done
+# --fabric-list: a directory is "not a file" (before: "the fabric list is empty"); a UTF-8 byte
+# order mark before the first path is dropped (before: "fabric file '<BOM>/...' does not exist").
+err=$(refs --fabric-list "$TMP" --dry-run 2>&1) && fail "--fabric-list DIR accepted"
+grep -q "the fabric list (--fabric-list) is not a file" <<< "$err" || fail "--fabric-list DIR: $err"
+printf '\xef\xbb\xbf%s\n# a comment\n' "$M" > "$TMP/list.txt"
+out=$(refs --fabric-list "$TMP/list.txt" --seeds 1 --dry-run) || fail "--fabric-list with a BOM exited $?"
+[ "$(wc -l <<< "$out")" -eq 3 ] || fail "--fabric-list with a BOM: $out"
 out=$(refs --fabrics "$M" --seeds "0,18446744073709551615" --dry-run) || fail "--seeds 0,2^64-1"
 grep -q "sphere.json seed 18446744073709551615" <<< "$out" || fail "largest seed: $out"
 [ "$(wc -l <<< "$out")" -eq 6 ] || fail "expected 6 tasks: $out"
