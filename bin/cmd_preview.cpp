@@ -234,8 +234,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                 "fade\"; as before session 22)");
   cmd->add_option("--light-map-out", args->light_map_out,
                   "write the fabric's baked light map (the card's \"visibility\": "
-                  "{\"light_map\"}) as an EXR: RGB = irradiance E (three.js lightMap, "
-                  "intensity 1), A = 1; metadata: the uv box");
+                  "{\"light_map\"}) as an EXR: R, G, B = irradiance E (three.js lightMap, "
+                  "intensity 1; no alpha channel, a texture takes A = 1); metadata: the uv box");
   
   cmd->add_option("--map-aniso-rule", args->map_aniso_rule,
                   "weave maps with weave_maps.anisotropy > 1: spec (EXT_texture_filter_anisotropic, "

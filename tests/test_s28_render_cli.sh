@@ -5,7 +5,7 @@
 # repairs reported (2); render-references checks every input before the first render (3); lut's
 # outputs, and two spellings of one new file (4); environment maps that are PNGs or missing
 # files (5); --help defaults and CLOTHFIT_PROGRESS=0 (6); bench's --width and --count (7);
-# render-preview's upper-case extension (8).
+# render-preview's upper-case extension (8); --light-map-out's help (9).
 . "$(dirname "$0")/cli_common.sh"
 D=$SRC/datasets
 BIN=$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")  # the blocks below cd
@@ -163,5 +163,12 @@ grep -q -- "--count" <<< "$err" || fail "bench --count: $err"
 "$BIN" --quiet render-preview --scene "$CARD" --material "$TMP/std.json" --out "$TMP/P.PNG" > /dev/null \
   || fail "render-preview --out P.PNG exited $?"
 [ "$(head -c 4 "$TMP/P.PNG" | tail -c 3)" = PNG ] || fail "P.PNG is not a PNG"
+
+# (9) --light-map-out's help said "A = 1" of a file with R, G, B only (docs/web.md: "A is not in
+# the file").
+"$BIN" render-preview --help | tr -s ' \n' ' ' | grep -q "A = 1; metadata" && fail "--light-map-out help claims an alpha channel"
+"$BIN" --quiet render-preview --scene "$D/scenes/drape.json" --material "$TMP/std.json" --out "$TMP/d.png" \
+  --light-map-out "$TMP/lm.exr" > /dev/null || fail "render-preview --light-map-out exited $?"
+oiiotool --info "$TMP/lm.exr" | grep -q "3 channel" || fail "the light map is not R, G, B: $(oiiotool --info "$TMP/lm.exr")"
 
 echo "PASS: s28 render audit"
