@@ -74,6 +74,13 @@ err=$(refs --fabrics "$M" --seeds 1 --target-error 0.05 --spp 40 2>&1) \
   && fail "an adaptive budget of 40 accepted"
 grep -q -- "--spp: with --target-error the budget must be a multiple of 16 >= 32, got 40" <<< "$err" \
   || fail "adaptive budget: $err"
+# a target item that names no task (a misspelt scene) is an error, not ignored
+err=$(refs --fabrics "$M" --seeds 1 --spp 32 --dry-run \
+  --target-error "sphere=0.05,drape=0.05,swatch=0.05,lambert/drap=0.01" 2>&1) && fail "an unused target item accepted"
+grep -q -- "--target-error: item 'lambert/drap=0.01' names no task of this run (sphere, drape, swatch, lambert/sphere" <<< "$err" \
+  || fail "unused target item: $err"
+refs --fabrics "$M" --seeds 1 --spp 32 --dry-run --target-error "sphere=0.05,drape=0.05,swatch=0.05,lambert/drape=0.01" \
+  > /dev/null || fail "a used fabric/scene target item refused"
 [ ! -e "$TMP/cache" ] || [ -z "$(ls "$TMP/cache")" ] || fail "a refused run rendered: $(ls "$TMP/cache")"
 # --seeds: integers only (before: -1 was 2^64 - 1, 1.5 and 1abc were 1, x said "stoull", an
 # empty list rendered nothing with status 0)
