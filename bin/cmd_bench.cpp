@@ -420,8 +420,8 @@ void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
   cmd->add_option("--catalogue", a.catalogue,
                   "`bench convert`: catalogue directory (default: generate one in a temporary "
                   "directory with datasets/catalogue/generate.py)");
-  cmd->add_option("--count", a.count,
-                  "`bench convert`: materials per input format when generating")
+  cmd->add_option("--count", a.count, "`bench convert`: materials per input format when generating")
+      ->check(CLI::Range(1, 100000))  // session 28: 0 and negative counts were accepted
       ->capture_default_str();
   // --threads: the name fit and render-* use; -j/--jobs kept (bench reference's --threads
   // before session 27 is this option now).
@@ -466,6 +466,7 @@ void AddBenchOptions(CLI::App* cmd, BenchArgs& a) {
   cmd->add_option("--seed", ra.seed, "`bench reference`: seed (both renderers)")
       ->capture_default_str();
   cmd->add_option("--width", ra.width, "`bench reference`: image width (0: the card's)")
+      ->check(CLI::Range(0, 8192))  // as render-references --width (session 28: -5 was the card's)
       ->capture_default_str();
   cmd->add_option("--target-error", ra.target_error,
                   "`bench reference`, woven: mean standard error / mean value to reach")

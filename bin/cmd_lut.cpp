@@ -1,7 +1,9 @@
 // clothfit lut: the DFG LUT and the glTF sheen albedo table, as EXR.
+#include <cctype>
 #include <cstdio>
 #include <filesystem>
 #include <string>
+#include <utility>
 
 #include "bin/commands.h"
 #include "bin/progress.h"
@@ -33,6 +35,8 @@ void AddLutCommand(CLI::App& app, const Globals& g, int& exit_code) {
       "lut",
       "compute the DFG LUT (R,G = GGX scale/bias, B = cloth sheen albedo) and the glTF "
       "sheen albedo table");
+  // --help shows each default ("=64"), as bench does (session 28: it showed none).
+  cmd->option_defaults()->always_capture_default();
   cmd->add_option("--size", args->size, "DFG texels per axis")->check(CLI::Range(2, 4096));
   cmd->add_option("--gl-order", args->order, "Gauss-Legendre nodes per theta_h panel")
       ->check(CLI::Range(2, 64));
@@ -47,6 +51,23 @@ void AddLutCommand(CLI::App& app, const Globals& g, int& exit_code) {
     try {
       io::RequireOutputDirectory(args->out);  // both, before any table is computed
       if (!args->sheen_out.empty()) io::RequireOutputDirectory(args->sheen_out);
+      // EXRs by name as by content, two different files, directories that take them (session
+      // 28: before, `--sheen-out` equal to `--out` replaced the DFG LUT with the sheen table,
+      // and `--out dfg.png` received EXR bytes).
+      using Output = std::pair<const char*, const std::string&>;
+      for (const auto& [flag, path] :
+           {Output{"--out", args->out}, Output{"--sheen-out", args->sheen_out}}) {
+        if (path.empty()) continue;
+        std::string ext = std::filesystem::path(path).extension().string();
+        for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+        if (ext != ".exr")
+          throw std::invalid_argument(std::string(flag) + ": '" + path +
+                                      "' must end in .exr (lut writes float EXR tables)");
+        RequireWritableOutput(path, flag);
+      }
+      if (!args->sheen_out.empty())
+        RefuseOutputOverInput({"--sheen-out", args->sheen_out},
+                              std::vector<NamedPath>{NamedPath{"--out", args->out}});
       lut::Settings s{args->size, args->order, args->azimuth};
       ProgressBar bar("lut dfg", g.quiet);
       const Table2D dfg = lut::ComputeDfg(s, [&](int d, int t) { bar.Update(d, t); });

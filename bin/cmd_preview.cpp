@@ -46,10 +46,15 @@ bool SameFile(const std::string& a, const std::string& b) {
     const bool same = fs::equivalent(a, b, ec);
     if (!ec) return same;
   }
+  // Absolute first: weakly_canonical leaves a relative path whose first element does not exist
+  // relative ("a.exr" stayed "a.exr" while "./a.exr" became "/cwd/a.exr"; session 28), so two
+  // spellings of one new file compared unequal.
   const auto canonical = [](const std::string& p) {
     std::error_code e;
-    const fs::path c = fs::weakly_canonical(p, e);
-    return e ? fs::absolute(p, e).lexically_normal() : c;
+    const fs::path abs = fs::absolute(p, e);
+    if (e) return fs::path(p).lexically_normal();
+    const fs::path c = fs::weakly_canonical(abs, e);
+    return e ? abs.lexically_normal() : c;
   };
   return canonical(a) == canonical(b);
 }
@@ -208,6 +213,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
       "render-preview", "render what the real-time engine draws for a scene and a material");
+  // --help shows each default ("=filament"), as bench does (session 28: it showed none).
+  cmd->option_defaults()->always_capture_default();
   cmd->add_option("--scene", args->scene, "scene card (JSON)")->required();
   cmd->add_option("--material", args->material, "material preset (JSON, docs/preset-format.md)")
       ->required();
@@ -227,8 +234,8 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
                 "fade\"; as before session 22)");
   cmd->add_option("--light-map-out", args->light_map_out,
                   "write the fabric's baked light map (the card's \"visibility\": "
-                  "{\"light_map\"}) as an EXR: RGB = irradiance E (three.js lightMap, "
-                  "intensity 1), A = 1; metadata: the uv box");
+                  "{\"light_map\"}) as an EXR: R, G, B = irradiance E (three.js lightMap, "
+                  "intensity 1; no alpha channel, a texture takes A = 1); metadata: the uv box");
   
   cmd->add_option("--map-aniso-rule", args->map_aniso_rule,
                   "weave maps with weave_maps.anisotropy > 1: spec (EXT_texture_filter_anisotropic, "
@@ -258,7 +265,9 @@ void AddPreviewCommand(CLI::App& app, const Globals& g, int& exit_code) {
     try {
       io::RequireOutputDirectory(args->out);  // before the PMREM and the cache build
       if (!args->light_map_out.empty()) io::RequireOutputDirectory(args->light_map_out);
-      const std::string ext = std::filesystem::path(args->out).extension().string();
+      // Case-insensitive, as tonemap and render-reference (session 28: "P.PNG" was refused).
+      std::string ext = std::filesystem::path(args->out).extension().string();
+      for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
       if (ext != ".png" && ext != ".exr") {
         std::fprintf(stderr, "clothfit render-preview: error: --out: '%s' must end in .png or .exr\n",
                      args->out.c_str());

@@ -1,11 +1,12 @@
 // clothfit render-reference: path-traced reference of a fabric on a scene.
-#include <algorithm>
 #include <tbb/global_control.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cstdio>
 #include <filesystem>
-#include <memory>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <sstream>
@@ -13,12 +14,12 @@
 
 #include "bin/commands.h"
 #include "bin/progress.h"
-#include "render/scene/environment.h"
-#include "render/scene/image_io.h"
 #include "render/reference/fabric.h"
 #include "render/reference/path_tracer.h"
-#include "render/scene/scene.h"
+#include "render/scene/environment.h"
+#include "render/scene/image_io.h"
 #include "render/scene/input_limits.h"
+#include "render/scene/scene.h"
 
 namespace clothfit::cli {
 
@@ -52,12 +53,26 @@ std::unique_ptr<render::Environment> LoadSceneEnvironment(const render::Scene& s
     const std::string key = e.path + key_tail;
     std::lock_guard<std::mutex> lock(memo_mutex);
     auto it = memo.find(key);
-    if (it == memo.end())
-      it = memo.emplace(key, std::make_shared<const render::Environment>(render::Environment::Load(
-                                 e.path, e.intensity, e.rotation_y, warn)))
-               .first;
+    if (it == memo.end()) {
+      try {
+        it =
+            memo.emplace(key, std::make_shared<const render::Environment>(render::Environment::Load(
+                                  e.path, e.intensity, e.rotation_y, warn)))
+                .first;
+      } catch (const io::IoError& error) {  // the map's own message, with the card and field
+        throw io::IoError(scene.card.path + ": field 'environment.path': " + error.what());
+      }
+    }
     return std::make_unique<render::Environment>(*it->second);
   }
+  // A file the card names is the user's own map, not one scripts/fetch-data installs: a typo
+  // there rendered the procedural sky with status 0 (session 28).
+  if (e.is_file)
+    throw io::IoError(scene.card.path + ": field 'environment.path': '" + e.name +
+                      "': no such file " + e.path +
+                      " (a path with '/' or an extension is a "
+                      "file, relative to the card's directory; only a map name such as "
+                      "\"studio\" may be missing, until scripts/fetch-data installs it)");
   if (e.path != "procedural-sky") {
     warn(scene.card.path + ": environment '" + e.path +
          "' is not installed (run scripts/fetch-data); using the procedural sky");
@@ -94,6 +109,8 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("render-reference",
                                      "path-trace a reference image of a fabric on a scene");
+  // --help shows each default ("=64"), as bench does (session 28: it showed none).
+  cmd->option_defaults()->always_capture_default();
   cmd->add_option("--scene", args->scene, "scene card (JSON)")->required();
   cmd->add_option("--fabric", args->fabric, "fabric definition (JSON)")->required();
   cmd->add_option("--out", args->out, "output EXR")->required();
@@ -105,7 +122,8 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->add_option("--env-samples", args->env_samples,
                   "environment samples at each camera ray's hit (default: the renderer's; with "
                   "--target-error: chosen among 2, 4, 8 by a pilot)")
-      ->check(CLI::Range(1, 16));
+      ->check(CLI::Range(1, 16))
+      ->default_str("");  // -1, "not given", is no value to show
   cmd->add_option("--target-error", args->target_error,
                   "adaptive sampling: target mean standard error / mean value (0.02 = 2 %); "
                   "--spp is then the per-pixel budget (a multiple of 16 >= 32)")
@@ -115,6 +133,18 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
   cmd->callback([args, &g, &exit_code]() {
     try {
       io::RequireOutputDirectory(args->out);  // before minutes of rendering
+      // An EXR by name as by content, not one of the inputs, in a directory that takes the file
+      // (session 28: before, `--out canvas.json` replaced the fabric with the image after the
+      // render, and `--out x.png` received EXR bytes).
+      std::string ext = std::filesystem::path(args->out).extension().string();
+      for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+      if (ext != ".exr")
+        throw std::invalid_argument("--out: '" + args->out +
+                                    "' must end in .exr (render-reference "
+                                    "writes a linear EXR; clothfit tonemap makes a PNG of it)");
+      RefuseOutputOverInput({"--out", args->out},
+                            {{"--scene", args->scene}, {"--fabric", args->fabric}});
+      RequireWritableOutput(args->out, "--out");
       render::RenderSettings st;
       st.spp = args->spp;
       st.seed = args->seed;
@@ -145,6 +175,20 @@ void AddRenderCommand(CLI::App& app, const Globals& g, int& exit_code) {
       }
       const render::Scene scene = render::LoadScene(args->scene);
       const render::Fabric fabric = render::LoadFabric(args->fabric);
+      // The files the card names are inputs too (its glTF, its environment map).
+      RefuseOutputOverInput(
+          {"--out", args->out},
+          {{"--scene's gltf", scene.card.gltf},
+           {"--scene's environment.path", scene.card.environment && scene.card.environment->found &&
+                                                  scene.card.environment->path != "procedural-sky"
+                                              ? scene.card.environment->path
+                                              : std::string()}});
+      // The loader's repairs (computed normals, tangents) and a missing map, as render-preview
+      // prints them (session 28: render-reference repaired silently).
+      for (const std::string& w : scene.warnings)
+        if (!g.quiet)
+          std::fprintf(stderr, "clothfit: warning: %s\n",
+                       limits::EscapeForMessage(w, 2000).c_str());
       const auto env = LoadSceneEnvironment(scene, g.quiet);
       render::PathTracer tracer(scene, *fabric.bsdf, env.get());
       ProgressBar bar("render " + fabric.name, g.quiet);

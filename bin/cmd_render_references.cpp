@@ -5,16 +5,19 @@
 // renders the tasks whose index is i modulo N in a fixed enumeration (fabric, scene, seed).
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <system_error>
 #include <utility>
 #include <vector>
 
 #include "bin/commands.h"
+#include "render/reference/fabric.h"
 #include "render/scene/input_limits.h"
 
 namespace clothfit::cli {
@@ -77,6 +80,9 @@ namespace {
 // One fabric JSON path per line; blank lines and '#' comments skipped; relative paths are
 // relative to the list file's directory.
 std::vector<std::string> ReadFabricList(const std::string& path) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec))  // a directory opened and read as empty (session 28)
+    throw std::invalid_argument(path + ": the fabric list (--fabric-list) is not a file");
   std::ifstream in(path);
   if (!in) throw std::invalid_argument(path + ": cannot read the fabric list (--fabric-list)");
   std::vector<std::string> out;
@@ -84,6 +90,8 @@ std::vector<std::string> ReadFabricList(const std::string& path) {
   int line_no = 0;
   while (std::getline(in, line)) {
     ++line_no;
+    // A UTF-8 byte order mark (Windows editors) is not part of the first path (session 28).
+    if (line_no == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);
     const size_t hash = line.find('#');
     if (hash != std::string::npos) line.resize(hash);
     const size_t b = line.find_first_not_of(" \t\r"), e = line.find_last_not_of(" \t\r");
@@ -99,6 +107,52 @@ std::vector<std::string> ReadFabricList(const std::string& path) {
   return out;
 }
 
+// --seeds: comma-separated decimal integers in [0, 2^64) (the renderer's uint64_t seed).
+// Before session 28 std::stoull took "-1" as 2^64 - 1, "1.5" and "1abc" as 1, failed "x" with
+// the bare message "stoull", and an empty list rendered nothing with status 0.
+std::vector<uint64_t> ParseSeeds(const std::string& spec) {
+  std::vector<uint64_t> seeds;
+  for (const std::string& s : SplitList(spec)) {
+    uint64_t v = 0;
+    bool ok =
+        !s.empty() && s.size() <= 20 && s.find_first_not_of("0123456789") == std::string::npos;
+    if (ok) {
+      try {
+        v = std::stoull(s);
+      } catch (const std::exception&) {
+        ok = false;  // above 2^64 - 1
+      }
+    }
+    if (!ok)
+      throw std::invalid_argument("--seeds: '" + s +
+                                  "' is not a seed (a non-negative integer below 2^64)");
+    seeds.push_back(v);
+  }
+  if (seeds.empty()) throw std::invalid_argument("--seeds: '" + spec + "' lists no seed");
+  return seeds;
+}
+
+// Every "key=E" item of --target-error names a scene or a fabric/scene of these tasks (session
+// 28: a misspelt override, "canvas/drap=0.01" next to "drape=0.02", was ignored silently and
+// the references were rendered at the other target).
+void RequireEveryTargetUsed(const std::string& spec, const std::vector<std::string>& fabrics,
+                            const std::vector<std::string>& scenes) {
+  if (spec.find('=') == std::string::npos) return;
+  std::vector<std::string> keys;
+  for (const std::string& scene : scenes) keys.push_back(fs::path(scene).stem().string());
+  for (const std::string& fabric : fabrics)
+    for (const std::string& scene : scenes)
+      keys.push_back(fs::path(fabric).stem().string() + "/" + fs::path(scene).stem().string());
+  for (const std::string& item : SplitList(spec)) {
+    const std::string key = item.substr(0, item.find('='));
+    if (std::find(keys.begin(), keys.end(), key) != keys.end()) continue;
+    std::string valid;
+    for (const std::string& k : keys) valid += (valid.empty() ? "" : ", ") + k;
+    throw std::invalid_argument("--target-error: item '" + item + "' names no task of this run (" +
+                                valid + ")");
+  }
+}
+
 }  // namespace
 
 void AddRenderReferencesCommand(CLI::App& app, const Globals& g, int& exit_code) {
@@ -111,6 +165,8 @@ void AddRenderReferencesCommand(CLI::App& app, const Globals& g, int& exit_code)
   CLI::App* cmd = app.add_subcommand(
       "render-references",
       "render (or reuse) the cached references of fabrics on the canonical scenes, one shard");
+  // --help shows each default ("=64"), as bench does (session 28: it showed none).
+  cmd->option_defaults()->always_capture_default();
   cmd->add_option("--fabric-list", a->fabric_list, "file: one fabric JSON per line");
   cmd->add_option("--fabrics", a->fabrics, "comma-separated fabric JSON files");
   cmd->add_option("--shard", a->shard, "i/N: render task indices equal to i modulo N (0-based)");
@@ -131,17 +187,41 @@ void AddRenderReferencesCommand(CLI::App& app, const Globals& g, int& exit_code)
       for (const std::string& f : SplitList(a->fabrics)) fabrics.push_back(f);
       if (fabrics.empty()) throw std::invalid_argument("give --fabric-list or --fabrics");
       const auto [shard, shards] = ParseShard(a->shard);
-      std::vector<uint64_t> seeds;
-      for (const std::string& s : SplitList(a->seeds)) seeds.push_back(std::stoull(s));
+      const std::vector<uint64_t> seeds = ParseSeeds(a->seeds);
+      const std::vector<std::string> scenes = CanonicalScenes();
+      // Every input before the first render (session 28: a broken second fabric, or a bad
+      // --target-error item for the last scene, failed only after the earlier references had
+      // been rendered, minutes each): the cards (their warnings once), the fabrics, each
+      // task's target and the budget adaptive sampling needs.
+      for (const std::string& scene : scenes)
+        for (const std::string& w : LoadSceneAtWidth(scene, a->width).warnings)
+          if (!g.quiet)
+            std::fprintf(stderr, "clothfit: warning: %s\n",
+                         limits::EscapeForMessage(w, 2000).c_str());
+      std::vector<std::vector<double>> targets;  // [fabric][scene]
+      for (const std::string& fabric : fabrics) {
+        render::LoadFabric(fabric);
+        targets.emplace_back();
+        for (const std::string& scene : scenes) {
+          targets.back().push_back(TargetErrorFor(a->target_error, fabric, scene));
+          if (targets.back().back() > 0.0 && (a->spp < 32 || a->spp % 16 != 0))
+            throw std::invalid_argument(
+                "--spp: with --target-error the budget must be a "
+                "multiple of 16 >= 32, got " +
+                std::to_string(a->spp));
+        }
+      }
+      RequireEveryTargetUsed(a->target_error, fabrics, scenes);
       std::unique_ptr<tbb::global_control> limit;
       if (a->threads > 0)
-        limit = std::make_unique<tbb::global_control>(
-            tbb::global_control::max_allowed_parallelism, size_t(a->threads));
-      const std::vector<std::string> scenes = CanonicalScenes();
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      size_t(a->threads));
       int task = 0;
-      for (const std::string& fabric : fabrics) {
-        for (const std::string& scene : scenes) {
-          const double te = TargetErrorFor(a->target_error, fabric, scene);
+      for (size_t fi = 0; fi < fabrics.size(); ++fi) {
+        const std::string& fabric = fabrics[fi];
+        for (size_t si = 0; si < scenes.size(); ++si) {
+          const std::string& scene = scenes[si];
+          const double te = targets[fi][si];
           for (uint64_t seed : seeds) {
             if (task++ % shards != shard) continue;
             if (a->dry_run) {

@@ -16,6 +16,8 @@ void AddStressCommand(CLI::App& app, const Globals& g, int& exit_code) {
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
       "stress", "evaluate every model (double, float, Jet) on random and adversarial inputs");
+  // --help shows each default ("=64"), as bench does (session 28: it showed none).
+  cmd->option_defaults()->always_capture_default();
   cmd->add_option("--evals", args->evals, "total evaluations, split across models")
       ->check(CLI::Range(1LL, 10000000000LL));
   cmd->add_option("--seed", args->seed, "random seed (results are deterministic per seed)");

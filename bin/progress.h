@@ -1,5 +1,5 @@
-// bin/progress.h: a one-line progress bar on stderr (only when stderr is a terminal or
-// CLOTHFIT_PROGRESS=1), with rate and ETA. Silent under --quiet.
+// bin/progress.h: a one-line progress bar on stderr (when stderr is a terminal, unless
+// CLOTHFIT_PROGRESS=0; always with CLOTHFIT_PROGRESS=1), with rate and ETA. Silent under --quiet.
 #pragma once
 
 #include <unistd.h>
@@ -15,7 +15,7 @@ class ProgressBar {
  public:
   ProgressBar(std::string label, bool quiet)
       : label_(std::move(label)),
-        enabled_(!quiet && (isatty(2) || std::getenv("CLOTHFIT_PROGRESS") != nullptr)),
+        enabled_(!quiet && Wanted()),
         start_(std::chrono::steady_clock::now()) {}
 
   void Update(long long done, long long total) {
@@ -36,6 +36,14 @@ class ProgressBar {
   }
 
  private:
+  // CLOTHFIT_PROGRESS=1 forces the bar, =0 (or empty) turns it off even on a terminal; unset:
+  // on a terminal only. (Before session 28 any value, "0" included, turned it on.)
+  static bool Wanted() {
+    const char* env = std::getenv("CLOTHFIT_PROGRESS");
+    if (env == nullptr) return isatty(2) != 0;
+    return std::string(env) != "0" && *env != '\0';
+  }
+
   std::string label_;
   bool enabled_;
   std::chrono::steady_clock::time_point start_, last_{};

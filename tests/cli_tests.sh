@@ -116,11 +116,11 @@ PY
     done
     # Every option with a default shows it in --help.
     help=$("$BIN" bench --help) || fail "bench --help"
-    for want in "--count INT=200" "-j,--jobs,--threads INT:INT in \[0 - 1024\]=0" "--widths TEXT=64,128,256,512" \
+    for want in "--count INT:INT in \[1 - 100000\]=200" "-j,--jobs,--threads INT:INT in \[0 - 1024\]=0" "--widths TEXT=64,128,256,512" \
                 "--strides TEXT=0,1" "--starts TEXT=1,2,3" "--spp INT:INT in \[16 - 65536\]=64" \
                 "--csv TEXT=out/bench-fit.csv" "--png TEXT=out/bench-fit.png" "--scene TEXT=.*/sphere.json" \
                 "--fabric TEXT=.*/lambert.json" "--max-depth INT:INT in \[1 - 64\]=8" "--seed UINT=1" \
-                "--width INT=0" "--target-error FLOAT:FLOAT in \[0.0001 - 1\]=0.02" \
+                "--width INT:INT in \[0 - 8192\]=0" "--target-error FLOAT:FLOAT in \[0.0001 - 1\]=0.02" \
                 "--cycles-script TEXT=.*cycles-reference"; do
       grep -q -- "$want" <<< "$help" || fail "bench --help lacks '$want': $help"
     done

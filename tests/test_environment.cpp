@@ -438,6 +438,26 @@ TEST_F(EnvironmentLoad, SingleChannelIsGreyAndExtraChannelsIgnored) {
   EXPECT_EQ(a.pixels(), (std::vector<float>{1, 2, 3, 4, 5, 6}));
 }
 
+// Session 28: an 8-bit PNG holds display-encoded codes clipped at 1, not radiance; it was read
+// as radiance (the scene lit dimly, without its sun, status 0). It is refused, naming the file.
+TEST_F(EnvironmentLoad, DisplayEncodedPngIsRefusedNamingIt) {
+  const std::string png = (dir_ / "sky.png").string();
+  io::WritePng8(png, 8, 4, std::vector<float>(8 * 4 * 3, 0.75f));
+  try {
+    Environment::Load(png, 1.0, 0.0);
+    FAIL() << "expected io::IoError";
+  } catch (const io::IoError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(png), std::string::npos) << msg;
+    EXPECT_NE(msg.find("must be linear radiance"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("uint8 png"), std::string::npos) << msg;
+  }
+  // The same texels in an EXR load.
+  const std::string exr =
+      WriteMap("sky.exr", 8, 4, [](int, int) { return Rgb<double>(0.75, 0.75, 0.75); });
+  EXPECT_EQ(Environment::Load(exr, 1.0, 0.0).pixels()[0], 0.75f);
+}
+
 TEST_F(EnvironmentLoad, MissingOrCorruptFileThrowsIoErrorNamingIt) {
   const std::string missing = (dir_ / "no_such_map.exr").string();
   try {

@@ -223,6 +223,28 @@ TEST(FabricRegression, PresetNameMustBePlain) {
   }
 }
 
+// Session 28: a fabric's name is printed (summary line, progress bar) and stored (EXR metadata):
+// control bytes in it are refused, naming the file and field, shown escaped.
+TEST(FabricRegression, NameMustBePrintable) {
+  for (const std::string& name : {std::string("x\\u001b[31mred"), std::string("a\\nb"),
+                                  std::string("tab\\there"), std::string("del\\u007f")}) {
+    const std::string text = R"({"format": "clothfit-fabric", "version": 1, "name": ")" + name +
+                             R"(", "model": "lambert", "albedo": [0.5, 0.5, 0.5]})";
+    try {
+      render::ParseFabric(text, "/tmp/f.json");
+      FAIL() << "name " << name << " accepted";
+    } catch (const render::FabricError& e) {
+      EXPECT_TRUE(Contains(e.what(), "/tmp/f.json")) << e.what();
+      EXPECT_TRUE(Contains(e.what(), "field 'name'")) << e.what();
+      EXPECT_FALSE(Contains(e.what(), "\x1b[")) << "unescaped ESC in the message";
+    }
+  }
+  const std::string ok =
+      R"({"format": "clothfit-fabric", "version": 1, "name": "Leinen \u00e9t\u00e9 #2",
+          "model": "lambert", "albedo": [0.5, 0.5, 0.5]})";
+  EXPECT_EQ(render::ParseFabric(ok, "/tmp/f.json").name, "Leinen \u00e9t\u00e9 #2");
+}
+
 // ---- Defects 5 and 8 (hash part) in a convert batch ---------------------------------------
 
 TEST(ConvertRegression, InvalidUtf8IsEscapedAndTheLogDumps) {

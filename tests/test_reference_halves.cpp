@@ -20,6 +20,7 @@
 #include "render/reference/path_tracer.h"
 #include "render/scene/environment.h"
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 #include "render/scene/scene.h"
 #include "tests/scene_fixtures.h"
 
@@ -185,6 +186,44 @@ TEST(ReferenceHalves, ReaderNamesTheFileAndTheMissingField) {
   }
   img.metadata["clothfit:half_batches"] = "16";
   EXPECT_THROW(io::ReferenceHalvesFromImage(img, "old.exr"), io::IoError);
+}
+
+// Session 28: RenderExrChannels is what WriteRenderExr writes (with every AOV and without), and
+// a render whose EXR io::ReadImage would refuse (over kMaxImageBytes) is refused before any
+// pixel is rendered. Before, a 4096 x 4096 reference (738 MiB as float) rendered for hours and
+// then could not be read by fit, evaluate or compare.
+TEST(ReferenceHalves, RendersTheReaderWouldRefuseAreRefusedFirst) {
+  HalvesTracer t;
+  for (const bool all : {false, true}) {
+    RenderSettings st;
+    st.spp = 4;
+    if (all) st.aovs = {true, true, true, true, true};
+    const RenderResult r = t.pt.Render(st);
+    const io::Image img = RoundTrip(r, all ? "clothfit_channels_all.exr" : "clothfit_channels.exr");
+    EXPECT_EQ(img.channels(), RenderExrChannels(st.aovs)) << all;
+  }
+  Scene big = HalvesScene();
+  big.card.path = "big.json";
+  big.card.width = 4096;  // 4096 x 4096 x 11 x 4 bytes = 704 MiB > 512 MiB
+  big.card.height = 4096;
+  const Environment env = Environment::Constant({0.8, 0.8, 0.8});
+  const LambertBsdf fabric{Rgbd(0.6, 0.5, 0.4)};
+  const PathTracer pt{big, fabric, &env};
+  RenderSettings st;
+  st.spp = 1;
+  int progress_calls = 0;
+  try {
+    pt.Render(st, [&](int, int) { ++progress_calls; });
+    FAIL() << "a 4096 x 4096 reference was rendered";
+  } catch (const std::invalid_argument& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("big.json: field 'width'/'height'"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("kMaxImageBytes"), std::string::npos) << msg;
+  }
+  EXPECT_EQ(progress_calls, 0);
+  // 2048 x 2048 with every AOV: 2048^2 x 23 x 4 = 368 MiB, allowed (not rendered here).
+  EXPECT_LE(size_t(2048) * 2048 * size_t(RenderExrChannels({true, true, true, true, true})) * 4,
+            limits::kMaxImageBytes);
 }
 
 }  // namespace

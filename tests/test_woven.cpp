@@ -208,6 +208,13 @@ TEST(WovenPattern, MalformedFilesGiveFileAndLine) {
       "bad.weave:9", "do not form one rectangle");
   ExpectWeaveError(good.substr(0, good.find("pattern") + 12), "bad.weave:20", "pattern ends");
   ExpectWeaveError("", "bad.weave:1", "header");
+  // Session 28: a pattern shorter or longer than its tile says. Before, the yarn line after a
+  // missing row was "a pattern row with 17 ids", and an extra row "unknown keyword '4'".
+  ExpectWeaveError(
+      replace_line(20, ""), "bad.weave:21",
+      "pattern has 1 rows, but 'tile 2 2' (line 17) declares 2; this line starts 'yarn'");
+  ExpectWeaveError(replace_line(17, "tile 2 1"), "bad.weave:20",
+                   "a pattern row after the 1 rows that 'tile 2 1' (line 17) declares");
 }
 
 // ---------------------------------------------------------------- Irawan model pieces
@@ -722,6 +729,30 @@ TEST(WovenFabric, ErrorsNameTheFileAndField) {
   ExpectFabricError(R"({"format": "clothfit-fabric", "version": 2})", "field 'version'");
   ExpectFabricError(head + R"("preset": "x", "uv_repeats": 4})", "missing field 'model'");
   ExpectFabricError("[1, 2]", "top level must be a JSON object");
+}
+
+// Session 28: Fabric::weave_path is the file the weave was read from, for content keys (the
+// reference cache keyed ../weaves/<preset>.weave even when 'weave_file' named another file).
+TEST(WovenFabric, WeavePathIsTheFileRead) {
+  const auto dir = std::filesystem::temp_directory_path() / "clothfit_woven_weave_path";
+  std::filesystem::create_directories(dir / "fabrics");
+  std::filesystem::create_directories(dir / "weaves");
+  std::ofstream(dir / "fabrics" / "mine.weave") << ReadText(WeavePath("polyester"));
+  std::ofstream(dir / "weaves" / "polyester.weave") << ReadText(WeavePath("polyester"));
+  const std::string own = (dir / "fabrics" / "own.json").string();
+  std::ofstream(own) << R"({"format": "clothfit-fabric", "version": 1, "name": "own", )"
+                     << R"("model": "irawan", "preset": "polyester", "weave_file": "mine.weave", )"
+                     << R"("uv_repeats": 3})";
+  EXPECT_EQ(LoadFabric(own).weave_path, (dir / "fabrics" / "mine.weave").string());
+  const std::string by_preset = (dir / "fabrics" / "preset.json").string();
+  std::ofstream(by_preset) << R"({"format": "clothfit-fabric", "version": 1, "name": "p", )"
+                           << R"("model": "irawan", "preset": "polyester", "uv_repeats": 3})";
+  EXPECT_EQ(LoadFabric(by_preset).weave_path, (dir / "weaves" / "polyester.weave").string());
+  const std::string simple = (dir / "fabrics" / "lambert.json").string();
+  std::ofstream(simple) << R"({"format": "clothfit-fabric", "version": 1, "name": "l", )"
+                        << R"("model": "lambert", "albedo": [0.5, 0.5, 0.5]})";
+  EXPECT_EQ(LoadFabric(simple).weave_path, "");
+  std::filesystem::remove_all(dir);
 }
 
 TEST(WovenFabric, WeaveErrorsKeepTheirFileAndLine) {

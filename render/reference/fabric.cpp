@@ -98,6 +98,14 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
   }
   Fabric f;
   f.name = GetString(j, "name", path);
+  // The name goes to terminals (summary lines, progress bars), EXR metadata and reports: no
+  // control bytes (session 28: an ESC sequence in it reached the terminal unescaped).
+  for (const char ch : f.name) {
+    const auto byte = static_cast<unsigned char>(ch);
+    if (byte < 0x20 || byte == 0x7f)
+      Fail(path, "field 'name' must be printable text without control characters, got \"" +
+                     limits::EscapeForMessage(f.name, 80) + "\"");
+  }
   f.model = GetString(j, "model", path);
   // Simple materials (simple_bsdf.h): no weave, no preset; for comparisons with other renderers.
   if (f.model == "lambert" || f.model == "ggx_conductor") {
@@ -150,8 +158,9 @@ Fabric ParseFabric(const std::string& text, const std::string& path) {
       weave = std::filesystem::path("..") / "weaves" / (f.preset + ".weave");
     }
     if (weave.is_relative()) weave = std::filesystem::path(path).parent_path() / weave;
+    f.weave_path = weave.lexically_normal().string();
     try {
-      WeavePattern pattern = LoadWeave(weave.lexically_normal().string());
+      WeavePattern pattern = LoadWeave(f.weave_path);
       f.bsdf = std::make_unique<IrawanBsdf>(std::move(pattern), f.uv_repeats, f.uv_repeats);
     } catch (const WeavePatternError& e) {
       // A fabric copied out of datasets/fabrics/ loses its ../weaves/ neighbour: say where the

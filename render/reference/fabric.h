@@ -38,6 +38,11 @@ struct Fabric {
   double uv_repeats = 1.0;  // weave repeats per UV unit (both u and v)
   std::unique_ptr<Bsdf> bsdf;
   double weave_period_uv = 1.0;  // size of one weave tile in uv units (= 1 / uv_repeats)
+  // irawan: the .weave file that was read ('weave_file', else ../weaves/<preset>.weave, relative
+  // to the fabric file; lexically normalised); empty for the other models. A content key of a
+  // render must hash this file (session 28: the reference cache hashed ../weaves/<preset>.weave
+  // even when 'weave_file' named another file, and reused references after it changed).
+  std::string weave_path;
 };
 
 Fabric LoadFabric(const std::string& path);

@@ -13,6 +13,7 @@
 #include "render/reference/adaptive_allocation.h"
 #include "render/scene/embree_scene.h"
 #include "render/scene/image_io.h"
+#include "render/scene/input_limits.h"
 #include "render/scene/lights.h"
 #include "render/scene/sampler.h"
 
@@ -589,6 +590,20 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   const auto t0 = std::chrono::steady_clock::now();
   const Scene& scene = impl_->scene;
   const int W = scene.card.width, H = scene.card.height;
+  // Session 28: a reference the project's own reader refuses (4096 x 4096 is 704 MiB as float
+  // with no AOV) was rendered, for hours, and written; refused here before any allocation.
+  const size_t exr_bytes =
+      size_t(W) * size_t(H) * size_t(RenderExrChannels(st.aovs)) * sizeof(float);
+  if (exr_bytes > limits::kMaxImageBytes)
+    throw std::invalid_argument(
+        limits::EscapeForMessage(scene.card.path, 400) + ": field 'width'/'height': a " +
+        std::to_string(W) + " x " + std::to_string(H) + " reference with " +
+        std::to_string(RenderExrChannels(st.aovs)) + " channels is " +
+        std::to_string(exr_bytes >> 20) + " MiB as float, over the " +
+        std::to_string(limits::kMaxImageBytes >> 20) + " MiB an image may have to be read back " +
+        limits::LimitRef("kMaxImageBytes") +
+        " (fit, evaluate and compare could not read it); "
+        "lower the width or height, or ask for fewer --aov");
   RenderResult r = AllocateResult(W, H, st.aovs);
 
   const int tiles_x = (W + st.tile_size - 1) / st.tile_size;
@@ -760,6 +775,11 @@ RenderResult PathTracer::Render(const RenderSettings& st,
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   Summarize(&r);
   return r;
+}
+
+int RenderExrChannels(const AovSet& aovs) {
+  return 11 + (aovs.normal ? 3 : 0) + (aovs.position ? 3 : 0) + (aovs.tangent ? 3 : 0) +
+         (aovs.uv ? 2 : 0) + (aovs.depth ? 1 : 0);
 }
 
 void WriteRenderExr(const std::string& path, const RenderResult& r,

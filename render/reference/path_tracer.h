@@ -130,6 +130,9 @@ class PathTracer {
   PathTracer(const Scene& scene, const Bsdf& fabric, const Environment* environment);
   ~PathTracer();
   // `progress(done_tiles, total_tiles)` may be empty; called from worker threads, serialised.
+  // Throws std::invalid_argument naming the card, before allocating, when the EXR that
+  // WriteRenderExr would write (width x height x RenderExrChannels x 4 bytes) is over
+  // limits::kMaxImageBytes: io::ReadImage, and so fit, evaluate and compare, could not read it.
   RenderResult Render(const RenderSettings& settings,
                       const std::function<void(int, int)>& progress = {}) const;
 
@@ -143,5 +146,8 @@ class PathTracer {
 // requested AOVs (N.X/Y/Z, P.X/Y/Z, T.X/Y/Z, uv.U/V, Z), with metadata `extra`.
 void WriteRenderExr(const std::string& path, const RenderResult& r,
                     const std::vector<std::pair<std::string, std::string>>& extra);
+// The most channels WriteRenderExr writes with these AOVs: R, G, B, A, fabric, stderr.RGB,
+// half.RGB and the AOVs' (N, P, T: 3 each; uv: 2; Z: 1).
+int RenderExrChannels(const AovSet& aovs);
 
 }  // namespace clothfit::render

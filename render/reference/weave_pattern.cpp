@@ -233,6 +233,15 @@ void ParsePatternBlock(const std::vector<std::string_view>& lines, const std::st
     const std::string row_where = Located(source, int(*li) + 1);
     const auto row = Tokens(lines[*li]);
     if (row.empty()) continue;
+    // A keyword where a row belongs: the pattern is shorter than the tile says (session 28:
+    // before, the keyword's line was reported as a row with the wrong number of ids).
+    if (row[0].find_first_not_of("+-0123456789") == 0) {
+      Fail(row_where, "pattern has " + std::to_string(rows) + " rows, but 'tile " +
+                          std::to_string(p.tile_width) + " " + std::to_string(p.tile_height) +
+                          "' (line " + std::to_string(d->seen.at("tile")) + ") declares " +
+                          std::to_string(p.tile_height) + "; this line starts '" +
+                          limits::EscapeForMessage(row[0], 40) + "'");
+    }
     if (int(row.size()) != p.tile_width) {
       Fail(row_where, "pattern row has " + std::to_string(row.size()) + " ids; expected " +
                           std::to_string(p.tile_width));
@@ -413,6 +422,14 @@ WeavePattern ParseWeave(std::string_view text, const std::string& source) {
       ParsePatternBlock(lines, source, tok, where, &li, &d);
     } else if (key == "yarn") {
       ParseYarnLine(tok, where, line_no, &d);
+    } else if (d.seen.count("pattern") &&
+               key.find_first_not_of("0123456789") == std::string::npos) {
+      // Rows after the pattern: it is longer than the tile says (session 28: before, "unknown
+      // keyword '1'").
+      Fail(where, "a pattern row after the " + std::to_string(d.p.tile_height) +
+                      " rows that 'tile " + std::to_string(d.p.tile_width) + " " +
+                      std::to_string(d.p.tile_height) + "' (line " +
+                      std::to_string(d.seen["tile"]) + ") declares");
     } else {
       ParseScalarLine(fields, key, tok, where, &d.p);
     }

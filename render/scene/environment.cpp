@@ -196,6 +196,15 @@ Environment Environment::Load(const std::string& path, double intensity, double 
   if (img.width <= 0 || img.height <= 0 || img.channels() <= 0) {
     throw io::IoError(path + ": empty environment map");
   }
+  // An 8/16-bit PNG holds display-encoded (sRGB) codes clipped at 1, not radiance: read as
+  // radiance it lights the scene dimly and without its sun, with no error (session 28).
+  if (!img.float_source) {
+    throw io::IoError(limits::EscapeForMessage(path, 400) +
+                      ": an environment map must be "
+                      "linear radiance (float or half EXR, or Radiance HDR); this is a " +
+                      img.source_format + " " + img.file_format +
+                      " with display-encoded values clipped at 1 (docs/environments.md)");
+  }
   const int nc = img.channels();
   Environment env;
   env.width_ = img.width;

@@ -294,6 +294,7 @@ void ResolveEnvironment(const std::string& file, const fs::path& card_dir, Envir
     if (p.is_relative()) p = card_dir / p;
     env.path = p.lexically_normal().string();
     env.found = fs::is_regular_file(env.path, ec);
+    env.is_file = true;
     return;
   }
   const fs::path dir = DataRoot() / "hdri";
@@ -1209,9 +1210,15 @@ Scene LoadScene(const std::string& card_path) {
     scene.lights.push_back(BuildLight(file, card, model, placed));
   }
   if (card.environment && !card.environment->found) {
-    scene.warnings.push_back(card.path + ": field 'environment.path': map " +
-                             Quote(card.environment->name) + " is not installed (looked for " +
-                             card.environment->path + "); renderers use the procedural sky");
+    // A missing file (not a cache name) is an error of the renderers (bin/cmd_render.cpp
+    // LoadSceneEnvironment), not a fallback to the sky.
+    scene.warnings.push_back(card.environment->is_file
+                                 ? card.path + ": field 'environment.path': no such file " +
+                                       card.environment->path + " (the renderers refuse it)"
+                                 : card.path + ": field 'environment.path': map " +
+                                       Quote(card.environment->name) +
+                                       " is not installed (looked for " + card.environment->path +
+                                       "); renderers use the procedural sky");
   }
   return scene;
 }

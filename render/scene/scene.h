@@ -90,6 +90,8 @@ struct EnvironmentSpec {
   std::string path;         // resolved absolute path, or "procedural-sky"
   bool found = true;        // false: the map is not installed (yet); loading does not fail,
                             // the renderer falls back to the procedural sky and warns
+  bool is_file = false;     // `name` is a file path ('/' or an extension), not a cache name: the
+                            // renderers refuse it when it is missing (session 28)
   double intensity = 1.0;   // multiplies the map's radiance
   double rotation_y = 0.0;  // radians, rotation of the map about +Y (three.js environmentRotation)
   // "sun": "auto" | "off" | "panels" (docs/scene-card.md); unset = not in the card (the preview's default).
