@@ -124,10 +124,12 @@ std::string CachedReference(const std::string& scene_path, const std::string& fa
                          ReadFileOrEmpty(scene.card.gltf) + "|" + ReadFileOrEmpty(fabric_path);
   // The card's own size is already in its content; an override is part of the key.
   if (width > 0) key_text += "|width=" + std::to_string(scene.card.width) + "x" + std::to_string(scene.card.height);
-  // The fabric's weave file (the default location next to the fabric file).
+  // The fabric's weave file: the one the loader read ('weave_file', else the default
+  // ../weaves/<preset>.weave next to the fabric; session 28: before, always the default, so a
+  // fabric with its own 'weave_file' kept its cached references after that file changed).
+  // Keys of fabrics without 'weave_file' are unchanged (the same file's bytes).
   const render::Fabric fabric = render::LoadFabric(fabric_path);
-  const fs::path weave = fs::path(fabric_path).parent_path() / ".." / "weaves" / (fabric.preset + ".weave");
-  key_text += "|" + ReadFileOrEmpty(weave.string());
+  key_text += "|" + (fabric.weave_path.empty() ? std::string() : ReadFileOrEmpty(fabric.weave_path));
   if (scene.card.environment) {
     // What the renderer will draw, not only the card's name for it (session 20): a map's
     // bytes, or the procedural sky that stands in for a map that is not installed. Before,

@@ -5,7 +5,8 @@
 # repairs reported (2); render-references checks every input before the first render (3); lut's
 # outputs, and two spellings of one new file (4); environment maps that are PNGs or missing
 # files (5); --help defaults and CLOTHFIT_PROGRESS=0 (6); bench's --width and --count (7);
-# render-preview's upper-case extension (8); --light-map-out's help (9).
+# render-preview's upper-case extension (8); --light-map-out's help (9); the reference cache key
+# and the fabric's own weave file (10).
 . "$(dirname "$0")/cli_common.sh"
 D=$SRC/datasets
 BIN=$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")  # the blocks below cd
@@ -177,5 +178,19 @@ grep -q -- "--count" <<< "$err" || fail "bench --count: $err"
 "$BIN" --quiet render-preview --scene "$D/scenes/drape.json" --material "$TMP/std.json" --out "$TMP/d.png" \
   --light-map-out "$TMP/lm.exr" > /dev/null || fail "render-preview --light-map-out exited $?"
 oiiotool --info "$TMP/lm.exr" | grep -q "3 channel" || fail "the light map is not R, G, B: $(oiiotool --info "$TMP/lm.exr")"
+
+# (10) The reference cache key hashes the .weave file the fabric names ('weave_file'): before,
+# it hashed ../weaves/<preset>.weave, so the references of a fabric with its own weave file were
+# reused after that file changed.
+before=$(refs --fabrics "$FAB" --seeds 1 --spp 16) || fail "render-references of the fabric exited $?"
+[ "$(wc -l <<< "$before")" = 3 ] || fail "expected 3 references: $before"
+again=$(refs --fabrics "$FAB" --seeds 1 --spp 16) || fail "render-references again exited $?"
+[ "$before" = "$again" ] || fail "the same inputs gave other cache files: $before / $again"
+sed -i '0,/kd 0.46 0.40 0.30/s//kd 0.20 0.40 0.60/' "$TMP/fab/my.weave"
+cmp -s "$TMP/fab/my.weave" "$D/weaves/cotton_canvas.weave" && fail "the weave file did not change"
+after=$(refs --fabrics "$FAB" --seeds 1 --spp 16) || fail "render-references after the change exited $?"
+for f in $after; do
+  grep -qxF "$f" <<< "$before" && fail "a changed weave file reused the cached $f"
+done
 
 echo "PASS: s28 render audit"
