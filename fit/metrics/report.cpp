@@ -1334,10 +1334,7 @@ std::vector<std::string> ViewerRoots(const std::string& report_dir, const std::s
   // page's hint only; the fit and the viewer report real errors).
   const auto field = [](const fs::path& file, std::initializer_list<const char*> keys) {
     try {
-      const std::string text =
-          limits::ReadFileBounded(file.string(), limits::kMaxJsonFileBytes, "JSON file");
-      limits::CheckJsonDepth(text, file.string());
-      const nlohmann::json j = nlohmann::json::parse(text);
+      const nlohmann::json j = ReadPresetJson(file.string());  // bounded, depth-checked
       const nlohmann::json* v = &j;
       for (const char* k : keys) {
         if (!v->is_object() || !v->contains(k)) return std::string();
