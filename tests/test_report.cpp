@@ -537,6 +537,14 @@ TEST_F(ReportTest, ViewerRootsNameTheMapsMeshAndEnvironmentDirectories) {
                                         abs(dir_ / "cards"), abs(dir_ / "meshes"),
                                         abs(dir_ / "env")}));
   EXPECT_EQ(roots.size(), got.size());  // each directory once
+  // A corrupt card or a missing one is no error here (the viewer reports it): its own
+  // directory, nothing else.
+  fs::create_directories(dir_ / "bad");
+  std::ofstream(dir_ / "bad" / "c.json") << "{\"gltf\": ";
+  const std::vector<std::string> bad =
+      ViewerRoots((repo / "out").string(), (dir_ / "bad" / "c.json").string(),
+                  {(dir_ / "bad" / "c.json").string(), (dir_ / "bad" / "none.json").string()});
+  EXPECT_EQ(bad, std::vector<std::string>{abs(dir_ / "bad")});
 }
 
 }  // namespace
